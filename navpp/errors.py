@@ -1,0 +1,23 @@
+"""Exceptions navpp raises on purpose.
+
+Every ``NavppError`` carries a message that names the input (file, column or topic) and the
+row or time at fault; the CLI prints it as one line and exits with code 1.
+"""
+
+from __future__ import annotations
+
+
+class NavppError(Exception):
+    """Base class: a failure the user can act on (bad input, bad config, divergence)."""
+
+
+class InputError(NavppError):
+    """A log, reference or GNSS file that cannot be used as it is."""
+
+
+class ConfigError(NavppError):
+    """A configuration file or command-line option that is invalid."""
+
+
+class FilterDivergedError(NavppError):
+    """The filter's covariance or state became non-finite or lost positive definiteness."""
