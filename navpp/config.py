@@ -1,0 +1,674 @@
+"""Run configuration: TOML loading, validation, IMU presets and datasheet-unit conversion.
+
+One TOML file, every field optional (see INTERFACES.md, "Configuration (TOML)")::
+
+    [imu]      preset, noise in datasheet units, mounting_rpy_deg, gyro_units, accel_units
+    [gnss]     lever_arm_m, default_std_m, default_vel_std_mps, gate_probability, ...
+    [time]     base, source
+    [init]     method, roll_deg, pitch_deg, heading_deg, ...
+    [vehicle]  type
+    [output]   rate_hz, formats
+    [filter.<name>]  each filter's own options, kept raw and validated by that filter
+
+This module is the only place where datasheet units (deg/sqrt(h), deg/h, m/s/sqrt(h), mg)
+are converted to SI: ``ImuConfig.noise()`` returns an :class:`ImuNoise` in rad, m and s.
+
+Every dataclass validates and normalises its own fields in ``__post_init__`` (ints become
+floats, lists become tuples, ``"inf"`` becomes ``math.inf``), so a config built in Python is
+checked exactly like one read from TOML.  ``config_from_dict`` adds what only a file can get
+wrong (unknown sections and keys, with the nearest valid key) and prefixes every message
+with the file name.  All failures raise :class:`navpp.errors.ConfigError`.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import tomllib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Final
+
+from navpp.errors import ConfigError
+
+__all__ = [
+    "ACCEL_UNITS",
+    "DEG_PER_H_TO_RAD_PER_S",
+    "DEG_PER_SQRT_H_TO_RAD_PER_SQRT_S",
+    "DEG_TO_RAD",
+    "GYRO_UNITS",
+    "INIT_METHODS",
+    "MG_TO_MPS2",
+    "MPS_PER_SQRT_H_TO_MPS_PER_SQRT_S",
+    "NOISE_KEYS",
+    "OUTPUT_FORMATS",
+    "PRESETS",
+    "PRESET_NAMES",
+    "STANDARD_GRAVITY",
+    "TIME_BASES",
+    "TIME_SOURCES",
+    "VEHICLE_TYPES",
+    "Config",
+    "GnssConfig",
+    "ImuConfig",
+    "ImuNoise",
+    "InitConfig",
+    "OutputConfig",
+    "TimeConfig",
+    "VehicleConfig",
+    "config_from_dict",
+    "load_config",
+]
+
+# --------------------------------------------------------------------------- unit factors
+
+STANDARD_GRAVITY: Final[float] = 9.80665
+"""Conventional standard gravity g0, m/s^2 (the g of "mg" and of ``accel_units = "g"``)."""
+DEG_TO_RAD: Final[float] = math.pi / 180.0
+"""deg -> rad."""
+DEG_PER_SQRT_H_TO_RAD_PER_SQRT_S: Final[float] = DEG_TO_RAD / 60.0
+"""Angle random walk: deg/sqrt(h) -> rad/sqrt(s)  (sqrt(3600 s) = 60 sqrt(s))."""
+MPS_PER_SQRT_H_TO_MPS_PER_SQRT_S: Final[float] = 1.0 / 60.0
+"""Velocity random walk: m/s/sqrt(h) -> m/s/sqrt(s)."""
+DEG_PER_H_TO_RAD_PER_S: Final[float] = DEG_TO_RAD / 3600.0
+"""Gyro bias: deg/h -> rad/s."""
+MG_TO_MPS2: Final[float] = STANDARD_GRAVITY * 1e-3
+"""Accelerometer bias: mg -> m/s^2."""
+
+# --------------------------------------------------------------------------- presets
+
+NOISE_KEYS: Final[tuple[str, ...]] = (
+    "gyro_arw_deg_per_sqrt_h",
+    "gyro_bias_deg_per_h",
+    "gyro_bias_instability_deg_per_h",
+    "gyro_bias_corr_time_s",
+    "accel_vrw_mps_per_sqrt_h",
+    "accel_bias_mg",
+    "accel_bias_instability_mg",
+    "accel_bias_corr_time_s",
+)
+"""The ``[imu]`` keys a preset fills, in datasheet units."""
+
+
+def _preset(values: tuple[float, ...]) -> dict[str, float]:
+    return dict(zip(NOISE_KEYS, values, strict=True))
+
+
+PRESETS: dict[str, dict[str, float]] = {
+    # name:          ARW    bias   instab  tau     VRW   bias    instab  tau
+    "consumer": _preset((0.5, 200.0, 10.0, 100.0, 0.1, 20.0, 1.0, 100.0)),
+    "automotive": _preset((1.0, 10.0, 1.0, 300.0, 0.05, 2.0, 0.1, 300.0)),
+    "tactical": _preset((0.1, 1.0, 0.1, 600.0, 0.03, 0.3, 0.02, 600.0)),
+    "navigation": _preset((0.003, 0.03, 0.01, 3600.0, 0.03, 0.025, 0.01, 3600.0)),
+}
+"""IMU noise presets in datasheet units (INTERFACES.md table), keyed by ``NOISE_KEYS``."""
+
+PRESET_NAMES: Final[tuple[str, ...]] = tuple(PRESETS)
+DEFAULT_PRESET: Final[str] = "automotive"
+
+GYRO_UNITS: Final[tuple[str, ...]] = ("rad/s", "deg/s")
+ACCEL_UNITS: Final[tuple[str, ...]] = ("m/s^2", "g")
+TIME_BASES: Final[tuple[str, ...]] = ("unix", "gpst", "relative")
+TIME_SOURCES: Final[tuple[str, ...]] = ("header", "log")
+INIT_METHODS: Final[tuple[str, ...]] = ("auto", "gyrocompass", "gnss", "config")
+VEHICLE_TYPES: Final[tuple[str, ...]] = ("car", "none")
+OUTPUT_FORMATS: Final[tuple[str, ...]] = ("csv", "mcap", "tum", "geojson", "kml")
+
+# Default of the eight noise fields: "take this value from the preset".  Identified by
+# identity, so a NaN a user writes is still rejected as not finite.
+_FROM_PRESET: Final[float] = float("nan")
+
+_INF_WORDS: Final[frozenset[str]] = frozenset({"inf", "+inf", "infinity", "+infinity"})
+
+# --------------------------------------------------------------------------- field checks
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _nearest(word: str, candidates: Sequence[str]) -> str | None:
+    """The candidate closest to ``word`` (difflib ratio, then prefix/substring), or None."""
+    lowered = {c.lower(): c for c in candidates}
+    w = word.lower()
+    match = difflib.get_close_matches(w, list(lowered), n=1, cutoff=0.6)
+    if match:
+        return lowered[match[0]]
+    containing = [c for low, c in lowered.items() if w and (w in low or low in w)]
+    if containing:
+        return min(containing, key=len)
+    match = difflib.get_close_matches(w, list(lowered), n=1, cutoff=0.4)
+    return lowered[match[0]] if match else None
+
+
+def _as_float(
+    section: str,
+    key: str,
+    value: object,
+    *,
+    minimum: float | None = None,
+    maximum: float | None = None,
+    strict_min: bool = False,
+    strict_max: bool = False,
+    allow_inf: bool = False,
+) -> float:
+    """Check that ``value`` is a real number (bool excluded) within bounds; return a float."""
+    if allow_inf and isinstance(value, str) and value.strip().lower() in _INF_WORDS:
+        return math.inf
+    if not _is_number(value):
+        what = 'a number or "inf"' if allow_inf else "a number"
+        raise ConfigError(f"[{section}] {key} must be {what}, got {value!r}")
+    x = float(value)  # type: ignore[arg-type]  # checked by _is_number
+    if math.isnan(x) or (math.isinf(x) and not allow_inf):
+        raise ConfigError(f"[{section}] {key} must be finite, got {value!r}")
+    if minimum is not None and (x <= minimum if strict_min else x < minimum):
+        op = ">" if strict_min else ">="
+        raise ConfigError(f"[{section}] {key} must be {op} {minimum:g}, got {value!r}")
+    if maximum is not None and (x >= maximum if strict_max else x > maximum):
+        op = "<" if strict_max else "<="
+        raise ConfigError(f"[{section}] {key} must be {op} {maximum:g}, got {value!r}")
+    return x
+
+
+def _as_vector(section: str, key: str, value: object, n: int) -> tuple[float, ...]:
+    """Check that ``value`` is a list/tuple of ``n`` finite numbers; return a float tuple."""
+    if (
+        not isinstance(value, list | tuple)
+        or len(value) != n
+        or not all(_is_number(v) and math.isfinite(v) for v in value)
+    ):
+        raise ConfigError(
+            f"[{section}] {key} must be a list of {n} finite numbers, got {value!r}"
+        )
+    return tuple(float(v) for v in value)
+
+
+def _as_choice(section: str, key: str, value: object, choices: Sequence[str]) -> str:
+    """Check that ``value`` is one of ``choices``; the message lists them all."""
+    if isinstance(value, str) and value in choices:
+        return value
+    listed = ", ".join(repr(c) for c in choices)
+    msg = f"[{section}] {key} must be one of {listed}; got {value!r}"
+    if isinstance(value, str) and (near := _nearest(value, choices)) is not None:
+        msg += f" (did you mean {near!r}?)"
+    raise ConfigError(msg)
+
+
+def _as_int(section: str, key: str, value: object, *, minimum: int) -> int:
+    if not isinstance(value, int) or isinstance(value, bool):
+        raise ConfigError(f"[{section}] {key} must be an integer, got {value!r}")
+    if value < minimum:
+        raise ConfigError(f"[{section}] {key} must be >= {minimum}, got {value!r}")
+    return value
+
+
+def _as_optional_float(section: str, key: str, value: object, **bounds: Any) -> float | None:
+    return None if value is None else _as_float(section, key, value, **bounds)
+
+
+def _fix_float(obj: object, section: str, key: str, **bounds: Any) -> None:
+    """Validate ``obj.key`` with ``_as_float`` and store the float back (frozen dataclass)."""
+    _set(obj, key, _as_float(section, key, getattr(obj, key), **bounds))
+
+
+def _fix_optional_float(obj: object, section: str, key: str, **bounds: Any) -> None:
+    """As ``_fix_float`` but None is allowed and kept."""
+    _set(obj, key, _as_optional_float(section, key, getattr(obj, key), **bounds))
+
+
+def _freeze(value: Any) -> Any:
+    """Read-only deep copy: mappings -> MappingProxyType, lists -> tuples."""
+    if isinstance(value, Mapping):
+        return MappingProxyType({k: _freeze(v) for k, v in value.items()})
+    if isinstance(value, list | tuple):
+        return tuple(_freeze(v) for v in value)
+    return value
+
+
+def _set(obj: object, name: str, value: object) -> None:
+    object.__setattr__(obj, name, value)  # normalising a frozen dataclass in __post_init__
+
+
+# --------------------------------------------------------------------------- sections
+
+
+@dataclass(frozen=True)
+class ImuNoise:
+    """IMU error model in SI units, derived once from :class:`ImuConfig` by ``noise()``.
+
+    Bias models are first-order Gauss-Markov: ``b_dot = -b / tau + w`` with steady-state
+    standard deviation ``*_bias_instability``; ``tau = math.inf`` means a random walk.
+
+    Attributes
+    ----------
+    gyro_arw : float, rad/sqrt(s). Angle random walk (white rate noise density).
+    accel_vrw : float, m/s/sqrt(s). Velocity random walk (white specific-force noise density).
+    gyro_bias_sigma : float, rad/s. Turn-on gyro bias, 1 sigma (initial covariance).
+    gyro_bias_instability : float, rad/s. Steady-state sigma of the gyro bias process.
+    gyro_bias_tau : float, s. Gyro bias correlation time, > 0, may be ``math.inf``.
+    accel_bias_sigma : float, m/s^2. Turn-on accelerometer bias, 1 sigma.
+    accel_bias_instability : float, m/s^2. Steady-state sigma of the accelerometer bias.
+    accel_bias_tau : float, s. Accelerometer bias correlation time, > 0, may be ``math.inf``.
+    """
+
+    gyro_arw: float
+    accel_vrw: float
+    gyro_bias_sigma: float
+    gyro_bias_instability: float
+    gyro_bias_tau: float
+    accel_bias_sigma: float
+    accel_bias_instability: float
+    accel_bias_tau: float
+
+
+@dataclass(frozen=True)
+class ImuConfig:
+    """``[imu]``: noise in datasheet units, mounting rotation and sample units.
+
+    Each of the eight noise values comes from ``preset`` unless given explicitly; explicit
+    values override the preset.  Values are resolved at construction, so to switch preset
+    build a new ``ImuConfig(preset=...)`` rather than ``dataclasses.replace`` the preset.
+
+    Attributes
+    ----------
+    preset : str. One of ``PRESET_NAMES``; default ``"automotive"``.
+    gyro_arw_deg_per_sqrt_h : float, deg/sqrt(h), >= 0. Gyro angle random walk.
+    gyro_bias_deg_per_h : float, deg/h, >= 0. Turn-on gyro bias, 1 sigma.
+    gyro_bias_instability_deg_per_h : float, deg/h, >= 0. Gyro bias instability.
+    gyro_bias_corr_time_s : float, s, > 0 or ``math.inf`` (TOML ``inf`` or ``"inf"``).
+    accel_vrw_mps_per_sqrt_h : float, m/s/sqrt(h), >= 0. Accelerometer velocity random walk.
+    accel_bias_mg : float, mg, >= 0. Turn-on accelerometer bias, 1 sigma.
+    accel_bias_instability_mg : float, mg, >= 0. Accelerometer bias instability.
+    accel_bias_corr_time_s : float, s, > 0 or ``math.inf``.
+    mounting_rpy_deg : (3,) float, deg. Rotation from the sensor frame to body FLU as roll,
+        pitch, yaw about x, y, z.
+    gyro_units : str. Units of the logged angular rate: ``"rad/s"`` or ``"deg/s"``.
+    accel_units : str. Units of the logged specific force: ``"m/s^2"`` or ``"g"``.
+    """
+
+    preset: str = DEFAULT_PRESET
+    gyro_arw_deg_per_sqrt_h: float = _FROM_PRESET
+    gyro_bias_deg_per_h: float = _FROM_PRESET
+    gyro_bias_instability_deg_per_h: float = _FROM_PRESET
+    gyro_bias_corr_time_s: float = _FROM_PRESET
+    accel_vrw_mps_per_sqrt_h: float = _FROM_PRESET
+    accel_bias_mg: float = _FROM_PRESET
+    accel_bias_instability_mg: float = _FROM_PRESET
+    accel_bias_corr_time_s: float = _FROM_PRESET
+    mounting_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gyro_units: str = "rad/s"
+    accel_units: str = "m/s^2"
+
+    def __post_init__(self) -> None:
+        preset = _as_choice("imu", "preset", self.preset, PRESET_NAMES)
+        for key in NOISE_KEYS:
+            value = getattr(self, key)
+            if value is _FROM_PRESET:
+                value = PRESETS[preset][key]
+            if key.endswith("_corr_time_s"):
+                value = _as_float(
+                    "imu", key, value, minimum=0.0, strict_min=True, allow_inf=True
+                )
+            else:
+                value = _as_float("imu", key, value, minimum=0.0)
+            _set(self, key, value)
+        mounting = _as_vector("imu", "mounting_rpy_deg", self.mounting_rpy_deg, 3)
+        _set(self, "mounting_rpy_deg", mounting)
+        _as_choice("imu", "gyro_units", self.gyro_units, GYRO_UNITS)
+        _as_choice("imu", "accel_units", self.accel_units, ACCEL_UNITS)
+
+    @property
+    def gyro_scale(self) -> float:
+        """Factor that converts logged angular rate (``gyro_units``) to rad/s."""
+        return DEG_TO_RAD if self.gyro_units == "deg/s" else 1.0
+
+    @property
+    def accel_scale(self) -> float:
+        """Factor that converts logged specific force (``accel_units``) to m/s^2."""
+        return STANDARD_GRAVITY if self.accel_units == "g" else 1.0
+
+    def noise(self) -> ImuNoise:
+        """The noise model in SI units.
+
+        Returns
+        -------
+        ImuNoise
+            ARW in rad/sqrt(s), VRW in m/s/sqrt(s), gyro biases in rad/s, accelerometer
+            biases in m/s^2, correlation times in s.
+        """
+        return ImuNoise(
+            gyro_arw=self.gyro_arw_deg_per_sqrt_h * DEG_PER_SQRT_H_TO_RAD_PER_SQRT_S,
+            accel_vrw=self.accel_vrw_mps_per_sqrt_h * MPS_PER_SQRT_H_TO_MPS_PER_SQRT_S,
+            gyro_bias_sigma=self.gyro_bias_deg_per_h * DEG_PER_H_TO_RAD_PER_S,
+            gyro_bias_instability=self.gyro_bias_instability_deg_per_h * DEG_PER_H_TO_RAD_PER_S,
+            gyro_bias_tau=self.gyro_bias_corr_time_s,
+            accel_bias_sigma=self.accel_bias_mg * MG_TO_MPS2,
+            accel_bias_instability=self.accel_bias_instability_mg * MG_TO_MPS2,
+            accel_bias_tau=self.accel_bias_corr_time_s,
+        )
+
+
+def _std_triplet(value: object) -> tuple[float, float, float]:
+    """``default_std_m``: scalar, [horizontal, vertical] or [east, north, up] -> ENU tuple."""
+    key = "default_std_m"
+    if _is_number(value):
+        s = _as_float("gnss", key, value, minimum=0.0, strict_min=True)
+        return (s, s, s)
+    if isinstance(value, list | tuple) and len(value) in (2, 3):
+        for v in value:
+            if not _is_number(v) or not math.isfinite(v) or v <= 0:
+                break
+        else:
+            if len(value) == 2:
+                return (float(value[0]), float(value[0]), float(value[1]))
+            return (float(value[0]), float(value[1]), float(value[2]))
+    raise ConfigError(
+        f"[gnss] {key} must be a positive number, a list [horizontal, vertical] or a list "
+        f"[east, north, up] of positive numbers, got {value!r}"
+    )
+
+
+@dataclass(frozen=True)
+class GnssConfig:
+    """``[gnss]``: antenna lever arm, default measurement noise and outlier gate.
+
+    Attributes
+    ----------
+    lever_arm_m : (3,) float, m. Antenna phase centre in body FLU, from the IMU.
+    default_std_m : (3,) float, m, > 0. ENU position 1 sigma used when the log has none.
+        Accepts a scalar (all axes) or [horizontal, vertical] and stores (e, n, u).
+    default_vel_std_mps : float, m/s, > 0. Velocity 1 sigma used when the log has none.
+    gate_probability : float in [0, 1). Chi-square innovation gate; 0 disables gating.
+    max_consecutive_rejects : int, >= 0. After this many rejected fixes in a row the next
+        one is accepted.
+    time_offset_s : float, s. Added to GNSS stamps to put them on the IMU's time base.
+    """
+
+    lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    default_std_m: tuple[float, float, float] = (2.0, 2.0, 4.0)
+    default_vel_std_mps: float = 0.1
+    gate_probability: float = 0.9999
+    max_consecutive_rejects: int = 5
+    time_offset_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        _set(self, "lever_arm_m", _as_vector("gnss", "lever_arm_m", self.lever_arm_m, 3))
+        _set(self, "default_std_m", _std_triplet(self.default_std_m))
+        _fix_float(self, "gnss", "default_vel_std_mps", minimum=0.0, strict_min=True)
+        _fix_float(self, "gnss", "gate_probability", minimum=0.0, maximum=1.0, strict_max=True)
+        _as_int("gnss", "max_consecutive_rejects", self.max_consecutive_rejects, minimum=0)
+        _fix_float(self, "gnss", "time_offset_s")
+
+
+@dataclass(frozen=True)
+class TimeConfig:
+    """``[time]``: the log's time base and which stamps to use.
+
+    Attributes
+    ----------
+    base : str. ``"unix"`` (UTC s since 1970), ``"gpst"`` or ``"relative"``.
+    source : str. ``"header"`` (message header stamps) or ``"log"`` (record times).
+    """
+
+    base: str = "unix"
+    source: str = "header"
+
+    def __post_init__(self) -> None:
+        _as_choice("time", "base", self.base, TIME_BASES)
+        _as_choice("time", "source", self.source, TIME_SOURCES)
+
+
+@dataclass(frozen=True)
+class InitConfig:
+    """``[init]``: initial alignment.
+
+    Attributes
+    ----------
+    method : str. ``"auto"``, ``"gyrocompass"``, ``"gnss"`` or ``"config"`` (needs
+        ``heading_deg``).
+    roll_deg, pitch_deg : float or None, deg. When given they override levelling. Roll in
+        [-180, 180], pitch in [-90, 90], navigation convention.
+    heading_deg : float or None, deg clockwise from north.
+    still_min_s : float, s, >= 0. Minimum still period for levelling / gyrocompassing.
+    gyrocompass_max_heading_std_deg : float, deg, > 0. Gyrocompass heading accepted only if
+        its 1 sigma is below this.
+    min_speed_mps : float, m/s, >= 0. Minimum GNSS speed for heading from the velocity.
+    """
+
+    method: str = "auto"
+    roll_deg: float | None = None
+    pitch_deg: float | None = None
+    heading_deg: float | None = None
+    still_min_s: float = 2.0
+    gyrocompass_max_heading_std_deg: float = 2.0
+    min_speed_mps: float = 3.0
+
+    def __post_init__(self) -> None:
+        _as_choice("init", "method", self.method, INIT_METHODS)
+        _fix_optional_float(self, "init", "roll_deg", minimum=-180.0, maximum=180.0)
+        _fix_optional_float(self, "init", "pitch_deg", minimum=-90.0, maximum=90.0)
+        _fix_optional_float(self, "init", "heading_deg")
+        _fix_float(self, "init", "still_min_s", minimum=0.0)
+        _fix_float(self, "init", "gyrocompass_max_heading_std_deg", minimum=0.0, strict_min=True)
+        _fix_float(self, "init", "min_speed_mps", minimum=0.0)
+        if self.method == "config" and self.heading_deg is None:
+            raise ConfigError("[init] method = 'config' requires heading_deg")
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    """``[vehicle]``: motion constraints. ``type`` is ``"car"`` (non-holonomic) or ``"none"``."""
+
+    type: str = "none"
+
+    def __post_init__(self) -> None:
+        _as_choice("vehicle", "type", self.type, VEHICLE_TYPES)
+
+
+@dataclass(frozen=True)
+class OutputConfig:
+    """``[output]``: what to write.
+
+    Attributes
+    ----------
+    rate_hz : float or None, Hz, > 0. Output rate; None writes one row per IMU sample.
+    formats : tuple of str. Subset of ``OUTPUT_FORMATS``, non-empty, duplicates dropped.
+        TOML may give a list or one comma-separated string (``"csv,mcap"``).
+    """
+
+    rate_hz: float | None = None
+    formats: tuple[str, ...] = ("csv",)
+
+    def __post_init__(self) -> None:
+        _fix_optional_float(self, "output", "rate_hz", minimum=0.0, strict_min=True)
+        raw: object = self.formats
+        if isinstance(raw, str):
+            raw = [part.strip() for part in raw.split(",") if part.strip()]
+        if not isinstance(raw, list | tuple) or not raw:
+            raise ConfigError(
+                f"[output] formats must be a non-empty list of format names, got {self.formats!r}"
+            )
+        formats = [_as_choice("output", "formats", f, OUTPUT_FORMATS) for f in raw]
+        _set(self, "formats", tuple(dict.fromkeys(formats)))
+
+
+_SECTIONS: Final[dict[str, type]] = {
+    "imu": ImuConfig,
+    "gnss": GnssConfig,
+    "time": TimeConfig,
+    "init": InitConfig,
+    "vehicle": VehicleConfig,
+    "output": OutputConfig,
+}
+_FILTER_SECTION: Final[str] = "filter"
+_ALL_SECTIONS: Final[tuple[str, ...]] = (*_SECTIONS, _FILTER_SECTION)
+
+
+@dataclass(frozen=True)
+class Config:
+    """A whole, validated run configuration.
+
+    Attributes
+    ----------
+    imu, gnss, time, init, vehicle, output : the section dataclasses.
+    filters : read-only mapping ``name -> options`` holding the raw ``[filter.<name>]``
+        tables (nested tables read-only, lists as tuples); each filter validates its own.
+    source : str. Where the configuration came from: a file path or ``"built-in defaults"``.
+    notes : tuple of str. Lines to tell the user, e.g. which IMU preset is in use.
+    """
+
+    imu: ImuConfig = field(default_factory=ImuConfig)
+    gnss: GnssConfig = field(default_factory=GnssConfig)
+    time: TimeConfig = field(default_factory=TimeConfig)
+    init: InitConfig = field(default_factory=InitConfig)
+    vehicle: VehicleConfig = field(default_factory=VehicleConfig)
+    output: OutputConfig = field(default_factory=OutputConfig)
+    filters: Mapping[str, Mapping[str, Any]] = field(
+        default_factory=lambda: MappingProxyType({})
+    )
+    source: str = "built-in defaults"
+    notes: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        for name, cls in _SECTIONS.items():
+            if not isinstance(getattr(self, name), cls):
+                got = getattr(self, name)
+                raise ConfigError(f"[{name}] must be a {cls.__name__}, got {got!r}")
+        if not isinstance(self.filters, Mapping):
+            raise ConfigError(
+                f"[filter] must be a table of [filter.<name>] tables, got {self.filters!r}"
+            )
+        for name, options in self.filters.items():
+            if not isinstance(options, Mapping):
+                raise ConfigError(
+                    f"[filter] may only hold [filter.<name>] tables; got {name!r} = {options!r}"
+                )
+        _set(self, "filters", _freeze(self.filters))
+        _set(self, "notes", tuple(self.notes))
+
+    @classmethod
+    def default(cls) -> Config:
+        """Built-in defaults: the automotive IMU preset, and a note that says so."""
+        return cls(notes=(f"no config given: using the {DEFAULT_PRESET} IMU preset",))
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def _unknown_key(key: object, section: str, valid: Sequence[str]) -> ConfigError:
+    msg = f"unknown key {key!r} in [{section}]"
+    near = _nearest(key, valid) if isinstance(key, str) else None
+    if near is not None:
+        return ConfigError(f"{msg}; did you mean {near!r}?")
+    return ConfigError(f"{msg}; valid keys: {', '.join(valid)}")
+
+
+def _unknown_top_level(key: object, value: object) -> ConfigError:
+    sections = ", ".join(f"[{s}]" for s in _ALL_SECTIONS)
+    if not isinstance(key, str):
+        return ConfigError(f"unknown section {key!r}; valid sections: {sections}")
+    if isinstance(value, Mapping):
+        near = _nearest(key, _ALL_SECTIONS)
+        hint = f"did you mean [{near}]?" if near is not None else f"valid sections: {sections}"
+        return ConfigError(f"unknown section [{key}]; {hint}")
+    owners = [s for s, cls in _SECTIONS.items() if key in {f.name for f in fields(cls)}]
+    if owners:
+        return ConfigError(
+            f"key {key!r} is outside any section; did you mean to put it under [{owners[0]}]?"
+        )
+    return ConfigError(f"unknown top-level key {key!r}; settings go in the sections {sections}")
+
+
+def _imu_note(imu_table: Mapping[str, Any], imu: ImuConfig, source: str) -> str:
+    given = [k for k in NOISE_KEYS if k in imu_table]
+    if "preset" not in imu_table and not given:
+        return f"{source} sets no IMU noise: using the {DEFAULT_PRESET} IMU preset by default"
+    if len(given) == len(NOISE_KEYS):
+        return (
+            f"IMU noise: all {len(given)} values from {source} "
+            f"(the {imu.preset} preset is not used)"
+        )
+    which = f"the {imu.preset} IMU preset" + ("" if "preset" in imu_table else " (default)")
+    if not given:
+        return f"IMU noise: {which}, from {source}"
+    return f"IMU noise: {which}, with {', '.join(given)} overridden by {source}"
+
+
+def _build(data: Mapping[str, Any], source: str) -> Config:
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"the top level must be a table, got {data!r}")
+    for key, value in data.items():
+        if key not in _ALL_SECTIONS:
+            raise _unknown_top_level(key, value)
+    sections: dict[str, Any] = {}
+    for name, cls in _SECTIONS.items():
+        table = data.get(name, {})
+        if not isinstance(table, Mapping):
+            raise ConfigError(f"[{name}] must be a table, got {table!r}")
+        valid = [f.name for f in fields(cls)]
+        for key in table:
+            if key not in valid:
+                raise _unknown_key(key, name, valid)
+        sections[name] = cls(**table)
+    filters = data.get(_FILTER_SECTION, {})
+    if not isinstance(filters, Mapping):
+        raise ConfigError(f"[filter] must be a table of [filter.<name>] tables, got {filters!r}")
+    note = _imu_note(data.get("imu", {}), sections["imu"], source)
+    return Config(**sections, filters=filters, source=source, notes=(note,))
+
+
+def config_from_dict(data: Mapping[str, Any], source: str) -> Config:
+    """Validate a parsed configuration (as ``tomllib`` returns it) and build a :class:`Config`.
+
+    Parameters
+    ----------
+    data : mapping ``section -> table``; missing sections and keys take their defaults.
+    source : str. Where ``data`` came from; starts every error message and is kept in
+        ``Config.source``.
+
+    Raises
+    ------
+    ConfigError
+        Unknown section or key (with the nearest valid one), wrong type or shape, value out
+        of range, unknown preset or enum value.
+    """
+    try:
+        return _build(data, source)
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
+
+
+def load_config(path: str | Path | None) -> Config:
+    """Read and validate a TOML configuration file.
+
+    Parameters
+    ----------
+    path : str, Path or None. None returns :meth:`Config.default`.
+
+    Raises
+    ------
+    ConfigError
+        Missing or unreadable file, invalid UTF-8 or TOML (with tomllib's line and column),
+        or any error of :func:`config_from_dict`.
+    """
+    if path is None:
+        return Config.default()
+    source = str(path)
+    try:
+        raw = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise ConfigError(f"config file not found: {source}") from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read config file {source}: {exc.strerror or exc}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        msg = f"{source}: not UTF-8 text ({exc.reason} at byte {exc.start})"
+        raise ConfigError(msg) from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{source}: invalid TOML: {exc}") from None
+    return config_from_dict(data, source)

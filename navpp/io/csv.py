@@ -1,0 +1,590 @@
+"""CSV logs: a directory holding ``imu.csv`` and ``gnss.csv`` (and optionally ``reference.csv``).
+
+Schemas (header row required, comma separated, extra columns ignored and named once in a
+warning; see ``INTERFACES.md``):
+
+- ``imu.csv``: ``t, gx, gy, gz, ax, ay, az``: angular rate (rad/s) and specific force (m/s^2)
+  sampled at ``t``, body FLU; or increments ``t, dthx, dthy, dthz, dvx, dvy, dvz`` (rad, m/s)
+  accumulated over the interval ending at ``t`` (converted to rates by
+  :func:`increments_to_rates`).
+- ``gnss.csv``: ``t, lat, lon, alt`` (deg, deg, m ellipsoidal); optional ``std_e, std_n, std_u``
+  (m, 1-sigma); optional ``ve, vn, vu`` (m/s) with optional ``std_ve, std_vn, std_vu``; optional
+  ``fix``, ``num_sats``.  Each triple is all or none.
+- ``reference.csv``: ``t, lat, lon, alt``; optional ``ve, vn, vu``; optional
+  ``roll, pitch, heading`` (deg).
+
+Time: ``t`` is float seconds on the log's time base (``unix``, ``gpst`` or ``relative``).  The
+recording's ``t0_ns`` is the first IMU stamp (as parsed to float64) converted exactly to integer
+nanoseconds; every relative time is ``t - t_imu[0]`` in float64 (the reference, read on its own,
+uses ``t0_ns``).
+
+Validation happens before any array is handed out.  Every failure is an ``InputError`` whose
+one-line message names the file, the column and the line (header = line 1, first data row =
+line 2) or the time.  What is accepted but worth knowing (dropped duplicate stamps, gaps, ignored
+columns, GNSS fixes outside the IMU span) becomes a line in ``Recording.warnings``.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from navpp.errors import ConfigError, InputError
+from navpp.recording import GnssData, ImuData, Recording, ReferenceData
+
+__all__ = ["increments_to_rates", "is_csv_log", "read_csv_log", "read_reference_csv"]
+
+IMU_FILE = "imu.csv"
+GNSS_FILE = "gnss.csv"
+REFERENCE_FILE = "reference.csv"
+
+TIME_BASES = ("unix", "gpst", "relative")
+GYRO_UNITS = {"rad/s": 1.0, "deg/s": np.pi / 180.0}
+ACCEL_UNITS = {"m/s^2": 1.0, "g": 9.80665}
+
+GAP_FACTOR = 2.5
+"""A sample interval longer than this times the median interval is reported as a gap."""
+
+_IMU_RATE_COLS = ("gx", "gy", "gz", "ax", "ay", "az")
+_IMU_INCREMENT_COLS = ("dthx", "dthy", "dthz", "dvx", "dvy", "dvz")
+_GNSS_REQUIRED = ("t", "lat", "lon", "alt")
+_GNSS_GROUPS = (("std_e", "std_n", "std_u"), ("ve", "vn", "vu"), ("std_ve", "std_vn", "std_vu"))
+_GNSS_SINGLES = ("fix", "num_sats")
+_REF_REQUIRED = ("t", "lat", "lon", "alt")
+_REF_GROUPS = (("ve", "vn", "vu"), ("roll", "pitch", "heading"))
+_MAX_NAMES_SHOWN = 20
+
+
+# --------------------------------------------------------------------------------------------
+# public API
+# --------------------------------------------------------------------------------------------
+
+
+def is_csv_log(path: str | Path) -> bool:
+    """True if ``path`` is a directory holding ``imu.csv`` and ``gnss.csv``."""
+    p = Path(path)
+    return p.is_dir() and (p / IMU_FILE).is_file() and (p / GNSS_FILE).is_file()
+
+
+def read_csv_log(
+    path: str | Path,
+    *,
+    reference: str | Path | None = None,
+    time_base: str = "unix",
+    gyro_units: str = "rad/s",
+    accel_units: str = "m/s^2",
+    time_offset_s: float = 0.0,
+) -> Recording:
+    """Read and validate a CSV log directory.
+
+    Parameters
+    ----------
+    path : directory holding ``imu.csv`` and ``gnss.csv``.  A ``reference.csv`` in it is read
+        too unless ``reference`` names another file.
+    reference : reference trajectory CSV to use instead of ``path/reference.csv``.
+    time_base : ``"unix"``, ``"gpst"`` or ``"relative"``: what the ``t`` columns count.
+    gyro_units : ``"rad/s"`` or ``"deg/s"`` (for increments: rad or deg).
+    accel_units : ``"m/s^2"`` or ``"g"`` (for increments: m/s or g*s).
+    time_offset_s : s, added to every GNSS stamp (receiver latency correction).
+
+    Returns
+    -------
+    Recording
+        ``t0_ns`` = the first IMU stamp in integer ns on ``time_base``; all ``t`` arrays are
+        float seconds relative to it.  ``warnings`` holds what validation accepted but noticed.
+
+    Raises
+    ------
+    InputError
+        A file is missing or unusable; the message names the file, column and line or time.
+    ConfigError
+        ``time_base`` or a unit is not one of the accepted values.
+
+    Notes
+    -----
+    IMU increments (``dthx .. dvz``) become rates sampled at the stamps as described in
+    :func:`increments_to_rates`; the first IMU row is then dropped (its increment covers time
+    before the log starts), so ``t0_ns`` is the second stamp of the file.
+    """
+    gyro_scale, accel_scale = _check_options(time_base, gyro_units, accel_units)
+    log_dir = Path(path)
+    if not log_dir.is_dir():
+        raise InputError(
+            f"{log_dir}: not a directory; a CSV log is a directory holding {IMU_FILE} and {GNSS_FILE}"
+        )
+    warnings: list[str] = []
+
+    # IMU -------------------------------------------------------------------------------------
+    imu_path = log_dir / IMU_FILE
+    header = _read_header(imu_path)
+    imu_format, imu_cols = _imu_format(imu_path, header)
+    imu = _read_table(imu_path, header, imu_cols, warnings)
+    imu = _check_time(imu, warnings)
+    if imu_format == "increments":
+        if imu.n < 3:
+            raise _need_more(imu, "at least 3 rows are needed for IMU increments (the first row is dropped)")
+        t_imu, rates = increments_to_rates(imu.col("t"), imu.block(_IMU_INCREMENT_COLS))
+        imu_lines = imu.lines[1:]
+    else:
+        if imu.n < 2:
+            raise _need_more(imu, "at least 2 IMU samples are needed")
+        t_imu, rates = imu.col("t"), imu.block(_IMU_RATE_COLS)
+        imu_lines = imu.lines
+    _gap_warning(imu.path.name, t_imu, imu_lines, warnings)
+    t_first = float(t_imu[0])
+    t_last = float(t_imu[-1])
+    t0_ns = _seconds_to_ns(t_first)
+    gyro = np.ascontiguousarray(rates[:, 0:3] * gyro_scale)
+    accel = np.ascontiguousarray(rates[:, 3:6] * accel_scale)
+    imu_data = ImuData(t=t_imu - t_first, gyro=gyro, accel=accel)
+
+    # GNSS ------------------------------------------------------------------------------------
+    gnss_path = log_dir / GNSS_FILE
+    header = _read_header(gnss_path)
+    gnss_cols = _select_columns(gnss_path, header, _GNSS_REQUIRED, _GNSS_GROUPS, _GNSS_SINGLES)
+    if "std_ve" in gnss_cols and "ve" not in gnss_cols:
+        raise InputError(
+            f"{gnss_path}: line 1 (header), columns 'std_ve', 'std_vn', 'std_vu' given without "
+            "'ve', 'vn', 'vu'"
+        )
+    gnss = _read_table(gnss_path, header, gnss_cols, warnings)
+    _check_lat_lon(gnss)
+    _check_nonnegative(gnss, [c for g in (_GNSS_GROUPS[0], _GNSS_GROUPS[2]) for c in g])
+    _check_integral(gnss, _GNSS_SINGLES)
+    gnss = _check_time(gnss, warnings)
+    if gnss.n < 1:  # cannot happen after _read_table's row check; kept as the contract
+        raise _need_more(gnss, "at least 1 GNSS fix is needed")
+    t_gnss = gnss.col("t") + float(time_offset_s)
+    _gap_warning(gnss.path.name, t_gnss, gnss.lines, warnings)
+    n_before = int(np.count_nonzero(t_gnss < t_first))
+    n_after = int(np.count_nonzero(t_gnss > t_last))
+    if n_before or n_after:
+        warnings.append(
+            f"{gnss.path.name}: {n_before + n_after} of {gnss.n} fixes lie outside the IMU time span "
+            f"t={t_first!r}..{t_last!r} ({n_before} before, {n_after} after"
+            + (f", after adding time_offset_s={time_offset_s!r}" if time_offset_s else "")
+            + "); kept, but the engine ignores them"
+        )
+    gnss_data = GnssData(
+        t=t_gnss - t_first,
+        lat_deg=gnss.col("lat"),
+        lon_deg=gnss.col("lon"),
+        alt=gnss.col("alt"),
+        std_enu=gnss.block(_GNSS_GROUPS[0]) if "std_e" in gnss_cols else None,
+        vel_enu=gnss.block(_GNSS_GROUPS[1]) if "ve" in gnss_cols else None,
+        std_vel_enu=gnss.block(_GNSS_GROUPS[2]) if "std_ve" in gnss_cols else None,
+        fix=gnss.col("fix").astype(np.int64) if "fix" in gnss_cols else None,
+        num_sats=gnss.col("num_sats").astype(np.int64) if "num_sats" in gnss_cols else None,
+    )
+
+    # reference -------------------------------------------------------------------------------
+    ref_data: ReferenceData | None = None
+    if reference is not None:
+        ref_data = read_reference_csv(reference, t0_ns, warnings_out=warnings)
+    elif (log_dir / REFERENCE_FILE).exists():
+        ref_data = read_reference_csv(log_dir / REFERENCE_FILE, t0_ns, warnings_out=warnings)
+
+    return Recording(
+        imu=imu_data,
+        gnss=gnss_data,
+        t0_ns=t0_ns,
+        time_base=time_base,
+        reference=ref_data,
+        source=str(path),
+        warnings=tuple(warnings),
+    )
+
+
+def read_reference_csv(
+    path: str | Path, t0_ns: int, *, warnings_out: list[str] | None = None
+) -> ReferenceData:
+    """Read and validate a reference trajectory CSV.
+
+    Parameters
+    ----------
+    path : CSV file with ``t, lat, lon, alt`` and optionally ``ve, vn, vu`` and
+        ``roll, pitch, heading`` (deg).
+    t0_ns : int, ns on the log's time base: the stamp the relative times are measured from
+        (``Recording.t0_ns``).
+    warnings_out : if given, validation warnings (ignored columns, duplicate stamps) are
+        appended to it.
+
+    Returns
+    -------
+    ReferenceData
+        ``t`` in s relative to ``t0_ns``; ``source`` is ``str(path)``.
+
+    Raises
+    ------
+    InputError
+        As :func:`read_csv_log`.
+    """
+    ref_path = Path(path)
+    warnings: list[str] = []
+    header = _read_header(ref_path)
+    cols = _select_columns(ref_path, header, _REF_REQUIRED, _REF_GROUPS, ())
+    ref = _read_table(ref_path, header, cols, warnings)
+    _check_lat_lon(ref)
+    ref = _check_time(ref, warnings)
+    if warnings_out is not None:
+        warnings_out.extend(warnings)
+    # (t - whole seconds) is exact in float64; the sub-second part of t0 is then subtracted.
+    sec, frac_ns = divmod(int(t0_ns), 1_000_000_000)
+    t_rel = (ref.col("t") - float(sec)) - frac_ns * 1e-9
+    return ReferenceData(
+        t=t_rel,
+        lat_deg=ref.col("lat"),
+        lon_deg=ref.col("lon"),
+        alt=ref.col("alt"),
+        vel_enu=ref.block(_REF_GROUPS[0]) if "ve" in cols else None,
+        rph_deg=ref.block(_REF_GROUPS[1]) if "roll" in cols else None,
+        source=str(path),
+    )
+
+
+def increments_to_rates(t: np.ndarray, increments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Convert increments accumulated over the interval ending at each stamp to rates at the stamps.
+
+    Parameters
+    ----------
+    t : (N,) float, s, strictly increasing stamps, N >= 3.
+    increments : (N, K) float, quantity accumulated over ``(t[k-1], t[k]]`` (e.g. rad and m/s);
+        row 0 covers time before ``t[0]`` and is not used.
+
+    Returns
+    -------
+    t_out : (N-1,) float, s, ``t[1:]``.
+    rates : (N-1, K) float, quantity per second, sampled at ``t_out``.
+
+    Notes
+    -----
+    The mean rate of interval k is ``r_k = increments[k] / dt_k`` with ``dt_k = t[k] - t[k-1]``;
+    it is the rate at the interval's midpoint if the rate varies linearly.  The rate at ``t[k]``
+    interpolates linearly between the midpoints of intervals k and k+1:
+    ``(dt_{k+1} r_k + dt_k r_{k+1}) / (dt_k + dt_{k+1})``, which is the plain average
+    ``(r_k + r_{k+1}) / 2`` when the sampling is uniform, and exact for a linearly varying rate
+    at any spacing (a long gap after ``t[k]`` barely weighs in).  The last sample takes its own
+    interval's mean rate.  The first sample is dropped: its increment covers time before the log.
+    """
+    t = np.asarray(t, dtype=np.float64)
+    inc = np.asarray(increments, dtype=np.float64)
+    if t.ndim != 1 or inc.ndim != 2 or inc.shape[0] != t.shape[0] or t.shape[0] < 3:
+        raise ValueError(
+            f"increments_to_rates: t {t.shape}, increments {inc.shape}; expected (N,), (N, K), N >= 3"
+        )
+    dt = np.diff(t)  # dt[k-1] = t[k] - t[k-1], k = 1..N-1
+    mean_rate = inc[1:] / dt[:, None]  # r_k, k = 1..N-1
+    rates = np.empty_like(mean_rate)
+    w_next = (dt[:-1] / (dt[:-1] + dt[1:]))[:, None]
+    rates[:-1] = (1.0 - w_next) * mean_rate[:-1] + w_next * mean_rate[1:]
+    rates[-1] = mean_rate[-1]
+    return t[1:].copy(), rates
+
+
+# --------------------------------------------------------------------------------------------
+# validation helpers
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Table:
+    """Validated numeric columns of one CSV file, with the file line number of every row."""
+
+    path: Path
+    data: dict[str, np.ndarray]
+    lines: np.ndarray  # (n,) int64, line number in the file (header = 1)
+
+    @property
+    def n(self) -> int:
+        return int(self.lines.shape[0])
+
+    def col(self, name: str) -> np.ndarray:
+        return np.ascontiguousarray(self.data[name])
+
+    def block(self, names: Sequence[str]) -> np.ndarray:
+        return np.column_stack([self.data[c] for c in names])
+
+    def take(self, keep: np.ndarray) -> _Table:
+        return _Table(self.path, {k: v[keep] for k, v in self.data.items()}, self.lines[keep])
+
+
+def _check_options(time_base: str, gyro_units: str, accel_units: str) -> tuple[float, float]:
+    if time_base not in TIME_BASES:
+        raise ConfigError(f"time base {time_base!r} is not one of {', '.join(map(repr, TIME_BASES))}")
+    if gyro_units not in GYRO_UNITS:
+        raise ConfigError(f"gyro units {gyro_units!r} are not one of {', '.join(map(repr, GYRO_UNITS))}")
+    if accel_units not in ACCEL_UNITS:
+        raise ConfigError(
+            f"accel units {accel_units!r} are not one of {', '.join(map(repr, ACCEL_UNITS))}"
+        )
+    return GYRO_UNITS[gyro_units], ACCEL_UNITS[accel_units]
+
+
+def _seconds_to_ns(t: float) -> int:
+    """Exact integer ns of a float64 number of seconds (no float rounding of ``t * 1e9``)."""
+    return round(Fraction(t) * 1_000_000_000)
+
+
+def _names(names: Sequence[str]) -> str:
+    shown = ", ".join(repr(n) for n in names[:_MAX_NAMES_SHOWN])
+    if len(names) > _MAX_NAMES_SHOWN:
+        shown += f", ... ({len(names)} columns)"
+    return shown
+
+
+def _read_header(path: Path) -> list[str]:
+    """The header's column names, stripped of surrounding blanks; checks the file is usable."""
+    if not path.exists():
+        raise InputError(f"{path}: file not found")
+    if not path.is_file():
+        raise InputError(f"{path}: not a file")
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as f:
+            row = next(csv.reader(f), None)
+    except UnicodeDecodeError as e:
+        raise InputError(f"{path}: line 1: not a UTF-8 text file ({e.reason} at byte {e.start})") from e
+    except (OSError, csv.Error) as e:
+        raise InputError(f"{path}: line 1: cannot read the header: {e}") from e
+    if row is None:
+        raise InputError(f"{path}: empty file; expected a header row (line 1) and data rows")
+    names = [c.strip() for c in row]
+    if not any(names):
+        raise InputError(f"{path}: line 1: empty header; expected column names (a header row is required)")
+    seen: set[str] = set()
+    for name in names:
+        if name and name in seen:
+            raise InputError(f"{path}: line 1 (header), column {name!r}: appears more than once")
+        seen.add(name)
+    return names
+
+
+def _missing_columns_error(path: Path, missing: Sequence[str], header: list[str], expected: str) -> InputError:
+    return InputError(
+        f"{path}: line 1 (header): missing required column(s) {_names(missing)}; expected {expected}; "
+        f"found {_names(header)}"
+    )
+
+
+def _imu_format(path: Path, header: list[str]) -> tuple[str, list[str]]:
+    present = set(header)
+    rates = ("t", *_IMU_RATE_COLS)
+    increments = ("t", *_IMU_INCREMENT_COLS)
+    if all(c in present for c in rates):
+        return "rates", list(rates)
+    if all(c in present for c in increments):
+        return "increments", list(increments)
+    n_rates = sum(c in present for c in _IMU_RATE_COLS)
+    n_inc = sum(c in present for c in _IMU_INCREMENT_COLS)
+    chosen = increments if n_inc > n_rates else rates
+    missing = [c for c in chosen if c not in present]
+    raise _missing_columns_error(
+        path, missing, header, f"{', '.join(rates)} (rates) or {', '.join(increments)} (increments)"
+    )
+
+
+def _select_columns(
+    path: Path,
+    header: list[str],
+    required: Sequence[str],
+    groups: Sequence[Sequence[str]],
+    singles: Sequence[str],
+) -> list[str]:
+    present = set(header)
+    missing = [c for c in required if c not in present]
+    if missing:
+        raise _missing_columns_error(path, missing, header, ", ".join(required))
+    cols = list(required)
+    for group in groups:
+        have = [c for c in group if c in present]
+        if have and len(have) < len(group):
+            lacking = [c for c in group if c not in present]
+            raise InputError(
+                f"{path}: line 1 (header): missing column(s) {_names(lacking)}: {_names(list(group))} "
+                "go together, all or none"
+            )
+        cols.extend(have)
+    cols.extend(c for c in singles if c in present)
+    return cols
+
+
+def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list[str]) -> _Table:
+    """Parse ``wanted`` columns as float64 and check every cell is a finite number."""
+    # Unnamed columns (trailing commas) are ignored silently: there is nothing to name.
+    extra = [name for name in header if name and name not in wanted]
+    if extra:
+        warnings.append(f"{path.name}: ignoring extra column(s) {_names(extra)}")
+    positions = [header.index(c) for c in wanted]
+    try:
+        df = pd.read_csv(
+            path,
+            engine="c",
+            header=0,
+            dtype={i: np.float64 for i in positions},
+            skip_blank_lines=False,
+            encoding="utf-8-sig",
+        )
+    except pd.errors.ParserError as e:
+        raise InputError(f"{path}: {_parser_message(e, len(header))}") from e
+    except ValueError as e:
+        raise _locate_non_numeric(path, wanted, positions, e) from e
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(f"{path}: cannot read: {e}") from e
+    data_cols = [df.iloc[:, i].to_numpy(dtype=np.float64) for i in positions]
+    block = np.column_stack(data_cols)
+    finite = np.isfinite(block)
+    n = block.shape[0]
+    # Blank lines at the end of the file are harmless: drop them.
+    row_empty = np.isnan(block).all(axis=1)
+    while n > 0 and row_empty[n - 1]:
+        n -= 1
+    if n == 0:
+        raise InputError(f"{path}: line 1 (header) is not followed by any data row; expected at least one")
+    block, finite = block[:n], finite[:n]
+    if not finite.all():
+        row, j = _first_true(~finite)
+        value = block[row, j]
+        if row_empty[row]:
+            what = "blank line"
+        elif np.isnan(value):
+            what = "missing value (empty cell or NaN)"
+        else:
+            what = f"non-finite value {float(value)!r}"
+        raise InputError(f"{path}: line {row + 2}, column {wanted[j]!r}: {what}")
+    data = {name: block[:, j] for j, name in enumerate(wanted)}
+    return _Table(path, data, np.arange(2, n + 2, dtype=np.int64))
+
+
+def _first_true(mask: np.ndarray) -> tuple[int, int]:
+    """(row, column) of the first True in row-major order (the first offending line)."""
+    flat = int(np.argmax(mask.ravel()))
+    return divmod(flat, mask.shape[1])
+
+
+def _parser_message(e: Exception, n_header: int) -> str:
+    m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", str(e))
+    if m:
+        return f"line {m.group(2)}: {m.group(3)} fields, but the header (line 1) has {n_header} columns"
+    return f"cannot parse as CSV: {str(e).strip().splitlines()[-1]}"
+
+
+def _locate_non_numeric(path: Path, wanted: list[str], positions: list[int], cause: Exception) -> InputError:
+    """Slow path, only after the fast parse failed: find the first cell that is not a number."""
+    try:
+        raw = pd.read_csv(
+            path, engine="c", header=0, usecols=positions, dtype=object,
+            skip_blank_lines=False, encoding="utf-8-sig",
+        )
+    except Exception:  # noqa: BLE001 - fall back to the fast parser's own message
+        return InputError(f"{path}: non-numeric value: {cause}")
+    best: tuple[int, str, object] | None = None
+    # usecols returns columns in file order; map back to names by position.
+    by_position = dict(zip(positions, wanted))
+    for k, pos in enumerate(sorted(positions)):
+        s = raw.iloc[:, k]
+        bad = pd.to_numeric(s, errors="coerce").isna().to_numpy() & s.notna().to_numpy()
+        if bad.any():
+            row = int(np.argmax(bad))
+            if best is None or row < best[0]:
+                best = (row, by_position[pos], s.iloc[row])
+    if best is None:
+        return InputError(f"{path}: non-numeric value: {cause}")
+    row, name, value = best
+    return InputError(f"{path}: line {row + 2}, column {name!r}: non-numeric value {value!r}")
+
+
+def _check_lat_lon(table: _Table) -> None:
+    _check_range(table, "lat", -90.0, 90.0, "[-90, 90] deg", upper_open=False)
+    _check_range(table, "lon", -180.0, 360.0, "[-180, 360) deg", upper_open=True)
+
+
+def _check_range(table: _Table, name: str, lo: float, hi: float, text: str, *, upper_open: bool) -> None:
+    v = table.data[name]
+    bad = (v < lo) | ((v >= hi) if upper_open else (v > hi))
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise InputError(
+            f"{table.path}: line {table.lines[k]}, column {name!r}: {float(v[k])!r} is outside {text}"
+        )
+
+
+def _check_nonnegative(table: _Table, names: Sequence[str]) -> None:
+    names = [c for c in names if c in table.data]
+    if not names:
+        return
+    bad = np.column_stack([table.data[c] < 0 for c in names])
+    if bad.any():
+        row, j = _first_true(bad)
+        raise InputError(
+            f"{table.path}: line {table.lines[row]}, column {names[j]!r}: negative standard deviation "
+            f"{float(table.data[names[j]][row])!r}"
+        )
+
+
+def _check_integral(table: _Table, names: Sequence[str]) -> None:
+    for name in names:
+        if name in table.data:
+            v = table.data[name]
+            bad = v != np.round(v)
+            if bad.any():
+                k = int(np.argmax(bad))
+                raise InputError(
+                    f"{table.path}: line {table.lines[k]}, column {name!r}: {float(v[k])!r} is not an integer"
+                )
+
+
+def _check_time(table: _Table, warnings: list[str]) -> _Table:
+    """Stamps must not decrease; equal consecutive stamps: the later row is dropped (warned)."""
+    t = table.data["t"]
+    dt = np.diff(t)
+    back = dt < 0
+    if back.any():
+        k = int(np.argmax(back)) + 1
+        raise InputError(
+            f"{table.path}: line {table.lines[k]}, column 't': time goes backwards, t={float(t[k])!r} "
+            f"after t={float(t[k - 1])!r} on line {table.lines[k - 1]}"
+        )
+    dup = dt == 0
+    if not dup.any():
+        return table
+    n_dup = int(np.count_nonzero(dup))
+    first_line = int(table.lines[int(np.argmax(dup)) + 1])
+    warnings.append(
+        f"{table.path.name}: dropped {n_dup} duplicate timestamp{'s' if n_dup > 1 else ''} "
+        f"(first at line {first_line})"
+    )
+    keep = np.concatenate(([True], ~dup))
+    return table.take(keep)
+
+
+def _gap_warning(file_name: str, t: np.ndarray, lines: np.ndarray, warnings: list[str]) -> None:
+    """Warn about intervals longer than ``GAP_FACTOR`` times the median interval."""
+    if t.shape[0] < 3:
+        return
+    dt = np.diff(t)
+    nominal = float(np.median(dt))
+    gaps = dt > GAP_FACTOR * nominal
+    if not gaps.any():
+        return
+    k = int(np.argmax(np.where(gaps, dt, -np.inf)))
+    n_gaps = int(np.count_nonzero(gaps))
+    warnings.append(
+        f"{file_name}: {n_gaps} gap{'s' if n_gaps > 1 else ''} longer than {GAP_FACTOR} x the nominal "
+        f"interval {nominal:.4g} s ({1.0 / nominal:.4g} Hz); largest {float(dt[k]):.6g} s from "
+        f"t={float(t[k])!r} (line {lines[k]}) to t={float(t[k + 1])!r} (line {lines[k + 1]})"
+    )
+
+
+def _need_more(table: _Table, need: str) -> InputError:
+    lines = table.lines
+    where = f"line {lines[0]}" if table.n == 1 else f"lines {lines[0]}..{lines[-1]}"
+    return InputError(
+        f"{table.path}: column 't': {table.n} distinct timestamp{'s' if table.n != 1 else ''} ({where}); "
+        f"{need}"
+    )
