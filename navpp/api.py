@@ -1,0 +1,171 @@
+"""What the CLI and Python users call: :func:`process` and :func:`simulate_log`.
+
+These functions return result objects and raise :class:`navpp.errors.NavppError` subclasses
+with one-line messages; they never print or exit.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from .config import Config, load_config
+from .errors import ConfigError, InputError
+from .recording import Recording, Solution
+
+CONFIG_IN_LOG_DIR = "navpp.toml"
+
+
+@dataclass(frozen=True)
+class ProcessResult:
+    """Outcome of :func:`process`: the solution, metrics (None without a reference), files."""
+
+    filter_name: str
+    recording: Recording
+    solution: Solution
+    run: Any                       # engine.RunResult
+    metrics: dict | None
+    out_dir: Path
+    files: tuple[Path, ...]
+    config: Config
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+
+def resolve_config(log: Path, config_path: str | Path | None) -> Config:
+    """Explicit ``--config``; else ``navpp.toml`` beside/inside the log; else built-in defaults."""
+    if config_path is not None:
+        return load_config(config_path)
+    base = log if log.is_dir() else log.parent
+    candidate = base / CONFIG_IN_LOG_DIR
+    if candidate.is_file():
+        cfg = load_config(candidate)
+        return cfg
+    return load_config(None)
+
+
+def read_log(log: str | Path, config: Config, *, reference: str | Path | None = None) -> Recording:
+    """Read any supported log into a validated :class:`Recording`."""
+    from .io import csv as csv_io
+
+    path = Path(log)
+    if not path.exists():
+        raise InputError(f"{path}: no such file or directory")
+    if csv_io.is_csv_log(path):
+        return csv_io.read_csv_log(path, reference=reference, time_base=config.time.base,
+                                   gyro_units=config.imu.gyro_units, accel_units=config.imu.accel_units,
+                                   time_offset_s=config.gnss.time_offset_s)
+    if path.is_dir():
+        raise InputError(f"{path}: not a navpp log directory (expected imu.csv and gnss.csv inside)")
+    raise InputError(f"{path}: unsupported log format {path.suffix or '(no suffix)'!r}; this version reads "
+                     "CSV log directories (imu.csv + gnss.csv)")
+
+
+def make_filter(name: str, config: Config, *, seed: int | None = None):
+    """Instantiate a registered filter with its ``[filter.<name>]`` options and the GNSS gate."""
+    from .filters import FILTERS, get_filter
+
+    for key in config.filters:
+        if key not in FILTERS:
+            import difflib
+            near = difflib.get_close_matches(key, list(FILTERS), n=1)
+            hint = f"; did you mean [filter.{near[0]}]?" if near else f"; filters: {', '.join(sorted(FILTERS))}"
+            raise ConfigError(f"{config.source}: unknown section [filter.{key}]{hint}")
+    cls = get_filter(name)
+    opts = dict(config.filters.get(name, {}))
+    opt_seed = opts.get("seed")
+    options = cls.options_from_mapping(opts, config.source)
+    rng = np.random.default_rng(seed if seed is not None else (opt_seed if isinstance(opt_seed, int) else 0))
+    return cls(options, gate_probability=config.gnss.gate_probability,
+               max_consecutive_rejects=config.gnss.max_consecutive_rejects, rng=rng)
+
+
+def resample_solution(sol: Solution, rate_hz: float) -> Solution:
+    """The solution at ``rate_hz`` on whole multiples of the period (interpolated)."""
+    from .metrics import interpolate_solution
+
+    period = 1.0 / rate_hz
+    t0_abs = sol.t0_ns * 1e-9
+    k0 = np.ceil((t0_abs + sol.t[0]) / period - 1e-9)
+    k1 = np.floor((t0_abs + sol.t[-1]) / period + 1e-9)
+    t = np.arange(k0, k1 + 1) * period - t0_abs
+    t = t[(t >= sol.t[0]) & (t <= sol.t[-1])]
+    it = interpolate_solution(sol, t)
+    std = np.column_stack([np.interp(t, sol.t, sol.std_enu[:, i]) for i in range(3)])
+    gb = np.column_stack([np.interp(t, sol.t, sol.gyro_bias[:, i]) for i in range(3)])
+    ab = np.column_stack([np.interp(t, sol.t, sol.accel_bias[:, i]) for i in range(3)])
+    return Solution(t=t, lat_deg=it["lat_deg"], lon_deg=it["lon_deg"], alt=it["alt"], vel_enu=it["vel_enu"],
+                    rph_deg=it["rph_deg"], std_enu=std, gyro_bias=gb, accel_bias=ab, t0_ns=sol.t0_ns)
+
+
+def default_out_dir(log: Path, filter_name: str) -> Path:
+    stem = log.name if log.is_dir() else log.stem
+    return Path("navpp-out") / f"{stem}-{filter_name}"
+
+
+def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | Config | None = None,
+            reference: str | Path | None = None, out_dir: str | Path | None = None,
+            output_rate_hz: float | None = None, progress: Callable[[str, float], None] | None = None,
+            write: bool = True) -> ProcessResult:
+    """Read a log, run one filter, write trajectory (and metrics with a reference).
+
+    Parameters
+    ----------
+    log : a CSV log directory (imu.csv, gnss.csv, optional reference.csv).
+    filter_name : registry name (``navpp filters``).
+    config : a TOML path or a :class:`Config`; None looks for ``navpp.toml`` in the log
+        directory, then uses the defaults (automotive preset).
+    reference : reference CSV overriding ``reference.csv`` in the log directory.
+    progress : ``progress(stage, fraction)`` for progress bars.
+    """
+    from . import engine
+    from .io import writers
+    from .metrics import compute_metrics
+
+    log = Path(log)
+    cfg = config if isinstance(config, Config) else resolve_config(log, config)
+    filt = make_filter(filter_name, cfg)
+    if progress:
+        progress("reading", 0.0)
+    rec = read_log(log, cfg, reference=reference)
+    if progress:
+        progress("reading", 1.0)
+    t_start = time.perf_counter()
+    result = engine.run(rec, cfg, filt, progress=(lambda f: progress("filtering", f)) if progress else None)
+    runtime = time.perf_counter() - t_start
+    sol = result.solution
+    rate = output_rate_hz if output_rate_hz is not None else cfg.output.rate_hz
+    sol_out = resample_solution(sol, rate) if rate else sol
+
+    metrics = None
+    if rec.reference is not None:
+        metrics = compute_metrics(
+            sol, rec.reference, filter_name=filter_name, log=str(log), reference=rec.reference.source or "",
+            runtime_s=runtime, imu_samples=len(rec.imu), gnss_epochs=result.gnss_epochs,
+            gnss_rejected=result.gnss_rejected, gnss=rec.gnss, lever_arm_m=cfg.gnss.lever_arm_m)
+
+    out = Path(out_dir) if out_dir is not None else default_out_dir(log, filter_name)
+    files: list[Path] = []
+    if write:
+        out.mkdir(parents=True, exist_ok=True)
+        p = out / "trajectory.csv"
+        writers.write_trajectory_csv(p, sol_out, t0_s=rec.t0_ns * 1e-9)
+        files.append(p)
+        if metrics is not None:
+            writers.write_metrics_json(out / "metrics.json", metrics)
+            writers.write_metrics_md(out / "metrics.md", metrics)
+            files += [out / "metrics.json", out / "metrics.md"]
+    notes = tuple(cfg.notes) + tuple(rec.warnings) + tuple(result.alignment.lines)
+    return ProcessResult(filter_name, rec, sol_out, result, metrics, out, tuple(files), cfg, notes)
+
+
+def simulate_log(out: str | Path, **spec: Any) -> Path:
+    """Simulate a drive and write it as a CSV log directory (see :mod:`navpp.simulate`)."""
+    from .simulate import SimulationSpec, simulate, write_csv_log
+
+    sim = simulate(SimulationSpec(**spec))
+    write_csv_log(sim, out)
+    return Path(out)

@@ -1,0 +1,170 @@
+"""navpp command line: a thin Typer app over :mod:`navpp.api`.
+
+Heavy modules (numpy, numba, pandas) are imported inside the commands so ``navpp --help``
+answers at once.  Every :class:`navpp.errors.NavppError` becomes one line on stderr and exit
+code 1; usage errors exit with 2 (Typer/Click).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+app = typer.Typer(
+    add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+    help="Post-process inertial navigation logs: strapdown INS + loosely coupled GNSS filters.",
+)
+
+
+def _fail(message: str) -> None:
+    from rich.console import Console
+
+    Console(stderr=True, highlight=False, soft_wrap=True).print(f"[bold red]navpp: error:[/] {message}")
+    raise typer.Exit(1)
+
+
+class _Progress:
+    """Rich progress bars on stderr, one task per stage; silent with --quiet."""
+
+    def __init__(self, quiet: bool) -> None:
+        self.quiet = quiet
+        self.bar = None
+        self.tasks: dict[str, int] = {}
+
+    def __enter__(self):
+        if not self.quiet:
+            from rich.console import Console
+            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+            self.bar = Progress(TextColumn("{task.description:<10}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
+                                TimeElapsedColumn(), console=Console(stderr=True), transient=True)
+            self.bar.__enter__()
+        return self
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        if self.bar is None:
+            return
+        if stage not in self.tasks:
+            self.tasks[stage] = self.bar.add_task(stage, total=1.0)
+        self.bar.update(self.tasks[stage], completed=fraction)
+
+    def __exit__(self, *exc) -> None:
+        if self.bar is not None:
+            self.bar.__exit__(*exc)
+
+
+@app.command()
+def process(
+    log: Annotated[Path, typer.Argument(help="Log: a directory with imu.csv and gnss.csv (reference.csv optional).")],
+    filter: Annotated[str, typer.Option("--filter", "-f", help="Filter name (see `navpp filters`).")] = "ekf",
+    config: Annotated[Optional[Path], typer.Option(help="TOML config; default: navpp.toml in the log directory, "
+                                                   "else the automotive preset.")] = None,
+    reference: Annotated[Optional[Path], typer.Option(help="Reference CSV (t, lat, lon, alt[, ve, vn, vu, roll, "
+                                                      "pitch, heading]); overrides reference.csv.")] = None,
+    out: Annotated[Optional[Path], typer.Option(help="Output directory [default: navpp-out/<log>-<filter>].")] = None,
+    output_rate: Annotated[Optional[float], typer.Option(help="Trajectory rate in Hz [default: every IMU sample].")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars or summary.")] = False,
+) -> None:
+    """Process one log with one filter; write trajectory.csv (and metrics with a reference)."""
+    from .errors import NavppError
+
+    try:
+        from . import api
+
+        with _Progress(quiet) as prog:
+            res = api.process(log, filter_name=filter, config=config, reference=reference, out_dir=out,
+                              output_rate_hz=output_rate, progress=prog)
+    except NavppError as exc:
+        _fail(str(exc))
+        return
+    if not quiet:
+        _print_summary(res)
+
+
+def _print_summary(res) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    err = Console(stderr=True, highlight=False)
+    for line in res.notes:
+        err.print(f"[dim]·[/] {line}")
+    con = Console(highlight=False)
+    run = res.run
+    con.print(f"{res.recording.source}: {len(res.recording.imu)} IMU samples at {res.recording.imu.rate_hz:.1f} Hz, "
+              f"{run.gnss_epochs} GNSS epochs ({run.gnss_rejected} rejected by the gate), "
+              f"filter [bold]{res.filter_name}[/] ran in {run.runtime_s:.2f} s")
+    if res.metrics is not None:
+        m = res.metrics
+        tab = Table(title=f"position error vs reference ({m['epochs']} epochs), metres")
+        for col in ("", "MAE", "RMSE", "max", "p95"):
+            tab.add_column(col, justify="right")
+        rows = [("east", m["position_m"]["east"]), ("north", m["position_m"]["north"]), ("up", m["position_m"]["up"]),
+                ("horizontal", m["position_m"]["horizontal"]), ("3-D", m["position_m"]["3d"])]
+        if "gnss_position_m" in m:
+            rows.append(("raw GNSS horiz.", m["gnss_position_m"]["horizontal"]))
+            rows.append(("raw GNSS up", m["gnss_position_m"]["up"]))
+        for name, s in rows:
+            tab.add_row(name, *(f"{s[k]:.3f}" if k in s else "" for k in ("mae", "rmse", "max", "p95")))
+        con.print(tab)
+    con.print("wrote " + ", ".join(str(p) for p in res.files))
+
+
+@app.command()
+def simulate(
+    out: Annotated[Path, typer.Argument(help="Output directory for the CSV log (imu.csv, gnss.csv, reference.csv, navpp.toml).")],
+    duration: Annotated[float, typer.Option(help="Drive length, s (includes the initial still period).")] = 900.0,
+    imu_rate: Annotated[float, typer.Option(help="IMU rate, Hz.")] = 125.0,
+    gnss_rate: Annotated[float, typer.Option(help="GNSS rate, Hz (1-10).")] = 5.0,
+    preset: Annotated[str, typer.Option(help="IMU grade: consumer, automotive, tactical, navigation, ideal.")] = "automotive",
+    seed: Annotated[int, typer.Option(help="Random seed (same seed, same log).")] = 0,
+    gnss_std_h: Annotated[float, typer.Option(help="GNSS horizontal noise 1-sigma per axis, m.")] = 1.8,
+    gnss_std_u: Annotated[float, typer.Option(help="GNSS vertical noise 1-sigma, m.")] = 2.5,
+    gnss_error: Annotated[str, typer.Option(help="GNSS error model: white or correlated.")] = "white",
+    lever_arm: Annotated[Optional[str], typer.Option(help="Antenna lever arm in body FLU, m: 'x,y,z'.")] = None,
+    still: Annotated[float, typer.Option(help="Initial still period, s.")] = 60.0,
+) -> None:
+    """Simulate a car-like drive and write it as a CSV log with its reference."""
+    from .errors import NavppError
+
+    try:
+        from . import api
+
+        kwargs = dict(duration_s=duration, imu_rate_hz=imu_rate, gnss_rate_hz=gnss_rate, preset=preset, seed=seed,
+                      gnss_std_h_m=gnss_std_h, gnss_std_u_m=gnss_std_u, gnss_error=gnss_error, still_s=still)
+        if lever_arm:
+            try:
+                la = tuple(float(v) for v in lever_arm.split(","))
+            except ValueError:
+                la = ()
+            if len(la) != 3:
+                raise typer.BadParameter(f"--lever-arm needs three numbers 'x,y,z', got {lever_arm!r}")
+            kwargs["lever_arm_m"] = la
+        try:
+            path = api.simulate_log(out, **kwargs)
+        except ValueError as exc:
+            _fail(f"simulate: {exc}")
+            return
+    except NavppError as exc:
+        _fail(str(exc))
+        return
+    typer.echo(f"wrote {path}/imu.csv, gnss.csv, reference.csv, navpp.toml")
+
+
+@app.command("filters")
+def filters_cmd() -> None:
+    """List the filters with their paper and a one-line description."""
+    from .filters import FILTERS
+
+    for name, cls in sorted(FILTERS.items()):
+        typer.echo(f"{name:<10} {cls.summary}  [{cls.paper}]")
+
+
+def main() -> None:
+    app(prog_name="navpp")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,249 @@
+"""The filter core: immutable Gaussian states, innovation records, the filter template, registry.
+
+A filter is a template with hooks (ARCHITECTURE.md, "The filter core"):
+
+- :meth:`Filter.predict` (abstract): time update over an ``interval = (t_start, t_end)``.
+- :meth:`Filter.update` (template): :meth:`predict_measurement` (Jacobian or points) ->
+  :meth:`measurement_noise` (fixed R, or an adaptive estimate) -> chi-square gate ->
+  :meth:`correct` (shared: Cholesky solves, Joseph form, symmetrised P) ->
+  :meth:`after_update` (adaptive filters learn from the :class:`Innovation`).
+
+Models supply ``plus``/``minus`` (⊞/⊟ between states and error vectors), ``transition``
+(nominal propagation with Phi and Qd) and ``propagate_points``; measurements supply
+``innovation_at``, ``jacobian``, ``predict_points`` and ``R``.  A variant is a small subclass,
+registered by name with :func:`register`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+from dataclasses import dataclass
+from typing import Any, ClassVar, Mapping
+
+import numpy as np
+from numba import njit
+from scipy.stats import chi2
+
+from ..errors import ConfigError, FilterDivergedError
+
+
+@dataclass(frozen=True)
+class GaussianState:
+    """A filter state at time ``t`` (s): model state ``x`` and error covariance ``P`` (n, n)."""
+
+    t: float
+    x: np.ndarray
+    P: np.ndarray
+
+
+@dataclass(frozen=True)
+class Innovation:
+    """What one measurement update saw and did.
+
+    nu : (m,) innovation ``z ⊟ ẑ``; S : (m, m) its covariance incl. R; Pxz : (n, m);
+    R : (m, m) measurement noise used; nis : ``nu^T S^-1 nu``; accepted : passed the gate.
+    """
+
+    t: float
+    nu: np.ndarray
+    S: np.ndarray
+    Pxz: np.ndarray
+    R: np.ndarray
+    nis: float
+    accepted: bool
+
+
+@dataclass(frozen=True)
+class MeasurementPrediction:
+    """Predicted-measurement moments before R is added.
+
+    nu : (m,) innovation; Pzz : (m, m) predicted-measurement covariance without R;
+    Pxz : (n, m) state-measurement cross-covariance; H : (m, n) Jacobian when the filter is
+    linearised (enables the Joseph form), else None.
+    """
+
+    nu: np.ndarray
+    Pzz: np.ndarray
+    Pxz: np.ndarray
+    H: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class NoOptions:
+    """A filter without options of its own."""
+
+
+FILTERS: dict[str, type["Filter"]] = {}
+
+
+def register(name: str):
+    """Class decorator adding a filter to :data:`FILTERS` under ``name``."""
+    def deco(cls: type[Filter]) -> type[Filter]:
+        cls.name = name
+        FILTERS[name] = cls
+        return cls
+    return deco
+
+
+def get_filter(name: str) -> type["Filter"]:
+    """The filter class registered as ``name``; ConfigError listing the choices otherwise."""
+    try:
+        return FILTERS[name]
+    except KeyError:
+        raise ConfigError(f"unknown filter {name!r}; choose one of: {', '.join(sorted(FILTERS))}") from None
+
+
+def symmetrise(P: np.ndarray) -> np.ndarray:
+    return 0.5 * (P + P.T)
+
+
+@njit(cache=True)
+def _chol_solve(L, B):
+    """Solve ``(L L^T) X = B`` for lower-triangular ``L`` (m, m), ``B`` (m, k)."""
+    m, k = B.shape
+    Y = np.empty((m, k))
+    for c in range(k):
+        for i in range(m):
+            s = B[i, c]
+            for j in range(i):
+                s -= L[i, j] * Y[j, c]
+            Y[i, c] = s / L[i, i]
+        for i in range(m - 1, -1, -1):
+            s = Y[i, c]
+            for j in range(i + 1, m):
+                s -= L[j, i] * Y[j, c]
+            Y[i, c] = s / L[i, i]
+    return Y
+
+
+@njit(cache=True)
+def _gain_and_nis(Pxz, S, nu):
+    """Kalman gain ``K = Pxz S^-1`` and ``nis = nu^T S^-1 nu`` by Cholesky solves."""
+    L = np.linalg.cholesky(S)
+    Kt = _chol_solve(L, np.ascontiguousarray(Pxz.T))
+    w = _chol_solve(L, nu.reshape(-1, 1))[:, 0].copy()
+    return Kt.T.copy(), float(nu @ w)
+
+
+@njit(cache=True)
+def _joseph(P, K, H, R):
+    I_KH = np.eye(P.shape[0]) - K @ H
+    Pn = I_KH @ P @ I_KH.T + K @ R @ K.T
+    return 0.5 * (Pn + Pn.T)
+
+
+@njit(cache=True)
+def _sigma_posterior(P, K, S):
+    Pn = P - K @ S @ K.T
+    return 0.5 * (Pn + Pn.T)
+
+
+def _is_pd(S: np.ndarray) -> bool:
+    if not np.all(np.isfinite(S)):
+        return False
+    try:
+        np.linalg.cholesky(S)
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
+class Filter:
+    """Template for every navpp filter (see module docstring).
+
+    Parameters
+    ----------
+    options : the filter's own ``Options`` dataclass (``[filter.<name>]`` in the config).
+    gate_probability : chi-square gate on the NIS; 0 disables gating.
+    max_consecutive_rejects : after this many gated fixes in a row the next one is accepted
+        (a filter must not lock itself out after an outage).
+    rng : the only source of randomness for random filters.
+    """
+
+    name: ClassVar[str] = ""
+    paper: ClassVar[str] = ""
+    summary: ClassVar[str] = ""
+    Options: ClassVar[type] = NoOptions
+
+    def __init__(self, options: Any = None, *, gate_probability: float = 0.0,
+                 max_consecutive_rejects: int = 5, rng: np.random.Generator | None = None) -> None:
+        self.options = options if options is not None else self.Options()
+        self.gate_probability = float(gate_probability)
+        self.max_consecutive_rejects = int(max_consecutive_rejects)
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self._gate_cache: dict[int, float] = {}
+        self._consecutive_rejects = 0
+        self.rejected = 0
+
+    @classmethod
+    def options_from_mapping(cls, data: Mapping[str, Any] | None, source: str = "config") -> Any:
+        """Build ``Options`` from a ``[filter.<name>]`` table; unknown keys name the nearest one."""
+        data = dict(data or {})
+        fields = {f.name: f for f in dataclasses.fields(cls.Options)}
+        for key in data:
+            if key not in fields:
+                near = difflib.get_close_matches(key, list(fields), n=1)
+                hint = f"; did you mean {near[0]!r}?" if near else (
+                    f"; valid keys: {', '.join(fields)}" if fields else "; this filter has no options")
+                raise ConfigError(f"{source}: unknown key {key!r} in [filter.{cls.name}]{hint}")
+        try:
+            return cls.Options(**data)
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"{source}: [filter.{cls.name}]: {exc}") from None
+
+    # hooks -------------------------------------------------------------------------------
+    def predict(self, state: GaussianState, model: Any, interval: tuple[float, float]) -> GaussianState:
+        raise NotImplementedError
+
+    def predict_measurement(self, state: GaussianState, model: Any, meas: Any) -> MeasurementPrediction:
+        raise NotImplementedError
+
+    def measurement_noise(self, meas: Any, pred: MeasurementPrediction) -> np.ndarray:
+        """R to use for this update; adaptive filters override."""
+        return meas.R
+
+    def after_update(self, innovation: Innovation, pred: MeasurementPrediction) -> None:
+        """Called after every gated update; adaptive filters learn here."""
+
+    # template ----------------------------------------------------------------------------
+    def gate_threshold(self, m: int) -> float:
+        if self.gate_probability <= 0.0:
+            return np.inf
+        thr = self._gate_cache.get(m)
+        if thr is None:
+            thr = self._gate_cache[m] = float(chi2.ppf(self.gate_probability, m))
+        return thr
+
+    def update(self, state: GaussianState, model: Any, meas: Any) -> tuple[GaussianState, Innovation]:
+        pred = self.predict_measurement(state, model, meas)
+        R = self.measurement_noise(meas, pred)
+        S = symmetrise(pred.Pzz + R)
+        if not _is_pd(S):
+            raise FilterDivergedError(
+                f"{self.name}: innovation covariance is not positive definite at t={state.t:.3f} s")
+        K, nis = _gain_and_nis(pred.Pxz, S, pred.nu)
+        accepted = nis <= self.gate_threshold(pred.nu.shape[0])
+        if not accepted and self._consecutive_rejects >= self.max_consecutive_rejects:
+            accepted = True   # forced: never lock out the GNSS after a run of rejections
+        innovation = Innovation(state.t, pred.nu, S, pred.Pxz, R, nis, accepted)
+        if not accepted:
+            self._consecutive_rejects += 1
+            self.rejected += 1
+            return state, innovation
+        self._consecutive_rejects = 0
+        new = self.correct(state, model, pred, K, S, R)
+        self.after_update(innovation, pred)
+        return new, innovation
+
+    def correct(self, state: GaussianState, model: Any, pred: MeasurementPrediction,
+                K: np.ndarray, S: np.ndarray, R: np.ndarray) -> GaussianState:
+        """Shared correction: ``x ⊞ K nu``; Joseph form when linearised, else ``P - K S K^T``."""
+        x = model.plus(state.x, K @ pred.nu)
+        if pred.H is not None:
+            P = _joseph(state.P, K, pred.H, R)
+        else:
+            P = _sigma_posterior(state.P, K, S)
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
+            raise FilterDivergedError(f"{self.name}: state became non-finite at t={state.t:.3f} s")
+        return GaussianState(state.t, x, P)

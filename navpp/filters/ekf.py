@@ -1,0 +1,28 @@
+"""Extended Kalman filter: the closed-loop error-state filter of the loosely coupled INS.
+
+After each update the estimated error is fed back into the nominal state (``x ⊞ K nu``) and
+the error mean is reset to zero, so the filter never carries an error estimate between epochs.
+
+References: paper 002 section 2 (15-state loosely coupled SINS/GPS model, eqs 1-3);
+Groves (2013) ch. 14.
+"""
+
+from __future__ import annotations
+
+from .base import Filter, GaussianState, MeasurementPrediction, register, symmetrise
+
+
+@register("ekf")
+class EKF(Filter):
+    paper = "paper 002, section 2"
+    summary = "Closed-loop error-state extended Kalman filter (the reference filter)."
+
+    def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> GaussianState:
+        x, Phi, Qd = model.transition(state.x, interval)
+        P = Phi @ state.P @ Phi.T + Qd        # P- = Phi P Phi^T + Qd
+        return GaussianState(interval[1], x, symmetrise(P))
+
+    def predict_measurement(self, state: GaussianState, model, meas) -> MeasurementPrediction:
+        H = meas.jacobian(state.x)
+        PHt = state.P @ H.T
+        return MeasurementPrediction(meas.innovation_at(state.x), H @ PHt, PHt, H)

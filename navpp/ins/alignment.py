@@ -1,0 +1,271 @@
+"""Initial alignment: still-period detection, static levelling, gyrocompassing, GNSS heading.
+
+- The first still period is *detected* from the IMU (windowed spread of specific force and
+  angular rate), confirmed by GNSS velocity when the log has it; never assumed from a fixed
+  time.
+- Levelling: roll and pitch from the mean specific force of the still period.
+- Heading: from the config when given; by gyrocompassing when the gyro grade makes it
+  accurate enough (predicted 1-sigma below ``[init] gyrocompass_max_heading_std_deg``);
+  otherwise from the GNSS course once the vehicle moves, carried back to the start with the
+  integrated vertical gyro rate (a still car does not turn, but this does not assume it).
+
+References: Groves (2013) section 5.6 (levelling, gyrocompassing); Titterton & Weston (2004)
+ch. 10.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import geodesy
+from ..errors import InputError
+from .attitude import dcm_to_quat, rph_to_dcm
+from .model import ATT, BA, BG, N_ERR, POS, VEL
+from .strapdown import NOMINAL_SIZE
+
+
+@dataclass(frozen=True)
+class AlignmentSettings:
+    """What alignment needs to know (SI units; taken from the config by the engine)."""
+
+    method: str = "auto"                     # auto | gyrocompass | gnss | config
+    roll: float | None = None                # rad, given by the user
+    pitch: float | None = None
+    heading: float | None = None
+    still_min_s: float = 2.0
+    gyrocompass_max_heading_std: float = math.radians(2.0)
+    min_speed_mps: float = 3.0
+    gyro_bias_sigma: float = 0.0             # rad/s (turn-on)
+    gyro_arw: float = 0.0                    # rad/sqrt(s)
+    accel_bias_sigma: float = 0.0            # m/s^2
+    accel_vrw: float = 0.0                   # m/s/sqrt(s)
+    lever_arm_b: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """Result: start time, nominal state and covariance, and a readable account of the method."""
+
+    t: float
+    index: int                   # IMU sample index of ``t``
+    x: np.ndarray                # (16,) nominal
+    P: np.ndarray                # (15, 15)
+    still: tuple[float, float] | None
+    lines: tuple[str, ...] = field(default_factory=tuple)
+
+
+def detect_still(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_duration: float,
+                 gyro_arw: float = 0.0, accel_vrw: float = 0.0, window_s: float = 0.5
+                 ) -> tuple[int, int] | None:
+    """First run of still windows lasting ``min_duration`` s: sample index range [i0, i1).
+
+    A window is still when the standard deviation of every specific-force axis is below
+    ``max(0.05 m/s^2, 4 x white-noise sigma)`` and of every rate axis below
+    ``max(0.5 deg/s, 4 x sigma)``, and the mean rate is below 1 deg/s.
+    """
+    n = t.shape[0]
+    dt = float(np.median(np.diff(t))) if n > 1 else 1.0
+    w = max(2, int(round(window_s / dt)))
+    nw = n // w
+    if nw == 0:
+        return None
+    sig_a = accel_vrw / math.sqrt(dt)
+    sig_g = gyro_arw / math.sqrt(dt)
+    thr_a = max(0.05, 4.0 * sig_a)
+    thr_g = max(math.radians(0.5), 4.0 * sig_g)
+    a = accel[: nw * w].reshape(nw, w, 3)
+    g = gyro[: nw * w].reshape(nw, w, 3)
+    still = ((a.std(axis=1).max(axis=1) < thr_a) & (g.std(axis=1).max(axis=1) < thr_g)
+             & (np.abs(g.mean(axis=1)).max(axis=1) < math.radians(1.0)))
+    need = max(1, int(math.ceil(min_duration / (w * dt))))
+    k = 0
+    while k < nw:
+        if still[k]:
+            j = k
+            while j < nw and still[j]:
+                j += 1
+            if j - k >= need:
+                return k * w, j * w
+            k = j
+        else:
+            k += 1
+    return None
+
+
+def level(f_mean: np.ndarray) -> tuple[float, float]:
+    """Roll and pitch (rad) from the mean specific force (body FLU) of a still period."""
+    roll = math.atan2(f_mean[1], f_mean[2])
+    pitch = math.atan2(f_mean[0], math.hypot(f_mean[1], f_mean[2]))
+    return roll, pitch
+
+
+def gyrocompass(w_mean: np.ndarray, roll: float, pitch: float) -> float:
+    """Heading (rad, clockwise from north) from the mean body rate of a still period."""
+    m = rph_to_dcm(roll, pitch, 0.0)       # body -> a frame levelled and pointing north
+    w_l = m @ w_mean                       # Earth rate in that frame: [0, W cos L, W sin L]
+    # rotating the levelled frame by heading psi: the body sees north at angle -psi
+    return float(np.mod(-math.atan2(w_l[0], w_l[1]), 2 * math.pi))
+
+
+def _gnss_enu(gnss, lat0: float, lon0: float, h0: float) -> np.ndarray:
+    return geodesy.geodetic_to_enu(np.radians(gnss.lat_deg), np.radians(gnss.lon_deg), gnss.alt,
+                                   lat0, lon0, h0)
+
+
+def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: AlignmentSettings) -> Alignment:
+    """Initial nominal state and covariance (see module docstring)."""
+    lines: list[str] = []
+    lever = np.asarray(settings.lever_arm_b, dtype=float)
+    still = detect_still(t, gyro, accel, min_duration=settings.still_min_s,
+                         gyro_arw=settings.gyro_arw, accel_vrw=settings.accel_vrw)
+    if len(gnss) == 0:
+        raise InputError("no GNSS fixes: cannot initialise the position")
+
+    if still is not None:
+        i0, i1 = still
+        t_s0, t_s1 = float(t[i0]), float(t[i1 - 1])
+        lines.append(f"still period detected: t = {t_s0:.2f} .. {t_s1:.2f} s ({t_s1 - t_s0:.1f} s)")
+        if i0 > 0:
+            lines.append(f"IMU data before the still period (t < {t_s0:.2f} s) is not used")
+        f_mean = accel[i0:i1].mean(axis=0)
+        w_mean = gyro[i0:i1].mean(axis=0)
+        roll, pitch = level(f_mean)
+        g_est = float(np.linalg.norm(f_mean))
+        att_std = math.hypot(settings.accel_bias_sigma / max(g_est, 1.0), math.radians(0.05))
+        level_how = "static levelling"
+        start = i0
+        moving = False
+    else:
+        lines.append(f"no still period of {settings.still_min_s:.1f} s found: starting in motion "
+                     "with roll = pitch = 0 (+-3 deg)")
+        roll = pitch = 0.0
+        att_std = math.radians(3.0)
+        level_how = "assumed level"
+        start = 0
+        i0 = i1 = 0
+        moving = True
+        t_s0 = t_s1 = float(t[0])
+    if settings.roll is not None and settings.pitch is not None:
+        roll, pitch = settings.roll, settings.pitch
+        level_how = "config"
+        att_std = math.radians(0.5)
+    t_start = float(t[start])
+
+    # position: GNSS fixes during the still period, else the first fix after the start
+    in_still = (gnss.t >= t_s0 - 0.5) & (gnss.t <= t_s1 + 0.5) if not moving else np.zeros(len(gnss), bool)
+    after = np.nonzero(gnss.t >= t_start)[0]
+    if not in_still.any() and after.size == 0:
+        raise InputError("no GNSS fix at or after the alignment start: cannot initialise the position")
+    idx = np.nonzero(in_still)[0] if in_still.any() else after[:1]
+    lat_a = math.radians(float(np.mean(gnss.lat_deg[idx])))
+    lon_a = math.radians(float(np.mean(gnss.lon_deg[idx])))
+    h_a = float(np.mean(gnss.alt[idx]))
+    fix_std = (np.mean(gnss.std_enu[idx], axis=0) if gnss.std_enu is not None else np.array([2.0, 2.0, 4.0]))
+
+    # heading
+    method = settings.method
+    g_sigma = math.sqrt(settings.gyro_bias_sigma ** 2 + (settings.gyro_arw ** 2 / max(t_s1 - t_s0, 1e-3)))
+    gc_std = g_sigma / (geodesy.OMEGA_E * max(math.cos(lat_a), 1e-3))
+    if settings.heading is not None and method in ("auto", "config"):
+        heading = settings.heading
+        head_std = math.radians(1.0)
+        head_how = "config"
+    elif method == "config":
+        raise InputError("[init] method = 'config' needs heading_deg")
+    elif not moving and (method == "gyrocompass" or (method == "auto" and gc_std < settings.gyrocompass_max_heading_std)):
+        heading = gyrocompass(w_mean, roll, pitch)
+        head_std = max(gc_std, math.radians(0.1))
+        head_how = f"gyrocompassing (predicted 1-sigma {math.degrees(gc_std):.2f} deg)"
+    else:
+        if method == "auto" and not moving:
+            lines.append(f"gyrocompassing not possible with this gyro (predicted 1-sigma "
+                         f"{math.degrees(gc_std):.1f} deg): heading from the GNSS course")
+        heading, head_std, t_course = _heading_from_gnss(t, gyro, gnss, t_start, roll, pitch, lat_a, lon_a,
+                                                         h_a, fix_std, settings.min_speed_mps)
+        head_how = f"GNSS course at t = {t_course:.2f} s carried back with the gyro"
+
+    C = rph_to_dcm(roll, pitch, heading)
+    # the GNSS fixes are of the antenna: remove the lever arm to get the IMU position
+    off = C @ lever
+    rm, rn = geodesy.radii(lat_a)
+    lat0 = lat_a - off[1] / (rm + h_a)
+    lon0 = lon_a - off[0] / ((rn + h_a) * math.cos(lat_a))
+    h0 = h_a - off[2]
+
+    x = np.zeros(NOMINAL_SIZE)
+    x[0:4] = dcm_to_quat(C)
+    x[7], x[8], x[9] = lat0, lon0, h0
+    if moving:
+        x[4:7] = _gnss_velocity_at(gnss, t_start, lat_a, lon_a, h_a)
+    P = np.zeros((N_ERR, N_ERR))
+    P[ATT, ATT] = np.diag([att_std ** 2, att_std ** 2, head_std ** 2])
+    vel_std = 0.05 if not moving else 1.0
+    P[VEL, VEL] = np.eye(3) * vel_std ** 2
+    P[POS, POS] = np.diag(fix_std ** 2)
+    P[BG, BG] = np.eye(3) * max(settings.gyro_bias_sigma, 1e-9) ** 2
+    P[BA, BA] = np.eye(3) * max(settings.accel_bias_sigma, 1e-9) ** 2
+
+    lines.append(f"attitude: roll {math.degrees(roll):+.2f} deg, pitch {math.degrees(pitch):+.2f} deg "
+                 f"({level_how}), heading {math.degrees(heading) % 360:.1f} deg +- "
+                 f"{math.degrees(head_std):.1f} ({head_how})")
+    lines.append(f"position: {len(idx)} GNSS fix(es) averaged; start at t = {t_start:.2f} s")
+    return Alignment(t_start, start, x, P, None if moving else (t_s0, t_s1), tuple(lines))
+
+
+def _gnss_velocity_at(gnss, t0: float, lat: float, lon: float, h: float) -> np.ndarray:
+    if gnss.vel_enu is not None:
+        k = int(np.argmin(np.abs(gnss.t - t0)))
+        return np.array(gnss.vel_enu[k], dtype=float)
+    enu = _gnss_enu(gnss, lat, lon, h)
+    k = int(np.searchsorted(gnss.t, t0))
+    k = min(max(k, 1), len(gnss) - 1)
+    return (enu[k] - enu[k - 1]) / (gnss.t[k] - gnss.t[k - 1])
+
+
+def _heading_from_gnss(t, gyro, gnss, t_start, roll, pitch, lat, lon, h, fix_std, min_speed):
+    """Heading at ``t_start`` from the GNSS course once moving, carried back with the gyro.
+
+    With GNSS velocity: the course at the first epoch faster than ``min_speed``.  Without: the
+    chord from the start position to the first fix 50 m away; a chord's direction is the
+    tangent at the middle of the arc, i.e. at the time the distance first exceeds half of it.
+    Returns (heading rad, 1-sigma rad, time of the course).
+    """
+    sel = gnss.t >= t_start
+    tg = gnss.t[sel]
+    if gnss.vel_enu is not None:
+        v = gnss.vel_enu[sel]
+        sp = np.hypot(v[:, 0], v[:, 1])
+        k = np.nonzero(sp > min_speed)[0]
+        if k.size == 0:
+            raise InputError(f"the vehicle never exceeds {min_speed} m/s in the GNSS velocity: cannot find "
+                             "the heading; give [init] heading_deg in the config")
+        k = int(k[0])
+        course = math.atan2(v[k, 0], v[k, 1])
+        t_c = float(tg[k])
+        std_v = float(np.mean(gnss.std_vel_enu[sel][k, :2])) if gnss.std_vel_enu is not None else 0.1
+        std = math.atan2(std_v, sp[k]) + math.radians(1.0)
+    else:
+        enu = _gnss_enu(gnss, lat, lon, h)[sel]
+        dist = np.hypot(enu[:, 0], enu[:, 1])
+        chord = 50.0
+        far = np.nonzero(dist > chord)[0]
+        if far.size == 0:
+            raise InputError("the vehicle never moves 50 m from its start in the GNSS log: cannot find the "
+                             "heading; give [init] heading_deg in the config")
+        kb = int(far[0])
+        course = math.atan2(enu[kb, 0], enu[kb, 1])
+        km = int(np.nonzero(dist[: kb + 1] > 0.5 * dist[kb])[0][0])
+        t_c = float(tg[km])
+        std = 2.0 * float(np.hypot(fix_std[0], fix_std[1])) / dist[kb] + math.radians(1.0)
+    # rotation about the vertical between the start and t_c, from the gyro (minus Earth rate)
+    i0 = int(np.searchsorted(t, t_start))
+    i1 = int(np.searchsorted(t, t_c))
+    C = rph_to_dcm(roll, pitch, 0.0)
+    w_up = gyro[i0:i1 + 1] @ C[2] - geodesy.OMEGA_E * math.sin(lat)
+    turned = float(np.trapezoid(w_up, t[i0:i1 + 1])) if i1 > i0 else 0.0
+    # heading is clockwise, a positive up-rate turns the vehicle counter-clockwise
+    heading = float(np.mod(course + turned, 2 * math.pi))
+    return heading, std, t_c

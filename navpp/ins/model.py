@@ -1,0 +1,361 @@
+"""The INS as a state-space model for the filters: 15-element error space around a nominal.
+
+Error state (``true = nominal ⊞ dx``), in this order (ALGORITHMS.md):
+
+=========  =====  =========================================================
+block      slice  meaning
+=========  =====  =========================================================
+``ATT``    0:3    attitude error phi, ENU, rad: ``C_true = exp([phi x]) C_est``
+``VEL``    3:6    velocity error, ENU, m/s
+``POS``    6:9    position error, local ENU metres
+``BG``     9:12   gyro bias error, body FLU, rad/s
+``BA``     12:15  accelerometer bias error, body FLU, m/s^2
+=========  =====  =========================================================
+
+The nominal state is the 16-vector of :mod:`navpp.ins.strapdown`.  Filters see only
+``plus``/``minus`` (⊞/⊟), ``transition`` (EKF: nominal propagation + Phi, Qd) and
+``propagate_points`` (sigma-point filters: every point through the real strapdown).
+
+Continuous error dynamics (psi-angle form, ENU; Groves 2013 eqs 14.64-14.72, paper 002 eqs 1-3):
+``phi' = -[w_in x] phi - M_v dv - C dbg``;
+``dv' = [f_n x]^T phi + ([v x] M_v - [(2 w_ie + w_en) x]) dv + dgamma/dh e_U dp_U - C dba``;
+``dp' = dv``; ``dbg' = -dbg / tau_g + w``; ``dba' = -dba / tau_a + w``.
+Per covariance step of length T (<= ``cov_step_s``): ``Phi = I + F T + (F T)^2 / 2``,
+``Qd = (Phi G Qc G^T Phi^T + G Qc G^T) T / 2`` (ALGORITHMS.md), accumulated over the interval.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .. import geodesy
+from .attitude import quat_conj, quat_mul, quat_to_dcm, quat_to_rotvec, rotvec_to_quat
+from .strapdown import NOMINAL_SIZE, _interp_row, _nav_rates, radii, step
+from .strapdown import integrate as _integrate_nominal
+
+N_ERR = 15
+ATT = slice(0, 3)
+VEL = slice(3, 6)
+POS = slice(6, 9)
+BG = slice(9, 12)
+BA = slice(12, 15)
+
+_DGDH_H1 = geodesy._H1
+_DGDH_H1_LAT = geodesy._H1_LAT
+_DGDH_H2 = geodesy._H2
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """Continuous-time noise of the 15-state model, SI units.
+
+    gyro_arw : rad/sqrt(s); accel_vrw : m/s/sqrt(s); ``*_instability`` : stationary 1-sigma
+    of the Gauss-Markov bias, rad/s or m/s^2; ``*_tau`` : correlation time, s (``inf``: random
+    walk reaching the instability in one hour).
+    """
+
+    gyro_arw: float
+    accel_vrw: float
+    gyro_bias_instability: float
+    gyro_bias_tau: float
+    accel_bias_instability: float
+    accel_bias_tau: float
+
+    def psd(self) -> np.ndarray:
+        """Diagonal of G Qc G^T (the noise enters isotropically), (15,)."""
+        def drive(sigma: float, tau: float) -> tuple[float, float]:
+            if math.isinf(tau):
+                return sigma * sigma / 3600.0, 0.0
+            return 2.0 * sigma * sigma / tau, 1.0 / tau
+        qg, _ = drive(self.gyro_bias_instability, self.gyro_bias_tau)
+        qa, _ = drive(self.accel_bias_instability, self.accel_bias_tau)
+        return np.concatenate([np.full(3, self.gyro_arw ** 2), np.full(3, self.accel_vrw ** 2),
+                               np.zeros(3), np.full(3, qg), np.full(3, qa)])
+
+    def inv_tau(self) -> tuple[float, float]:
+        g = 0.0 if math.isinf(self.gyro_bias_tau) else 1.0 / self.gyro_bias_tau
+        a = 0.0 if math.isinf(self.accel_bias_tau) else 1.0 / self.accel_bias_tau
+        return g, a
+
+
+@njit(cache=True)
+def error_dynamics(x, fn, inv_tau_g, inv_tau_a):
+    """Continuous error-state matrix F (15, 15) at nominal ``x`` with ENU specific force ``fn``."""
+    F = np.zeros((15, 15))
+    vel = x[4:7]
+    lat, h = x[7], x[9]
+    wie, wen, g, rm, rn = _nav_rates(lat, h, vel)
+    win = wie + wen
+    C = quat_to_dcm(x[0:4])
+    mv = np.zeros((3, 3))
+    mv[0, 1] = -1.0 / (rm + h)
+    mv[1, 0] = 1.0 / (rn + h)
+    mv[2, 0] = np.tan(lat) / (rn + h)
+    # attitude rows
+    F[0, 1], F[0, 2] = win[2], -win[1]
+    F[1, 0], F[1, 2] = -win[2], win[0]
+    F[2, 0], F[2, 1] = win[1], -win[0]
+    for r in range(3):
+        for c in range(3):
+            F[r, 3 + c] = -mv[r, c]
+            F[r, 9 + c] = -C[r, c]
+            F[3 + r, 12 + c] = -C[r, c]
+    # velocity rows: phi x f_n = -[f_n x] phi
+    F[3, 1], F[3, 2] = fn[2], -fn[1]
+    F[4, 0], F[4, 2] = -fn[2], fn[0]
+    F[5, 0], F[5, 1] = fn[1], -fn[0]
+    w2 = 2.0 * wie + wen
+    sk_v = np.array([[0.0, -vel[2], vel[1]], [vel[2], 0.0, -vel[0]], [-vel[1], vel[0], 0.0]])
+    vm = sk_v @ mv
+    F[3, 3], F[3, 4], F[3, 5] = vm[0, 0], vm[0, 1] + w2[2], vm[0, 2] - w2[1]
+    F[4, 3], F[4, 4], F[4, 5] = vm[1, 0] - w2[2], vm[1, 1], vm[1, 2] + w2[0]
+    F[5, 3], F[5, 4], F[5, 5] = vm[2, 0] + w2[1], vm[2, 1] - w2[0], vm[2, 2]
+    s2 = np.sin(lat) ** 2
+    F[5, 8] = _DGDH_H1 - _DGDH_H1_LAT * s2 - 2.0 * _DGDH_H2 * h   # -d(gravity)/dh
+    # position rows
+    F[6, 3] = F[7, 4] = F[8, 5] = 1.0
+    for k in range(3):
+        F[9 + k, 9 + k] = -inv_tau_g
+        F[12 + k, 12 + k] = -inv_tau_a
+    return F
+
+
+@njit(cache=True)
+def _cov_step(Phi_tot, Qd_tot, x, fn, T, psd, inv_tau_g, inv_tau_a):
+    F = error_dynamics(x, fn, inv_tau_g, inv_tau_a)
+    FT = F * T
+    Phi = np.eye(15) + FT + 0.5 * (FT @ FT)
+    GQG = np.diag(psd)
+    Qd = 0.5 * (Phi @ GQG @ Phi.T + GQG) * T
+    return Phi @ Phi_tot, Phi @ Qd_tot @ Phi.T + Qd
+
+
+@njit(cache=True)
+def integrate_with_jacobian(x, t, gyro, accel, t_start, t_end, out, record, psd,
+                            inv_tau_g, inv_tau_a, cov_step_s):
+    """Propagate nominal ``x`` (in place) and return the interval's (Phi, Qd).
+
+    Same node sequence as :func:`navpp.ins.strapdown.integrate`; the error-state transition is
+    accumulated over covariance steps no longer than ``cov_step_s``, with F evaluated at the
+    step's end state and its mean ENU specific force.
+    """
+    n = t.shape[0]
+    i = np.searchsorted(t, t_start, side="right")
+    bg = x[10:13].copy()
+    ba = x[13:16].copy()
+    wc = _interp_row(t, gyro, i, t_start) - bg
+    fc = _interp_row(t, accel, i, t_start) - ba
+    tc = t_start
+    dvn = np.zeros(3)
+    dvn_acc = np.zeros(3)
+    t_acc = 0.0
+    Phi = np.eye(15)
+    Qd = np.zeros((15, 15))
+    while tc < t_end:
+        if i < n and t[i] < t_end:
+            tn = t[i]
+            wn = gyro[i] - bg
+            fnb = accel[i] - ba
+            rec = i
+        else:
+            tn = t_end
+            wn = _interp_row(t, gyro, i, t_end) - bg
+            fnb = _interp_row(t, accel, i, t_end) - ba
+            rec = i if (i < n and t[i] == t_end) else -1
+        dt = tn - tc
+        step(x, wc, wn, fc, fnb, dt, dvn)
+        dvn_acc += dvn
+        t_acc += dt
+        if t_acc >= cov_step_s or tn >= t_end:
+            Phi, Qd = _cov_step(Phi, Qd, x, dvn_acc / t_acc, t_acc, psd, inv_tau_g, inv_tau_a)
+            dvn_acc[:] = 0.0
+            t_acc = 0.0
+        if record and rec >= 0:
+            out[rec, :] = x
+        tc, wc, fc = tn, wn, fnb
+        i += 1
+    return Phi, Qd
+
+
+@njit(cache=True)
+def plus(x, dx):
+    """Nominal ⊞ error: ``x`` (16,) and ``dx`` (15,) -> (16,)."""
+    y = x.copy()
+    y[0:4] = quat_mul(rotvec_to_quat(dx[0:3]), x[0:4])
+    y[4:7] = x[4:7] + dx[3:6]
+    rm, rn = radii(x[7])
+    h = x[9]
+    y[7] = x[7] + dx[7] / (rm + h)
+    y[8] = x[8] + dx[6] / ((rn + h) * np.cos(x[7]))
+    y[9] = h + dx[8]
+    y[10:13] = x[10:13] + dx[9:12]
+    y[13:16] = x[13:16] + dx[12:15]
+    return y
+
+
+@njit(cache=True)
+def minus(x1, x0):
+    """Error taking ``x0`` to ``x1``: ``x1 = x0 ⊞ minus(x1, x0)``, (15,)."""
+    dx = np.empty(15)
+    dx[0:3] = quat_to_rotvec(quat_mul(x1[0:4], quat_conj(x0[0:4])))
+    dx[3:6] = x1[4:7] - x0[4:7]
+    rm, rn = radii(x0[7])
+    h = x0[9]
+    dx[6] = (x1[8] - x0[8]) * (rn + h) * np.cos(x0[7])
+    dx[7] = (x1[7] - x0[7]) * (rm + h)
+    dx[8] = x1[9] - h
+    dx[9:12] = x1[10:13] - x0[10:13]
+    dx[12:15] = x1[13:16] - x0[13:16]
+    return dx
+
+
+@njit(cache=True)
+def _propagate_points(x, dX, t, gyro, accel, t_start, t_end, out, record):
+    xn = x.copy()
+    _integrate_nominal(xn, t, gyro, accel, t_start, t_end, out, record)   # the recorded nominal path
+    dX_new = np.empty_like(dX)
+    unused = np.empty((1, NOMINAL_SIZE))
+    for k in range(dX.shape[0]):
+        xk = plus(x, dX[k])
+        _integrate_nominal(xk, t, gyro, accel, t_start, t_end, unused, False)
+        dX_new[k] = minus(xk, xn)
+    return xn, dX_new
+
+
+
+@dataclass
+class InsModel:
+    """Strapdown INS over one recording's IMU data, in 15-element error space.
+
+    Parameters
+    ----------
+    t : (N,) s; gyro : (N, 3) rad/s; accel : (N, 3) m/s^2 (body FLU, mounting applied).
+    noise : continuous noise model (SI).
+    cov_step_s : longest covariance-propagation step, s.
+
+    ``path`` (N, 16) receives the nominal state at every IMU sample a transition passes.
+    """
+
+    t: np.ndarray
+    gyro: np.ndarray
+    accel: np.ndarray
+    noise: NoiseModel
+    cov_step_s: float = 0.05
+    path: np.ndarray | None = None
+    dim: int = N_ERR
+
+    def __post_init__(self) -> None:
+        self.t = np.ascontiguousarray(self.t, dtype=float)
+        self.gyro = np.ascontiguousarray(self.gyro, dtype=float)
+        self.accel = np.ascontiguousarray(self.accel, dtype=float)
+        self._psd = self.noise.psd()
+        self._inv_tau = self.noise.inv_tau()
+        if self.path is None:
+            self.path = np.full((self.t.shape[0], NOMINAL_SIZE), np.nan)
+
+    # ⊞ / ⊟ -----------------------------------------------------------------------------------
+    @staticmethod
+    def plus(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
+        return plus(x, np.ascontiguousarray(dx, dtype=float))
+
+    @staticmethod
+    def minus(x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
+        return minus(x1, x0)
+
+    # propagation ---------------------------------------------------------------------------
+    def transition(self, x: np.ndarray, interval: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Nominal propagation over ``interval = (t_start, t_end)`` with its Phi (15, 15) and Qd."""
+        xn = x.copy()
+        Phi, Qd = integrate_with_jacobian(xn, self.t, self.gyro, self.accel, interval[0], interval[1],
+                                          self.path, True, self._psd, self._inv_tau[0], self._inv_tau[1],
+                                          self.cov_step_s)
+        return xn, Phi, Qd
+
+    def process_noise(self, x: np.ndarray, interval: tuple[float, float]) -> np.ndarray:
+        """Qd over the interval (additive noise for sigma-point filters)."""
+        xn = x.copy()
+        _, Qd = integrate_with_jacobian(xn, self.t, self.gyro, self.accel, interval[0], interval[1],
+                                        self.path, False, self._psd, self._inv_tau[0], self._inv_tau[1],
+                                        self.cov_step_s)
+        return Qd
+
+    def propagate_points(self, x: np.ndarray, dX: np.ndarray, interval: tuple[float, float]
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """Push error points ``dX`` (m, 15) around ``x`` through the strapdown.
+
+        Returns the propagated nominal ``f(x)`` and the points ``f(x ⊞ dX_i) ⊟ f(x)``.
+        """
+        return _propagate_points(x, np.ascontiguousarray(dX, dtype=float), self.t, self.gyro, self.accel,
+                                 interval[0], interval[1], self.path, True)
+
+
+@njit(cache=True)
+def antenna_offset_enu(x, lever_arm_b):
+    """ENU offset (m) of an antenna at ``lever_arm_b`` (body FLU, m) from the nominal position."""
+    return quat_to_dcm(x[0:4]) @ lever_arm_b
+
+
+@dataclass(frozen=True)
+class GnssPosition:
+    """GNSS antenna position fix as a measurement of the 15-state model.
+
+    The residual is the fix minus the INS-predicted antenna position, in local ENU metres
+    about the nominal position; ``R`` (3, 3) is the fix covariance, m^2.
+    H = [ -[(C l) x], 0, I, 0, 0 ].
+    """
+
+    t: float
+    lat: float   # rad
+    lon: float   # rad
+    h: float     # m
+    R: np.ndarray
+    lever_arm_b: np.ndarray
+
+    def innovation_at(self, x: np.ndarray) -> np.ndarray:
+        return _gnss_innovation(x, self.lat, self.lon, self.h, self.lever_arm_b)
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        return _gnss_jacobian(x, self.lever_arm_b)
+
+    def predict_points(self, x: np.ndarray, dX: np.ndarray) -> np.ndarray:
+        """``h(x ⊞ dX_i) ⊟ h(x)`` in ENU metres, (m, 3)."""
+        return _gnss_points(x, np.ascontiguousarray(dX, dtype=float), self.lever_arm_b)
+
+
+@njit(cache=True)
+def _gnss_innovation(x, lat, lon, h, lever):
+    rm, rn = radii(x[7])
+    hx = x[9]
+    d = np.empty(3)
+    d[0] = (lon - x[8]) * (rn + hx) * np.cos(x[7])
+    d[1] = (lat - x[7]) * (rm + hx)
+    d[2] = h - hx
+    return d - antenna_offset_enu(x, lever)
+
+
+@njit(cache=True)
+def _gnss_jacobian(x, lever):
+    H = np.zeros((3, 15))
+    a = antenna_offset_enu(x, lever)
+    # -[a x]
+    H[0, 1], H[0, 2] = a[2], -a[1]
+    H[1, 0], H[1, 2] = -a[2], a[0]
+    H[2, 0], H[2, 1] = a[1], -a[0]
+    H[0, 6] = H[1, 7] = H[2, 8] = 1.0
+    return H
+
+
+@njit(cache=True)
+def _gnss_points(x, dX, lever):
+    m = dX.shape[0]
+    Z = np.empty((m, 3))
+    a0 = antenna_offset_enu(x, lever)
+    for k in range(m):
+        xk = plus(x, dX[k])
+        # position difference back in ENU metres about x, plus the rotated lever arm
+        Z[k] = minus(xk, x)[6:9] + antenna_offset_enu(xk, lever) - a0
+    return Z
