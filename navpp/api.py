@@ -95,10 +95,8 @@ def resample_solution(sol: Solution, rate_hz: float) -> Solution:
     t = t[(t >= sol.t[0]) & (t <= sol.t[-1])]
     it = interpolate_solution(sol, t)
     std = np.column_stack([np.interp(t, sol.t, sol.std_enu[:, i]) for i in range(3)])
-    gb = np.column_stack([np.interp(t, sol.t, sol.gyro_bias[:, i]) for i in range(3)])
-    ab = np.column_stack([np.interp(t, sol.t, sol.accel_bias[:, i]) for i in range(3)])
     return Solution(t=t, lat_deg=it["lat_deg"], lon_deg=it["lon_deg"], alt=it["alt"], vel_enu=it["vel_enu"],
-                    rph_deg=it["rph_deg"], std_enu=std, gyro_bias=gb, accel_bias=ab, t0_ns=sol.t0_ns)
+                    rph_deg=it["rph_deg"], std_enu=std, t0_ns=sol.t0_ns)
 
 
 def default_out_dir(log: Path, filter_name: str) -> Path:

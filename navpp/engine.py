@@ -22,7 +22,8 @@ from .config import Config
 from .errors import FilterDivergedError, InputError
 from .filters.base import Filter, GaussianState
 from .ins.alignment import Alignment, AlignmentSettings, align
-from .ins.attitude import dcm_to_rph, quat_to_dcm_batch
+from numba import njit
+
 from .ins.model import POS, GnssPosition, InsModel, NoiseModel
 from .recording import Recording, Solution
 
@@ -41,8 +42,19 @@ class Diagnostics:
 
 
 @dataclass(frozen=True)
+class BiasHistory:
+    """Estimated sensor biases after each GNSS epoch: t (M,) s; gyro (M, 3) rad/s and
+    accel (M, 3) m/s^2, body FLU.  They are constant between epochs."""
+
+    t: np.ndarray
+    gyro: np.ndarray
+    accel: np.ndarray
+
+
+@dataclass(frozen=True)
 class RunResult:
     solution: Solution
+    biases: BiasHistory
     alignment: Alignment
     diagnostics: Diagnostics
     gnss_epochs: int
@@ -90,7 +102,7 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
         gyro, accel = gyro @ m.T, accel @ m.T
     model = InsModel(imu.t, gyro, accel, noise_model(config), cov_step_s=cov_step_s)
     al = align(model.t, model.gyro, model.accel, gnss, alignment_settings(config))
-    model.path[al.index] = al.x
+    model.path[al.index] = al.x[:model.path.shape[1]]
 
     lever = np.asarray(config.gnss.lever_arm_m, dtype=float)
     sel = np.nonzero((gnss.t > al.t) & (gnss.t <= imu.t[-1]))[0]
@@ -111,6 +123,7 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
     nu = np.full((m_ep, 3), np.nan)
     nis = np.full(m_ep, np.nan)
     accepted = np.zeros(m_ep, bool)
+    bias = np.empty((m_ep, 6))
     state = GaussianState(al.t, al.x, al.P)
     var0 = np.diag(al.P)[POS].copy()
     tick = max(1, m_ep // 200)
@@ -120,6 +133,7 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
         meas = GnssPosition(float(tg[k]), float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever)
         state, inn = filt.update(state, model, meas)
         var_post[k] = np.diag(state.P)[POS]
+        bias[k] = state.x[10:16]
         nu[k] = inn.nu
         nis[k] = inn.nis
         accepted[k] = inn.accepted
@@ -133,38 +147,68 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
         progress(1.0)
 
     path = model.path[al.index:]
+    model.path = None
     t_out = imu.t[al.index:]
     std_out = _interpolated_std(t_out, al.t, var0, tg, var_prior, var_post)
     solution = solution_from_path(t_out, path, std_out, recording.t0_ns)
     diag = Diagnostics(tg, nu, nis, accepted)
-    return RunResult(solution, al, diag, m_ep, int((~accepted).sum()), time.perf_counter() - t_wall)
+    biases = BiasHistory(tg, bias[:, :3], bias[:, 3:])
+    return RunResult(solution, biases, al, diag, m_ep, int((~accepted).sum()), time.perf_counter() - t_wall)
 
 
+@njit(cache=True)
 def _interpolated_std(t, t0, var0, tg, var_prior, var_post):
-    """Position 1-sigma (m) at times ``t``: variance linear between one epoch's posterior and the
-    next epoch's prior (the growth between fixes is close to linear at GNSS rates)."""
-    knots_t = np.concatenate([[t0], tg])
-    knots_post = np.vstack([var0, var_post])
-    k = np.clip(np.searchsorted(knots_t, t, side="left") - 1, 0, len(knots_t) - 1)
-    has_next = k + 1 < len(knots_t)
-    kn = np.minimum(k + 1, len(knots_t) - 1)
-    t_a = knots_t[k]
-    t_b = np.where(has_next, knots_t[kn], t_a + 1.0)
-    w = np.clip((t - t_a) / np.maximum(t_b - t_a, 1e-12), 0.0, 1.0)[:, None]
-    v_b = np.where(has_next[:, None], var_prior[np.minimum(k, len(tg) - 1)], knots_post[k])
-    v = (1 - w) * knots_post[k] + w * v_b
-    v[t <= t0] = var0
-    return np.sqrt(np.maximum(v, 0.0))
+    """Position 1-sigma (m) at times ``t``: the variance runs linearly from one epoch's posterior
+    to the next epoch's prior (growth between fixes is close to linear at GNSS rates)."""
+    n = t.shape[0]
+    m = tg.shape[0]
+    out = np.empty((n, 3))
+    k = 0                       # next epoch index: tg[k-1] < t <= tg[k]
+    for i in range(n):
+        while k < m and tg[k] < t[i]:
+            k += 1
+        ta = t0 if k == 0 else tg[k - 1]
+        for j in range(3):
+            va = var0[j] if k == 0 else var_post[k - 1, j]
+            if k < m and tg[k] > ta:
+                w = (t[i] - ta) / (tg[k] - ta)
+                w = min(max(w, 0.0), 1.0)
+                v = (1.0 - w) * va + w * var_prior[k, j]
+            else:
+                v = va
+            out[i, j] = np.sqrt(max(v, 0.0))
+    return out
+
+
+@njit(cache=True)
+def _path_to_output_columns(path):
+    """Convert recorded rows (N, 10) in place into output units: columns 0-2 become roll, pitch,
+    heading in degrees (navigation convention), 7-8 latitude and longitude in degrees."""
+    r2d = 180.0 / np.pi
+    for i in range(path.shape[0]):
+        w, x, y, z = path[i, 0], path[i, 1], path[i, 2], path[i, 3]
+        c20 = 2.0 * (x * z - w * y)
+        c21 = 2.0 * (y * z + w * x)
+        c22 = 1.0 - 2.0 * (x * x + y * y)
+        c00 = 1.0 - 2.0 * (y * y + z * z)
+        c10 = 2.0 * (x * y + w * z)
+        pitch = np.arcsin(min(max(c20, -1.0), 1.0))
+        roll = np.arctan2(c21, c22)
+        heading = (0.5 * np.pi - np.arctan2(c10, c00)) % (2.0 * np.pi)
+        path[i, 0] = roll * r2d
+        path[i, 1] = pitch * r2d
+        path[i, 2] = heading * r2d
+        path[i, 3] = np.nan
+        path[i, 7] *= r2d
+        path[i, 8] *= r2d
 
 
 def solution_from_path(t: np.ndarray, path: np.ndarray, std_enu: np.ndarray, t0_ns: int) -> Solution:
-    """Nominal rows (N, 16) -> :class:`Solution` (degrees for angles, navigation convention)."""
-    roll, pitch, heading = dcm_to_rph(quat_to_dcm_batch(path[:, 0:4]))
-    return Solution(
-        t=np.asarray(t, dtype=float), lat_deg=np.degrees(path[:, 7]), lon_deg=np.degrees(path[:, 8]),
-        alt=path[:, 9].copy(), vel_enu=path[:, 4:7].copy(),
-        rph_deg=np.degrees(np.column_stack([roll, pitch, heading])), std_enu=std_enu,
-        gyro_bias=path[:, 10:13].copy(), accel_bias=path[:, 13:16].copy(), t0_ns=t0_ns)
+    """Recorded rows (N, 10: q_nb, vel_enu, lat, lon, h) -> :class:`Solution`, converting ``path``
+    IN PLACE: the solution's arrays are views of it, so an hour at 125 Hz costs no second copy."""
+    _path_to_output_columns(path)
+    return Solution(t=np.asarray(t, dtype=float), lat_deg=path[:, 7], lon_deg=path[:, 8], alt=path[:, 9],
+                    vel_enu=path[:, 4:7], rph_deg=path[:, 0:3], std_enu=std_enu, t0_ns=t0_ns)
 
 
 __all__ = ["Diagnostics", "RunResult", "run", "solution_from_path", "mounting_matrix"]

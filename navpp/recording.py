@@ -158,7 +158,6 @@ class Solution:
     vel_enu : (N, 3) float, m/s.
     rph_deg : (N, 3) float, roll / pitch / heading in degrees (navigation convention).
     std_enu : (N, 3) float, m, 1-sigma position uncertainty per ENU axis.
-    gyro_bias, accel_bias : (N, 3) float, rad/s and m/s^2, body FLU, estimated sensor biases.
     """
 
     t: np.ndarray
@@ -168,8 +167,6 @@ class Solution:
     vel_enu: np.ndarray
     rph_deg: np.ndarray
     std_enu: np.ndarray
-    gyro_bias: np.ndarray
-    accel_bias: np.ndarray
     t0_ns: int = 0
 
     def __len__(self) -> int:

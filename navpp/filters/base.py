@@ -23,7 +23,7 @@ from typing import Any, ClassVar, Mapping
 
 import numpy as np
 from numba import njit
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from ..errors import ConfigError, FilterDivergedError
 
@@ -212,7 +212,7 @@ class Filter:
             return np.inf
         thr = self._gate_cache.get(m)
         if thr is None:
-            thr = self._gate_cache[m] = float(chi2.ppf(self.gate_probability, m))
+            thr = self._gate_cache[m] = float(chdtri(m, 1.0 - self.gate_probability))  # chi2 quantile
         return thr
 
     def update(self, state: GaussianState, model: Any, meas: Any) -> tuple[GaussianState, Innovation]:

@@ -34,7 +34,7 @@ from numba import njit
 
 from .. import geodesy
 from .attitude import quat_conj, quat_mul, quat_to_dcm, quat_to_rotvec, rotvec_to_quat
-from .strapdown import NOMINAL_SIZE, _interp_row, _nav_rates, radii, step
+from .strapdown import PATH_SIZE, _interp_row, _nav_rates, radii, step
 from .strapdown import integrate as _integrate_nominal
 
 N_ERR = 15
@@ -175,7 +175,7 @@ def integrate_with_jacobian(x, t, gyro, accel, t_start, t_end, out, record, psd,
             dvn_acc[:] = 0.0
             t_acc = 0.0
         if record and rec >= 0:
-            out[rec, :] = x
+            out[rec, :] = x[:out.shape[1]]
         tc, wc, fc = tn, wn, fnb
         i += 1
     return Phi, Qd
@@ -218,7 +218,7 @@ def _propagate_points(x, dX, t, gyro, accel, t_start, t_end, out, record):
     xn = x.copy()
     _integrate_nominal(xn, t, gyro, accel, t_start, t_end, out, record)   # the recorded nominal path
     dX_new = np.empty_like(dX)
-    unused = np.empty((1, NOMINAL_SIZE))
+    unused = np.empty((1, PATH_SIZE))
     for k in range(dX.shape[0]):
         xk = plus(x, dX[k])
         _integrate_nominal(xk, t, gyro, accel, t_start, t_end, unused, False)
@@ -237,7 +237,9 @@ class InsModel:
     noise : continuous noise model (SI).
     cov_step_s : longest covariance-propagation step, s.
 
-    ``path`` (N, 16) receives the nominal state at every IMU sample a transition passes.
+    ``path`` (N, PATH_SIZE) receives the attitude, velocity and position of the nominal state
+    at every IMU sample a transition passes (biases change only at updates: the engine keeps
+    them per epoch).
     """
 
     t: np.ndarray
@@ -255,7 +257,7 @@ class InsModel:
         self._psd = self.noise.psd()
         self._inv_tau = self.noise.inv_tau()
         if self.path is None:
-            self.path = np.full((self.t.shape[0], NOMINAL_SIZE), np.nan)
+            self.path = np.full((self.t.shape[0], PATH_SIZE), np.nan)
 
     # ⊞ / ⊟ -----------------------------------------------------------------------------------
     @staticmethod

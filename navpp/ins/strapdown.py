@@ -31,6 +31,7 @@ NOMINAL_VEL = slice(4, 7)
 NOMINAL_POS = slice(7, 10)
 NOMINAL_BG = slice(10, 13)
 NOMINAL_BA = slice(13, 16)
+PATH_SIZE = 10   #: recorded columns per IMU sample: q_nb, vel_enu, lat, lon, h (biases change only at updates)
 
 radii = njit(cache=True)(geodesy.radii)
 gravity = njit(cache=True)(geodesy.gravity)
@@ -122,8 +123,9 @@ def integrate(x, t, gyro, accel, t_start, t_end, out, record):
 
     Nodes are ``t_start``, every sample with ``t_start < t[i] < t_end``, and ``t_end``; rates at
     ``t_start``/``t_end`` are linearly interpolated between the neighbouring samples, so an
-    epoch between samples is reached exactly.  When ``record`` is true, the state reached at
-    each sample time ``t[i]`` in ``(t_start, t_end]`` is written to ``out[i]``.
+    epoch between samples is reached exactly.  When ``record`` is true, the first
+    ``out.shape[1]`` elements of the state reached at each sample time ``t[i]`` in
+    ``(t_start, t_end]`` are written to ``out[i]``.
     """
     n = t.shape[0]
     i = np.searchsorted(t, t_start, side="right")
@@ -146,14 +148,15 @@ def integrate(x, t, gyro, accel, t_start, t_end, out, record):
             rec = i if (i < n and t[i] == t_end) else -1
         step(x, wc, wn, fc, fnb, tn - tc, fn)
         if record and rec >= 0:
-            out[rec, :] = x
+            out[rec, :] = x[:out.shape[1]]
         tc, wc, fc = tn, wn, fnb
         i += 1
     return x
 
 
 def free_inertial(x0: np.ndarray, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> np.ndarray:
-    """Free-inertial solution at every sample from ``x0`` at ``t[0]``; (N, 16) nominal rows."""
+    """Free-inertial solution at every sample from ``x0`` at ``t[0]``; (N, 16) nominal rows
+    (the biases stay those of ``x0``)."""
     out = np.empty((t.shape[0], NOMINAL_SIZE))
     x = np.array(x0, dtype=float)
     out[0] = x

@@ -414,6 +414,9 @@ def _select_columns(
     return cols
 
 
+_CHUNK_ROWS = 65536
+
+
 def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list[str]) -> _Table:
     """Parse ``wanted`` columns as float64 and check every cell is a finite number."""
     # Unnamed columns (trailing commas) are ignored silently: there is nothing to name.
@@ -422,22 +425,27 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
         warnings.append(f"{path.name}: ignoring extra column(s) {_names(extra)}")
     positions = [header.index(c) for c in wanted]
     try:
-        df = pd.read_csv(
+        # Chunked parsing keeps the peak memory near the size of the data itself (a one-shot
+        # read_csv holds ~4x the table in parser buffers for a 450k-row file).
+        reader = pd.read_csv(
             path,
             engine="c",
             header=0,
             dtype={i: np.float64 for i in positions},
             skip_blank_lines=False,
             encoding="utf-8-sig",
+            chunksize=_CHUNK_ROWS,
         )
+        with reader:
+            parts = [chunk.iloc[:, positions].to_numpy(dtype=np.float64) for chunk in reader]
     except pd.errors.ParserError as e:
         raise InputError(f"{path}: {_parser_message(e, len(header))}") from e
     except ValueError as e:
         raise _locate_non_numeric(path, wanted, positions, e) from e
     except (OSError, UnicodeDecodeError) as e:
         raise InputError(f"{path}: cannot read: {e}") from e
-    data_cols = [df.iloc[:, i].to_numpy(dtype=np.float64) for i in positions]
-    block = np.column_stack(data_cols)
+    block = np.concatenate(parts) if parts else np.empty((0, len(wanted)))
+    del parts
     finite = np.isfinite(block)
     n = block.shape[0]
     # Blank lines at the end of the file are harmless: drop them.

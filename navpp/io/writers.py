@@ -1,0 +1,434 @@
+"""Output files: ``trajectory.csv``, ``metrics.json``, ``metrics.md`` (see INTERFACES.md).
+
+Every file is written through :func:`atomic_write`: the bytes go to a temporary name in the
+target directory, are flushed to disk, and the temporary file is renamed over the target only
+when complete, so a failed or interrupted run never leaves a half-written file that looks
+finished.
+
+``trajectory.csv`` is formatted by a vectorised fixed-point formatter (:func:`format_fixed_columns`)
+rather than ``pandas.to_csv`` or ``numpy.savetxt``: 450 000 rows take a fraction of a second
+instead of several seconds.  Its text is identical to Python's ``format(x, ".Nf")`` for every
+value (correct rounding of the exact binary value, ties to even, ``"nan"``, ``"inf"``,
+``"-inf"``, and ``"-0.0000"`` for negative values that round to zero, as C's ``printf`` and
+pandas also write them).  The one exception is the ``t`` column, which is computed more
+precisely than ``format(t0_s + t, ".6f")`` would (see :func:`write_trajectory_csv`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from navpp.recording import Solution
+
+__all__ = [
+    "TRAJECTORY_COLUMNS",
+    "TRAJECTORY_DECIMALS",
+    "atomic_write",
+    "format_fixed_columns",
+    "write_metrics_json",
+    "write_metrics_md",
+    "write_trajectory_csv",
+]
+
+#: Column names of ``trajectory.csv``, in order (INTERFACES.md).
+TRAJECTORY_COLUMNS: tuple[str, ...] = (
+    "t", "lat", "lon", "alt", "ve", "vn", "vu", "roll", "pitch", "heading",
+    "std_e", "std_n", "std_u",
+)
+#: Decimals written per column: t 1 us, lat/lon 1e-9 deg (~0.1 mm), alt/velocities/angles/std 1e-4.
+TRAJECTORY_DECIMALS: tuple[int, ...] = (6, 9, 9, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4)
+
+_CHUNK_ROWS = 32_768  # rows formatted per pass: bounds memory to ~3 x 5 MB whatever the length
+_FAST_LIMIT = 2.0 ** 52  # |x * 10**d| below this: every half-integer is a double, int64 is exact
+_SPLIT = 134217729.0  # 2**27 + 1, Veltkamp splitting constant
+
+
+# --------------------------------------------------------------------------- atomic write
+
+
+def _default_file_mode() -> int:
+    """Permissions an ordinary ``open(path, "w")`` would give a new file (0o666 & ~umask)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return 0o666 & ~int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0o644
+
+
+def atomic_write(path: str | os.PathLike[str], writer: Callable[[IO[Any]], None],
+                 mode: str = "w") -> None:
+    """Write a file so that it appears complete or not at all.
+
+    ``writer`` receives an open file (text, UTF-8 with ``"\\n"`` line ends, for ``mode="w"``;
+    binary for ``mode="wb"``) on a temporary name in the target's directory.  When it returns,
+    the data are flushed and fsynced and the temporary file is renamed over ``path``
+    (``os.replace``, atomic on POSIX and Windows).  If ``writer`` raises (or the run is
+    interrupted), the temporary file is removed, ``path`` is left as it was, and the exception
+    propagates.
+
+    Parameters
+    ----------
+    path : target file; its directory must exist.
+    writer : callable that writes the whole content to the file it is given.
+    mode : ``"w"`` (text) or ``"wb"`` (binary).
+    """
+    if mode not in ("w", "wb"):
+        raise ValueError(f"atomic_write mode must be 'w' or 'wb', got {mode!r}")
+    path = Path(path)
+    directory = path.parent if str(path.parent) else Path(".")
+    fd, tmp_name = tempfile.mkstemp(dir=directory, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        if mode == "w":
+            f: IO[Any] = os.fdopen(fd, "w", encoding="utf-8", newline="\n")
+        else:
+            f = os.fdopen(fd, "wb")
+        with f:
+            writer(f)
+            f.flush()
+            os.fsync(f.fileno())
+        try:
+            target_mode = path.stat().st_mode & 0o7777
+        except FileNotFoundError:
+            target_mode = _default_file_mode()
+        os.chmod(tmp_name, target_mode)
+        os.replace(tmp_name, path)
+    except BaseException:
+        try:
+            os.unlink(tmp_name)
+        except FileNotFoundError:
+            pass
+        raise
+    _fsync_directory(directory)
+
+
+def _fsync_directory(directory: Path) -> None:
+    """Make the rename durable (POSIX); a no-op where directories cannot be opened."""
+    try:
+        dfd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(dfd)
+    except OSError:
+        pass
+    finally:
+        os.close(dfd)
+
+
+# --------------------------------------------------------------------------- fixed-point formatting
+
+
+def _product_error(a: np.ndarray, b: float, p: np.ndarray) -> np.ndarray:
+    """Exact rounding error ``a*b - p`` of the double product ``p = fl(a*b)`` (Dekker's TwoProduct)."""
+    c = _SPLIT * a
+    ah = c - (c - a)
+    al = a - ah
+    c = _SPLIT * b
+    bh = c - (c - b)
+    bl = b - bh
+    return ((ah * bh - p) + ah * bl + al * bh) + al * bl
+
+
+def _round_scaled(x: np.ndarray, decimals: int) -> tuple[np.ndarray, np.ndarray]:
+    """``round(x * 10**decimals)`` of the exact binary value, ties to even, as int64.
+
+    Returns ``(r, fast)``: ``fast`` marks the finite values with ``|x| * 10**decimals < 2**52``;
+    ``r`` is the correctly rounded scaled value there and 0 elsewhere.
+
+    ``p = fl(x * 10**d)`` can differ from the exact product, but rounding is monotonic and every
+    half-integer below 2**52 is a double, so ``rint(p)`` is the correct answer unless ``p`` lands
+    exactly on a half-integer; there the sign of the exact product error decides.
+    """
+    scale = 10.0 ** decimals
+    with np.errstate(invalid="ignore", over="ignore"):
+        p = x * scale
+        fast = np.abs(p) < _FAST_LIMIT
+    p = np.where(fast, p, 0.0)
+    r = np.rint(p)
+    tie = (p - np.floor(p)) == 0.5
+    if tie.any():
+        idx = np.flatnonzero(tie)
+        err = _product_error(x[idx], scale, p[idx])
+        low = np.floor(p[idx])
+        r[idx] = np.where(err > 0.0, low + 1.0, np.where(err < 0.0, low, r[idx]))
+    return r.astype(np.int64), fast
+
+
+def _n_digits(v: int) -> int:
+    return max(1, len(str(int(v))))
+
+
+class _Field:
+    """One column of one chunk, ready to be laid out: magnitude, sign and special strings."""
+
+    def __init__(self, mag: np.ndarray, neg: np.ndarray, decimals: int,
+                 special_rows: np.ndarray, special_text: np.ndarray) -> None:
+        self.mag = mag  # (n,) int64 >= 0, scaled by 10**decimals (0 on special rows)
+        self.neg = neg  # (n,) bool, write a minus sign
+        self.decimals = decimals
+        self.special_rows = special_rows  # (k,) int rows written as text instead
+        self.special_text = special_text  # (k,) bytes ("S") array
+        int_part_max = int(mag.max()) // 10 ** decimals if mag.size else 0
+        self.n_digits = _n_digits(int_part_max)  # integer digits of the largest number
+        self.n_int = self.n_digits  # integer positions of the slot (wider if a text is longer)
+        frac_width = decimals + 1 if decimals else 0
+        if special_rows.size:
+            longest = special_text.dtype.itemsize
+            self.n_int = max(self.n_int, longest - 1 - frac_width)
+        #: bytes in the row buffer: sign, integer digits, '.', fraction, separator
+        self.width = 1 + self.n_int + frac_width + 1
+
+
+def _field_from_values(x: np.ndarray, decimals: int) -> _Field:
+    """Fixed-point field of ``x`` identical to ``format(v, f'.{decimals}f')`` per value."""
+    x = np.asarray(x, dtype=np.float64)
+    r, fast = _round_scaled(x, decimals)
+    neg = np.signbit(x) & fast
+    rows = np.flatnonzero(~fast)
+    return _Field(np.abs(r), neg, decimals, rows, _special_text(x[rows], decimals))
+
+
+def _special_text(v: np.ndarray, decimals: int) -> np.ndarray:
+    """Text of values the fast path does not cover: nan, +-inf and |v| >= 2**52 / 10**decimals."""
+    if v.size == 0:
+        return np.empty(0, dtype="S1")
+    finite = np.isfinite(v)
+    longest = 4
+    texts: dict[int, bytes] = {}
+    for i in np.flatnonzero(finite):  # enormous finite values only: rare
+        s = format(float(v[i]), f".{decimals}f").encode("ascii")
+        texts[int(i)] = s
+        longest = max(longest, len(s))
+    out = np.empty(v.shape[0], dtype=f"S{longest}")
+    out[np.isnan(v)] = b"nan"
+    out[np.isposinf(v)] = b"inf"
+    out[np.isneginf(v)] = b"-inf"
+    for i, s in texts.items():
+        out[i] = s
+    return out
+
+
+_DIGITS = np.frombuffer(b"0123456789", dtype=np.uint8)
+
+
+def _layout(fields: Sequence[_Field], n: int) -> np.ndarray:
+    """Lay the fields out in a zero-padded (n, width) byte buffer and squeeze out the padding.
+
+    Each field is ``[sign][integer digits, right-aligned]['.'][fraction][',' or '\\n']``;
+    unused positions stay 0 and are dropped, so the result is the CSV text of the n rows.
+    """
+    total = sum(f.width for f in fields)
+    buf = np.zeros((n, total), dtype=np.uint8)
+    c0 = 0
+    for j, f in enumerate(fields):
+        buf[:, c0] = np.where(f.neg, ord("-"), 0).astype(np.uint8)
+        d = f.decimals
+        q = f.mag // 10 ** d
+        frac = f.mag - q * 10 ** d
+        units = c0 + f.n_int  # position of the integer units digit
+        for k in range(f.n_digits):
+            digit = _DIGITS[q % 10]
+            if k == 0:
+                buf[:, units] = digit
+            else:
+                buf[:, units - k] = np.where(q > 0, digit, 0)
+            q //= 10
+        if d:
+            buf[:, units + 1] = ord(".")
+            for k in range(d):
+                buf[:, units + 1 + d - k] = _DIGITS[frac % 10]
+                frac //= 10
+        if f.special_rows.size:
+            k = f.special_text.dtype.itemsize
+            buf[f.special_rows, c0:c0 + f.width - 1] = 0
+            buf[f.special_rows, c0:c0 + k] = f.special_text.view(np.uint8).reshape(-1, k)
+        buf[:, c0 + f.width - 1] = ord("\n") if j == len(fields) - 1 else ord(",")
+        c0 += f.width
+    return buf[buf != 0]
+
+
+def format_fixed_columns(columns: Sequence[np.ndarray], decimals: Sequence[int]) -> bytes:
+    """CSV text (no header) of equal-length float columns with fixed decimals per column.
+
+    Every value is written exactly as ``format(v, f".{d}f")`` writes it (see the module
+    docstring); rows end with ``"\\n"``.  Vectorised: no Python loop over rows.
+    """
+    if len(columns) != len(decimals) or not columns:
+        raise ValueError("format_fixed_columns needs one decimals entry per column")
+    n = int(np.shape(columns[0])[0])
+    parts: list[bytes] = []
+    for start in range(0, n, _CHUNK_ROWS):
+        stop = min(n, start + _CHUNK_ROWS)
+        fields = [_field_from_values(np.asarray(c)[start:stop], d) for c, d in zip(columns, decimals)]
+        parts.append(_layout(fields, stop - start).tobytes())
+    return b"".join(parts)
+
+
+def _time_field(t_rel: np.ndarray, t0_s: float) -> _Field:
+    """``t0_s + t_rel`` with 6 decimals, without the rounding of the float sum.
+
+    ``t0_s`` is split into whole seconds and a fraction (both exact), the fraction is added to
+    the relative times (small numbers, ~1e-11 s resolution) and the whole seconds are added
+    back as integer microseconds.  Negative values that round to zero are written ``0.000000``.
+    """
+    t0_int = math.floor(t0_s)
+    rel = (t0_s - t0_int) + np.asarray(t_rel, dtype=np.float64)
+    r, fast = _round_scaled(rel, 6)
+    total = r + np.int64(t0_int) * 1_000_000
+    neg = (total < 0) & fast
+    rows = np.flatnonzero(~fast)
+    special = _special_text(t0_int + rel[rows], 6)
+    return _Field(np.where(fast, np.abs(total), 0), neg, 6, rows, special)
+
+
+def write_trajectory_csv(path: str | os.PathLike[str], sol: Solution, *, t0_s: float) -> None:
+    """Write ``trajectory.csv`` (INTERFACES.md): one row per solution epoch.
+
+    Columns ``t, lat, lon, alt, ve, vn, vu, roll, pitch, heading, std_e, std_n, std_u``:
+    ``t`` in seconds on the log's own time base (``t0_s + sol.t``, 6 decimals), latitude and
+    longitude in degrees (9 decimals, ~0.1 mm), altitude m, velocity ENU m/s, roll/pitch/heading
+    deg (navigation convention), position 1-sigma m (4 decimals each).  Non-finite values are
+    written ``nan`` / ``inf`` / ``-inf``.
+
+    ``t`` is ``t0_s + sol.t`` rounded once to the microsecond: the float sum (which at unix
+    times of ~1.7e9 s has a resolution of 0.24 us) is never formed.  It is still only as exact
+    as ``t0_s`` itself.
+
+    Parameters
+    ----------
+    path : output file (written atomically).
+    sol : the solution.
+    t0_s : seconds on the log's time base of ``sol.t == 0`` (e.g. ``recording.t0_ns * 1e-9``).
+    """
+    if not math.isfinite(t0_s) or abs(t0_s) >= 1.0e12:
+        raise ValueError(f"t0_s must be finite and below 1e12 s in magnitude, got {t0_s!r}")
+    n = len(sol)
+    vel = np.asarray(sol.vel_enu, dtype=np.float64).reshape(n, 3)
+    rph = np.asarray(sol.rph_deg, dtype=np.float64).reshape(n, 3)
+    std = np.asarray(sol.std_enu, dtype=np.float64).reshape(n, 3)
+    columns = [sol.lat_deg, sol.lon_deg, sol.alt, vel[:, 0], vel[:, 1], vel[:, 2],
+               rph[:, 0], rph[:, 1], rph[:, 2], std[:, 0], std[:, 1], std[:, 2]]
+    header = (",".join(TRAJECTORY_COLUMNS) + "\n").encode("ascii")
+
+    def write(f: IO[bytes]) -> None:
+        f.write(header)
+        for start in range(0, n, _CHUNK_ROWS):
+            stop = min(n, start + _CHUNK_ROWS)
+            fields = [_time_field(np.asarray(sol.t)[start:stop], t0_s)]
+            fields += [_field_from_values(np.asarray(c, dtype=np.float64)[start:stop], d)
+                       for c, d in zip(columns, TRAJECTORY_DECIMALS[1:])]
+            f.write(memoryview(_layout(fields, stop - start)))
+
+    atomic_write(path, write, mode="wb")
+
+
+# --------------------------------------------------------------------------- metrics
+
+
+def _json_ready(obj: Any) -> Any:
+    """Plain JSON values: numpy scalars to Python numbers, non-finite floats to ``None``."""
+    if isinstance(obj, Mapping):
+        return {str(k): _json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_ready(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return [_json_ready(v) for v in obj.tolist()]
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    return obj
+
+
+def write_metrics_json(path: str | os.PathLike[str], metrics: Mapping[str, Any]) -> None:
+    """Write ``metrics.json`` (indented, UTF-8); NaN/inf become ``null`` so the file is valid JSON."""
+    text = json.dumps(_json_ready(metrics), indent=2, allow_nan=False) + "\n"
+    atomic_write(path, lambda f: f.write(text), mode="w")
+
+
+_STAT_COLUMNS = (("mae", "MAE"), ("rmse", "RMSE"), ("max", "max"), ("p95", "p95"))
+_POSITION_ROWS = ("east", "north", "up", "horizontal", "3d")
+
+
+def _num(v: Any, decimals: int = 4) -> str:
+    if v is None:
+        return "-"
+    v = float(v)
+    return f"{v:.{decimals}f}" if math.isfinite(v) else str(v)
+
+
+def _stats_table(stats: Mapping[str, Any], rows: Sequence[str], unit: str) -> list[str]:
+    lines = [
+        f"| | MAE ({unit}) | RMSE ({unit}) | max ({unit}) | p95 ({unit}) |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    for row in rows:
+        if row not in stats:
+            continue
+        s = stats[row]
+        lines.append(f"| {row} | " + " | ".join(_num(s.get(key)) for key, _ in _STAT_COLUMNS) + " |")
+    return lines
+
+
+def metrics_markdown(metrics: Mapping[str, Any]) -> str:
+    """The Markdown text of ``metrics.md``: the numbers of ``metrics.json`` as tables (4 decimals)."""
+    m = metrics
+    out = [
+        f"# navpp metrics: {m.get('filter', '?')} on {m.get('log', '?')}",
+        "",
+        f"- filter: `{m.get('filter', '')}`",
+        f"- log: `{m.get('log', '')}`",
+        f"- reference: `{m.get('reference', '')}`",
+        f"- reference epochs compared: {m.get('epochs', 0)}",
+        f"- runtime: {_num(m.get('runtime_s'), 3)} s",
+        f"- IMU samples: {m.get('imu_samples', 0)}; GNSS epochs: {m.get('gnss_epochs', 0)}; "
+        f"GNSS rejected: {m.get('gnss_rejected', 0)}",
+        "",
+        "## Position error (m)",
+        "",
+        "Estimate minus reference in the local ENU frame of each reference point: "
+        "east = longitude error, north = latitude error, up = height error, in metres; "
+        "horizontal = hypot(east, north), 3d = norm of all three.",
+        "",
+    ]
+    out += _stats_table(m.get("position_m", {}), _POSITION_ROWS, "m")
+    if "velocity_mps" in m:
+        out += ["", "## Velocity error (m/s)", "", "Estimate minus reference, ENU.", ""]
+        out += _stats_table(m["velocity_mps"], _POSITION_ROWS, "m/s")
+    if "attitude_deg" in m:
+        out += ["", "## Attitude error (deg)", "",
+                "Estimate minus reference, wrapped to [-180, 180).", ""]
+        out += _stats_table(m["attitude_deg"], ("roll", "pitch", "heading"), "deg")
+    if "gnss_position_m" in m:
+        g = m["gnss_position_m"]
+        out += ["", "## Raw GNSS position error (m)", "",
+                "GNSS fixes minus the reference antenna position (reference interpolated to the "
+                "GNSS epochs), local ENU: east = longitude error, north = latitude error.", ""]
+        if "epochs" in g:
+            out += [f"GNSS epochs compared: {g['epochs']}", ""]
+        if "note" in g:
+            out += [f"Note: {g['note']}", ""]
+        if any(row in g for row in _POSITION_ROWS):
+            out += _stats_table(g, _POSITION_ROWS, "m")
+    out += ["", f"GNSS epochs rejected by the filter: {m.get('gnss_rejected', 0)}", ""]
+    return "\n".join(out)
+
+
+def write_metrics_md(path: str | os.PathLike[str], metrics: Mapping[str, Any]) -> None:
+    """Write ``metrics.md``: :func:`metrics_markdown` of ``metrics``, atomically."""
+    text = metrics_markdown(metrics)
+    atomic_write(path, lambda f: f.write(text), mode="w")

@@ -1,0 +1,374 @@
+"""Accuracy of a solution against a reference: association, errors in local ENU metres, statistics.
+
+Steps, each a tested function of its own:
+
+1. :func:`associate` picks the reference epochs inside the solution's time span (no
+   extrapolation).
+2. :func:`interpolate_solution` brings the solution to those epochs (linear; heading on the
+   unwrapped angle).
+3. :func:`position_errors_enu` expresses estimate minus reference in the local ENU frame of
+   each reference point (exact, through ECEF): east = longitude error, north = latitude error,
+   up = height error, metres.
+4. :func:`error_stats` reduces errors to MAE / RMSE / max / p95 per axis, horizontally and in 3-D.
+
+:func:`compute_metrics` chains them into the ``metrics.json`` structure of INTERFACES.md and,
+when given the raw GNSS fixes, adds their own accuracy against the reference antenna position.
+
+All angles here are in degrees, navigation convention (heading clockwise from north, pitch
+nose up, roll right side down); body frame FLU, navigation frame ENU.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from navpp import geodesy
+from navpp.errors import InputError
+from navpp.recording import GnssData, ReferenceData, Solution
+
+__all__ = [
+    "Association",
+    "associate",
+    "compute_metrics",
+    "error_stats",
+    "interpolate_solution",
+    "mat_nb_from_rph",
+    "position_errors_enu",
+    "wrap_deg",
+]
+
+#: Below this horizontal speed (m/s) the reference velocity does not define a heading.
+MIN_SPEED_FOR_HEADING = 0.5
+
+
+class Association(NamedTuple):
+    """Reference epochs matched to an estimate.
+
+    Attributes
+    ----------
+    idx_ref : (K,) int, indices into the reference arrays, increasing.
+    t : (K,) float, s, the reference times ``t_ref[idx_ref]`` (where the estimate is evaluated).
+    """
+
+    idx_ref: np.ndarray
+    t: np.ndarray
+
+
+def associate(t_est: np.ndarray, t_ref: np.ndarray) -> Association:
+    """Reference epochs at which the estimate can be interpolated.
+
+    Keeps the reference epochs with ``t_est[0] <= t_ref <= t_est[-1]`` (the span's ends
+    included: the estimate is known there without extrapolation); non-finite reference times
+    are dropped.
+
+    Parameters
+    ----------
+    t_est : (N,) float, s, non-decreasing estimate times.
+    t_ref : (K,) float, s, reference times (same time base).
+
+    Returns
+    -------
+    Association ``(idx_ref, t)``; empty when the spans do not overlap or ``t_est`` is empty.
+    """
+    t_est = np.asarray(t_est, dtype=float)
+    t_ref = np.asarray(t_ref, dtype=float)
+    if t_est.size == 0:
+        idx = np.empty(0, dtype=np.int64)
+        return Association(idx, t_ref[idx])
+    inside = np.isfinite(t_ref) & (t_ref >= t_est[0]) & (t_ref <= t_est[-1])
+    idx = np.flatnonzero(inside).astype(np.int64)
+    return Association(idx, t_ref[idx])
+
+
+def wrap_deg(angle: np.ndarray | float, low: float = -180.0) -> np.ndarray:
+    """Wrap degrees into ``[low, low + 360)``."""
+    return np.mod(np.asarray(angle, dtype=float) - low, 360.0) + low
+
+
+def _interp(t_src: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Linear interpolation of (N,) or (N, m) ``y`` at ``t``; one-sample sources are constant."""
+    y = np.asarray(y, dtype=float)
+    if y.ndim == 1:
+        return np.interp(t, t_src, y)
+    return np.stack([np.interp(t, t_src, y[:, j]) for j in range(y.shape[1])], axis=-1)
+
+
+def _interp_track(t_src: np.ndarray, lat_deg: np.ndarray, lon_deg: np.ndarray, alt: np.ndarray,
+                  vel_enu: np.ndarray | None, rph_deg: np.ndarray | None,
+                  t: np.ndarray) -> dict[str, np.ndarray]:
+    """Interpolate a trajectory: positions, velocity and roll/pitch linearly; longitude and
+    heading on their unwrapped angles (across +-180 deg and 0/360 deg), then wrapped back."""
+    t_src = np.asarray(t_src, dtype=float)
+    t = np.asarray(t, dtype=float)
+    if t_src.size == 0:
+        raise ValueError("cannot interpolate a trajectory with no epochs")
+    if t_src.size > 1 and np.any(np.diff(t_src) < 0):
+        raise InputError("trajectory times are not increasing; cannot interpolate")
+    lon_unwrapped = np.unwrap(np.asarray(lon_deg, dtype=float), period=360.0)
+    out = {
+        "t": t,
+        "lat_deg": _interp(t_src, lat_deg, t),
+        "lon_deg": wrap_deg(_interp(t_src, lon_unwrapped, t)),
+        "alt": _interp(t_src, alt, t),
+    }
+    if vel_enu is not None:
+        out["vel_enu"] = _interp(t_src, vel_enu, t)
+    if rph_deg is not None:
+        rph = np.asarray(rph_deg, dtype=float)
+        heading = np.unwrap(rph[:, 2], period=360.0)
+        out["rph_deg"] = np.stack([
+            _interp(t_src, rph[:, 0], t),
+            _interp(t_src, rph[:, 1], t),
+            wrap_deg(_interp(t_src, heading, t), 0.0),
+        ], axis=-1)
+    return out
+
+
+def interpolate_solution(sol: Solution, t: np.ndarray) -> dict[str, np.ndarray]:
+    """Solution values at times ``t`` (s, relative to ``sol.t0_ns``) by linear interpolation.
+
+    Latitude, altitude, velocity, roll, pitch and position std are linear in time; longitude
+    is interpolated on its unwrapped value (so a crossing of +-180 deg is handled) and wrapped
+    to [-180, 180); heading is interpolated on the unwrapped angle and wrapped to [0, 360).
+    Times outside ``[sol.t[0], sol.t[-1]]`` get the end values (use :func:`associate` first).
+
+    Returns
+    -------
+    dict with ``t`` (K,), ``lat_deg`` (K,) deg, ``lon_deg`` (K,) deg, ``alt`` (K,) m,
+    ``vel_enu`` (K, 3) m/s, ``rph_deg`` (K, 3) deg, ``std_enu`` (K, 3) m.
+    """
+    out = _interp_track(sol.t, sol.lat_deg, sol.lon_deg, sol.alt, sol.vel_enu, sol.rph_deg, t)
+    out["std_enu"] = _interp(np.asarray(sol.t, dtype=float), sol.std_enu, np.asarray(t, dtype=float))
+    return out
+
+
+def position_errors_enu(lat_deg: np.ndarray, lon_deg: np.ndarray, alt: np.ndarray,
+                        ref_lat_deg: np.ndarray, ref_lon_deg: np.ndarray,
+                        ref_alt: np.ndarray) -> np.ndarray:
+    """Estimate minus reference position in the local ENU frame of each reference point.
+
+    Exact (through ECEF, :func:`navpp.geodesy.geodetic_to_enu`), so it holds at any latitude and
+    any error size.
+
+    Parameters
+    ----------
+    lat_deg, lon_deg, alt : (K,) estimate, deg / deg / m (WGS-84 ellipsoidal height).
+    ref_lat_deg, ref_lon_deg, ref_alt : (K,) reference, same units.
+
+    Returns
+    -------
+    (K, 3) float, m: east (longitude error), north (latitude error), up (height error).
+    """
+    return geodesy.geodetic_to_enu(
+        np.radians(np.asarray(lat_deg, dtype=float)), np.radians(np.asarray(lon_deg, dtype=float)),
+        np.asarray(alt, dtype=float),
+        np.radians(np.asarray(ref_lat_deg, dtype=float)),
+        np.radians(np.asarray(ref_lon_deg, dtype=float)), np.asarray(ref_alt, dtype=float),
+    ).reshape(-1, 3)
+
+
+def _abs_stats(a: np.ndarray) -> dict[str, float]:
+    """MAE, RMSE, max and 95th percentile (numpy's linear method) of non-negative values."""
+    return {
+        "mae": float(np.mean(a)),
+        "rmse": float(np.sqrt(np.mean(a * a))),
+        "max": float(np.max(a)),
+        "p95": float(np.percentile(a, 95.0)),
+    }
+
+
+def error_stats(err: np.ndarray) -> dict[str, dict[str, float]]:
+    """Statistics of ENU errors.
+
+    Parameters
+    ----------
+    err : (K, 3) float, errors east / north / up (m, or m/s for velocities), K >= 1.
+
+    Returns
+    -------
+    ``{"east", "north", "up", "horizontal", "3d"}``, each ``{"mae", "rmse", "max", "p95"}`` of
+    the absolute error: ``mae = mean|e|``, ``rmse = sqrt(mean e^2)``, ``max = max|e|``,
+    ``p95`` = 95th percentile of ``|e|`` (linear interpolation between order statistics);
+    horizontal uses ``hypot(east, north)``, 3d the Euclidean norm.
+    """
+    err = np.asarray(err, dtype=float)
+    if err.ndim != 2 or err.shape[1] != 3 or err.shape[0] == 0:
+        raise ValueError(f"error_stats needs a (K, 3) array with K >= 1, got shape {err.shape}")
+    a = np.abs(err)
+    return {
+        "east": _abs_stats(a[:, 0]),
+        "north": _abs_stats(a[:, 1]),
+        "up": _abs_stats(a[:, 2]),
+        "horizontal": _abs_stats(np.hypot(err[:, 0], err[:, 1])),
+        "3d": _abs_stats(np.linalg.norm(err, axis=1)),
+    }
+
+
+def _rx(a: np.ndarray) -> np.ndarray:
+    c, s, o, z = np.cos(a), np.sin(a), np.ones_like(a), np.zeros_like(a)
+    return np.stack([np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)], -2)
+
+
+def _ry(a: np.ndarray) -> np.ndarray:
+    c, s, o, z = np.cos(a), np.sin(a), np.ones_like(a), np.zeros_like(a)
+    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
+
+
+def _rz(a: np.ndarray) -> np.ndarray:
+    c, s, o, z = np.cos(a), np.sin(a), np.ones_like(a), np.zeros_like(a)
+    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
+
+
+def mat_nb_from_rph(rph_deg: np.ndarray) -> np.ndarray:
+    """Rotation body FLU -> navigation ENU from roll, pitch, heading (deg, navigation convention).
+
+    ``C_b^n = Rz(pi/2 - heading) @ Ry(-pitch) @ Rx(roll)`` with right-handed elementary
+    rotations: roll right side down positive, pitch nose up positive, heading clockwise from
+    north.  At zero roll and pitch the body x axis (forward) points to
+    ``(sin heading, cos heading, 0)`` in ENU.
+
+    Parameters
+    ----------
+    rph_deg : (..., 3) deg.
+
+    Returns
+    -------
+    (..., 3, 3) rotation matrices.
+    """
+    rph = np.radians(np.asarray(rph_deg, dtype=float))
+    return _rz(np.pi / 2 - rph[..., 2]) @ _ry(-rph[..., 1]) @ _rx(rph[..., 0])
+
+
+def _heading_from_velocity(vel_enu: np.ndarray) -> np.ndarray | None:
+    """Heading (deg) of the horizontal velocity, held across slow epochs; None if never moving."""
+    speed = np.hypot(vel_enu[:, 0], vel_enu[:, 1])
+    moving = np.isfinite(speed) & (speed >= MIN_SPEED_FOR_HEADING)
+    if not moving.any():
+        return None
+    idx = np.flatnonzero(moving)
+    # index of the nearest preceding moving epoch (or the first one, before it)
+    pos = np.maximum(np.searchsorted(idx, np.arange(len(speed)), side="right") - 1, 0)
+    src = idx[pos]
+    return np.degrees(np.arctan2(vel_enu[src, 0], vel_enu[src, 1]))
+
+
+def _gnss_position_metrics(gnss: GnssData, ref: ReferenceData,
+                           lever_arm_m: Sequence[float]) -> dict[str, Any]:
+    """Accuracy of the raw GNSS fixes against the reference antenna position."""
+    lever = np.asarray(lever_arm_m, dtype=float).reshape(3)
+    t_g = np.asarray(gnss.t, dtype=float)
+    ok = (np.isfinite(t_g) & np.isfinite(gnss.lat_deg) & np.isfinite(gnss.lon_deg)
+          & np.isfinite(gnss.alt))
+    assoc = associate(np.asarray(ref.t, dtype=float), np.where(ok, t_g, np.nan))
+    if assoc.idx_ref.size == 0:
+        return {"epochs": 0, "note": "no GNSS fix inside the reference time span"}
+    i = assoc.idx_ref
+    r = _interp_track(ref.t, ref.lat_deg, ref.lon_deg, ref.alt, ref.vel_enu, ref.rph_deg, assoc.t)
+    err = position_errors_enu(gnss.lat_deg[i], gnss.lon_deg[i], gnss.alt[i],
+                              r["lat_deg"], r["lon_deg"], r["alt"])
+    note = None
+    if np.any(lever != 0.0):
+        if "rph_deg" in r:
+            mat_nb = mat_nb_from_rph(r["rph_deg"])
+        else:
+            heading = _heading_from_velocity(r["vel_enu"]) if "vel_enu" in r else None
+            if heading is None:
+                mat_nb = None
+                note = ("lever arm ignored: the reference has no attitude and no velocity "
+                        "to take a heading from")
+            else:
+                mat_nb = mat_nb_from_rph(np.stack([np.zeros_like(heading), np.zeros_like(heading),
+                                                   heading], axis=-1))
+                note = ("lever arm rotated with the heading of the reference velocity "
+                        "(roll and pitch taken as zero): the reference has no attitude")
+        if mat_nb is not None:
+            # antenna = body + C_b^n l; in the ENU frame of the body point (the frame of the
+            # antenna point differs by |l| / R ~ 1e-7 rad)
+            err = err - mat_nb @ lever
+    out: dict[str, Any] = {"epochs": int(i.size)}
+    out.update(error_stats(err))
+    if note is not None:
+        out["note"] = note
+    return out
+
+
+def compute_metrics(sol: Solution, ref: ReferenceData, *, filter_name: str, log: str,
+                    reference: str, runtime_s: float, imu_samples: int, gnss_epochs: int,
+                    gnss_rejected: int, gnss: GnssData | None = None,
+                    lever_arm_m: Sequence[float] = (0.0, 0.0, 0.0)) -> dict[str, Any]:
+    """The ``metrics.json`` structure (INTERFACES.md) of a solution against a reference.
+
+    Keys: ``filter``, ``log``, ``reference``, ``epochs`` (reference epochs inside the solution
+    span), ``position_m`` (:func:`error_stats` of the ENU position errors, m), ``velocity_mps``
+    (same over ENU velocity errors, only if the reference has velocity), ``attitude_deg``
+    (``roll``, ``pitch``, ``heading``: each ``{"mae", "rmse", "max", "p95"}`` of the error
+    wrapped to [-180, 180), only if the reference has attitude), ``runtime_s``,
+    ``imu_samples``, ``gnss_epochs``, ``gnss_rejected``.
+
+    With ``gnss``, also ``gnss_position_m``: the raw fixes against the reference antenna
+    position (reference interpolated to the GNSS epochs inside its span; antenna = reference
+    body position + ``C_b^n @ lever_arm_m``, ``C_b^n`` from the reference attitude, else from
+    the heading of the reference velocity with zero roll and pitch, else the lever arm is
+    ignored).  It holds :func:`error_stats` plus ``epochs`` (fixes compared) and, when the lever
+    arm could not be applied in full, a ``note``.
+
+    Parameters
+    ----------
+    sol : the solution (body origin).
+    ref : the reference (body origin), same relative time base as ``sol``.
+    lever_arm_m : (3,) m, GNSS antenna position in the body frame (FLU).
+
+    Raises
+    ------
+    InputError
+        When no reference epoch falls inside the solution's time span.
+
+    Returns
+    -------
+    dict of plain Python ``str`` / ``int`` / ``float`` values (JSON serialisable).
+    """
+    t_sol = np.asarray(sol.t, dtype=float)
+    t_ref = np.asarray(ref.t, dtype=float)
+    # reference rows without a position cannot be compared: drop them (time -> NaN)
+    ref_ok = np.isfinite(ref.lat_deg) & np.isfinite(ref.lon_deg) & np.isfinite(ref.alt)
+    assoc = associate(t_sol, np.where(ref_ok, t_ref, np.nan))
+    if assoc.idx_ref.size == 0:
+        sol_span = f"[{t_sol[0]:.3f}, {t_sol[-1]:.3f}] s" if t_sol.size else "empty"
+        ref_span = f"[{np.nanmin(t_ref):.3f}, {np.nanmax(t_ref):.3f}] s" if t_ref.size else "empty"
+        raise InputError(
+            f"reference {reference or ref.source!r}: no epoch inside the solution's time span "
+            f"(solution {sol_span}, reference {ref_span}, relative to the log start)"
+        )
+    i = assoc.idx_ref
+    est = interpolate_solution(sol, assoc.t)
+    pos_err = position_errors_enu(est["lat_deg"], est["lon_deg"], est["alt"],
+                                  ref.lat_deg[i], ref.lon_deg[i], ref.alt[i])
+    metrics: dict[str, Any] = {
+        "filter": str(filter_name),
+        "log": str(log),
+        "reference": str(reference),
+        "epochs": int(i.size),
+        "position_m": error_stats(pos_err),
+    }
+    if ref.vel_enu is not None:
+        vel_err = est["vel_enu"] - np.asarray(ref.vel_enu, dtype=float)[i]
+        rows = np.all(np.isfinite(np.asarray(ref.vel_enu, dtype=float)[i]), axis=1)
+        if rows.any():
+            metrics["velocity_mps"] = error_stats(vel_err[rows])
+    if ref.rph_deg is not None:
+        ref_rph = np.asarray(ref.rph_deg, dtype=float)[i]
+        rows = np.all(np.isfinite(ref_rph), axis=1)
+        if rows.any():
+            a = np.abs(wrap_deg(est["rph_deg"][rows] - ref_rph[rows]))
+            metrics["attitude_deg"] = {name: _abs_stats(a[:, j])
+                                       for j, name in enumerate(("roll", "pitch", "heading"))}
+    metrics["runtime_s"] = float(runtime_s)
+    metrics["imu_samples"] = int(imu_samples)
+    metrics["gnss_epochs"] = int(gnss_epochs)
+    metrics["gnss_rejected"] = int(gnss_rejected)
+    if gnss is not None:
+        metrics["gnss_position_m"] = _gnss_position_metrics(gnss, ref, lever_arm_m)
+    return metrics

@@ -1,0 +1,824 @@
+"""Simulated INS/GNSS logs whose truth is known exactly: the oracle for navpp's tests.
+
+The trajectory is defined first, as smooth analytic controls of time; the ideal IMU is
+derived from it in closed form with the Earth model of :mod:`navpp.geodesy`.  Nothing here
+integrates IMU data with a strapdown, so a strapdown tested against this module is tested
+against an independent truth.
+
+Trajectory (a car-like drive)
+-----------------------------
+Controls, each an analytic function of time with analytic derivatives:
+
+- speed ``s(t) >= 0`` (m/s) along body x (no side slip),
+- heading ``psi(t)`` (rad, clockwise from north),
+- path angle ``theta(t)`` (rad, nose up); body pitch equals the path angle (no angle of attack),
+- roll ``phi(t) = -k * s * psi_dot / G0`` with ``k = LEAN_GAIN`` and ``G0 = 9.80665``: in a
+  right turn (``psi_dot > 0``) the roll is negative (left side down), i.e. the car leans
+  outward, by about 1.7 mrad per m/s^2 of lateral acceleration.
+
+Steps (speed changes, turns of +-90 deg, a U-turn) are quintic smootherstep
+``S(x) = 6x^5 - 15x^4 + 10x^3``; hills are the C2 bump ``B(x) = 64 x^3 (1 - x)^3`` in theta,
+always as a +bump followed by an equal -bump at constant speed, so the road climbs and comes
+back to the same height exactly.  The run starts with a still period (``still_s``, shortened
+to ``duration_s / 2`` for short runs), then a 200-s drive cycle (start, turns, hill, U-turn,
+a dip inside two turns, stop, 10 s standstill) repeats until ``duration_s``.  The net heading
+change of a cycle is zero.
+
+Velocity ENU is ``v = s [cos(theta) sin(psi), cos(theta) cos(psi), sin(theta)]``; position is
+integrated from it (``lat_dot = vN / (RM + h)``, ``lon_dot = vE / ((RN + h) cos lat)``,
+``h_dot = vU``) with scipy's DOP853 (rtol 1e-12, atol 1e-13) in chunks between the controls'
+breakpoints, so every chunk is analytic (C-infinity).
+
+Ideal IMU (instantaneous values at the sample times, not averages), ``C = mat_nb``::
+
+    f_b    = C^T (v_dot + (2 w_ie + w_en) x v - g_n),   g_n = [0, 0, -gravity(lat, h)]
+    w_ib_b = w_nb_b + C^T (w_ie + w_en)
+
+with ``skew(w_nb_b) = C^T C_dot`` written out from the Euler-angle rates
+(:func:`body_rate_from_rph`).
+
+Sensor errors
+-------------
+Per axis: measured = (1 + sf) * true + turn-on bias + Gauss-Markov bias instability + white
+noise.  sf ~ N(0, ppm * 1e-6), bias ~ N(0, bias 1-sigma), Gauss-Markov with stationary sigma
+= instability and correlation time tau (exact discretisation, started from its stationary
+distribution), white noise per-sample sigma = ARW / sqrt(dt) (VRW likewise).  Datasheet
+numbers per grade are in :data:`IMU_GRADES` (the same numbers as the ``[imu]`` presets).
+
+GNSS: antenna at ``lever_arm_m`` (body FLU), position = body position + C * lever arm.
+``gnss_error="white"``: white noise ``gnss_std_h_m`` per horizontal axis and ``gnss_std_u_m``
+vertical.  ``gnss_error="correlated"``: a first-order Gauss-Markov error (tau =
+``gnss_corr_time_s``, sigma = those stds) plus white noise of half those stds; the written
+``std_e/std_n/std_u`` are then the total 1-sigma, ``sqrt(1.25)`` times the stds.
+
+Randomness: one ``numpy.random.SeedSequence(seed)`` spawns independent streams for the IMU
+and the GNSS, so changing the IMU preset does not change the GNSS noise (and vice versa).
+
+References: Groves, *Principles of GNSS, Inertial, and Multisensor Integrated Navigation
+Systems*, 2nd ed., eqs 5.53-5.54 (ENU mechanisation, whose inverse gives the ideal IMU),
+eq 2.56 (Euler-rate kinematics) and section 14.2.6 (Gauss-Markov processes).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from functools import cached_property
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+import numpy as np
+from scipy.integrate import solve_ivp
+from scipy.signal import lfilter
+
+from navpp.errors import ConfigError
+from navpp.geodesy import A, E2, OMEGA_E, gravity, radii
+from navpp.ins.attitude import rph_to_dcm
+from navpp.recording import GnssData, ImuData, Recording, ReferenceData
+
+G0 = 9.80665  #: standard gravity, m/s^2 (mg conversion and the roll lean law)
+LEAN_GAIN = 0.03  #: roll = -LEAN_GAIN * lateral acceleration / G0 (rad); leans outward
+CYCLE_S = 200.0  #: length of one drive cycle, s
+_MAX_STEP_S = 1.0  # keeps the dense output (7th order) accurate between steps
+
+_DEG_PER_H = math.pi / 180.0 / 3600.0  # deg/h -> rad/s
+_DEG_PER_SQRT_H = math.pi / 180.0 / 60.0  # deg/sqrt(h) -> rad/sqrt(s)
+_MPS_PER_SQRT_H = 1.0 / 60.0  # m/s/sqrt(h) -> m/s/sqrt(s)
+_MG = 9.80665e-3  # mg -> m/s^2
+
+
+# --------------------------------------------------------------------------- IMU grades
+
+
+@dataclass(frozen=True)
+class ImuGrade:
+    """Sensor error budget of one IMU grade, in datasheet units (as the ``[imu]`` keys)."""
+
+    gyro_arw_deg_per_sqrt_h: float
+    gyro_bias_deg_per_h: float
+    gyro_bias_instability_deg_per_h: float
+    gyro_bias_corr_time_s: float
+    accel_vrw_mps_per_sqrt_h: float
+    accel_bias_mg: float
+    accel_bias_instability_mg: float
+    accel_bias_corr_time_s: float
+    scale_factor_ppm: float  #: gyro and accel alike, 1-sigma per axis
+
+
+#: The ``[imu]`` presets of INTERFACES.md plus a scale-factor error per grade, and "ideal".
+IMU_GRADES: dict[str, ImuGrade] = {
+    "consumer": ImuGrade(0.5, 200.0, 10.0, 100.0, 0.1, 20.0, 1.0, 100.0, 3000.0),
+    "automotive": ImuGrade(1.0, 10.0, 1.0, 300.0, 0.05, 2.0, 0.1, 300.0, 500.0),
+    "tactical": ImuGrade(0.1, 1.0, 0.1, 600.0, 0.03, 0.3, 0.02, 600.0, 100.0),
+    "navigation": ImuGrade(0.003, 0.03, 0.01, 3600.0, 0.03, 0.025, 0.01, 3600.0, 10.0),
+    "ideal": ImuGrade(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0),
+}
+
+
+# --------------------------------------------------------------------------- the spec
+
+
+@dataclass(frozen=True)
+class SimulationSpec:
+    """Everything that defines a simulated log; the same spec and seed give the same log.
+
+    Times in s, rates in Hz, angles in degrees where the name says ``_deg``, lengths in m.
+    ``errors=False`` makes the IMU exact whatever the preset (GNSS noise is controlled by
+    its stds; set them to 0 for exact GNSS).
+    """
+
+    duration_s: float = 900.0
+    imu_rate_hz: float = 125.0
+    gnss_rate_hz: float = 5.0
+    reference_rate_hz: float = 10.0
+    preset: str = "automotive"
+    seed: int = 0
+    still_s: float = 60.0
+    lat0_deg: float = 45.0
+    lon0_deg: float = 7.0
+    alt0_m: float = 300.0
+    heading0_deg: float = 30.0
+    lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gnss_std_h_m: float = 1.8
+    gnss_std_u_m: float = 2.5
+    gnss_error: str = "white"
+    gnss_corr_time_s: float = 120.0
+    gnss_velocity: bool = False
+    t0_unix: float = 1_700_000_000.0
+    gnss_std_vel_mps: float = 0.05
+    errors: bool = True
+
+    def __post_init__(self) -> None:
+        lever = tuple(float(x) for x in self.lever_arm_m)
+        if len(lever) != 3:
+            raise ConfigError(f"simulate: lever_arm_m needs 3 numbers (body FLU, m), got {self.lever_arm_m!r}")
+        object.__setattr__(self, "lever_arm_m", lever)
+        if not self.duration_s >= 30.0:
+            raise ConfigError(f"simulate: duration must be >= 30 s, got {self.duration_s!r}")
+        if not self.imu_rate_hz > 0.0:
+            raise ConfigError(f"simulate: IMU rate must be > 0 Hz, got {self.imu_rate_hz!r}")
+        if not 1.0 <= self.gnss_rate_hz <= 10.0:
+            raise ConfigError(f"simulate: GNSS rate must be within 1-10 Hz, got {self.gnss_rate_hz!r}")
+        if not self.reference_rate_hz > 0.0:
+            raise ConfigError(f"simulate: reference rate must be > 0 Hz, got {self.reference_rate_hz!r}")
+        if self.preset not in IMU_GRADES:
+            raise ConfigError(
+                f"simulate: unknown IMU preset {self.preset!r}; choose one of {', '.join(IMU_GRADES)}"
+            )
+        if self.gnss_error not in ("white", "correlated"):
+            raise ConfigError(f"simulate: gnss_error must be 'white' or 'correlated', got {self.gnss_error!r}")
+        if not self.still_s >= 0.0:
+            raise ConfigError(f"simulate: still_s must be >= 0 s, got {self.still_s!r}")
+        for name in ("gnss_std_h_m", "gnss_std_u_m", "gnss_std_vel_mps"):
+            if not getattr(self, name) >= 0.0:
+                raise ConfigError(f"simulate: {name} must be >= 0, got {getattr(self, name)!r}")
+        if not self.gnss_corr_time_s > 0.0:
+            raise ConfigError(f"simulate: gnss_corr_time_s must be > 0 s, got {self.gnss_corr_time_s!r}")
+        if not -85.0 <= self.lat0_deg <= 85.0:
+            raise ConfigError(f"simulate: lat0_deg must be within +-85 deg, got {self.lat0_deg!r}")
+
+    @property
+    def still_effective_s(self) -> float:
+        """Still period actually used: ``min(still_s, duration_s / 2)``."""
+        return min(self.still_s, 0.5 * self.duration_s)
+
+
+# --------------------------------------------------------------------------- smooth pieces
+
+
+def smootherstep(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Quintic smootherstep ``S(x) = 6x^5 - 15x^4 + 10x^3`` on clipped x and its derivatives.
+
+    Returns ``S, dS/dx, d2S/dx2``; constant 0 before x = 0 and 1 after x = 1 (C2).
+    """
+    x = np.clip(x, 0.0, 1.0)
+    x2 = x * x
+    s = x2 * x * (10.0 + x * (-15.0 + 6.0 * x))
+    d1 = 30.0 * x2 * (1.0 - x) ** 2
+    d2 = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x)
+    return s, d1, d2
+
+
+def bump(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """C2 bump ``B(x) = 64 x^3 (1 - x)^3`` (peak 1 at x = 1/2, zero outside [0, 1]) and derivatives."""
+    x = np.clip(x, 0.0, 1.0)
+    u = 1.0 - x
+    b = 64.0 * x**3 * u**3
+    d1 = 192.0 * x * x * u * u * (u - x)
+    d2 = 384.0 * x * u * ((u - x) ** 2 - x * u)
+    return b, d1, d2
+
+
+@dataclass(frozen=True)
+class _Channel:
+    """One control as a sequence of non-overlapping smooth events.
+
+    ``kind == "step"``: value = base + sum of ``delta * S((t - start) / T)``;
+    ``kind == "bump"``: value = sum of ``delta * B((t - start) / T)`` (returns to ``base``).
+    """
+
+    kind: str
+    base: float
+    start: np.ndarray
+    length: np.ndarray
+    delta: np.ndarray
+
+    def __post_init__(self) -> None:
+        if np.any(self.start[1:] < self.start[:-1] + self.length[:-1] - 1e-9):
+            raise ValueError(f"{self.kind} channel: events overlap")
+
+    @property
+    def _before(self) -> np.ndarray:
+        # value accumulated before event i (steps only)
+        if self.kind == "bump":
+            return np.zeros(self.start.size + 1)
+        return np.concatenate([[0.0], np.cumsum(self.delta)])
+
+    def evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Value and first two time derivatives at ``t`` (vectorised)."""
+        t = np.asarray(t, dtype=float)
+        if self.start.size == 0:
+            z = np.zeros_like(t)
+            return z + self.base, z, z.copy()
+        i = np.searchsorted(self.start, t, side="right") - 1
+        active = i >= 0
+        j = np.where(active, i, 0)
+        x = np.where(active, (t - self.start[j]) / self.length[j], 0.0)
+        f, d1, d2 = (smootherstep if self.kind == "step" else bump)(x)
+        amp = np.where(active, self.delta[j], 0.0)
+        t_scale = self.length[j]
+        before = np.where(active, self._before[j], 0.0)
+        return (self.base + before + amp * f, amp * d1 / t_scale, amp * d2 / (t_scale * t_scale))
+
+    def breakpoints(self) -> np.ndarray:
+        return np.concatenate([self.start, self.start + self.length])
+
+    def piece(self, t_mid: float) -> tuple[float, float, float, float, bool]:
+        """Scalar description on a breakpoint-free interval containing ``t_mid``.
+
+        Returns ``(offset, amplitude, start, length, is_step)`` so that the value is
+        ``offset + amplitude * shape((t - start) / length)``; amplitude 0 when no event runs.
+        """
+        before = self._before
+        i = int(np.searchsorted(self.start, t_mid, side="right")) - 1
+        if i >= 0 and t_mid < self.start[i] + self.length[i]:
+            return (self.base + before[i], float(self.delta[i]), float(self.start[i]),
+                    float(self.length[i]), self.kind == "step")
+        offset = self.base + (before[i + 1] if i >= 0 else 0.0)
+        return offset, 0.0, 0.0, 1.0, self.kind == "step"
+
+
+def _scalar_shape(x: float, is_step: bool) -> float:
+    x = 0.0 if x < 0.0 else (1.0 if x > 1.0 else x)
+    if is_step:
+        return x * x * x * (10.0 + x * (-15.0 + 6.0 * x))
+    u = 1.0 - x
+    return 64.0 * x * x * x * u * u * u
+
+
+# --------------------------------------------------------------------------- controls
+
+
+# One drive cycle, times relative to the cycle start: (start s, length s, change)
+_CYCLE_SPEED = (  # m/s
+    (0.0, 10.0, 12.0),  # pull away to 12 m/s
+    (28.0, 8.0, 8.0),  # to 20 m/s
+    (100.0, 8.0, -14.0),  # brake to 6 m/s
+    (132.0, 10.0, 9.0),  # to 15 m/s
+    (178.0, 12.0, -15.0),  # stop; standstill 190-200
+)
+_CYCLE_HEADING = (  # rad, positive = right turn
+    (14.0, 10.0, 0.5 * math.pi),  # right turn at 12 m/s
+    (80.0, 14.0, -0.5 * math.pi),  # left turn at 20 m/s
+    (112.0, 16.0, math.pi),  # U-turn at 6 m/s
+    (146.0, 12.0, -0.5 * math.pi),  # left turn at 15 m/s (inside a dip)
+    (162.0, 12.0, -0.5 * math.pi),  # left turn at 15 m/s
+)
+_CYCLE_PITCH = (  # rad, bump amplitudes; +bump then -bump at constant speed
+    (40.0, 20.0, math.radians(4.0)),  # hill at 20 m/s: climbs ~12.8 m and comes back
+    (60.0, 20.0, -math.radians(4.0)),
+    (146.0, 12.0, -math.radians(3.0)),  # dip at 15 m/s during two left turns: ~4.3 m
+    (158.0, 12.0, math.radians(3.0)),
+)
+
+
+@dataclass(frozen=True)
+class DriveControls:
+    """Speed, heading and path-angle controls of the scripted drive, and the roll law.
+
+    Build with :meth:`scripted`; evaluate with :meth:`evaluate`.
+    """
+
+    speed: _Channel
+    heading: _Channel
+    pitch: _Channel
+    lean_gain: float = LEAN_GAIN
+
+    @classmethod
+    def scripted(cls, duration_s: float, still_s: float, heading0_rad: float) -> DriveControls:
+        """Still for ``still_s``, then 200-s drive cycles until past ``duration_s``."""
+        n_cycles = max(1, int(math.ceil((duration_s - still_s) / CYCLE_S)) + 1)
+        offsets = still_s + CYCLE_S * np.arange(n_cycles)
+
+        def channel(kind: str, base: float, table: tuple[tuple[float, float, float], ...]) -> _Channel:
+            ev = np.array(table, dtype=float)
+            start = (offsets[:, None] + ev[None, :, 0]).ravel()
+            length = np.tile(ev[:, 1], n_cycles)
+            delta = np.tile(ev[:, 2], n_cycles)
+            return _Channel(kind, base, start, length, delta)
+
+        return cls(
+            speed=channel("step", 0.0, _CYCLE_SPEED),
+            heading=channel("step", heading0_rad, _CYCLE_HEADING),
+            pitch=channel("bump", 0.0, _CYCLE_PITCH),
+        )
+
+    def evaluate(self, t: np.ndarray) -> dict[str, np.ndarray]:
+        """Controls at ``t`` (s): ``s, s_dot, psi, psi_dot, psi_ddot, theta, theta_dot, phi, phi_dot``."""
+        s, s_dot, _ = self.speed.evaluate(t)
+        psi, psi_dot, psi_ddot = self.heading.evaluate(t)
+        theta, theta_dot, _ = self.pitch.evaluate(t)
+        k = self.lean_gain / G0
+        phi = -k * s * psi_dot
+        phi_dot = -k * (s_dot * psi_dot + s * psi_ddot)
+        return dict(s=s, s_dot=s_dot, psi=psi, psi_dot=psi_dot, psi_ddot=psi_ddot,
+                    theta=theta, theta_dot=theta_dot, phi=phi, phi_dot=phi_dot)
+
+    def breakpoints(self) -> np.ndarray:
+        return np.unique(np.concatenate([c.breakpoints() for c in (self.speed, self.heading, self.pitch)]))
+
+
+# --------------------------------------------------------------------------- kinematics
+
+
+def body_rate_from_rph(rph: np.ndarray, rph_dot: np.ndarray) -> np.ndarray:
+    """Body rate w.r.t. the navigation frame, ``w_nb_b`` (..., 3) rad/s, body FLU.
+
+    From ``C^T C_dot = skew(w_nb_b)`` with ``C = Rz(pi/2 - heading) Ry(-pitch) Rx(roll)``
+    (:func:`navpp.ins.attitude.rph_to_dcm`)::
+
+        w_nb_b = [roll_dot - heading_dot sin(pitch),
+                  -pitch_dot cos(roll) - heading_dot cos(pitch) sin(roll),
+                  pitch_dot sin(roll) - heading_dot cos(pitch) cos(roll)]
+
+    Parameters
+    ----------
+    rph, rph_dot : (..., 3) roll, pitch, heading (rad) and their rates (rad/s).
+    """
+    rph = np.asarray(rph, dtype=float)
+    rph_dot = np.asarray(rph_dot, dtype=float)
+    sr, cr = np.sin(rph[..., 0]), np.cos(rph[..., 0])
+    sp, cp = np.sin(rph[..., 1]), np.cos(rph[..., 1])
+    dr, dp, dh = rph_dot[..., 0], rph_dot[..., 1], rph_dot[..., 2]
+    return np.stack([
+        dr - dh * sp,
+        -dp * cr - dh * cp * sr,
+        dp * sr - dh * cp * cr,
+    ], axis=-1)
+
+
+def earth_rate_enu_batch(lat: np.ndarray) -> np.ndarray:
+    """Earth rotation rate in ENU, (N, 3) rad/s, for latitudes (N,) rad."""
+    lat = np.asarray(lat, dtype=float)
+    return np.stack([np.zeros_like(lat), OMEGA_E * np.cos(lat), OMEGA_E * np.sin(lat)], axis=-1)
+
+
+def transport_rate_enu_batch(lat: np.ndarray, h: np.ndarray, vel_enu: np.ndarray) -> np.ndarray:
+    """Transport rate of ENU w.r.t. the Earth, (N, 3) rad/s, as ``geodesy.transport_rate_enu``."""
+    rm, rn = radii(lat)
+    ve, vn = vel_enu[..., 0], vel_enu[..., 1]
+    return np.stack([-vn / (rm + h), ve / (rn + h), ve * np.tan(lat) / (rn + h)], axis=-1)
+
+
+def _rotate_t(mat: np.ndarray, vec: np.ndarray) -> np.ndarray:
+    """``mat^T @ vec`` for stacks (N, 3, 3), (N, 3)."""
+    return np.einsum("nji,nj->ni", mat, vec)
+
+
+def _rotate(mat: np.ndarray, vec: np.ndarray) -> np.ndarray:
+    return np.einsum("nij,nj->ni", mat, vec)
+
+
+def _offset_geodetic(lat: np.ndarray, lon: np.ndarray, h: np.ndarray,
+                     d_enu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Small ENU offsets (N, 3) m -> geodetic, first order through the radii at (lat, h)."""
+    rm, rn = radii(lat)
+    return (lat + d_enu[:, 1] / (rm + h),
+            lon + d_enu[:, 0] / ((rn + h) * np.cos(lat)),
+            h + d_enu[:, 2])
+
+
+# --------------------------------------------------------------------------- trajectory
+
+
+class Trajectory:
+    """Analytic truth of the body (IMU) origin: controls + integrated geodetic position.
+
+    Valid on ``[0, t_end]`` s.  The position ODE is solved on first use and cached.
+
+    Parameters
+    ----------
+    controls : the drive controls.
+    lat0, lon0 : rad; h0 : m -- position at t = 0.
+    t_end : s, end of the valid interval.
+    """
+
+    def __init__(self, controls: DriveControls, lat0: float, lon0: float, h0: float, t_end: float):
+        self.controls = controls
+        self.lat0 = float(lat0)
+        self.lon0 = float(lon0)
+        self.h0 = float(h0)
+        self.t_end = float(t_end)
+
+    @classmethod
+    def from_spec(cls, spec: SimulationSpec) -> Trajectory:
+        """The scripted drive of ``spec`` (valid to ``duration_s + 1`` s for finite differences)."""
+        controls = DriveControls.scripted(spec.duration_s + 1.0, spec.still_effective_s,
+                                          math.radians(spec.heading0_deg))
+        return cls(controls, math.radians(spec.lat0_deg), math.radians(spec.lon0_deg),
+                   spec.alt0_m, spec.duration_s + 1.0)
+
+    # -- position ------------------------------------------------------------------------
+
+    @cached_property
+    def _chunks(self) -> tuple[np.ndarray, list]:
+        """Position over [0, t_end]: chunk starts and, per chunk, a dense output or a constant."""
+        bp = self.controls.breakpoints()
+        edges = np.unique(np.concatenate([[0.0], bp[(bp > 0.0) & (bp < self.t_end)], [self.t_end]]))
+        y = np.array([self.lat0, self.lon0, self.h0])
+        pieces: list = []
+        for ta, tb in zip(edges[:-1], edges[1:]):
+            tm = 0.5 * (ta + tb)
+            sp = self.controls.speed.piece(tm)
+            if sp[1] == 0.0 and sp[0] == 0.0:  # standing still
+                pieces.append(y.copy())
+                continue
+            sol = solve_ivp(_position_rhs(sp, self.controls.heading.piece(tm), self.controls.pitch.piece(tm)),
+                            (ta, tb), y, method="DOP853", rtol=1e-12, atol=1e-13, dense_output=True,
+                            max_step=_MAX_STEP_S)
+            if not sol.success:  # pragma: no cover - the right-hand side is analytic
+                raise RuntimeError(f"position integration failed on [{ta}, {tb}] s: {sol.message}")
+            pieces.append(sol.sol)
+            y = sol.y[:, -1].copy()
+        return edges[:-1], pieces
+
+    def position(self, t: np.ndarray) -> np.ndarray:
+        """Geodetic position (N, 3): lat (rad), lon (rad), h (m) at times ``t`` (s)."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        if t.size and (t.min() < 0.0 or t.max() > self.t_end):
+            raise ValueError(f"trajectory is defined on [0, {self.t_end}] s, got times in "
+                             f"[{t.min()}, {t.max()}]")
+        starts, pieces = self._chunks
+        order = np.argsort(t, kind="stable")
+        ts = t[order]
+        out = np.empty((t.size, 3))
+        lo = np.searchsorted(ts, starts, side="left")
+        hi = np.append(lo[1:], ts.size)
+        res = np.empty((ts.size, 3))
+        for a, b, piece in zip(lo, hi, pieces):
+            if a == b:
+                continue
+            if isinstance(piece, np.ndarray):
+                res[a:b] = piece
+            else:
+                res[a:b] = piece(ts[a:b]).T
+        out[order] = res
+        return out
+
+    # -- state ---------------------------------------------------------------------------
+
+    def state(self, t: np.ndarray) -> dict[str, np.ndarray]:
+        """Truth at times ``t`` (N,) s.
+
+        Returns
+        -------
+        dict with ``lat, lon`` (N,) rad, ``h`` (N,) m, ``vel_enu`` (N, 3) m/s, ``accel_enu``
+        (N, 3) m/s^2 (time derivative of the ENU velocity components), ``rph`` (N, 3) rad
+        (roll, pitch, heading; heading unwrapped) and ``rph_dot`` (N, 3) rad/s.
+        """
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        pos = self.position(t)
+        c = self.controls.evaluate(t)
+        s, th, ps = c["s"], c["theta"], c["psi"]
+        cth, sth, cps, sps = np.cos(th), np.sin(th), np.cos(ps), np.sin(ps)
+        u = np.stack([cth * sps, cth * cps, sth], axis=-1)
+        du_dth = np.stack([-sth * sps, -sth * cps, cth], axis=-1)
+        du_dps = np.stack([cth * cps, -cth * sps, np.zeros_like(th)], axis=-1)
+        vel = s[:, None] * u
+        acc = (c["s_dot"][:, None] * u
+               + s[:, None] * (c["theta_dot"][:, None] * du_dth + c["psi_dot"][:, None] * du_dps))
+        return dict(
+            lat=pos[:, 0], lon=pos[:, 1], h=pos[:, 2], vel_enu=vel, accel_enu=acc,
+            rph=np.stack([c["phi"], th, ps], axis=-1),
+            rph_dot=np.stack([c["phi_dot"], c["theta_dot"], c["psi_dot"]], axis=-1),
+        )
+
+    def ideal_imu(self, t: np.ndarray, state: dict[str, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Error-free IMU at ``t``: gyro (N, 3) rad/s and specific force (N, 3) m/s^2, body FLU.
+
+        ``state`` may pass ``self.state(t)`` when already computed.
+        """
+        st = self.state(t) if state is None else state
+        lat, h, vel = st["lat"], st["h"], st["vel_enu"]
+        rph = st["rph"]
+        mat_nb = rph_to_dcm(rph[:, 0], rph[:, 1], rph[:, 2])
+        w_ie = earth_rate_enu_batch(lat)
+        w_en = transport_rate_enu_batch(lat, h, vel)
+        f_n = st["accel_enu"] + np.cross(2.0 * w_ie + w_en, vel)
+        f_n[:, 2] += gravity(lat, h)  # - g_n
+        accel = _rotate_t(mat_nb, f_n)
+        gyro = body_rate_from_rph(rph, st["rph_dot"]) + _rotate_t(mat_nb, w_ie + w_en)
+        return gyro, accel
+
+
+def _position_rhs(speed_piece: tuple, heading_piece: tuple, pitch_piece: tuple):
+    """Scalar right-hand side of the position ODE on one breakpoint-free chunk."""
+    s_off, s_amp, s_t0, s_len, _ = speed_piece
+    p_off, p_amp, p_t0, p_len, _ = heading_piece
+    q_off, q_amp, q_t0, q_len, _ = pitch_piece
+    one_minus_e2 = 1.0 - E2
+    sin, cos, sqrt = math.sin, math.cos, math.sqrt
+
+    def rhs(t, y):
+        s = s_off + s_amp * _scalar_shape((t - s_t0) / s_len, True)
+        psi = p_off + p_amp * _scalar_shape((t - p_t0) / p_len, True)
+        th = q_off + q_amp * _scalar_shape((t - q_t0) / q_len, False)
+        ch = cos(th)
+        ve, vn, vu = s * ch * sin(psi), s * ch * cos(psi), s * sin(th)
+        lat, h = y[0], y[2]
+        sl = sin(lat)
+        w2 = 1.0 - E2 * sl * sl
+        w = sqrt(w2)
+        rn = A / w
+        rm = A * one_minus_e2 / (w2 * w)
+        return [vn / (rm + h), ve / ((rn + h) * cos(lat)), vu]
+
+    return rhs
+
+
+# --------------------------------------------------------------------------- random errors
+
+
+def gauss_markov(rng: np.random.Generator, n: int, dt: float, sigma: np.ndarray | float,
+                 tau: float, axes: int = 3) -> np.ndarray:
+    """First-order Gauss-Markov samples (n, axes), stationary from the first sample.
+
+    ``b[k+1] = exp(-dt/tau) b[k] + sqrt(1 - exp(-2 dt/tau)) sigma w[k]``, ``b[0] ~ N(0, sigma^2)``.
+    """
+    sigma = np.broadcast_to(np.asarray(sigma, dtype=float), (axes,))
+    a = math.exp(-dt / tau)
+    x = rng.standard_normal((n, axes))
+    x[1:] *= math.sqrt(-math.expm1(-2.0 * dt / tau))
+    x *= sigma
+    return lfilter([1.0], [1.0, -a], x, axis=0)
+
+
+def draw_imu_errors(rng: np.random.Generator, n: int, dt: float, grade: ImuGrade) -> dict[str, np.ndarray | float]:
+    """Draw one IMU's errors for ``n`` samples at interval ``dt`` (SI units, body FLU).
+
+    Order of draws (fixed, so a seed reproduces): scale factors, turn-on biases, Gauss-Markov
+    processes (gyro, accel), white noise (gyro, accel).
+    """
+    sf = grade.scale_factor_ppm * 1e-6
+    gyro_sf = rng.normal(0.0, sf, 3)
+    accel_sf = rng.normal(0.0, sf, 3)
+    gyro_bias = rng.normal(0.0, grade.gyro_bias_deg_per_h * _DEG_PER_H, 3)
+    accel_bias = rng.normal(0.0, grade.accel_bias_mg * _MG, 3)
+    gyro_gm = gauss_markov(rng, n, dt, grade.gyro_bias_instability_deg_per_h * _DEG_PER_H,
+                           grade.gyro_bias_corr_time_s)
+    accel_gm = gauss_markov(rng, n, dt, grade.accel_bias_instability_mg * _MG,
+                            grade.accel_bias_corr_time_s)
+    gyro_sigma = grade.gyro_arw_deg_per_sqrt_h * _DEG_PER_SQRT_H / math.sqrt(dt)
+    accel_sigma = grade.accel_vrw_mps_per_sqrt_h * _MPS_PER_SQRT_H / math.sqrt(dt)
+    gyro_white = rng.standard_normal((n, 3)) * gyro_sigma
+    accel_white = rng.standard_normal((n, 3)) * accel_sigma
+    return dict(
+        gyro_scale_factor=gyro_sf, accel_scale_factor=accel_sf,
+        gyro_bias=gyro_bias, accel_bias=accel_bias,
+        gyro_gauss_markov=gyro_gm, accel_gauss_markov=accel_gm,
+        gyro_white_sigma=gyro_sigma, accel_white_sigma=accel_sigma,
+        gyro_bias_instability=grade.gyro_bias_instability_deg_per_h * _DEG_PER_H,
+        accel_bias_instability=grade.accel_bias_instability_mg * _MG,
+        gyro_bias_corr_time_s=grade.gyro_bias_corr_time_s,
+        accel_bias_corr_time_s=grade.accel_bias_corr_time_s,
+        _gyro_white=gyro_white, _accel_white=accel_white,
+    )
+
+
+# --------------------------------------------------------------------------- simulation
+
+
+@dataclass(frozen=True, eq=False)
+class Simulation:
+    """A simulated log and its truth.
+
+    Times are float seconds relative to the first IMU sample; ``t0_ns`` is that sample's unix
+    time in integer ns.  ``sensor_errors`` holds the drawn errors (SI units, body FLU /
+    ENU): ``gyro_bias``, ``accel_bias`` (3,) turn-on biases; ``gyro_scale_factor``,
+    ``accel_scale_factor`` (3,); ``gyro_gauss_markov``, ``accel_gauss_markov`` (N, 3);
+    ``gyro_white_sigma``, ``accel_white_sigma`` per-sample sigmas; ``gnss_error_enu`` (M, 3) m;
+    ``gnss_true_lat_deg``, ``gnss_true_lon_deg``, ``gnss_true_alt`` (antenna truth);
+    ``gnss_true_vel_enu`` (M, 3) when GNSS velocity is simulated.
+    """
+
+    imu: ImuData
+    gnss: GnssData
+    reference: ReferenceData
+    truth_imu: ImuData
+    t0_ns: int
+    spec: SimulationSpec
+    sensor_errors: dict = field(repr=False)
+    trajectory: Trajectory | None = field(default=None, repr=False, compare=False)
+
+    def recording(self) -> Recording:
+        """The simulated log as a :class:`~navpp.recording.Recording` (unix time base)."""
+        sp = self.spec
+        return Recording(imu=self.imu, gnss=self.gnss, t0_ns=self.t0_ns, time_base="unix",
+                         reference=self.reference,
+                         source=f"navpp.simulate(duration={sp.duration_s:g} s, preset={sp.preset}, seed={sp.seed})")
+
+
+def _sample_times(duration: float, rate: float) -> np.ndarray:
+    n = int(math.floor(duration * rate + 1e-9)) + 1
+    return np.arange(n) / rate
+
+
+def simulate(spec: SimulationSpec) -> Simulation:
+    """Simulate a drive: IMU (with errors of ``spec.preset``), GNSS and reference.
+
+    Parameters
+    ----------
+    spec : what to simulate; the same spec gives bit-identical output.
+
+    Returns
+    -------
+    Simulation
+    """
+    traj = Trajectory.from_spec(spec)
+    imu_rng, gnss_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(spec.seed).spawn(2))
+
+    # IMU ---------------------------------------------------------------------------------
+    dt = 1.0 / spec.imu_rate_hz
+    t_imu = _sample_times(spec.duration_s, spec.imu_rate_hz)
+    gyro_true, accel_true = traj.ideal_imu(t_imu)
+    grade = IMU_GRADES[spec.preset] if spec.errors else IMU_GRADES["ideal"]
+    err = draw_imu_errors(imu_rng, t_imu.size, dt, grade)
+    gyro_white = err.pop("_gyro_white")
+    accel_white = err.pop("_accel_white")
+    if spec.preset == "ideal" or not spec.errors:
+        gyro, accel = gyro_true.copy(), accel_true.copy()
+    else:
+        # measured = (1 + sf) * true + turn-on bias + Gauss-Markov + white, per axis
+        gyro = ((1.0 + err["gyro_scale_factor"]) * gyro_true + err["gyro_bias"]
+                + err["gyro_gauss_markov"] + gyro_white)
+        accel = ((1.0 + err["accel_scale_factor"]) * accel_true + err["accel_bias"]
+                 + err["accel_gauss_markov"] + accel_white)
+    del gyro_white, accel_white
+
+    # GNSS --------------------------------------------------------------------------------
+    t_gnss = _sample_times(spec.duration_s, spec.gnss_rate_hz)
+    st = traj.state(t_gnss)
+    mat_nb = rph_to_dcm(st["rph"][:, 0], st["rph"][:, 1], st["rph"][:, 2])
+    lever = np.asarray(spec.lever_arm_m, dtype=float)
+    lat_a, lon_a, h_a = _offset_geodetic(st["lat"], st["lon"], st["h"], mat_nb @ lever)
+    std = np.array([spec.gnss_std_h_m, spec.gnss_std_h_m, spec.gnss_std_u_m])
+    m = t_gnss.size
+    if spec.gnss_error == "white":
+        e_gnss = gnss_rng.standard_normal((m, 3)) * std
+        std_total = std
+    else:
+        gm = gauss_markov(gnss_rng, m, 1.0 / spec.gnss_rate_hz, std, spec.gnss_corr_time_s)
+        e_gnss = gm + gnss_rng.standard_normal((m, 3)) * (0.5 * std)
+        std_total = std * math.sqrt(1.25)
+    lat_m, lon_m, h_m = _offset_geodetic(lat_a, lon_a, h_a, e_gnss)
+    errors = dict(err, gnss_error_enu=e_gnss, gnss_true_lat_deg=np.degrees(lat_a),
+                  gnss_true_lon_deg=np.degrees(lon_a), gnss_true_alt=h_a)
+    vel_m = std_vel = None
+    if spec.gnss_velocity:
+        w_en = transport_rate_enu_batch(st["lat"], st["h"], st["vel_enu"])
+        w_eb_b = body_rate_from_rph(st["rph"], st["rph_dot"]) + _rotate_t(mat_nb, w_en)
+        vel_a = st["vel_enu"] + _rotate(mat_nb, np.cross(w_eb_b, lever))
+        vel_m = vel_a + gnss_rng.standard_normal((m, 3)) * spec.gnss_std_vel_mps
+        std_vel = np.full((m, 3), spec.gnss_std_vel_mps)
+        errors["gnss_true_vel_enu"] = vel_a
+    gnss = GnssData(t=t_gnss, lat_deg=np.degrees(lat_m), lon_deg=np.degrees(lon_m), alt=h_m,
+                    std_enu=np.tile(std_total, (m, 1)), vel_enu=vel_m, std_vel_enu=std_vel)
+
+    # reference ---------------------------------------------------------------------------
+    t_ref = _sample_times(spec.duration_s, spec.reference_rate_hz)
+    sr = traj.state(t_ref)
+    rph_deg = np.degrees(sr["rph"])
+    rph_deg[:, 2] = np.mod(rph_deg[:, 2], 360.0)
+    rph_deg[:, 2] = np.where(rph_deg[:, 2] >= 360.0, 0.0, rph_deg[:, 2])
+    reference = ReferenceData(t=t_ref, lat_deg=np.degrees(sr["lat"]), lon_deg=np.degrees(sr["lon"]),
+                              alt=sr["h"], vel_enu=sr["vel_enu"], rph_deg=rph_deg,
+                              source="navpp.simulate truth (body origin)")
+
+    return Simulation(
+        imu=ImuData(t=t_imu, gyro=gyro, accel=accel),
+        gnss=gnss,
+        reference=reference,
+        truth_imu=ImuData(t=t_imu.copy(), gyro=gyro_true, accel=accel_true),
+        t0_ns=int(round(spec.t0_unix * 1e6)) * 1000,  # the microsecond the CSV times are written to
+        spec=spec,
+        sensor_errors=errors,
+        trajectory=traj,
+    )
+
+
+# --------------------------------------------------------------------------- CSV output
+
+
+def _write_atomic(path: Path, parts: Iterable[str]) -> None:
+    """Write the text ``parts`` to a temporary name beside ``path``, then rename it into place."""
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
+            for part in parts:
+                fh.write(part)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _table(t0_unix: float, t: np.ndarray, header: list[str], columns: list[tuple[np.ndarray, str]],
+           rows_per_block: int = 50_000) -> Iterator[str]:
+    """CSV text in blocks: header, then rows whose first column is the absolute time.
+
+    The time is exact to the microsecond (integer seconds and microseconds, 6 decimals); each
+    block is formatted by one ``%`` operation on a repeated row format (no per-row Python).
+    """
+    yield ",".join(header) + "\n"
+    us = int(round(t0_unix * 1e6)) + np.round(np.asarray(t) * 1e6).astype(np.int64)
+    row = "%d.%06d," + ",".join(f for _, f in columns) + "\n"
+    for a in range(0, us.size, rows_per_block):
+        b = min(a + rows_per_block, us.size)
+        data = np.empty((b - a, 2 + len(columns)), dtype=object)
+        data[:, 0] = (us[a:b] // 1_000_000).tolist()
+        data[:, 1] = (us[a:b] % 1_000_000).tolist()
+        for j, (col, _) in enumerate(columns):
+            data[:, 2 + j] = (np.asarray(col[a:b], dtype=float) + 0.0).tolist()  # + 0.0: no "-0.0"
+        yield (row * (b - a)) % tuple(data.ravel().tolist())
+
+
+def _toml(sim: Simulation) -> str:
+    sp = sim.spec
+    lines = [
+        "# navpp.toml -- generated by navpp.simulate (navpp simulate): a simulated car drive.",
+        f"# duration {sp.duration_s:g} s (still {sp.still_effective_s:g} s first), start "
+        f"{sp.lat0_deg:g} deg N {sp.lon0_deg:g} deg E {sp.alt0_m:g} m, heading {sp.heading0_deg:g} deg.",
+        f"# IMU {sp.imu_rate_hz:g} Hz, preset {sp.preset}, errors {'on' if sp.errors else 'off'}, "
+        f"seed {sp.seed}; GNSS {sp.gnss_rate_hz:g} Hz, {sp.gnss_error} noise "
+        f"({sp.gnss_std_h_m:g} m horizontal, {sp.gnss_std_u_m:g} m vertical)"
+        + (f", velocity {sp.gnss_std_vel_mps:g} m/s" if sp.gnss_velocity else "") + ".",
+        f"# imu.csv, gnss.csv, reference.csv: t in unix seconds (first IMU sample {sp.t0_unix:.6f});",
+        "# reference.csv is the exact truth of the body (IMU) origin.",
+        "",
+    ]
+    if sp.preset != "ideal":
+        lines += ["[imu]", f'preset = "{sp.preset}"', ""]
+    else:
+        lines += ["# [imu] preset omitted: the IMU is error-free (preset 'ideal').", ""]
+    lever = ", ".join(repr(float(x)) for x in sp.lever_arm_m)
+    lines += ["[gnss]", f"lever_arm_m = [{lever}]", ""]
+    return "\n".join(lines)
+
+
+def write_csv_log(sim: Simulation, out_dir: str | os.PathLike) -> None:
+    """Write ``imu.csv``, ``gnss.csv``, ``reference.csv`` and ``navpp.toml`` into ``out_dir``.
+
+    Times are absolute (``spec.t0_unix + t``, 6 decimals, exact to the microsecond); IMU
+    values are written with 17 significant digits (round-trip exact).  Each file is written
+    to a temporary name and renamed when complete.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = sim.spec.t0_unix
+    imu = sim.imu
+    g17 = "%.17g"
+    _write_atomic(out / "imu.csv", _table(
+        t0, imu.t, ["t", "gx", "gy", "gz", "ax", "ay", "az"],
+        [(imu.gyro[:, i], g17) for i in range(3)] + [(imu.accel[:, i], g17) for i in range(3)]))
+
+    g = sim.gnss
+    header = ["t", "lat", "lon", "alt", "std_e", "std_n", "std_u"]
+    cols = [(g.lat_deg, "%.12f"), (g.lon_deg, "%.12f"), (g.alt, "%.9f")]
+    cols += [(g.std_enu[:, i], "%.6g") for i in range(3)]
+    if g.vel_enu is not None:
+        header += ["ve", "vn", "vu", "std_ve", "std_vn", "std_vu"]
+        cols += [(g.vel_enu[:, i], "%.9f") for i in range(3)]
+        cols += [(g.std_vel_enu[:, i], "%.6g") for i in range(3)]
+    _write_atomic(out / "gnss.csv", _table(t0, g.t, header, cols))
+
+    r = sim.reference
+    cols = [(r.lat_deg, "%.12f"), (r.lon_deg, "%.12f"), (r.alt, "%.9f")]
+    cols += [(r.vel_enu[:, i], "%.9f") for i in range(3)]
+    heading = np.round(r.rph_deg[:, 2], 9)
+    heading = np.where(heading >= 360.0, 0.0, heading)  # [0, 360) after rounding too
+    cols += [(r.rph_deg[:, 0], "%.9f"), (r.rph_deg[:, 1], "%.9f"), (heading, "%.9f")]
+    _write_atomic(out / "reference.csv", _table(
+        t0, r.t, ["t", "lat", "lon", "alt", "ve", "vn", "vu", "roll", "pitch", "heading"], cols))
+
+    _write_atomic(out / "navpp.toml", [_toml(sim)])
