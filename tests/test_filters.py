@@ -1,0 +1,103 @@
+"""Filter core: every registered filter against the closed-form Kalman filter on a linear
+model; gating; options validation."""
+
+import numpy as np
+import pytest
+
+from navpp.errors import ConfigError
+from navpp.filters import FILTERS, GaussianState, get_filter
+from navpp.filters.linear import LinearMeasurement, LinearModel
+
+
+def _kalman_reference(x, P, Phi, Q, z, H, R):
+    """Textbook Kalman filter, written independently with explicit inverses (the oracle)."""
+    x = Phi @ x
+    P = Phi @ P @ Phi.T + Q
+    S = H @ P @ H.T + R
+    K = P @ H.T @ np.linalg.inv(S)
+    x = x + K @ (z - H @ x)
+    P = (np.eye(len(x)) - K @ H) @ P
+    return x, P
+
+
+def _problem(seed=1, n=4, m=2):
+    rng = np.random.default_rng(seed)
+    dt = 0.5
+    Phi = np.eye(n) + np.diag(np.full(n - 1, dt), 1)
+    A = rng.normal(size=(n, n))
+    Q = 0.01 * A @ A.T + 1e-3 * np.eye(n)
+    H = rng.normal(size=(m, n))
+    R = np.diag(rng.uniform(0.5, 2.0, m))
+    x0 = rng.normal(size=n)
+    B = rng.normal(size=(n, n))
+    P0 = B @ B.T + np.eye(n)
+    zs = [rng.normal(size=m) * 3 for _ in range(8)]
+    return Phi, Q, H, R, x0, P0, zs
+
+
+@pytest.mark.parametrize("name", sorted(FILTERS))
+def test_every_filter_equals_kalman_on_linear_model(name):
+    Phi, Q, H, R, x0, P0, zs = _problem()
+    model = LinearModel(Phi, Q)
+    filt = FILTERS[name]()
+    state = GaussianState(0.0, x0, P0)
+    x_ref, P_ref = x0, P0
+    for k, z in enumerate(zs, start=1):
+        state = filt.predict(state, model, (k - 1.0, float(k)))
+        state, inn = filt.update(state, model, LinearMeasurement(float(k), z, H, R))
+        assert inn.accepted
+        x_ref, P_ref = _kalman_reference(x_ref, P_ref, Phi, Q, z, H, R)
+        np.testing.assert_allclose(state.x, x_ref, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(state.P, P_ref, rtol=1e-8, atol=1e-10)
+        np.testing.assert_array_equal(state.P, state.P.T)
+
+
+def test_innovation_record_and_nis():
+    Phi, Q, H, R, x0, P0, zs = _problem()
+    filt = get_filter("ekf")()
+    model = LinearModel(Phi, Q)
+    state = filt.predict(GaussianState(0.0, x0, P0), model, (0.0, 1.0))
+    _, inn = filt.update(state, model, LinearMeasurement(1.0, zs[0], H, R))
+    nu = zs[0] - H @ state.x
+    S = H @ state.P @ H.T + R
+    np.testing.assert_allclose(inn.nu, nu)
+    np.testing.assert_allclose(inn.S, S)
+    assert inn.nis == pytest.approx(float(nu @ np.linalg.solve(S, nu)), rel=1e-10)
+
+
+def test_gate_rejects_outlier_then_forces_acceptance():
+    n = 2
+    model = LinearModel(np.eye(n), 1e-4 * np.eye(n))
+    H = np.eye(n)
+    R = np.eye(n)
+    filt = get_filter("ekf")(gate_probability=0.999, max_consecutive_rejects=2)
+    state = GaussianState(0.0, np.zeros(n), np.eye(n))
+    outlier = LinearMeasurement(1.0, np.array([100.0, 0.0]), H, R)
+    results = []
+    for k in range(3):
+        state = filt.predict(state, model, (float(k), k + 1.0))
+        before = state.x.copy()
+        state, inn = filt.update(state, model, outlier)
+        results.append(inn.accepted)
+        if not inn.accepted:
+            np.testing.assert_array_equal(state.x, before)   # a rejected fix changes nothing
+    # chi2(2) 99.9 % = 13.8: the 100 m outlier is rejected twice, then forced in
+    assert results == [False, False, True]
+    assert filt.rejected == 2
+
+
+def test_gate_threshold_is_chi_square_quantile():
+    filt = get_filter("ekf")(gate_probability=0.99)
+    assert filt.gate_threshold(1) == pytest.approx(6.634896601, rel=1e-8)
+    assert filt.gate_threshold(3) == pytest.approx(11.34486673, rel=1e-8)
+    assert get_filter("ekf")(gate_probability=0.0).gate_threshold(3) == np.inf
+
+
+def test_unknown_filter_lists_choices():
+    with pytest.raises(ConfigError, match="ekf"):
+        get_filter("ekff")
+
+
+def test_filter_without_options_rejects_keys():
+    with pytest.raises(ConfigError, match=r"\[filter.ekf\]"):
+        get_filter("ekf").options_from_mapping({"alpha": 1.0}, "cfg.toml")
