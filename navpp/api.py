@@ -59,6 +59,11 @@ def read_log(log: str | Path, config: Config, *, reference: str | Path | None = 
                                    gyro_units=config.imu.gyro_units, accel_units=config.imu.accel_units,
                                    time_offset_s=config.gnss.time_offset_s)
     if path.is_dir():
+        present = [name for name in (csv_io.IMU_FILE, csv_io.GNSS_FILE) if (path / name).is_file()]
+        if len(present) == 1:  # half a CSV log: name the file that is missing
+            missing = csv_io.GNSS_FILE if present[0] == csv_io.IMU_FILE else csv_io.IMU_FILE
+            raise InputError(f"{path / missing}: file not found (a CSV log needs {csv_io.IMU_FILE} and "
+                             f"{csv_io.GNSS_FILE})")
         raise InputError(f"{path}: not a navpp log directory (expected imu.csv and gnss.csv inside)")
     raise InputError(f"{path}: unsupported log format {path.suffix or '(no suffix)'!r}; this version reads "
                      "CSV log directories (imu.csv + gnss.csv)")

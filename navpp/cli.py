@@ -21,8 +21,10 @@ app = typer.Typer(
 
 def _fail(message: str) -> None:
     from rich.console import Console
+    from rich.markup import escape
 
-    Console(stderr=True, highlight=False, soft_wrap=True).print(f"[bold red]navpp: error:[/] {message}")
+    # escape: messages name config sections such as "[init]", which rich would eat as markup
+    Console(stderr=True, highlight=False, soft_wrap=True).print(f"[bold red]navpp: error:[/] {escape(message)}")
     raise typer.Exit(1)
 
 
@@ -86,14 +88,15 @@ def process(
 
 def _print_summary(res) -> None:
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
     err = Console(stderr=True, highlight=False)
     for line in res.notes:
-        err.print(f"[dim]·[/] {line}")
+        err.print(f"[dim]·[/] {escape(line)}")
     con = Console(highlight=False)
     run = res.run
-    con.print(f"{res.recording.source}: {len(res.recording.imu)} IMU samples at {res.recording.imu.rate_hz:.1f} Hz, "
+    con.print(f"{escape(res.recording.source)}: {len(res.recording.imu)} IMU samples at {res.recording.imu.rate_hz:.1f} Hz, "
               f"{run.gnss_epochs} GNSS epochs ({run.gnss_rejected} rejected by the gate), "
               f"filter [bold]{res.filter_name}[/] ran in {run.runtime_s:.2f} s")
     if res.metrics is not None:
@@ -109,7 +112,7 @@ def _print_summary(res) -> None:
         for name, s in rows:
             tab.add_row(name, *(f"{s[k]:.3f}" if k in s else "" for k in ("mae", "rmse", "max", "p95")))
         con.print(tab)
-    con.print("wrote " + ", ".join(str(p) for p in res.files))
+    con.print(escape("wrote " + ", ".join(str(p) for p in res.files)))
 
 
 @app.command()

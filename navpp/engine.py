@@ -101,7 +101,10 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
         m = mounting_matrix(config.imu.mounting_rpy_deg)
         gyro, accel = gyro @ m.T, accel @ m.T
     model = InsModel(imu.t, gyro, accel, noise_model(config), cov_step_s=cov_step_s)
-    al = align(model.t, model.gyro, model.accel, gnss, alignment_settings(config))
+    try:
+        al = align(model.t, model.gyro, model.accel, gnss, alignment_settings(config))
+    except InputError as exc:  # alignment knows the data, not where it came from
+        raise InputError(f"{recording.source}: {exc}") from None
     model.path[al.index] = al.x[:model.path.shape[1]]
 
     lever = np.asarray(config.gnss.lever_arm_m, dtype=float)

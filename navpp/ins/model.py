@@ -34,7 +34,7 @@ from numba import njit
 
 from .. import geodesy
 from .attitude import quat_conj, quat_mul, quat_to_dcm, quat_to_rotvec, rotvec_to_quat
-from .strapdown import PATH_SIZE, _interp_row, _nav_rates, radii, step
+from .strapdown import _NO_SEG, _NO_SEG3, _NO_T, PATH_SIZE, _nav_rates, radii
 from .strapdown import integrate as _integrate_nominal
 
 N_ERR = 15
@@ -125,13 +125,21 @@ def error_dynamics(x, fn, inv_tau_g, inv_tau_a):
 
 
 @njit(cache=True)
-def _cov_step(Phi_tot, Qd_tot, x, fn, T, psd, inv_tau_g, inv_tau_a):
-    F = error_dynamics(x, fn, inv_tau_g, inv_tau_a)
-    FT = F * T
-    Phi = np.eye(15) + FT + 0.5 * (FT @ FT)
-    GQG = np.diag(psd)
-    Qd = 0.5 * (Phi @ GQG @ Phi.T + GQG) * T
-    return Phi @ Phi_tot, Phi @ Qd_tot @ Phi.T + Qd
+def _transition_from_segments(seg_x, seg_fn, seg_T, n_seg, psd, inv_tau_g, inv_tau_a):
+    """Accumulate Phi and Qd over the strapdown's segments (module docstring)."""
+    Phi = np.eye(15)
+    Qd = np.zeros((15, 15))
+    for j in range(n_seg):
+        T = seg_T[j]
+        FT = error_dynamics(seg_x[j], seg_fn[j], inv_tau_g, inv_tau_a) * T
+        Phi_j = np.eye(15) + FT + 0.5 * (FT @ FT)
+        # Qd_j = (Phi_j GQG Phi_j^T + GQG) T / 2 with GQG = diag(psd)
+        Qd_j = Phi_j * (psd * (0.5 * T)) @ Phi_j.T
+        for k in range(15):
+            Qd_j[k, k] += 0.5 * T * psd[k]
+        Phi = Phi_j @ Phi
+        Qd = Phi_j @ Qd @ Phi_j.T + Qd_j
+    return Phi, Qd
 
 
 @njit(cache=True)
@@ -139,46 +147,15 @@ def integrate_with_jacobian(x, t, gyro, accel, t_start, t_end, out, record, psd,
                             inv_tau_g, inv_tau_a, cov_step_s):
     """Propagate nominal ``x`` (in place) and return the interval's (Phi, Qd).
 
-    Same node sequence as :func:`navpp.ins.strapdown.integrate`; the error-state transition is
-    accumulated over covariance steps no longer than ``cov_step_s``, with F evaluated at the
-    step's end state and its mean ENU specific force.
+    The error-state transition is accumulated over the strapdown's segments of about
+    ``cov_step_s``, with F evaluated at each segment's end state and mean ENU specific force.
     """
-    n = t.shape[0]
-    i = np.searchsorted(t, t_start, side="right")
-    bg = x[10:13].copy()
-    ba = x[13:16].copy()
-    wc = _interp_row(t, gyro, i, t_start) - bg
-    fc = _interp_row(t, accel, i, t_start) - ba
-    tc = t_start
-    dvn = np.zeros(3)
-    dvn_acc = np.zeros(3)
-    t_acc = 0.0
-    Phi = np.eye(15)
-    Qd = np.zeros((15, 15))
-    while tc < t_end:
-        if i < n and t[i] < t_end:
-            tn = t[i]
-            wn = gyro[i] - bg
-            fnb = accel[i] - ba
-            rec = i
-        else:
-            tn = t_end
-            wn = _interp_row(t, gyro, i, t_end) - bg
-            fnb = _interp_row(t, accel, i, t_end) - ba
-            rec = i if (i < n and t[i] == t_end) else -1
-        dt = tn - tc
-        step(x, wc, wn, fc, fnb, dt, dvn)
-        dvn_acc += dvn
-        t_acc += dt
-        if t_acc >= cov_step_s or tn >= t_end:
-            Phi, Qd = _cov_step(Phi, Qd, x, dvn_acc / t_acc, t_acc, psd, inv_tau_g, inv_tau_a)
-            dvn_acc[:] = 0.0
-            t_acc = 0.0
-        if record and rec >= 0:
-            out[rec, :] = x[:out.shape[1]]
-        tc, wc, fc = tn, wn, fnb
-        i += 1
-    return Phi, Qd
+    m = int((t_end - t_start) / cov_step_s) + 2
+    seg_x = np.empty((m, 16))
+    seg_fn = np.empty((m, 3))
+    seg_T = np.empty(m)
+    n_seg = _integrate_nominal(x, t, gyro, accel, t_start, t_end, out, record, cov_step_s, seg_x, seg_fn, seg_T)
+    return _transition_from_segments(seg_x, seg_fn, seg_T, n_seg, psd, inv_tau_g, inv_tau_a)
 
 
 @njit(cache=True)
@@ -216,12 +193,12 @@ def minus(x1, x0):
 @njit(cache=True)
 def _propagate_points(x, dX, t, gyro, accel, t_start, t_end, out, record):
     xn = x.copy()
-    _integrate_nominal(xn, t, gyro, accel, t_start, t_end, out, record)   # the recorded nominal path
+    _integrate_nominal(xn, t, gyro, accel, t_start, t_end, out, record, 0.0, _NO_SEG, _NO_SEG3, _NO_T)
     dX_new = np.empty_like(dX)
     unused = np.empty((1, PATH_SIZE))
     for k in range(dX.shape[0]):
         xk = plus(x, dX[k])
-        _integrate_nominal(xk, t, gyro, accel, t_start, t_end, unused, False)
+        _integrate_nominal(xk, t, gyro, accel, t_start, t_end, unused, False, 0.0, _NO_SEG, _NO_SEG3, _NO_T)
         dX_new[k] = minus(xk, xn)
     return xn, dX_new
 

@@ -165,6 +165,13 @@ def read_csv_log(
     _gap_warning(gnss.path.name, t_gnss, gnss.lines, warnings)
     n_before = int(np.count_nonzero(t_gnss < t_first))
     n_after = int(np.count_nonzero(t_gnss > t_last))
+    if n_before + n_after == gnss.n:
+        raise InputError(
+            f"{gnss.path}: column 't': all {gnss.n} fixes (t={float(t_gnss[0])!r}..{float(t_gnss[-1])!r}"
+            + (f", after adding time_offset_s={time_offset_s!r}" if time_offset_s else "")
+            + f") lie outside the IMU time span t={t_first!r}..{t_last!r}; check the time bases of "
+            f"{IMU_FILE} and {GNSS_FILE}"
+        )
     if n_before or n_after:
         warnings.append(
             f"{gnss.path.name}: {n_before + n_after} of {gnss.n} fixes lie outside the IMU time span "

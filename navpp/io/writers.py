@@ -46,7 +46,7 @@ TRAJECTORY_COLUMNS: tuple[str, ...] = (
 #: Decimals written per column: t 1 us, lat/lon 1e-9 deg (~0.1 mm), alt/velocities/angles/std 1e-4.
 TRAJECTORY_DECIMALS: tuple[int, ...] = (6, 9, 9, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4)
 
-_CHUNK_ROWS = 32_768  # rows formatted per pass: bounds memory to ~3 x 5 MB whatever the length
+_CHUNK_ROWS = 16_384  # rows formatted per pass: bounds memory to a few MB whatever the length
 _FAST_LIMIT = 2.0 ** 52  # |x * 10**d| below this: every half-integer is a double, int64 is exact
 _SPLIT = 134217729.0  # 2**27 + 1, Veltkamp splitting constant
 

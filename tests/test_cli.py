@@ -1,0 +1,369 @@
+"""The ``navpp`` command line: what users type, what they get (INTERFACES.md).
+
+Most tests drive the Typer app in-process with ``CliRunner`` (this Typer vendors Click >= 8.2:
+``result.stdout`` and ``result.stderr`` are separate, ``result.output`` mixes both); one test
+runs the installed console script.  The simulated session log (``conftest.sim_log_dir``) has
+a known truth, so accuracy checks compare against it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from navpp.cli import app
+
+TRAJECTORY_HEADER = "t,lat,lon,alt,ve,vn,vu,roll,pitch,heading,std_e,std_n,std_u"
+METRICS_KEYS = {"filter", "log", "reference", "epochs", "position_m", "velocity_mps", "attitude_deg",
+                "runtime_s", "imu_samples", "gnss_epochs", "gnss_rejected"}
+
+runner = CliRunner()
+
+
+# --------------------------------------------------------------------------------- helpers
+
+
+def invoke(*args: str | Path):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def flat(text: str) -> str:
+    """Whitespace collapsed: rich wraps long lines at the console width."""
+    return " ".join(text.split())
+
+
+def read_lines(path: Path) -> list[str]:
+    return path.read_text().splitlines()
+
+
+def write_lines(path: Path, lines: list[str]) -> None:
+    path.write_text("\n".join(lines) + "\n")
+
+
+def set_cell(path: Path, line_no: int, column: str, value: str) -> None:
+    """Replace one cell; ``line_no`` counts file lines from 1 (the header is line 1)."""
+    lines = read_lines(path)
+    header = lines[0].split(",")
+    fields = lines[line_no - 1].split(",")
+    fields[header.index(column)] = value
+    lines[line_no - 1] = ",".join(fields)
+    write_lines(path, lines)
+
+
+def column(path: Path, name: str) -> np.ndarray:
+    lines = read_lines(path)
+    j = lines[0].split(",").index(name)
+    return np.array([float(line.split(",")[j]) for line in lines[1:]])
+
+
+def assert_one_line_error(res, out_dir: Path) -> str:
+    """Exit 1 via a clean failure: one non-empty stderr line, nothing on stdout, no files."""
+    assert res.exit_code == 1, (res.exit_code, res.output, res.exception)
+    # CliRunner turns an uncaught exception into exit code 1 too: make sure it was a clean exit
+    assert isinstance(res.exception, SystemExit), repr(res.exception)
+    assert "Traceback" not in res.output
+    assert res.stdout.strip() == ""
+    lines = [line for line in res.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, res.stderr
+    assert lines[0].startswith("navpp: error: ")
+    leftovers = sorted(p.name for p in out_dir.rglob("*")) if out_dir.exists() else []
+    assert leftovers == [], leftovers
+    return lines[0]
+
+
+# --------------------------------------------------------------------------------- process
+
+
+@pytest.fixture(scope="module")
+def processed(sim_log_dir: Path, tmp_path_factory: pytest.TempPathFactory):
+    """``navpp process LOG --out DIR`` on the session log (reference.csv picked up from LOG)."""
+    out = tmp_path_factory.mktemp("process") / "run"
+    res = invoke("process", sim_log_dir, "--out", out)
+    return res, out
+
+
+def test_process_exit_and_summary(processed) -> None:
+    res, out = processed
+    assert res.exit_code == 0, (res.output, res.exception)
+    assert res.exception is None
+    text = flat(res.stdout)
+    assert "15001 IMU samples at 125.0 Hz" in text
+    assert "filter ekf" in text
+    assert "horizontal" in text and "raw GNSS horiz." in text
+    assert "wrote" in text and all(n in text for n in ("trajectory.csv", "metrics.json", "metrics.md"))
+
+
+def test_process_trajectory_one_row_per_imu_sample(processed, sim_log_dir: Path) -> None:
+    _, out = processed
+    traj = out / "trajectory.csv"
+    lines = read_lines(traj)
+    assert lines[0] == TRAJECTORY_HEADER
+    t_traj = column(traj, "t")
+    t_imu = column(sim_log_dir / "imu.csv", "t")
+    # rows start at the alignment start, which is an IMU stamp, then follow every IMU sample
+    expected = t_imu[t_imu >= t_traj[0] - 1e-7]
+    assert len(t_traj) == len(expected)
+    np.testing.assert_allclose(t_traj, expected, rtol=0.0, atol=1e-6)
+    assert all(len(line.split(",")) == 13 for line in lines[1:])
+
+
+def test_process_metrics_files(processed, sim_log_dir: Path) -> None:
+    _, out = processed
+    assert (out / "metrics.md").is_file()
+    assert sorted(p.name for p in out.iterdir()) == ["metrics.json", "metrics.md", "trajectory.csv"]
+    m = json.loads((out / "metrics.json").read_text())
+    assert METRICS_KEYS <= set(m)
+    assert m["filter"] == "ekf"
+    assert m["reference"] == str(sim_log_dir / "reference.csv")   # auto-pickup from the log dir
+    assert m["epochs"] > 1000
+    assert set(m["position_m"]) >= {"east", "north", "up", "horizontal", "3d"}
+    for axis in ("east", "north", "up"):
+        assert {"mae", "rmse", "max"} <= set(m["position_m"][axis])
+    assert {"mae", "rmse", "p95"} <= set(m["position_m"]["horizontal"])
+    assert {"mae", "rmse"} <= set(m["position_m"]["3d"])
+    assert m["imu_samples"] == 15001
+    assert m["gnss_epochs"] > 500 and 0 <= m["gnss_rejected"] < m["gnss_epochs"]
+    assert m["runtime_s"] > 0.0
+
+
+def test_process_beats_raw_gnss(processed) -> None:
+    """The fused solution is closer to the simulator's truth than the raw GNSS fixes."""
+    _, out = processed
+    m = json.loads((out / "metrics.json").read_text())
+    fused = m["position_m"]["horizontal"]["rmse"]
+    raw = m["gnss_position_m"]["horizontal"]["rmse"]
+    assert 0.0 < fused < raw, (fused, raw)
+
+
+def test_process_reference_option_overrides(log_copy: Path, tmp_path: Path) -> None:
+    ref = tmp_path / "truth-elsewhere.csv"
+    shutil.copyfile(log_copy / "reference.csv", ref)
+    (log_copy / "reference.csv").unlink()
+    out = tmp_path / "out"
+    res = invoke("process", log_copy, "--reference", ref, "--out", out, "--quiet")
+    assert res.exit_code == 0, (res.output, res.exception)
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["reference"] == str(ref)
+    assert m["position_m"]["horizontal"]["rmse"] < m["gnss_position_m"]["horizontal"]["rmse"]
+
+
+def test_process_without_reference_writes_trajectory_only(log_copy: Path, tmp_path: Path) -> None:
+    (log_copy / "reference.csv").unlink()
+    out = tmp_path / "out"
+    res = invoke("process", log_copy, "--out", out)
+    assert res.exit_code == 0, (res.output, res.exception)
+    assert sorted(p.name for p in out.iterdir()) == ["trajectory.csv"]
+    assert "position error" not in res.stdout
+    assert "trajectory.csv" in flat(res.stdout)
+
+
+def test_process_output_rate(sim_log_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    res = invoke("process", sim_log_dir, "--out", out, "--output-rate", "10", "--quiet")
+    assert res.exit_code == 0, (res.output, res.exception)
+    traj = out / "trajectory.csv"
+    lines = read_lines(traj)
+    assert lines[0] == TRAJECTORY_HEADER
+    t_text = [line.split(",", 1)[0] for line in lines[1:]]
+    # t on whole multiples of 0.1 s (6 decimals written: the last five are zero)
+    assert all(s.split(".")[1][1:] == "00000" for s in t_text), t_text[:5]
+    t = np.array([float(s) for s in t_text])
+    np.testing.assert_allclose(np.diff(t), 0.1, atol=1e-6)
+    span = t[-1] - t[0]
+    assert span > 115.0
+    assert abs(len(t) / span - 10.0) < 0.1
+
+
+def test_process_quiet_prints_nothing_on_stdout(sim_log_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    res = invoke("process", sim_log_dir, "--out", out, "--quiet")
+    assert res.exit_code == 0, (res.output, res.exception)
+    assert res.stdout == ""
+    assert (out / "trajectory.csv").is_file()
+
+
+def test_process_duplicate_imu_stamps_warned(log_copy: Path, tmp_path: Path) -> None:
+    imu = log_copy / "imu.csv"
+    lines = read_lines(imu)
+    lines.insert(300, lines[299])          # file line 300 repeated as line 301
+    lines.insert(500, lines[499])
+    write_lines(imu, lines)
+    out = tmp_path / "out"
+    res = invoke("process", log_copy, "--out", out)
+    assert res.exit_code == 0, (res.output, res.exception)
+    assert "imu.csv: dropped 2 duplicate timestamps (first at line 301)" in flat(res.stderr)
+    assert (out / "trajectory.csv").is_file()
+
+
+# --------------------------------------------------------------------------------- filters, simulate
+
+
+def test_filters_lists_ekf_with_paper() -> None:
+    res = invoke("filters")
+    assert res.exit_code == 0, res.output
+    (line,) = [line for line in res.stdout.splitlines() if line.startswith("ekf ")]
+    assert "paper 002" in line
+    assert "Kalman" in line
+
+
+def test_simulate_writes_log_and_is_reproducible(tmp_path: Path) -> None:
+    a, b = tmp_path / "a", tmp_path / "b"
+    for d in (a, b):
+        res = invoke("simulate", d, "--duration", "40", "--seed", "1")
+        assert res.exit_code == 0, (res.output, res.exception)
+        assert "wrote" in res.stdout and str(d) in res.stdout
+        assert sorted(p.name for p in d.iterdir()) == ["gnss.csv", "imu.csv", "navpp.toml", "reference.csv"]
+    assert (a / "imu.csv").read_bytes() == (b / "imu.csv").read_bytes()
+    assert (a / "gnss.csv").read_bytes() == (b / "gnss.csv").read_bytes()
+    assert len(read_lines(a / "imu.csv")) == 1 + 40 * 125 + 1
+
+
+@pytest.mark.parametrize("lever", ["1,2", "a,b,c"])
+def test_simulate_bad_lever_arm(tmp_path: Path, lever: str) -> None:
+    out = tmp_path / "sim"
+    res = invoke("simulate", out, "--duration", "40", "--lever-arm", lever)
+    assert res.exit_code != 0
+    assert "Traceback" not in res.output
+    assert "--lever-arm" in res.output and "x,y,z" in res.output
+    assert not out.exists()
+
+
+# --------------------------------------------------------------------------------- bad input
+
+
+def test_missing_imu_csv(log_copy: Path, tmp_path: Path) -> None:
+    (log_copy / "imu.csv").unlink()
+    out = tmp_path / "out"
+    msg = assert_one_line_error(invoke("process", log_copy, "--out", out), out)
+    assert str(log_copy / "imu.csv") in msg and "not found" in msg
+
+
+def test_gnss_missing_column(log_copy: Path, tmp_path: Path) -> None:
+    gnss = log_copy / "gnss.csv"
+    lines = read_lines(gnss)
+    j = lines[0].split(",").index("alt")
+    write_lines(gnss, [",".join(f for i, f in enumerate(line.split(",")) if i != j) for line in lines])
+    out = tmp_path / "out"
+    msg = assert_one_line_error(invoke("process", log_copy, "--out", out), out)
+    assert str(gnss) in msg and "'alt'" in msg and "line 1" in msg
+
+
+def test_imu_non_numeric_value(log_copy: Path, tmp_path: Path) -> None:
+    imu = log_copy / "imu.csv"
+    set_cell(imu, 101, "gz", "abc")
+    out = tmp_path / "out"
+    msg = assert_one_line_error(invoke("process", log_copy, "--out", out), out)
+    assert str(imu) in msg and "line 101" in msg and "'gz'" in msg and "'abc'" in msg
+
+
+def test_gnss_nan(log_copy: Path, tmp_path: Path) -> None:
+    gnss = log_copy / "gnss.csv"
+    set_cell(gnss, 51, "lat", "NaN")
+    out = tmp_path / "out"
+    msg = assert_one_line_error(invoke("process", log_copy, "--out", out), out)
+    assert str(gnss) in msg and "line 51" in msg and "'lat'" in msg
+
+
+def test_imu_time_goes_backwards(log_copy: Path, tmp_path: Path) -> None:
+    imu = log_copy / "imu.csv"
+    lines = read_lines(imu)
+    lines[200], lines[201] = lines[201], lines[200]       # file lines 201 and 202 swapped
+    write_lines(imu, lines)
+    out = tmp_path / "out"
+    msg = assert_one_line_error(invoke("process", log_copy, "--out", out), out)
+    assert str(imu) in msg and "line 202" in msg and "backwards" in msg and "line 201" in msg
+
+
+def test_config_unknown_key(log_copy: Path, tmp_path: Path) -> None:
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text('[imu]\npreset = "automotive"\ngyro_arw_deg_per_sqrt = 1.0\n')
+    out = tmp_path / "out"
+    msg = assert_one_line_error(invoke("process", log_copy, "--config", cfg, "--out", out), out)
+    assert str(cfg) in msg and "'gyro_arw_deg_per_sqrt'" in msg
+    assert "[imu]" in msg and "did you mean 'gyro_arw_deg_per_sqrt_h'" in msg
+
+
+def test_unknown_filter_lists_filters(sim_log_dir: Path, tmp_path: Path) -> None:
+    from navpp.filters import FILTERS
+
+    out = tmp_path / "out"
+    msg = assert_one_line_error(invoke("process", sim_log_dir, "--filter", "ekff", "--out", out), out)
+    assert "'ekff'" in msg
+    assert all(name in msg for name in FILTERS)
+
+
+def test_log_does_not_exist(tmp_path: Path) -> None:
+    log, out = tmp_path / "no-such-log", tmp_path / "out"
+    msg = assert_one_line_error(invoke("process", log, "--out", out), out)
+    assert str(log) in msg and "no such file or directory" in msg
+
+
+def test_directory_is_not_a_log(tmp_path: Path) -> None:
+    log, out = tmp_path / "empty", tmp_path / "out"
+    log.mkdir()
+    msg = assert_one_line_error(invoke("process", log, "--out", out), out)
+    assert str(log) in msg and "imu.csv" in msg and "gnss.csv" in msg
+
+
+def test_unsupported_suffix(tmp_path: Path) -> None:
+    log, out = tmp_path / "drive.txt", tmp_path / "out"
+    log.write_text("t,gx\n0,0\n")
+    msg = assert_one_line_error(invoke("process", log, "--out", out), out)
+    assert str(log) in msg and "'.txt'" in msg and "unsupported" in msg
+
+
+def test_gnss_outside_imu_span(log_copy: Path, tmp_path: Path) -> None:
+    gnss = log_copy / "gnss.csv"
+    lines = read_lines(gnss)
+    shifted = [lines[0]]
+    for line in lines[1:]:
+        t, rest = line.split(",", 1)
+        shifted.append(f"{float(t) + 1000.0:.6f},{rest}")
+    write_lines(gnss, shifted)
+    out = tmp_path / "out"
+    msg = assert_one_line_error(invoke("process", log_copy, "--out", out), out)
+    assert str(gnss) in msg and "'t'" in msg and "outside the IMU time span" in msg
+    assert "1700001000.0" in msg and "1700000000.0" in msg       # both spans, as written
+
+
+def test_no_still_period_and_gnss_never_moves(log_copy: Path, tmp_path: Path) -> None:
+    """Starting in motion, heading must come from the GNSS track; a frozen track cannot give it."""
+    imu, gnss = log_copy / "imu.csv", log_copy / "gnss.csv"
+    lines = read_lines(imu)
+    t0 = float(lines[1].split(",", 1)[0])
+    write_lines(imu, [lines[0]] + [line for line in lines[1:] if float(line.split(",", 1)[0]) >= t0 + 40.0])
+    lines = read_lines(gnss)
+    first = lines[1].split(",")
+    frozen = [lines[0]]
+    for line in lines[1:]:
+        f = line.split(",")
+        f[1:4] = first[1:4]                                  # lat, lon, alt never change
+        frozen.append(",".join(f))
+    write_lines(gnss, frozen)
+    (log_copy / "reference.csv").unlink()
+    out = tmp_path / "out"
+    msg = assert_one_line_error(invoke("process", log_copy, "--out", out), out)
+    assert str(log_copy) in msg
+    assert "cannot find the heading" in msg and "[init] heading_deg" in msg
+
+
+# --------------------------------------------------------------------------------- console script
+
+
+def test_console_script_help() -> None:
+    exe = Path(sys.executable).parent / "navpp"
+    assert exe.is_file(), f"console script not installed at {exe}"
+    env = dict(os.environ, COLUMNS="120")
+    proc = subprocess.run([str(exe), "--help"], capture_output=True, text=True, timeout=60, env=env)
+    assert proc.returncode == 0, proc.stderr
+    for command in ("process", "simulate", "filters"):
+        assert command in proc.stdout
+    assert "Traceback" not in proc.stderr
