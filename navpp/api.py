@@ -32,7 +32,8 @@ class ProcessResult:
     out_dir: Path
     files: tuple[Path, ...]
     config: Config
-    notes: tuple[str, ...] = field(default_factory=tuple)
+    notes: tuple[str, ...] = field(default_factory=tuple)      # what was chosen (config, alignment)
+    warnings: tuple[str, ...] = field(default_factory=tuple)   # what the data made us do
 
 
 def resolve_config(log: Path, config_path: str | Path | None) -> Config:
@@ -161,8 +162,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
             writers.write_metrics_json(out / "metrics.json", metrics)
             writers.write_metrics_md(out / "metrics.md", metrics)
             files += [out / "metrics.json", out / "metrics.md"]
-    notes = tuple(cfg.notes) + tuple(rec.warnings) + tuple(result.alignment.lines)
-    return ProcessResult(filter_name, rec, sol_out, result, metrics, out, tuple(files), cfg, notes)
+    notes = tuple(cfg.notes) + tuple(result.alignment.lines)
+    return ProcessResult(filter_name, rec, sol_out, result, metrics, out, tuple(files), cfg, notes, tuple(rec.warnings))
 
 
 def simulate_log(out: str | Path, **spec: Any) -> Path:

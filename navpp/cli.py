@@ -29,7 +29,7 @@ def _fail(message: str) -> None:
 
 
 class _Progress:
-    """Rich progress bars on stderr, one task per stage; silent with --quiet."""
+    """Rich progress bars on stderr, one task per stage; only on a terminal, never with --quiet."""
 
     def __init__(self, quiet: bool) -> None:
         self.quiet = quiet
@@ -37,12 +37,14 @@ class _Progress:
         self.tasks: dict[str, int] = {}
 
     def __enter__(self):
-        if not self.quiet:
-            from rich.console import Console
+        from rich.console import Console
+
+        console = Console(stderr=True)
+        if not self.quiet and console.is_terminal:
             from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
             self.bar = Progress(TextColumn("{task.description:<10}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
-                                TimeElapsedColumn(), console=Console(stderr=True), transient=True)
+                                TimeElapsedColumn(), console=console, transient=True)
             self.bar.__enter__()
         return self
 
@@ -68,7 +70,8 @@ def process(
                                                       "pitch, heading]); overrides reference.csv.")] = None,
     out: Annotated[Optional[Path], typer.Option(help="Output directory [default: navpp-out/<log>-<filter>].")] = None,
     output_rate: Annotated[Optional[float], typer.Option(help="Trajectory rate in Hz [default: every IMU sample].")] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars or summary.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars, notes or summary (warnings about "
+                                        "the data are still printed).")] = False,
 ) -> None:
     """Process one log with one filter; write trajectory.csv (and metrics with a reference)."""
     from .errors import NavppError
@@ -82,19 +85,22 @@ def process(
     except NavppError as exc:
         _fail(str(exc))
         return
-    if not quiet:
-        _print_summary(res)
+    _print_summary(res, quiet)
 
 
-def _print_summary(res) -> None:
+def _print_summary(res, quiet: bool) -> None:
     from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
 
-    err = Console(stderr=True, highlight=False)
+    err = Console(stderr=True, highlight=False, soft_wrap=True)
+    for line in res.warnings:
+        err.print(f"[yellow]warning:[/] {escape(line)}")
+    if quiet:
+        return
     for line in res.notes:
         err.print(f"[dim]·[/] {escape(line)}")
-    con = Console(highlight=False)
+    con = Console(highlight=False, soft_wrap=True)
     run = res.run
     con.print(f"{escape(res.recording.source)}: {len(res.recording.imu)} IMU samples at {res.recording.imu.rate_hz:.1f} Hz, "
               f"{run.gnss_epochs} GNSS epochs ({run.gnss_rejected} rejected by the gate), "
