@@ -33,12 +33,13 @@ ProgressFn = Callable[[float], None]   # called with the fraction done, 0..1
 @dataclass(frozen=True)
 class Diagnostics:
     """Per-GNSS-epoch record of what the filter saw: t (s), innovation nu (M, 3) ENU m,
-    NIS, accepted flag."""
+    NIS, accepted flag, forced flag (accepted after a run of rejections)."""
 
     t: np.ndarray
     nu: np.ndarray
     nis: np.ndarray
     accepted: np.ndarray
+    forced: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -126,24 +127,36 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
     nu = np.full((m_ep, 3), np.nan)
     nis = np.full(m_ep, np.nan)
     accepted = np.zeros(m_ep, bool)
+    forced = np.zeros(m_ep, bool)
     bias = np.empty((m_ep, 6))
     state = GaussianState(al.t, al.x, al.P)
     var0 = np.diag(al.P)[POS].copy()
     tick = max(1, m_ep // 200)
+    n_path = model.path.shape[1]
+    idx = np.minimum(np.searchsorted(imu.t, tg), len(imu) - 1)
+    k_sample = np.where(imu.t[idx] == tg, idx, -1)
     for k in range(m_ep):
         state = filt.predict(state, model, (state.t, float(tg[k])))
         var_prior[k] = np.diag(state.P)[POS]
         meas = GnssPosition(float(tg[k]), float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever)
         state, inn = filt.update(state, model, meas)
+        if inn.accepted and k_sample[k] >= 0:
+            model.path[k_sample[k]] = state.x[:n_path]     # the epoch's own sample shows the posterior
         var_post[k] = np.diag(state.P)[POS]
         bias[k] = state.x[10:16]
         nu[k] = inn.nu
         nis[k] = inn.nis
         accepted[k] = inn.accepted
+        forced[k] = inn.forced
         if progress is not None and k % tick == 0:
             progress(k / m_ep)
     if state.t < imu.t[-1]:
+        # after the last fix the uncertainty keeps growing: one more knot at the end of the log
         state = filt.predict(state, model, (state.t, float(imu.t[-1])))
+        var_end = np.diag(state.P)[POS]
+        tg = np.append(tg, state.t)
+        var_prior = np.vstack([var_prior, var_end])
+        var_post = np.vstack([var_post, var_end])
     if not np.all(np.isfinite(state.P)):
         raise FilterDivergedError(f"{filt.name}: covariance became non-finite by t = {state.t:.2f} s")
     if progress is not None:
@@ -154,7 +167,7 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
     t_out = imu.t[al.index:]
     std_out = _interpolated_std(t_out, al.t, var0, tg, var_prior, var_post)
     solution = solution_from_path(t_out, path, std_out, recording.t0_ns)
-    diag = Diagnostics(tg, nu, nis, accepted)
+    diag = Diagnostics(tg[:m_ep], nu, nis, accepted, forced)
     biases = BiasHistory(tg, bias[:, :3], bias[:, 3:])
     return RunResult(solution, biases, al, diag, m_ep, int((~accepted).sum()), time.perf_counter() - t_wall)
 
@@ -162,13 +175,14 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
 @njit(cache=True)
 def _interpolated_std(t, t0, var0, tg, var_prior, var_post):
     """Position 1-sigma (m) at times ``t``: the variance runs linearly from one epoch's posterior
-    to the next epoch's prior (growth between fixes is close to linear at GNSS rates)."""
+    to the next epoch's prior (growth between fixes is close to linear at GNSS rates; over a
+    long outage, where it grows faster, this is conservative).  At an epoch: the posterior."""
     n = t.shape[0]
     m = tg.shape[0]
     out = np.empty((n, 3))
-    k = 0                       # next epoch index: tg[k-1] < t <= tg[k]
+    k = 0                       # next epoch index: tg[k-1] <= t < tg[k]
     for i in range(n):
-        while k < m and tg[k] < t[i]:
+        while k < m and tg[k] <= t[i]:
             k += 1
         ta = t0 if k == 0 else tg[k - 1]
         for j in range(3):

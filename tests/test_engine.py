@@ -88,3 +88,58 @@ def test_navigation_grade_gyrocompasses():
     assert any("gyrocompassing (" in line for line in res.alignment.lines)
     heading0 = np.degrees(np.angle(np.exp(1j * np.radians(res.solution.rph_deg[0, 2] - sim.reference.rph_deg[0, 2]))))
     assert abs(heading0) < 0.5
+
+
+def _modified_run(edit, duration=300.0, seed=8):
+    sim = simulate(SimulationSpec(duration_s=duration, seed=seed, still_s=30.0))
+    rec = sim.recording()
+    from dataclasses import replace
+
+    rec = replace(rec, gnss=edit(rec.gnss))
+    cfg = config_from_dict({"imu": {"preset": "automotive"}}, "test")
+    res = engine.run(rec, cfg, api.make_filter("ekf", cfg))
+    return sim, rec, res
+
+
+def _errors_at(rec, sol, t):
+    ref = rec.reference
+    k = np.searchsorted(ref.t, t)
+    it = interpolate_solution(sol, ref.t[k])
+    e = position_errors_enu(it["lat_deg"], it["lon_deg"], it["alt"], ref.lat_deg[k], ref.lon_deg[k], ref.alt[k])
+    return e, it
+
+
+def test_uncertainty_keeps_growing_after_the_last_fix():
+    from navpp.recording import GnssData
+
+    def cut(g):
+        keep = g.t <= 200.0
+        return GnssData(g.t[keep], g.lat_deg[keep], g.lon_deg[keep], g.alt[keep], std_enu=g.std_enu[keep])
+
+    _, rec, res = _modified_run(cut)
+    sol = res.solution
+    e, it = _errors_at(rec, sol, np.array([200.0, 290.0]))
+    assert it["std_enu"][1, 0] > 5 * it["std_enu"][0, 0]           # 90 s of free inertial
+    assert np.all(np.abs(e[1, :2]) < 3.0 * it["std_enu"][1, :2])     # and it covers the drift
+
+
+def test_gnss_jump_is_absorbed_without_ringing():
+    from navpp.recording import GnssData
+
+    def jump(g):
+        lat = g.lat_deg.copy()
+        lon = g.lon_deg.copy()
+        step = g.t >= 150.0
+        lon[step] += np.degrees(20.0 / (6.39e6 * np.cos(np.radians(lat[step]))))   # 20 m east
+        return GnssData(g.t, lat, lon, g.alt.copy(), std_enu=g.std_enu)
+
+    sim, rec, res = _modified_run(jump)
+    assert res.diagnostics.forced.sum() >= 1
+    sol = res.solution
+    ref = rec.reference
+    sel = (ref.t > 150.0) & (ref.t < 250.0)
+    it = interpolate_solution(sol, ref.t[sel])
+    verr = np.linalg.norm(it["vel_enu"][:, :2] - ref.vel_enu[sel, :2], axis=1)
+    assert verr.max() < 0.6                                   # velocity is not kicked by the jump
+    e, _ = _errors_at(rec, sol, np.array([170.0, 240.0]))
+    assert np.all(np.abs(e[:, 0] - 20.0) < 2.5)               # following the new GNSS positions

@@ -42,7 +42,9 @@ class Innovation:
     """What one measurement update saw and did.
 
     nu : (m,) innovation ``z ⊟ ẑ``; S : (m, m) its covariance incl. R; Pxz : (n, m);
-    R : (m, m) measurement noise used; nis : ``nu^T S^-1 nu``; accepted : passed the gate.
+    R : (m, m) measurement noise used; nis : ``nu^T S^-1 nu``; accepted : applied to the state;
+    forced : applied although it failed the gate (after ``max_consecutive_rejects`` rejections,
+    with the covariance re-anchored first; ``nis`` is the value before re-anchoring).
     """
 
     t: float
@@ -52,6 +54,7 @@ class Innovation:
     R: np.ndarray
     nis: float
     accepted: bool
+    forced: bool = False
 
 
 @dataclass(frozen=True)
@@ -218,15 +221,17 @@ class Filter:
     def update(self, state: GaussianState, model: Any, meas: Any) -> tuple[GaussianState, Innovation]:
         pred = self.predict_measurement(state, model, meas)
         R = self.measurement_noise(meas, pred)
-        S = symmetrise(pred.Pzz + R)
-        if not _is_pd(S):
-            raise FilterDivergedError(
-                f"{self.name}: innovation covariance is not positive definite at t={state.t:.3f} s")
-        K, nis = _gain_and_nis(pred.Pxz, S, pred.nu)
+        S, K, nis = self._moments(state, pred, R)
         accepted = nis <= self.gate_threshold(pred.nu.shape[0])
+        forced = False
         if not accepted and self._consecutive_rejects >= self.max_consecutive_rejects:
-            accepted = True   # forced: never lock out the GNSS after a run of rejections
-        innovation = Innovation(state.t, pred.nu, S, pred.Pxz, R, nis, accepted)
+            # A run of rejections means the prior, not the measurements, is wrong: never lock
+            # the GNSS out. Re-anchor the covariance on this measurement, then apply it.
+            forced = accepted = True
+            state = GaussianState(state.t, state.x, self._reanchored(state, meas, pred, R, nis))
+            pred = self.predict_measurement(state, model, meas)
+            S, K, _ = self._moments(state, pred, R)
+        innovation = Innovation(state.t, pred.nu, S, pred.Pxz, R, nis, accepted, forced)
         if not accepted:
             self._consecutive_rejects += 1
             self.rejected += 1
@@ -235,6 +240,24 @@ class Filter:
         new = self.correct(state, model, pred, K, S, R)
         self.after_update(innovation, pred)
         return new, innovation
+
+    def _moments(self, state: GaussianState, pred: MeasurementPrediction, R: np.ndarray):
+        S = symmetrise(pred.Pzz + R)
+        if not _is_pd(S):
+            raise FilterDivergedError(
+                f"{self.name}: innovation covariance is not positive definite at t={state.t:.3f} s")
+        K, nis = _gain_and_nis(pred.Pxz, S, pred.nu)
+        return S, K, nis
+
+    def _reanchored(self, state: GaussianState, meas: Any, pred: MeasurementPrediction, R: np.ndarray,
+                    nis: float) -> np.ndarray:
+        """Covariance to use for a forced update: the measurement's own re-anchoring when it has
+        one (GNSS position: the position block restarts from the innovation), else P inflated so
+        that the innovation sits on the gate."""
+        reanchor = getattr(meas, "reanchor", None)
+        if reanchor is not None:
+            return reanchor(state.P, pred.nu, R)
+        return state.P * max(1.0, nis / self.gate_threshold(pred.nu.shape[0]))
 
     def correct(self, state: GaussianState, model: Any, pred: MeasurementPrediction,
                 K: np.ndarray, S: np.ndarray, R: np.ndarray) -> GaussianState:

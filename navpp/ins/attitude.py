@@ -64,7 +64,7 @@ def quat_to_rotvec(q):
         w, x, y, z = -w, -x, -y, -z
     n = np.sqrt(x * x + y * y + z * z)
     if n < 1e-8:
-        k = 2.0 / w * (1.0 + n * n / (3.0 * w * w))  # 2*atan(n/w)/n to second order
+        k = 2.0 / w * (1.0 - n * n / (3.0 * w * w))  # 2*atan(n/w)/n to second order
     else:
         k = 2.0 * np.arctan2(n, w) / n
     return np.array([k * x, k * y, k * z])

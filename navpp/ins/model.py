@@ -125,20 +125,30 @@ def error_dynamics(x, fn, inv_tau_g, inv_tau_a):
 
 
 @njit(cache=True)
-def _transition_from_segments(seg_x, seg_fn, seg_T, n_seg, psd, inv_tau_g, inv_tau_a):
-    """Accumulate Phi and Qd over the strapdown's segments (module docstring)."""
+def _transition_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd, inv_tau_g, inv_tau_a):
+    """Accumulate Phi and Qd over the strapdown's segments (module docstring).
+
+    F of a segment is the mean of F at its start and end states (with the segment's mean
+    specific force), and Phi_j = I + FT + (FT)^2/2 + (FT)^3/6: the third-order term carries
+    gyro bias -> attitude -> velocity -> position within one step.
+    """
     Phi = np.eye(15)
     Qd = np.zeros((15, 15))
+    F_prev_state = x_start
     for j in range(n_seg):
         T = seg_T[j]
-        FT = error_dynamics(seg_x[j], seg_fn[j], inv_tau_g, inv_tau_a) * T
-        Phi_j = np.eye(15) + FT + 0.5 * (FT @ FT)
+        F = 0.5 * (error_dynamics(F_prev_state, seg_fn[j], inv_tau_g, inv_tau_a)
+                   + error_dynamics(seg_x[j], seg_fn[j], inv_tau_g, inv_tau_a))
+        FT = F * T
+        FT2 = FT @ FT
+        Phi_j = np.eye(15) + FT + 0.5 * FT2 + (FT2 @ FT) / 6.0
         # Qd_j = (Phi_j GQG Phi_j^T + GQG) T / 2 with GQG = diag(psd)
         Qd_j = Phi_j * (psd * (0.5 * T)) @ Phi_j.T
         for k in range(15):
             Qd_j[k, k] += 0.5 * T * psd[k]
         Phi = Phi_j @ Phi
         Qd = Phi_j @ Qd @ Phi_j.T + Qd_j
+        F_prev_state = seg_x[j]
     return Phi, Qd
 
 
@@ -148,14 +158,21 @@ def integrate_with_jacobian(x, t, gyro, accel, t_start, t_end, out, record, psd,
     """Propagate nominal ``x`` (in place) and return the interval's (Phi, Qd).
 
     The error-state transition is accumulated over the strapdown's segments of about
-    ``cov_step_s``, with F evaluated at each segment's end state and mean ENU specific force.
+    ``cov_step_s``.
     """
     m = int((t_end - t_start) / cov_step_s) + 2
     seg_x = np.empty((m, 16))
     seg_fn = np.empty((m, 3))
     seg_T = np.empty(m)
+    x_start = x.copy()
     n_seg = _integrate_nominal(x, t, gyro, accel, t_start, t_end, out, record, cov_step_s, seg_x, seg_fn, seg_T)
-    return _transition_from_segments(seg_x, seg_fn, seg_T, n_seg, psd, inv_tau_g, inv_tau_a)
+    return _transition_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd, inv_tau_g, inv_tau_a)
+
+
+@njit(cache=True, inline="always")
+def _wrap_pi(a):
+    """Angle difference wrapped to [-pi, pi) (longitude across the antimeridian)."""
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
 @njit(cache=True)
@@ -167,7 +184,7 @@ def plus(x, dx):
     rm, rn = radii(x[7])
     h = x[9]
     y[7] = x[7] + dx[7] / (rm + h)
-    y[8] = x[8] + dx[6] / ((rn + h) * np.cos(x[7]))
+    y[8] = _wrap_pi(x[8] + dx[6] / ((rn + h) * np.cos(x[7])))
     y[9] = h + dx[8]
     y[10:13] = x[10:13] + dx[9:12]
     y[13:16] = x[13:16] + dx[12:15]
@@ -182,7 +199,7 @@ def minus(x1, x0):
     dx[3:6] = x1[4:7] - x0[4:7]
     rm, rn = radii(x0[7])
     h = x0[9]
-    dx[6] = (x1[8] - x0[8]) * (rn + h) * np.cos(x0[7])
+    dx[6] = _wrap_pi(x1[8] - x0[8]) * (rn + h) * np.cos(x0[7])
     dx[7] = (x1[7] - x0[7]) * (rm + h)
     dx[8] = x1[9] - h
     dx[9:12] = x1[10:13] - x0[10:13]
@@ -304,13 +321,24 @@ class GnssPosition:
         """``h(x ⊞ dX_i) ⊟ h(x)`` in ENU metres, (m, 3)."""
         return _gnss_points(x, np.ascontiguousarray(dX, dtype=float), self.lever_arm_b)
 
+    @staticmethod
+    def reanchor(P: np.ndarray, nu: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """Covariance for a fix forced through the gate: the position block restarts from the
+        innovation (``diag(nu^2) + R``) uncorrelated with the rest, so a GNSS jump moves the
+        position without kicking velocity and attitude through stale cross-covariances."""
+        P = P.copy()
+        P[POS, :] = 0.0
+        P[:, POS] = 0.0
+        P[POS, POS] = np.diag(nu ** 2) + R
+        return P
+
 
 @njit(cache=True)
 def _gnss_innovation(x, lat, lon, h, lever):
     rm, rn = radii(x[7])
     hx = x[9]
     d = np.empty(3)
-    d[0] = (lon - x[8]) * (rn + hx) * np.cos(x[7])
+    d[0] = _wrap_pi(lon - x[8]) * (rn + hx) * np.cos(x[7])
     d[1] = (lat - x[7]) * (rm + hx)
     d[2] = h - hx
     return d - antenna_offset_enu(x, lever)

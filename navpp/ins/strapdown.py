@@ -160,7 +160,12 @@ def step(x, w0, w1, f0, f1, dt, fn_out):
             lat_m = lat + 0.5 * vmn / (rm + h) * dt
     x[9] = h + vmu * dt
     x[7] = lat + vmn / (rm + h_m) * dt
-    x[8] = lon + vme / ((rn + h_m) * cl) * dt
+    lon = lon + vme / ((rn + h_m) * cl) * dt
+    if lon >= np.pi:          # keep longitude in [-pi, pi) across the antimeridian
+        lon -= 2.0 * np.pi
+    elif lon < -np.pi:
+        lon += 2.0 * np.pi
+    x[8] = lon
     x[4], x[5], x[6] = ne, nn, nu
     # C(k) = exp(-zeta x) C(k-1) exp(phi x)
     r0, r1, r2, r3 = _rv2q(p0, p1, p2)
