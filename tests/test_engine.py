@@ -143,3 +143,14 @@ def test_gnss_jump_is_absorbed_without_ringing():
     assert verr.max() < 0.6                                   # velocity is not kicked by the jump
     e, _ = _errors_at(rec, sol, np.array([170.0, 240.0]))
     assert np.all(np.abs(e[:, 0] - 20.0) < 2.5)               # following the new GNSS positions
+
+
+def test_gnss_epochs_between_imu_samples():
+    # 100 Hz IMU, 3 Hz GNSS: every third epoch falls between two samples and the IMU is
+    # interpolated to it; accuracy and consistency must not suffer
+    _, rec, res, m = _run(seed=9, imu_rate=100.0, gnss_rate=3.0, duration=400.0)
+    frac = np.abs(rec.gnss.t * 100.0 - np.round(rec.gnss.t * 100.0))
+    assert np.mean(frac > 1e-6) > 0.5
+    assert m["position_m"]["horizontal"]["rmse"] <= 0.5 * m["gnss_position_m"]["horizontal"]["rmse"]
+    nrms = np.sqrt(np.mean(_normalised_errors(rec, res.solution) ** 2, axis=0))
+    assert np.all(nrms < 2.0), nrms

@@ -143,3 +143,19 @@ def test_reanchor_restarts_position_block():
     np.testing.assert_allclose(Pn[M.POS, M.POS], np.diag(nu ** 2) + R)
     assert np.all(Pn[M.POS, :3] == 0) and np.all(Pn[M.VEL, M.POS] == 0)
     np.testing.assert_array_equal(Pn[M.VEL, M.VEL], P[M.VEL, M.VEL])
+
+
+def test_propagate_points_is_the_strapdown_in_error_space(drive):
+    # the sigma-point interface: each point goes through the real strapdown and comes back as an
+    # error about the propagated nominal; small points must follow Phi, and the nominal must be
+    # the same one the EKF's transition produces (and records)
+    sim, t, gyro, accel = drive
+    x0 = _truth_state(sim, 78.0)
+    mdl = M.InsModel(t, gyro, accel, NOISE)
+    x_ekf, Phi, _ = mdl.transition(x0, (78.0, 78.2))
+    dX = np.random.default_rng(2).normal(size=(6, 15)) * EPS * 1e-2
+    x_new, dX_new = mdl.propagate_points(x0, dX, (78.0, 78.2))
+    np.testing.assert_array_equal(x_new, x_ekf)
+    np.testing.assert_allclose(dX_new, dX @ Phi.T, rtol=0, atol=2e-2 * np.abs(dX @ Phi.T).max())
+    i = int(np.searchsorted(t, 78.2))
+    np.testing.assert_array_equal(mdl.path[i], x_new[: S.PATH_SIZE])

@@ -34,7 +34,7 @@ from numba import njit
 
 from .. import geodesy
 from .attitude import quat_conj, quat_mul, quat_to_dcm, quat_to_rotvec, rotvec_to_quat
-from .strapdown import _NO_SEG, _NO_SEG3, _NO_T, PATH_SIZE, _nav_rates, radii
+from .strapdown import PATH_SIZE, _nav_rates, radii
 from .strapdown import integrate as _integrate_nominal
 
 N_ERR = 15
@@ -209,13 +209,16 @@ def minus(x1, x0):
 
 @njit(cache=True)
 def _propagate_points(x, dX, t, gyro, accel, t_start, t_end, out, record):
+    no_seg = np.empty((0, 16))      # (module-level empty arrays would be read-only constants here)
+    no_seg3 = np.empty((0, 3))
+    no_t = np.empty(0)
     xn = x.copy()
-    _integrate_nominal(xn, t, gyro, accel, t_start, t_end, out, record, 0.0, _NO_SEG, _NO_SEG3, _NO_T)
+    _integrate_nominal(xn, t, gyro, accel, t_start, t_end, out, record, 0.0, no_seg, no_seg3, no_t)
     dX_new = np.empty_like(dX)
     unused = np.empty((1, PATH_SIZE))
     for k in range(dX.shape[0]):
         xk = plus(x, dX[k])
-        _integrate_nominal(xk, t, gyro, accel, t_start, t_end, unused, False, 0.0, _NO_SEG, _NO_SEG3, _NO_T)
+        _integrate_nominal(xk, t, gyro, accel, t_start, t_end, unused, False, 0.0, no_seg, no_seg3, no_t)
         dX_new[k] = minus(xk, xn)
     return xn, dX_new
 
