@@ -25,6 +25,7 @@ from .ins.alignment import Alignment, AlignmentSettings, align
 from numba import njit
 
 from .ins.model import POS, GnssPosition, InsModel, NoiseModel
+from .ins.strapdown import NOMINAL_BA, NOMINAL_BG
 from .recording import Recording, Solution
 
 ProgressFn = Callable[[float], None]   # called with the fraction done, 0..1
@@ -143,7 +144,8 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
         if inn.accepted and k_sample[k] >= 0:
             model.path[k_sample[k]] = state.x[:n_path]     # the epoch's own sample shows the posterior
         var_post[k] = np.diag(state.P)[POS]
-        bias[k] = state.x[10:16]
+        bias[k, :3] = state.x[NOMINAL_BG]
+        bias[k, 3:] = state.x[NOMINAL_BA]
         nu[k] = inn.nu
         nis[k] = inn.nis
         accepted[k] = inn.accepted
