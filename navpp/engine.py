@@ -138,12 +138,12 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
     k_sample = np.where(imu.t[idx] == tg, idx, -1)
     for k in range(m_ep):
         state = filt.predict(state, model, (state.t, float(tg[k])))
-        var_prior[k] = np.diag(state.P)[POS]
+        var_prior[k] = state.P.diagonal()[POS]
         meas = GnssPosition(float(tg[k]), float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever)
         state, inn = filt.update(state, model, meas)
         if inn.accepted and k_sample[k] >= 0:
             model.path[k_sample[k]] = state.x[:n_path]     # the epoch's own sample shows the posterior
-        var_post[k] = np.diag(state.P)[POS]
+        var_post[k] = state.P.diagonal()[POS]
         bias[k, :3] = state.x[NOMINAL_BG]
         bias[k, 3:] = state.x[NOMINAL_BA]
         nu[k] = inn.nu

@@ -101,3 +101,16 @@ def test_unknown_filter_lists_choices():
 def test_filter_without_options_rejects_keys():
     with pytest.raises(ConfigError, match=r"\[filter.ekf\]"):
         get_filter("ekf").options_from_mapping({"alpha": 1.0}, "cfg.toml")
+
+
+def test_divergence_is_reported_not_propagated():
+    from navpp.errors import FilterDivergedError
+
+    n = 2
+    Q = np.eye(n)
+    Q[0, 1] = Q[1, 0] = np.nan
+    model = LinearModel(np.eye(n), Q)
+    filt = get_filter("ekf")()
+    state = filt.predict(GaussianState(0.0, np.zeros(n), np.eye(n)), model, (0.0, 1.0))
+    with pytest.raises(FilterDivergedError, match="t=1.000"):
+        filt.update(state, model, LinearMeasurement(1.0, np.ones(n), np.eye(n), np.eye(n)))

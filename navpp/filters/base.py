@@ -121,12 +121,35 @@ def _chol_solve(L, B):
 
 
 @njit(cache=True)
+def _cholesky(S):
+    """Lower Cholesky factor of ``S`` and whether ``S`` is (numerically) positive definite."""
+    m = S.shape[0]
+    L = np.zeros((m, m))
+    for j in range(m):
+        d = S[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:            # also catches NaN
+            return L, False
+        L[j, j] = np.sqrt(d)
+        for i in range(j + 1, m):
+            v = S[i, j]
+            for k in range(j):
+                v -= L[i, k] * L[j, k]
+            L[i, j] = v / L[j, j]
+    return L, True
+
+
+@njit(cache=True)
 def _gain_and_nis(Pxz, S, nu):
-    """Kalman gain ``K = Pxz S^-1`` and ``nis = nu^T S^-1 nu`` by Cholesky solves."""
-    L = np.linalg.cholesky(S)
+    """Kalman gain ``K = Pxz S^-1`` and ``nis = nu^T S^-1 nu`` by Cholesky solves; ``ok`` is
+    False when S is not positive definite (K and nis are then meaningless)."""
+    L, ok = _cholesky(S)
+    if not ok:
+        return np.zeros_like(Pxz), np.inf, False
     Kt = _chol_solve(L, np.ascontiguousarray(Pxz.T))
     w = _chol_solve(L, nu.reshape(-1, 1))[:, 0].copy()
-    return Kt.T.copy(), float(nu @ w)
+    return Kt.T.copy(), float(nu @ w), True
 
 
 @njit(cache=True)
@@ -140,16 +163,6 @@ def _joseph(P, K, H, R):
 def _sigma_posterior(P, K, S):
     Pn = P - K @ S @ K.T
     return 0.5 * (Pn + Pn.T)
-
-
-def _is_pd(S: np.ndarray) -> bool:
-    if not np.all(np.isfinite(S)):
-        return False
-    try:
-        np.linalg.cholesky(S)
-    except np.linalg.LinAlgError:
-        return False
-    return True
 
 
 class Filter:
@@ -243,10 +256,10 @@ class Filter:
 
     def _moments(self, state: GaussianState, pred: MeasurementPrediction, R: np.ndarray):
         S = symmetrise(pred.Pzz + R)
-        if not _is_pd(S):
+        K, nis, ok = _gain_and_nis(pred.Pxz, S, pred.nu)
+        if not ok:
             raise FilterDivergedError(
                 f"{self.name}: innovation covariance is not positive definite at t={state.t:.3f} s")
-        K, nis = _gain_and_nis(pred.Pxz, S, pred.nu)
         return S, K, nis
 
     def _reanchored(self, state: GaussianState, meas: Any, pred: MeasurementPrediction, R: np.ndarray,
@@ -267,6 +280,6 @@ class Filter:
             P = _joseph(state.P, K, pred.H, R)
         else:
             P = _sigma_posterior(state.P, K, S)
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
+        if not (np.isfinite(x.sum()) and np.isfinite(P.sum())):
             raise FilterDivergedError(f"{self.name}: state became non-finite at t={state.t:.3f} s")
         return GaussianState(state.t, x, P)
