@@ -24,7 +24,7 @@ from .filters.base import Filter, GaussianState
 from .ins.alignment import Alignment, AlignmentSettings, align
 from numba import njit
 
-from .ins.model import POS, GnssPosition, InsModel, NoiseModel
+from .ins.model import BA, BG, POS, GnssPosition, InsModel, NoiseModel
 from .ins.strapdown import NOMINAL_BA, NOMINAL_BG
 from .recording import Recording, Solution
 
@@ -45,12 +45,14 @@ class Diagnostics:
 
 @dataclass(frozen=True)
 class BiasHistory:
-    """Estimated sensor biases after each GNSS epoch: t (M,) s; gyro (M, 3) rad/s and
-    accel (M, 3) m/s^2, body FLU.  They are constant between epochs."""
+    """Estimated sensor biases after each GNSS epoch and their 1-sigma: t (M,) s; gyro and
+    gyro_std (M, 3) rad/s; accel and accel_std (M, 3) m/s^2; body FLU.  Constant between epochs."""
 
     t: np.ndarray
     gyro: np.ndarray
     accel: np.ndarray
+    gyro_std: np.ndarray
+    accel_std: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -88,9 +90,8 @@ def alignment_settings(config: Config) -> AlignmentSettings:
 
 def noise_model(config: Config) -> NoiseModel:
     n = config.imu.noise()
-    return NoiseModel(gyro_arw=n.gyro_arw, accel_vrw=n.accel_vrw,
-                      gyro_bias_instability=n.gyro_bias_instability, gyro_bias_tau=n.gyro_bias_tau,
-                      accel_bias_instability=n.accel_bias_instability, accel_bias_tau=n.accel_bias_tau)
+    return NoiseModel.from_datasheet(n.gyro_arw, n.accel_vrw, n.gyro_bias_sigma, n.gyro_bias_instability,
+                                     n.gyro_bias_tau, n.accel_bias_sigma, n.accel_bias_instability, n.accel_bias_tau)
 
 
 def run(recording: Recording, config: Config, filt: Filter, *, progress: ProgressFn | None = None,
@@ -130,6 +131,7 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
     accepted = np.zeros(m_ep, bool)
     forced = np.zeros(m_ep, bool)
     bias = np.empty((m_ep, 6))
+    bias_var = np.empty((m_ep, 6))
     state = GaussianState(al.t, al.x, al.P)
     var0 = np.diag(al.P)[POS].copy()
     tick = max(1, m_ep // 200)
@@ -146,6 +148,8 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
         var_post[k] = state.P.diagonal()[POS]
         bias[k, :3] = state.x[NOMINAL_BG]
         bias[k, 3:] = state.x[NOMINAL_BA]
+        bias_var[k, :3] = state.P.diagonal()[BG]
+        bias_var[k, 3:] = state.P.diagonal()[BA]
         nu[k] = inn.nu
         nis[k] = inn.nis
         accepted[k] = inn.accepted
@@ -170,7 +174,8 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
     std_out = _interpolated_std(t_out, al.t, var0, tg, var_prior, var_post)
     solution = solution_from_path(t_out, path, std_out, recording.t0_ns)
     diag = Diagnostics(tg[:m_ep], nu, nis, accepted, forced)
-    biases = BiasHistory(tg, bias[:, :3], bias[:, 3:])
+    bias_std = np.sqrt(bias_var)
+    biases = BiasHistory(tg[:m_ep], bias[:, :3], bias[:, 3:], bias_std[:, :3], bias_std[:, 3:])
     return RunResult(solution, biases, al, diag, m_ep, int((~accepted).sum()), time.perf_counter() - t_wall)
 
 

@@ -63,15 +63,19 @@ def test_solution_covers_the_log_at_imu_rate(drive):
         assert np.all(np.isfinite(a))
 
 
-def test_biases_are_estimated(drive):
+def test_biases_are_estimated_with_honest_sigma(drive):
     sim, _, res, _ = drive
-    true_gyro_bias = sim.sensor_errors["gyro_bias"]
-    true_accel_bias = sim.sensor_errors["accel_bias"]
-    est_g = res.biases.gyro[-1]
-    est_a = res.biases.accel[-1]
-    # the vertical gyro and the accelerometers are observable on a drive with turns and accelerations
-    assert abs(est_g[2] - true_gyro_bias[2]) < 0.5 * abs(true_gyro_bias[2]) + np.radians(2.0) / 3600
-    assert np.linalg.norm(est_a - true_accel_bias) < 0.5 * np.linalg.norm(true_accel_bias) + 5e-4
+    err = sim.sensor_errors
+    true_g = err["gyro_bias"] + err["gyro_gauss_markov"][-1]
+    true_a = err["accel_bias"] + err["accel_gauss_markov"][-1]
+    est = res.biases
+    zg = (est.gyro[-1] - true_g) / est.gyro_std[-1]
+    za = (est.accel[-1] - true_a) / est.accel_std[-1]
+    assert np.all(np.abs(zg) < 3.0), zg
+    # accelerometer z also carries the unmodelled 500 ppm scale factor times gravity (~0.5 mg)
+    assert np.all(np.abs(za[:2]) < 3.0), za
+    # and the estimates are informative: the vertical gyro bias is learnt in the turns
+    assert est.gyro_std[-1, 2] < 0.5 * np.hypot(np.radians(10.0), np.radians(1.0)) / 3600.0
 
 
 @pytest.mark.slow

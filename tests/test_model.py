@@ -15,8 +15,8 @@ from navpp.simulate import SimulationSpec, simulate
 
 BLOCKS = {"ATT": M.ATT, "VEL": M.VEL, "POS": M.POS, "BG": M.BG, "BA": M.BA}
 EPS = np.array([1e-4] * 3 + [1e-2] * 3 + [1.0] * 3 + [1e-4] * 3 + [1e-2] * 3)
-NOISE = M.NoiseModel(gyro_arw=1e-4, accel_vrw=1e-3, gyro_bias_instability=1e-5, gyro_bias_tau=math.inf,
-                     accel_bias_instability=1e-3, accel_bias_tau=math.inf)
+NOISE = M.NoiseModel(gyro_arw=1e-4, accel_vrw=1e-3, gyro_bias_psd=1e-12, gyro_bias_tau=math.inf,
+                     accel_bias_psd=1e-8, accel_bias_tau=math.inf)
 
 
 @pytest.fixture(scope="module")
@@ -83,7 +83,7 @@ def test_phi_qd_match_van_loan_for_frozen_dynamics(drive):
     x = _truth_state(sim, 78.0)
     fn = np.array([0.8, -2.0, 9.81])
     F = M.error_dynamics(x, fn, 1.0 / 300.0, 1.0 / 300.0)
-    psd = M.NoiseModel(1e-3, 1e-2, 1e-4, 300.0, 1e-3, 300.0).psd()
+    psd = M.NoiseModel(1e-3, 1e-2, 1e-9, 300.0, 1e-7, 300.0).psd()
     total, n_seg = 0.2, 20
     # Van Loan: expm([[-F, GQG], [0, F^T]] T) -> Phi = B22^T, Qd = Phi B12 (exact for frozen F)
     n = 15
@@ -159,3 +159,13 @@ def test_propagate_points_is_the_strapdown_in_error_space(drive):
     np.testing.assert_allclose(dX_new, dX @ Phi.T, rtol=0, atol=2e-2 * np.abs(dX @ Phi.T).max())
     i = int(np.searchsorted(t, 78.2))
     np.testing.assert_array_equal(mdl.path[i], x_new[: S.PATH_SIZE])
+
+
+def test_bias_process_keeps_turn_on_uncertainty():
+    # the stationary variance q tau / 2 is turn-on^2 + instability^2, the drive the instability's
+    q, tau = M.NoiseModel.bias_process(10.0, 1.0, 300.0)
+    assert q == pytest.approx(2.0 / 300.0)
+    assert q * tau / 2 == pytest.approx(101.0)
+    assert M.NoiseModel.bias_process(10.0, 0.0, 300.0) == (0.0, math.inf)        # a random constant
+    q, tau = M.NoiseModel.bias_process(10.0, 1.0, math.inf)
+    assert tau == math.inf and q * 3600.0 == pytest.approx(1.0)                 # random walk

@@ -19,7 +19,8 @@ The nominal state is the 16-vector of :mod:`navpp.ins.strapdown`.  Filters see o
 Continuous error dynamics (psi-angle form, ENU; Groves 2013 eqs 14.64-14.72, paper 002 eqs 1-3):
 ``phi' = -[w_in x] phi - M_v dv - C dbg``;
 ``dv' = [f_n x]^T phi + ([v x] M_v - [(2 w_ie + w_en) x]) dv + dgamma/dh e_U dp_U - C dba``;
-``dp' = dv``; ``dbg' = -dbg / tau_g + w``; ``dba' = -dba / tau_a + w``.
+``dp' = dv``; ``dbg' = -dbg / tau_g + w``; ``dba' = -dba / tau_a + w`` (see
+:meth:`NoiseModel.bias_process` for how tau and the drive follow from the datasheet).
 Per covariance step of length T (<= ``cov_step_s``): ``Phi = I + F T + (F T)^2 / 2``,
 ``Qd = (Phi G Qc G^T Phi^T + G Qc G^T) T / 2`` (ALGORITHMS.md), accumulated over the interval.
 """
@@ -53,28 +54,52 @@ _DGDH_H2 = geodesy._H2
 class NoiseModel:
     """Continuous-time noise of the 15-state model, SI units.
 
-    gyro_arw : rad/sqrt(s); accel_vrw : m/s/sqrt(s); ``*_instability`` : stationary 1-sigma
-    of the Gauss-Markov bias, rad/s or m/s^2; ``*_tau`` : correlation time, s (``inf``: random
-    walk reaching the instability in one hour).
+    gyro_arw : rad/sqrt(s); accel_vrw : m/s/sqrt(s) (white noise densities).
+    gyro_bias_psd, accel_bias_psd : drive of the bias states, (rad/s)^2/s and (m/s^2)^2/s.
+    gyro_bias_tau, accel_bias_tau : correlation time of the bias states, s (``inf``: no decay).
+    Build it from datasheet figures with :meth:`from_datasheet`.
     """
 
     gyro_arw: float
     accel_vrw: float
-    gyro_bias_instability: float
+    gyro_bias_psd: float
     gyro_bias_tau: float
-    accel_bias_instability: float
+    accel_bias_psd: float
     accel_bias_tau: float
+
+    @staticmethod
+    def bias_process(turn_on: float, instability: float, tau: float) -> tuple[float, float]:
+        """(drive psd, correlation time) of one bias state for a sensor whose bias is a random
+        constant (1-sigma ``turn_on``) plus a Gauss-Markov process (``instability``, ``tau``).
+
+        One first-order state cannot hold both, and a Gauss-Markov state with the
+        instability's own (sigma, tau) forgets, within a few tau, that the constant part is
+        unknown: its covariance collapses to the instability whether the bias was observed or
+        not.  navpp keeps the instability's drive ``2 instability^2 / tau`` (how fast the bias
+        really wanders) and stretches the correlation time so that the stationary variance is the
+        sum, ``tau_eff = tau (turn_on^2 + instability^2) / instability^2``.  ``tau = inf`` is a
+        random walk reaching the instability in one hour; no instability is a random constant.
+        """
+        if instability <= 0.0:
+            return 0.0, math.inf
+        if math.isinf(tau):
+            return instability ** 2 / 3600.0, math.inf
+        total = turn_on ** 2 + instability ** 2
+        return 2.0 * instability ** 2 / tau, tau * total / instability ** 2
+
+    @classmethod
+    def from_datasheet(cls, gyro_arw: float, accel_vrw: float, gyro_bias_sigma: float,
+                       gyro_bias_instability: float, gyro_bias_tau: float, accel_bias_sigma: float,
+                       accel_bias_instability: float, accel_bias_tau: float) -> "NoiseModel":
+        """From SI datasheet figures (:class:`navpp.config.ImuNoise` fields)."""
+        qg, tg = cls.bias_process(gyro_bias_sigma, gyro_bias_instability, gyro_bias_tau)
+        qa, ta = cls.bias_process(accel_bias_sigma, accel_bias_instability, accel_bias_tau)
+        return cls(gyro_arw, accel_vrw, qg, tg, qa, ta)
 
     def psd(self) -> np.ndarray:
         """Diagonal of G Qc G^T (the noise enters isotropically), (15,)."""
-        def drive(sigma: float, tau: float) -> tuple[float, float]:
-            if math.isinf(tau):
-                return sigma * sigma / 3600.0, 0.0
-            return 2.0 * sigma * sigma / tau, 1.0 / tau
-        qg, _ = drive(self.gyro_bias_instability, self.gyro_bias_tau)
-        qa, _ = drive(self.accel_bias_instability, self.accel_bias_tau)
-        return np.concatenate([np.full(3, self.gyro_arw ** 2), np.full(3, self.accel_vrw ** 2),
-                               np.zeros(3), np.full(3, qg), np.full(3, qa)])
+        return np.concatenate([np.full(3, self.gyro_arw ** 2), np.full(3, self.accel_vrw ** 2), np.zeros(3),
+                               np.full(3, self.gyro_bias_psd), np.full(3, self.accel_bias_psd)])
 
     def inv_tau(self) -> tuple[float, float]:
         g = 0.0 if math.isinf(self.gyro_bias_tau) else 1.0 / self.gyro_bias_tau
