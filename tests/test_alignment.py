@@ -59,7 +59,7 @@ def _settings(sim, **kw):
 def test_heading_from_gnss_course_with_automotive_gyro(heading0):
     sim = simulate(SimulationSpec(duration_s=200.0, still_s=40.0, seed=5, heading0_deg=heading0, lever_arm_m=(0.2, 0.1, 1.0)))
     al = align(sim.imu.t, sim.imu.gyro, sim.imu.accel, sim.gnss, _settings(sim))
-    assert any("GNSS course" in line for line in al.lines)
+    assert any("GNSS track" in line for line in al.lines)
     assert al.still[0] == 0.0 and 38.0 <= al.still[1] <= 42.0
     truth = sim.reference.rph_deg[0]
     roll, pitch, heading = np.degrees(np.array(sim_rph(al.x)))
@@ -97,3 +97,18 @@ def sim_rph(x):
     from navpp.ins.attitude import dcm_to_rph, quat_to_dcm
 
     return dcm_to_rph(quat_to_dcm(x[0:4]))
+
+
+@pytest.mark.parametrize("gnss_velocity", [False, True])
+def test_heading_from_gnss_track_is_accurate_and_honest(gnss_velocity):
+    # over several drives and start headings: the heading error is small and its sigma honest
+    errors, sigmas = [], []
+    for seed in range(8):
+        sim = simulate(SimulationSpec(duration_s=200.0, still_s=30.0, seed=seed, heading0_deg=float(seed * 47 % 360),
+                                      gnss_velocity=gnss_velocity))
+        al = align(sim.imu.t, sim.imu.gyro, sim.imu.accel, sim.gnss, _settings(sim))
+        errors.append(math.remainder(math.degrees(sim_rph(al.x)[2]) - sim.reference.rph_deg[0, 2], 360.0))
+        sigmas.append(math.degrees(math.sqrt(al.P[2, 2])))
+    errors, sigmas = np.array(errors), np.array(sigmas)
+    assert np.sqrt(np.mean(errors ** 2)) < (0.6 if gnss_velocity else 1.5)
+    assert np.all(np.abs(errors) < 3.0 * sigmas)

@@ -6,8 +6,9 @@
 - Levelling: roll and pitch from the mean specific force of the still period.
 - Heading: from the config when given; by gyrocompassing when the gyro grade makes it
   accurate enough (predicted 1-sigma below ``[init] gyrocompass_max_heading_std_deg``);
-  otherwise from the GNSS course once the vehicle moves, carried back to the start with the
-  integrated vertical gyro rate (a still car does not turn, but this does not assume it).
+  otherwise from the GNSS track of the first 150 m of driving, each displacement rotated back
+  by the turn the gyro measured since the start (a still car does not turn, but this does not
+  assume it).
 
 References: Groves (2013) section 5.6 (levelling, gyrocompassing); Titterton & Weston (2004)
 ch. 10.
@@ -182,10 +183,10 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
     else:
         if method == "auto" and not moving:
             lines.append(f"gyrocompassing not possible with this gyro (predicted 1-sigma "
-                         f"{math.degrees(gc_std):.1f} deg): heading from the GNSS course")
-        heading, head_std, t_course = _heading_from_gnss(t, gyro, gnss, t_start, roll, pitch, lat_a, lon_a,
-                                                         h_a, fix_std, settings.min_speed_mps)
-        head_how = f"GNSS course at t = {t_course:.2f} s carried back with the gyro"
+                         f"{math.degrees(gc_std):.1f} deg): heading from the GNSS track")
+        heading, head_std, t_course = _heading_from_gnss(t, gyro, gnss, t_start, t_s1, roll, pitch, lat_a,
+                                                         lon_a, h_a, fix_std, settings.min_speed_mps)
+        head_how = f"GNSS track up to t = {t_course:.2f} s, turns taken out with the gyro"
 
     C = rph_to_dcm(roll, pitch, heading)
     # the GNSS fixes are of the antenna: remove the lever arm to get the IMU position
@@ -225,47 +226,60 @@ def _gnss_velocity_at(gnss, t0: float, lat: float, lon: float, h: float) -> np.n
     return (enu[k] - enu[k - 1]) / (gnss.t[k] - gnss.t[k - 1])
 
 
-def _heading_from_gnss(t, gyro, gnss, t_start, roll, pitch, lat, lon, h, fix_std, min_speed):
-    """Heading at ``t_start`` from the GNSS course once moving, carried back with the gyro.
+def _heading_from_gnss(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, fix_std, min_speed,
+                       path_length=150.0, min_length=30.0, max_window=120.0):
+    """Heading at ``t_start`` from the GNSS track once moving, referred back with the gyro.
 
-    With GNSS velocity: the course at the first epoch faster than ``min_speed``.  Without: the
-    chord from the start position to the first fix 50 m away; a chord's direction is the
-    tangent at the middle of the arc, i.e. at the time the distance first exceeds half of it.
-    Returns (heading rad, 1-sigma rad, time of the course).
+    Every GNSS displacement after the still period (from positions, or from GNSS velocity x dt
+    when the log has it) points along the vehicle's heading at that moment (no side slip).  The
+    gyro says how far the vehicle has turned since ``t_start``; rotating each displacement back
+    by that angle makes them all point along the start heading, and their sum (the first
+    ``path_length`` metres of driving) gives it with the noise of a ``path_length`` chord, whatever
+    the turns.  With positions, the start point is the mean of the still-period fixes.
+    Returns (heading rad, 1-sigma rad, time the summed track ends).
     """
-    sel = gnss.t >= t_start
-    tg = gnss.t[sel]
-    if gnss.vel_enu is not None:
-        v = gnss.vel_enu[sel]
-        sp = np.hypot(v[:, 0], v[:, 1])
-        k = np.nonzero(sp > min_speed)[0]
-        if k.size == 0:
-            raise InputError(f"the vehicle never exceeds {min_speed} m/s in the GNSS velocity: cannot find "
-                             "the heading; give [init] heading_deg in the config")
-        k = int(k[0])
-        course = math.atan2(v[k, 0], v[k, 1])
-        t_c = float(tg[k])
-        std_v = float(np.mean(gnss.std_vel_enu[sel][k, :2])) if gnss.std_vel_enu is not None else 0.1
-        std = math.atan2(std_v, sp[k]) + math.radians(1.0)
-    else:
-        enu = _gnss_enu(gnss, lat, lon, h)[sel]
-        dist = np.hypot(enu[:, 0], enu[:, 1])
-        chord = 50.0
-        far = np.nonzero(dist > chord)[0]
-        if far.size == 0:
-            raise InputError("the vehicle never moves 50 m from its start in the GNSS log: cannot find the "
-                             "heading; give [init] heading_deg in the config")
-        kb = int(far[0])
-        course = math.atan2(enu[kb, 0], enu[kb, 1])
-        km = int(np.nonzero(dist[: kb + 1] > 0.5 * dist[kb])[0][0])
-        t_c = float(tg[km])
-        std = 2.0 * float(np.hypot(fix_std[0], fix_std[1])) / dist[kb] + math.radians(1.0)
-    # rotation about the vertical between the start and t_c, from the gyro (minus Earth rate)
-    i0 = int(np.searchsorted(t, t_start))
-    i1 = int(np.searchsorted(t, t_c))
     C = rph_to_dcm(roll, pitch, 0.0)
-    w_up = gyro[i0:i1 + 1] @ C[2] - geodesy.OMEGA_E * math.sin(lat)
-    turned = float(np.trapezoid(w_up, t[i0:i1 + 1])) if i1 > i0 else 0.0
-    # heading is clockwise, a positive up-rate turns the vehicle counter-clockwise
-    heading = float(np.mod(course + turned, 2 * math.pi))
-    return heading, std, t_c
+    i0 = int(np.searchsorted(t, t_start))
+    w_up = gyro[i0:] @ C[2] - geodesy.OMEGA_E * math.sin(lat)
+    # vehicle turn since t_start (counter-clockwise positive) at every IMU sample
+    ts = t[i0:]
+    turned = np.concatenate([[0.0], np.cumsum(0.5 * (w_up[1:] + w_up[:-1]) * np.diff(ts))])
+
+    after = gnss.t > t_still_end
+    tg = gnss.t[after]
+    if gnss.vel_enu is not None:
+        v = gnss.vel_enu[after]
+        moving = np.hypot(v[:, 0], v[:, 1]) > min_speed
+        dt = np.diff(np.concatenate([[t_still_end], tg]))
+        d = v[:, :2] * dt[:, None]
+        d[~moving] = 0.0
+        t_mid = tg - 0.5 * dt
+        std_v = float(np.mean(gnss.std_vel_enu[after][:, :2])) if gnss.std_vel_enu is not None else 0.1
+        step_noise = std_v * dt          # independent per displacement
+    else:
+        enu = _gnss_enu(gnss, lat, lon, h)[after][:, :2]
+        pts = np.vstack([np.zeros((1, 2)), enu])          # the still position is the origin
+        d = np.diff(pts, axis=0)
+        t_mid = 0.5 * (np.concatenate([[t_still_end], tg[:-1]]) + tg)
+        step_noise = None                # the sum telescopes: only the end's noise remains (the
+                                         # start is the mean of the still fixes)
+    if tg.size == 0:
+        raise InputError("no GNSS fix after the still period: cannot find the heading; give [init] heading_deg "
+                         "in the config")
+    # rotate each displacement back to the start heading: course + turn (complex N + iE)
+    rot = np.interp(t_mid, ts, turned)
+    z = (d[:, 1] + 1j * d[:, 0]) * np.exp(1j * rot)
+    csum = np.cumsum(z)
+    reach = np.nonzero((np.abs(csum) >= path_length) | (tg - t_still_end > max_window))[0]
+    k = int(reach[0]) if reach.size else len(z) - 1
+    total = csum[k]
+    if abs(total) < min_length:
+        raise InputError(f"the vehicle never moves {min_length:.0f} m from its start in the GNSS log: cannot find "
+                         "the heading; give [init] heading_deg in the config")
+    heading = float(np.mod(np.angle(total), 2 * math.pi))
+    if step_noise is not None:
+        noise = float(np.sqrt(np.sum(step_noise[: k + 1] ** 2)))
+    else:
+        noise = 1.1 * float(np.mean(fix_std[:2]))      # across-track error of the end point
+    std = noise / abs(total) + math.radians(0.3)
+    return heading, std, float(tg[k])
