@@ -48,7 +48,8 @@ def resolve_config(log: Path, config_path: str | Path | None) -> Config:
     return load_config(None)
 
 
-def read_log(log: str | Path, config: Config, *, reference: str | Path | None = None) -> Recording:
+def read_log(log: str | Path, config: Config, *, reference: str | Path | None = None,
+             progress: Callable[[float], None] | None = None) -> Recording:
     """Read any supported log into a validated :class:`Recording`."""
     from .io import csv as csv_io
 
@@ -58,7 +59,7 @@ def read_log(log: str | Path, config: Config, *, reference: str | Path | None = 
     if csv_io.is_csv_log(path):
         return csv_io.read_csv_log(path, reference=reference, time_base=config.time.base,
                                    gyro_units=config.imu.gyro_units, accel_units=config.imu.accel_units,
-                                   time_offset_s=config.gnss.time_offset_s)
+                                   time_offset_s=config.gnss.time_offset_s, progress=progress)
     if path.is_dir():
         present = [name for name in (csv_io.IMU_FILE, csv_io.GNSS_FILE) if (path / name).is_file()]
         if len(present) == 1:  # half a CSV log: name the file that is missing
@@ -134,7 +135,7 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     filt = make_filter(filter_name, cfg)
     if progress:
         progress("reading", 0.0)
-    rec = read_log(log, cfg, reference=reference)
+    rec = read_log(log, cfg, reference=reference, progress=(lambda f: progress("reading", f)) if progress else None)
     if progress:
         progress("reading", 1.0)
     t_start = time.perf_counter()

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import csv
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -81,8 +81,9 @@ def read_csv_log(
     gyro_units: str = "rad/s",
     accel_units: str = "m/s^2",
     time_offset_s: float = 0.0,
+    progress: Callable[[float], None] | None = None,
 ) -> Recording:
-    """Read and validate a CSV log directory.
+    """Read and validate a CSV log directory (``progress(fraction)`` follows imu.csv's bytes).
 
     Parameters
     ----------
@@ -125,7 +126,7 @@ def read_csv_log(
     imu_path = log_dir / IMU_FILE
     header = _read_header(imu_path)
     imu_format, imu_cols = _imu_format(imu_path, header)
-    imu = _read_table(imu_path, header, imu_cols, warnings)
+    imu = _read_table(imu_path, header, imu_cols, warnings, progress)
     imu = _check_time(imu, warnings)
     if imu_format == "increments":
         if imu.n < 3:
@@ -424,27 +425,34 @@ def _select_columns(
 _CHUNK_ROWS = 65536
 
 
-def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list[str]) -> _Table:
+def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list[str],
+                progress: Callable[[float], None] | None = None) -> _Table:
     """Parse ``wanted`` columns as float64 and check every cell is a finite number."""
     # Unnamed columns (trailing commas) are ignored silently: there is nothing to name.
     extra = [name for name in header if name and name not in wanted]
     if extra:
         warnings.append(f"{path.name}: ignoring extra column(s) {_names(extra)}")
     positions = [header.index(c) for c in wanted]
+    size = max(path.stat().st_size, 1)
     try:
         # Chunked parsing keeps the peak memory near the size of the data itself (a one-shot
         # read_csv holds ~4x the table in parser buffers for a 450k-row file).
-        reader = pd.read_csv(
-            path,
-            engine="c",
-            header=0,
-            dtype={i: np.float64 for i in positions},
-            skip_blank_lines=False,
-            encoding="utf-8-sig",
-            chunksize=_CHUNK_ROWS,
-        )
-        with reader:
-            parts = [chunk.iloc[:, positions].to_numpy(dtype=np.float64) for chunk in reader]
+        with open(path, "rb") as fh:
+            reader = pd.read_csv(
+                fh,
+                engine="c",
+                header=0,
+                dtype={i: np.float64 for i in positions},
+                skip_blank_lines=False,
+                encoding="utf-8-sig",
+                chunksize=_CHUNK_ROWS,
+            )
+            parts = []
+            with reader:
+                for chunk in reader:
+                    parts.append(chunk.iloc[:, positions].to_numpy(dtype=np.float64))
+                    if progress is not None:
+                        progress(min(fh.tell() / size, 1.0))
     except pd.errors.ParserError as e:
         raise InputError(f"{path}: {_parser_message(e, len(header))}") from e
     except ValueError as e:
