@@ -6,6 +6,9 @@ with one-line messages; they never print or exit.
 
 from __future__ import annotations
 
+import math
+import os
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +21,10 @@ from .errors import ConfigError, InputError
 from .recording import Recording, Solution
 
 CONFIG_IN_LOG_DIR = "navpp.toml"
+#: Files navpp writes into an output directory.  After a successful run, any of these that the
+#: run did not write (e.g. metrics from an earlier run with a reference) are removed, so the
+#: directory never mixes results of different runs.  Only these exact names are touched.
+OUTPUT_FILES = ("trajectory.csv", "metrics.json", "metrics.md")
 
 
 @dataclass(frozen=True)
@@ -90,16 +97,32 @@ def make_filter(name: str, config: Config, *, seed: int | None = None):
                max_consecutive_rejects=config.gnss.max_consecutive_rejects, rng=rng)
 
 
+def check_output_rate(rate_hz: object, what: str = "--output-rate") -> float:
+    """``rate_hz`` as a float if it is a finite number > 0 Hz; :class:`ConfigError` naming ``what``."""
+    ok = isinstance(rate_hz, (int, float, np.integer, np.floating)) and not isinstance(rate_hz, (bool, np.bool_))
+    if not ok or not math.isfinite(float(rate_hz)) or float(rate_hz) <= 0.0:
+        raise ConfigError(f"{what} must be a finite number of Hz > 0, got {rate_hz!r}")
+    return float(rate_hz)
+
+
 def resample_solution(sol: Solution, rate_hz: float) -> Solution:
-    """The solution at ``rate_hz`` on whole multiples of the period (interpolated)."""
+    """The solution at ``rate_hz`` on whole multiples of the period (interpolated).
+
+    Raises :class:`ConfigError` if ``rate_hz`` is not a finite number > 0, or so low that no
+    whole multiple of the period falls within the solution's time span.
+    """
     from .metrics import interpolate_solution
 
+    rate_hz = check_output_rate(rate_hz, "output rate")
     period = 1.0 / rate_hz
     t0_abs = sol.t0_ns * 1e-9
     k0 = np.ceil((t0_abs + sol.t[0]) / period - 1e-9)
     k1 = np.floor((t0_abs + sol.t[-1]) / period + 1e-9)
-    t = np.arange(k0, k1 + 1) * period - t0_abs
+    t = np.arange(k0, max(k1, k0 - 1.0) + 1) * period - t0_abs
     t = t[(t >= sol.t[0]) & (t <= sol.t[-1])]
+    if t.size == 0:
+        raise ConfigError(f"output rate {rate_hz:g} Hz: no output epoch falls within the solution's "
+                          f"{sol.t[-1] - sol.t[0]:.3f} s span; use a higher rate")
     it = interpolate_solution(sol, t)
     std = np.column_stack([np.interp(t, sol.t, sol.std_enu[:, i]) for i in range(3)])
     return Solution(t=t, lat_deg=it["lat_deg"], lon_deg=it["lon_deg"], alt=it["alt"], vel_enu=it["vel_enu"],
@@ -109,6 +132,60 @@ def resample_solution(sol: Solution, rate_hz: float) -> Solution:
 def default_out_dir(log: Path, filter_name: str) -> Path:
     stem = log.name if log.is_dir() else log.stem
     return Path("navpp-out") / f"{stem}-{filter_name}"
+
+
+def _os_reason(exc: OSError) -> str:
+    """An OSError as a short lower-case reason ("permission denied"), without the path."""
+    return (exc.strerror or str(exc) or type(exc).__name__).lower()
+
+
+def _first_non_directory(path: Path) -> Path | None:
+    """``path`` or its nearest ancestor that exists but is not a directory, if any."""
+    for p in (path, *path.parents):
+        if p.exists() or p.is_symlink():
+            return None if p.is_dir() else p
+    return None
+
+
+def prepare_out_dir(out: Path, label: str) -> list[Path]:
+    """Create ``out`` (with parents) and prove it is writable by creating and removing a file.
+
+    Returns the directories this call created (outermost first), so that a run that fails
+    later can remove them again.  Raises :class:`InputError` ``"<label> <out>: cannot write
+    there (<reason>)"``.
+    """
+    missing = [p for p in (out, *out.parents) if not (p.exists() or p.is_symlink())][::-1]
+    try:
+        blocker = _first_non_directory(out)
+        if blocker is not None:
+            what = "it is" if blocker == out else f"{blocker} is"
+            kind = "a broken symbolic link" if not blocker.exists() else "a file, not a directory"
+            raise InputError(f"{label} {out}: cannot write there ({what} {kind})")
+        out.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=out, prefix=".navpp-write-test-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        remove_created_dirs(missing)
+        raise InputError(f"{label} {out}: cannot write there ({_os_reason(exc)})") from None
+    return missing
+
+
+def remove_created_dirs(created: list[Path]) -> None:
+    """Remove the (still empty) directories :func:`prepare_out_dir` created, innermost first."""
+    for d in reversed(created):
+        try:
+            d.rmdir()
+        except OSError:
+            break
+
+
+def _write_file(path: Path, write: Callable[[], None]) -> Path:
+    try:
+        write()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write ({_os_reason(exc)})") from None
+    return path
 
 
 def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | Config | None = None,
@@ -124,7 +201,14 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     config : a TOML path or a :class:`Config`; None looks for ``navpp.toml`` in the log
         directory, then uses the defaults (automotive preset).
     reference : reference CSV overriding ``reference.csv`` in the log directory.
+    out_dir : output directory; default ``navpp-out/<log>-<filter>``.  With ``write=True`` it is
+        created and checked writable before anything is read (:class:`InputError` if not).
+        After a successful run, navpp's own output files (:data:`OUTPUT_FILES`) that this run
+        did not write are removed from it.
+    output_rate_hz : trajectory rate, Hz (finite, > 0, at most the IMU rate); overrides
+        ``[output] rate_hz``; None and no config rate: one row per IMU sample.
     progress : ``progress(stage, fraction)`` for progress bars.
+    write : False computes everything and writes nothing.
     """
     from . import engine
     from .io import writers
@@ -132,37 +216,60 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
 
     log = Path(log)
     cfg = config if isinstance(config, Config) else resolve_config(log, config)
+    if output_rate_hz is not None:
+        rate, rate_what = check_output_rate(output_rate_hz), "--output-rate"
+    else:
+        rate, rate_what = cfg.output.rate_hz, f"{cfg.source}: [output] rate_hz"
+        if rate is not None:
+            rate = check_output_rate(rate, rate_what)
     filt = make_filter(filter_name, cfg)
-    if progress:
-        progress("reading", 0.0)
-    rec = read_log(log, cfg, reference=reference, progress=(lambda f: progress("reading", f)) if progress else None)
-    if progress:
-        progress("reading", 1.0)
-    t_start = time.perf_counter()
-    result = engine.run(rec, cfg, filt, progress=(lambda f: progress("filtering", f)) if progress else None)
-    runtime = time.perf_counter() - t_start
-    sol = result.solution
-    rate = output_rate_hz if output_rate_hz is not None else cfg.output.rate_hz
-    sol_out = resample_solution(sol, rate) if rate else sol
-
-    metrics = None
-    if rec.reference is not None:
-        metrics = compute_metrics(
-            sol, rec.reference, filter_name=filter_name, log=str(log), reference=rec.reference.source or "",
-            runtime_s=runtime, imu_samples=len(rec.imu), gnss_epochs=result.gnss_epochs,
-            gnss_rejected=result.gnss_rejected, gnss=rec.gnss, lever_arm_m=cfg.gnss.lever_arm_m)
-
     out = Path(out_dir) if out_dir is not None else default_out_dir(log, filter_name)
-    files: list[Path] = []
-    if write:
-        out.mkdir(parents=True, exist_ok=True)
-        p = out / "trajectory.csv"
-        writers.write_trajectory_csv(p, sol_out, t0_s=rec.t0_ns * 1e-9)
-        files.append(p)
-        if metrics is not None:
-            writers.write_metrics_json(out / "metrics.json", metrics)
-            writers.write_metrics_md(out / "metrics.md", metrics)
-            files += [out / "metrics.json", out / "metrics.md"]
+    created = prepare_out_dir(out, "--out" if out_dir is not None else "output directory") if write else []
+    try:
+        if progress:
+            progress("reading", 0.0)
+        rec = read_log(log, cfg, reference=reference,
+                       progress=(lambda f: progress("reading", f)) if progress else None)
+        if progress:
+            progress("reading", 1.0)
+        imu_rate = rec.imu.rate_hz
+        # 0.1 % slack: the IMU rate is a median of stamp differences (jitter, stamp rounding)
+        if rate is not None and rate > imu_rate * 1.001:
+            raise ConfigError(f"{rate_what} {rate:g} Hz is above the IMU rate of {log} ({imu_rate:.1f} Hz); "
+                              "the trajectory cannot be finer than the IMU")
+        t_start = time.perf_counter()
+        result = engine.run(rec, cfg, filt, progress=(lambda f: progress("filtering", f)) if progress else None)
+        runtime = time.perf_counter() - t_start
+        sol = result.solution
+        sol_out = resample_solution(sol, rate) if rate is not None else sol
+
+        metrics = None
+        if rec.reference is not None:
+            metrics = compute_metrics(
+                sol, rec.reference, filter_name=filter_name, log=str(log), reference=rec.reference.source or "",
+                runtime_s=runtime, imu_samples=len(rec.imu), gnss_epochs=result.gnss_epochs,
+                gnss_rejected=result.gnss_rejected, gnss=rec.gnss, lever_arm_m=cfg.gnss.lever_arm_m)
+
+        files: list[Path] = []
+        if write:
+            files.append(_write_file(out / "trajectory.csv", lambda: writers.write_trajectory_csv(
+                out / "trajectory.csv", sol_out, t0_s=rec.t0_ns * 1e-9)))
+            if metrics is not None:
+                files.append(_write_file(out / "metrics.json",
+                                         lambda: writers.write_metrics_json(out / "metrics.json", metrics)))
+                files.append(_write_file(out / "metrics.md",
+                                         lambda: writers.write_metrics_md(out / "metrics.md", metrics)))
+            for name in OUTPUT_FILES:          # stale results of an earlier run: not ours any more
+                stale = out / name
+                if stale not in files and stale.is_file():
+                    try:
+                        stale.unlink()
+                    except OSError as exc:
+                        raise InputError(f"{stale}: cannot remove this output of an earlier run "
+                                         f"({_os_reason(exc)})") from None
+    except BaseException:
+        remove_created_dirs(created)
+        raise
     notes = tuple(cfg.notes) + tuple(result.alignment.lines)
     return ProcessResult(filter_name, rec, sol_out, result, metrics, out, tuple(files), cfg, notes, tuple(rec.warnings))
 

@@ -2,19 +2,27 @@
 
 Heavy modules (numpy, numba, pandas) are imported inside the commands so ``navpp --help``
 answers at once.  Every :class:`navpp.errors.NavppError` becomes one line on stderr and exit
-code 1; usage errors exit with 2 (Typer/Click).
+code 1.  Usage errors exit with 2 (Typer/Click): options that cannot be parsed, and option
+values that are invalid whatever the data (``--output-rate 0``, ``--seed -1``), which the
+option callbacks below reject as ``Error: Invalid value for '--option': must be ..., got ...``.
+Problems that depend on the data (an ``--output-rate`` above the log's IMU rate, an ``--out``
+directory that cannot be written) are processing errors: one line, exit code 1.
+
+Help and usage errors are plain Click text (``rich_markup_mode=None``): rich markup would eat
+bracketed text such as ``[default: ...]`` and ``[init]``.
 """
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Callable, Optional
 
 import typer
 
 app = typer.Typer(
-    add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+    add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
     help="Post-process inertial navigation logs: strapdown INS + loosely coupled GNSS filters.",
 )
 
@@ -26,6 +34,31 @@ def _fail(message: str) -> None:
     # escape: messages name config sections such as "[init]", which rich would eat as markup
     Console(stderr=True, highlight=False, soft_wrap=True).print(f"[bold red]navpp: error:[/] {escape(message)}")
     raise typer.Exit(1)
+
+
+def _note(console, line: str) -> None:
+    from rich.markup import escape
+
+    console.print(f"[dim]·[/] {escape(line)}")
+
+
+def _show(value) -> str:
+    return f"{value:g}" if isinstance(value, float) else repr(value)
+
+
+def _require(ok: Callable[[object], bool], requirement: str) -> Callable:
+    """Option callback: a usage error (exit 2) naming the option unless ``ok(value)``."""
+
+    def callback(value):
+        if value is not None and not ok(value):
+            raise typer.BadParameter(f"must be {requirement}, got {_show(value)}")
+        return value
+
+    return callback
+
+
+def _finite(lo: float, hi: float = math.inf, *, strict: bool = False) -> Callable[[float], bool]:
+    return lambda v: math.isfinite(v) and (v > lo if strict else v >= lo) and v <= hi
 
 
 class _Progress:
@@ -62,14 +95,18 @@ class _Progress:
 
 @app.command()
 def process(
-    log: Annotated[Path, typer.Argument(help="Log: a directory with imu.csv and gnss.csv (reference.csv optional).")],
+    log: Annotated[Path, typer.Argument(metavar="LOG", help="Log: a directory with imu.csv and gnss.csv "
+                                        "(reference.csv optional).")],
     filter: Annotated[str, typer.Option("--filter", "-f", help="Filter name (see `navpp filters`).")] = "ekf",
     config: Annotated[Optional[Path], typer.Option(help="TOML config; default: navpp.toml in the log directory, "
                                                    "else the automotive preset.")] = None,
     reference: Annotated[Optional[Path], typer.Option(help="Reference CSV (t, lat, lon, alt[, ve, vn, vu, roll, "
                                                       "pitch, heading]); overrides reference.csv.")] = None,
-    out: Annotated[Optional[Path], typer.Option(help="Output directory [default: navpp-out/<log>-<filter>].")] = None,
-    output_rate: Annotated[Optional[float], typer.Option(help="Trajectory rate in Hz [default: every IMU sample].")] = None,
+    out: Annotated[Optional[Path], typer.Option(
+        help="Output directory, created if needed.  [default: navpp-out/<log>-<filter>]")] = None,
+    output_rate: Annotated[Optional[float], typer.Option(
+        help="Trajectory rate in Hz, at most the IMU rate.  [default: every IMU sample]",
+        callback=_require(_finite(0.0, strict=True), "a finite number of Hz > 0"))] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars, notes or summary (warnings about "
                                         "the data are still printed).")] = False,
 ) -> None:
@@ -99,11 +136,14 @@ def _print_summary(res, quiet: bool) -> None:
     if quiet:
         return
     for line in res.notes:
-        err.print(f"[dim]·[/] {escape(line)}")
+        _note(err, line)
+    compile_s = getattr(res.run, "compile_s", 0.0) or 0.0
+    if compile_s > 0.5:
+        _note(err, f"compiled navpp's kernels in {compile_s:.1f} s (first run only; cached for next time)")
     con = Console(highlight=False, soft_wrap=True)
     run = res.run
     con.print(f"{escape(res.recording.source)}: {len(res.recording.imu)} IMU samples at {res.recording.imu.rate_hz:.1f} Hz, "
-              f"{run.gnss_epochs} GNSS epochs ({run.gnss_rejected} rejected by the gate), "
+              f"{run.gnss_epochs} GNSS epochs used ({run.gnss_rejected} rejected by the gate), "
               f"filter [bold]{res.filter_name}[/] ran in {run.runtime_s:.2f} s")
     if res.metrics is not None:
         m = res.metrics
@@ -121,35 +161,60 @@ def _print_summary(res, quiet: bool) -> None:
     con.print(escape("wrote " + ", ".join(str(p) for p in res.files)))
 
 
+PRESETS = ("consumer", "automotive", "tactical", "navigation", "ideal")
+
+
+def _lever_arm(value: Optional[str]) -> Optional[tuple[float, float, float]]:
+    if value is None:
+        return None
+    try:
+        la = tuple(float(v) for v in value.split(","))
+    except ValueError:
+        la = ()
+    if len(la) != 3 or not all(math.isfinite(v) for v in la):
+        raise typer.BadParameter(f"needs three finite numbers 'x,y,z' (m), got {value!r}", param_hint="'--lever-arm'")
+    return la  # type: ignore[return-value]
+
+
 @app.command()
 def simulate(
-    out: Annotated[Path, typer.Argument(help="Output directory for the CSV log (imu.csv, gnss.csv, reference.csv, navpp.toml).")],
-    duration: Annotated[float, typer.Option(help="Drive length, s (includes the initial still period).")] = 900.0,
-    imu_rate: Annotated[float, typer.Option(help="IMU rate, Hz.")] = 125.0,
-    gnss_rate: Annotated[float, typer.Option(help="GNSS rate, Hz (1-10).")] = 5.0,
-    preset: Annotated[str, typer.Option(help="IMU grade: consumer, automotive, tactical, navigation, ideal.")] = "automotive",
-    seed: Annotated[int, typer.Option(help="Random seed (same seed, same log).")] = 0,
-    gnss_std_h: Annotated[float, typer.Option(help="GNSS horizontal noise 1-sigma per axis, m.")] = 1.8,
-    gnss_std_u: Annotated[float, typer.Option(help="GNSS vertical noise 1-sigma, m.")] = 2.5,
-    gnss_error: Annotated[str, typer.Option(help="GNSS error model: white or correlated.")] = "white",
-    lever_arm: Annotated[Optional[str], typer.Option(help="Antenna lever arm in body FLU, m: 'x,y,z'.")] = None,
-    still: Annotated[float, typer.Option(help="Initial still period, s.")] = 60.0,
+    out: Annotated[Path, typer.Argument(metavar="OUT", help="Output directory for the CSV log (imu.csv, gnss.csv, "
+                                        "reference.csv, navpp.toml).")],
+    duration: Annotated[float, typer.Option(help="Drive length, s, >= 30 (includes the initial still period).",
+                                            callback=_require(_finite(30.0), "a finite number of seconds >= 30"))] = 900.0,
+    imu_rate: Annotated[float, typer.Option(help="IMU rate, Hz.",
+                                            callback=_require(_finite(0.0, strict=True), "a finite number of Hz > 0"))] = 125.0,
+    gnss_rate: Annotated[float, typer.Option(help="GNSS rate, Hz (1-10).",
+                                             callback=_require(_finite(1.0, 10.0), "a number of Hz within 1-10"))] = 5.0,
+    preset: Annotated[str, typer.Option(help=f"IMU grade: {', '.join(PRESETS)}.",
+                                        callback=_require(lambda v: v in PRESETS, f"one of {', '.join(PRESETS)}"))]
+        = "automotive",
+    seed: Annotated[int, typer.Option(help="Random seed (same seed, same log).",
+                                      callback=_require(lambda v: v >= 0, "a non-negative integer"))] = 0,
+    gnss_std_h: Annotated[float, typer.Option(help="GNSS horizontal noise 1-sigma per axis, m.",
+                                              callback=_require(_finite(0.0), "a finite number of metres >= 0"))] = 1.8,
+    gnss_std_u: Annotated[float, typer.Option(help="GNSS vertical noise 1-sigma, m.",
+                                              callback=_require(_finite(0.0), "a finite number of metres >= 0"))] = 2.5,
+    gnss_error: Annotated[str, typer.Option(help="GNSS error model: white or correlated.",
+                                            callback=_require(lambda v: v in ("white", "correlated"),
+                                                              "'white' or 'correlated'"))] = "white",
+    lever_arm: Annotated[Optional[str], typer.Option(
+        help="Antenna lever arm in body FLU, m: 'x,y,z'.  [default: 0,0,0]")] = None,
+    still: Annotated[float, typer.Option(help="Initial still period, s (at most half of --duration).",
+                                         callback=_require(_finite(0.0), "a finite number of seconds >= 0"))] = 60.0,
 ) -> None:
     """Simulate a car-like drive and write it as a CSV log with its reference."""
+    from rich.console import Console
+
     from .errors import NavppError
 
+    la = _lever_arm(lever_arm)
     try:
         from . import api
 
         kwargs = dict(duration_s=duration, imu_rate_hz=imu_rate, gnss_rate_hz=gnss_rate, preset=preset, seed=seed,
                       gnss_std_h_m=gnss_std_h, gnss_std_u_m=gnss_std_u, gnss_error=gnss_error, still_s=still)
-        if lever_arm:
-            try:
-                la = tuple(float(v) for v in lever_arm.split(","))
-            except ValueError:
-                la = ()
-            if len(la) != 3:
-                raise typer.BadParameter(f"--lever-arm needs three numbers 'x,y,z', got {lever_arm!r}")
+        if la is not None:
             kwargs["lever_arm_m"] = la
         try:
             path = api.simulate_log(out, **kwargs)
@@ -159,6 +224,13 @@ def simulate(
     except NavppError as exc:
         _fail(str(exc))
         return
+    from .simulate import SimulationSpec
+
+    spec = SimulationSpec(**kwargs)
+    if spec.still_effective_s < spec.still_s:
+        _note(Console(stderr=True, highlight=False, soft_wrap=True),
+              f"still period shortened to {spec.still_effective_s:g} s: --still {still:g} s is more than half "
+              f"of --duration {duration:g} s")
     typer.echo(f"wrote {path}/imu.csv, gnss.csv, reference.csv, navpp.toml")
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -63,7 +63,9 @@ class RunResult:
     diagnostics: Diagnostics
     gnss_epochs: int
     gnss_rejected: int
-    runtime_s: float
+    runtime_s: float                  # processing wall time, s, without kernel compilation
+    compile_s: float = 0.0            # one-off numba compilation on a cold cache, s
+    warnings: tuple[str, ...] = ()    # what the run noticed about the data (units, tilt, gating)
 
 
 def mounting_matrix(rpy_deg: tuple[float, float, float]) -> np.ndarray:
@@ -96,8 +98,60 @@ def noise_model(config: Config) -> NoiseModel:
 
 def run(recording: Recording, config: Config, filt: Filter, *, progress: ProgressFn | None = None,
         cov_step_s: float = 0.05) -> RunResult:
-    """Process one recording with one filter; returns the IMU-rate solution and diagnostics."""
+    """Process one recording with one filter; returns the IMU-rate solution and diagnostics.
+
+    ``runtime_s`` excludes the one-off compilation of navpp's kernels on a cold cache, which
+    is reported as ``compile_s``.
+    """
+    from numba.core import event as numba_event
+
     t_wall = time.perf_counter()
+    with numba_event.install_recorder("numba:compile") as rec:
+        result = _run(recording, config, filt, progress, cov_step_s)
+    compile_s = _top_level_duration(rec.buffer)
+    return replace(result, runtime_s=time.perf_counter() - t_wall - compile_s, compile_s=compile_s)
+
+
+def _top_level_duration(events) -> float:
+    """Seconds covered by outermost START..END pairs of numba compile events."""
+    depth, start, total = 0, 0.0, 0.0
+    for ts, ev in events:
+        if ev.is_start:
+            if depth == 0:
+                start = ts
+            depth += 1
+        else:
+            depth -= 1
+            if depth == 0:
+                total += ts - start
+    return total
+
+
+def check_imu_plausible(recording: Recording) -> list[str]:
+    """Catch unit and column mistakes before they become a wrong trajectory.
+
+    Raises InputError when the median specific force is far from gravity (e.g. an
+    accelerometer in g read as m/s^2); returns warnings for gyro rates no land vehicle turns at
+    (e.g. deg/s read as rad/s).
+    """
+    imu = recording.imu
+    f = float(np.median(np.linalg.norm(imu.accel, axis=1)))
+    if not 3.0 < f < 30.0:
+        hint = ('are the accelerometer values in g? set [imu] accel_units = "g"' if 0.3 < f < 3.0
+                else "check the accelerometer columns and their units")
+        raise InputError(f"{recording.source}: the median specific force is {f:.3g} m/s^2, not about 9.8: {hint}")
+    w = float(np.percentile(np.linalg.norm(imu.gyro, axis=1), 99.0))
+    warnings = []
+    if w > 5.0:
+        warnings.append(f"{recording.source}: gyro rates reach {w:.1f} rad/s ({np.degrees(w):.0f} deg/s) in the top "
+                        'percentile: if the gyro is in deg/s, set [imu] gyro_units = "deg/s"')
+    return warnings
+
+
+def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
+         cov_step_s: float) -> RunResult:
+    t_wall = time.perf_counter()
+    warnings = check_imu_plausible(recording)
     imu, gnss = recording.imu, recording.gnss
     gyro, accel = imu.gyro, imu.accel
     if any(a != 0.0 for a in config.imu.mounting_rpy_deg):
@@ -176,7 +230,20 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
     diag = Diagnostics(tg[:m_ep], nu, nis, accepted, forced)
     bias_std = np.sqrt(bias_var)
     biases = BiasHistory(tg[:m_ep], bias[:, :3], bias[:, 3:], bias_std[:, :3], bias_std[:, 3:])
-    return RunResult(solution, biases, al, diag, m_ep, int((~accepted).sum()), time.perf_counter() - t_wall)
+    rejected = int((~accepted).sum())
+    warnings += list(al.warnings)
+    if rejected > 0.05 * m_ep:
+        warnings.append(f"{recording.source}: {rejected} of {m_ep} GNSS fixes ({100.0 * rejected / m_ep:.0f}%) failed "
+                        "the innovation gate: the IMU and GNSS disagree; check the IMU units and axes, the lever "
+                        "arm, the time bases and the GNSS standard deviations")
+    ok = accepted & ~forced
+    if ok.sum() >= 20:
+        mean_nis = float(np.mean(nis[ok])) / 3.0
+        if mean_nis > 3.0:
+            warnings.append(f"{recording.source}: GNSS innovations are {math.sqrt(mean_nis):.1f} times larger than "
+                            "the filter expects: the GNSS standard deviations or the IMU noise are too optimistic")
+    return RunResult(solution, biases, al, diag, m_ep, rejected, time.perf_counter() - t_wall, 0.0,
+                     tuple(warnings))
 
 
 @njit(cache=True)

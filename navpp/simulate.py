@@ -154,6 +154,17 @@ class SimulationSpec:
         if len(lever) != 3:
             raise ConfigError(f"simulate: lever_arm_m needs 3 numbers (body FLU, m), got {self.lever_arm_m!r}")
         object.__setattr__(self, "lever_arm_m", lever)
+        if not all(math.isfinite(x) for x in lever):
+            raise ConfigError(f"simulate: lever_arm_m must be finite, got {self.lever_arm_m!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise ConfigError(f"simulate: seed must be a non-negative integer, got {self.seed!r}")
+        for name in ("duration_s", "imu_rate_hz", "gnss_rate_hz", "reference_rate_hz", "still_s", "gnss_std_h_m",
+                     "gnss_std_u_m", "gnss_std_vel_mps", "gnss_corr_time_s", "lat0_deg", "lon0_deg", "alt0_m",
+                     "heading0_deg", "t0_unix"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                    or not math.isfinite(value):
+                raise ConfigError(f"simulate: {name} must be a finite number, got {value!r}")
         if not self.duration_s >= 30.0:
             raise ConfigError(f"simulate: duration must be >= 30 s, got {self.duration_s!r}")
         if not self.imu_rate_hz > 0.0:

@@ -112,3 +112,43 @@ def test_heading_from_gnss_track_is_accurate_and_honest(gnss_velocity):
     errors, sigmas = np.array(errors), np.array(sigmas)
     assert np.sqrt(np.mean(errors ** 2)) < (0.6 if gnss_velocity else 1.5)
     assert np.all(np.abs(errors) < 3.0 * sigmas)
+
+
+def test_smooth_motion_is_not_taken_for_a_still_period():
+    # the simulator has no vibration: a smooth pull-away looks quiet to the IMU; the GNSS track
+    # (or the specific force) must overrule it
+    sim = simulate(SimulationSpec(duration_s=200.0, still_s=0.0, seed=2))
+    al = align(sim.imu.t, sim.imu.gyro, sim.imu.accel, sim.gnss, _settings(sim))
+    assert al.still is None
+    assert any("starting in motion" in line for line in al.lines)
+    truth = sim.reference
+    k = int(np.searchsorted(truth.t, al.t))
+    err = geodesy.geodetic_to_enu(al.x[7], al.x[8], al.x[9], math.radians(truth.lat_deg[k]),
+                                  math.radians(truth.lon_deg[k]), truth.alt[k])
+    assert np.all(np.abs(err[:2]) < 3 * 1.8)
+    assert np.linalg.norm(al.x[4:6] - truth.vel_enu[k, :2]) < 3.0
+
+
+def test_gnss_starting_after_the_still_period_starts_in_motion_at_the_first_fix():
+    from dataclasses import replace
+
+    sim = simulate(SimulationSpec(duration_s=200.0, still_s=30.0, seed=3))
+    g = sim.gnss
+    keep = g.t >= 45.0                          # the car drives off at 30 s
+    gnss = replace(g, t=g.t[keep], lat_deg=g.lat_deg[keep], lon_deg=g.lon_deg[keep], alt=g.alt[keep],
+                   std_enu=g.std_enu[keep])
+    al = align(sim.imu.t, sim.imu.gyro, sim.imu.accel, gnss, _settings(sim))
+    assert al.still is None and al.t == pytest.approx(45.0, abs=0.01)
+    assert any("no GNSS fix yet" in line for line in al.lines)
+
+
+def test_tilted_mounting_is_warned():
+    w, f = _static(math.radians(180.0), 0.0, 1.0)        # FRD-like: z axis pointing down
+    t = np.arange(0.0, 10.0, 0.01)
+    n = t.size
+    from navpp.recording import GnssData
+
+    tg = np.arange(0.0, 10.0, 0.2)
+    gnss = GnssData(tg, np.full(tg.size, 45.0), np.full(tg.size, 7.0), np.full(tg.size, 300.0))
+    al = align(t, np.tile(w, (n, 1)), np.tile(f, (n, 1)), gnss, AlignmentSettings(heading=0.5, method="config"))
+    assert any("mounting_rpy_deg" in wline for wline in al.warnings)

@@ -97,6 +97,8 @@ def test_process_exit_and_summary(processed) -> None:
     text = flat(res.stdout)
     assert "15001 IMU samples at 125.0 Hz" in text
     assert "filter ekf" in text
+    m = json.loads((processed[1] / "metrics.json").read_text())
+    assert f"{m['gnss_epochs']} GNSS epochs used ({m['gnss_rejected']} rejected by the gate)" in text
     assert "horizontal" in text and "raw GNSS horiz." in text
     assert "wrote" in text and all(n in text for n in ("trajectory.csv", "metrics.json", "metrics.md"))
 
@@ -203,6 +205,130 @@ def test_process_duplicate_imu_stamps_warned(log_copy: Path, tmp_path: Path) -> 
     assert (out / "trajectory.csv").is_file()
 
 
+def test_process_rerun_without_reference_leaves_no_stale_metrics(log_copy: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    res = invoke("process", log_copy, "--out", out, "--quiet")
+    assert res.exit_code == 0, (res.output, res.exception)
+    assert sorted(p.name for p in out.iterdir()) == ["metrics.json", "metrics.md", "trajectory.csv"]
+    first = (out / "trajectory.csv").read_bytes()
+    (log_copy / "reference.csv").unlink()
+    res = invoke("process", log_copy, "--out", out, "--output-rate", "10")
+    assert res.exit_code == 0, (res.output, res.exception)
+    assert sorted(p.name for p in out.iterdir()) == ["trajectory.csv"]
+    assert (out / "trajectory.csv").read_bytes() != first
+    assert res.stdout.splitlines()[-1] == f"wrote {out / 'trajectory.csv'}"
+
+
+def test_process_out_is_an_existing_file(sim_log_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "results"
+    out.write_text("keep me\n")
+    res = invoke("process", sim_log_dir, "--out", out)
+    msg = assert_one_line_error(res, tmp_path / "nothing-here")
+    assert msg == f"navpp: error: --out {out}: cannot write there (it is a file, not a directory)"
+    assert out.read_text() == "keep me\n"
+
+
+def test_process_out_below_a_file(sim_log_dir: Path, tmp_path: Path) -> None:
+    blocker = tmp_path / "results"
+    blocker.write_text("x")
+    out = blocker / "sub"
+    msg = assert_one_line_error(invoke("process", sim_log_dir, "--out", out), out)
+    assert msg == f"navpp: error: --out {out}: cannot write there ({blocker} is a file, not a directory)"
+
+
+def test_process_out_checked_before_reading(log_copy: Path, tmp_path: Path) -> None:
+    """A broken log and an unwritable --out: the --out problem is reported (nothing was read)."""
+    (log_copy / "imu.csv").write_text("garbage\n")
+    blocker = tmp_path / "results"
+    blocker.write_text("x")
+    msg = assert_one_line_error(invoke("process", log_copy, "--out", blocker), tmp_path / "nothing-here")
+    assert f"--out {blocker}: cannot write there" in msg
+
+
+@pytest.mark.parametrize("rate", ["nan", "inf", "-inf", "-1", "0"])
+def test_process_output_rate_usage_error(sim_log_dir: Path, tmp_path: Path, rate: str) -> None:
+    out = tmp_path / "out"
+    res = invoke("process", sim_log_dir, "--out", out, "--output-rate", rate)
+    assert res.exit_code == 2, (res.output, res.exception)
+    assert "Traceback" not in res.output and res.stdout == ""
+    (line,) = [line for line in res.stderr.splitlines() if line.startswith("Error:")]
+    assert line == f"Error: Invalid value for '--output-rate': must be a finite number of Hz > 0, got {rate}"
+    assert not out.exists()
+
+
+def test_process_output_rate_above_imu_rate(sim_log_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    msg = assert_one_line_error(invoke("process", sim_log_dir, "--out", out, "--output-rate", "500"), out)
+    assert msg == (f"navpp: error: --output-rate 500 Hz is above the IMU rate of {sim_log_dir} (125.0 Hz); "
+                   "the trajectory cannot be finer than the IMU")
+    assert not out.exists()
+
+
+def test_process_help_shows_defaults() -> None:
+    res = runner.invoke(app, ["process", "--help"], terminal_width=200)
+    assert res.exit_code == 0, res.output
+    text = flat(res.stdout)
+    assert "Output directory, created if needed. [default: navpp-out/<log>-<filter>]" in text
+    assert "Trajectory rate in Hz, at most the IMU rate. [default: every IMU sample]" in text
+    assert "[default: ekf]" in text
+    for option in ("--filter", "--config", "--reference", "--out", "--output-rate", "--quiet"):
+        assert option in text
+
+
+def test_simulate_help_shows_defaults() -> None:
+    res = runner.invoke(app, ["simulate", "--help"], terminal_width=200)
+    assert res.exit_code == 0, res.output
+    text = flat(res.stdout)
+    for expected in ("--duration <float> Drive length, s, >= 30 (includes the initial still period). [default: 900.0]",
+                     "--seed <int> Random seed (same seed, same log). [default: 0]",
+                     "'x,y,z'. [default: 0,0,0]", "[default: 60.0]", "[default: automotive]"):
+        assert expected in text, expected
+
+
+# --------------------------------------------------------------------------------- summary notes
+
+
+@pytest.fixture(scope="module")
+def computed(sim_log_dir: Path):
+    from navpp import api
+
+    return api.process(sim_log_dir, write=False)
+
+
+class _Run:
+    """The engine's RunResult, with ``compile_s`` set to a given value or absent (as before the
+    engine had the field)."""
+
+    def __init__(self, run, compile_s: float | None) -> None:
+        self._run, self._compile_s = run, compile_s
+
+    def __getattr__(self, name: str):
+        if name == "compile_s":
+            if self._compile_s is None:
+                raise AttributeError(name)
+            return self._compile_s
+        return getattr(self._run, name)
+
+
+@pytest.mark.parametrize("compile_s, quiet, shown", [(2.34, False, True), (0.4, False, False), (0.0, False, False),
+                                                     (None, False, False), (2.34, True, False)])
+def test_summary_compile_note(computed, capsys, compile_s, quiet, shown) -> None:
+    import dataclasses
+
+    from navpp import cli
+
+    res = dataclasses.replace(computed, run=_Run(computed.run, compile_s))
+    assert hasattr(res.run, "compile_s") is (compile_s is not None)
+    cli._print_summary(res, quiet)
+    captured = capsys.readouterr()
+    err = flat(captured.err)
+    assert ("· compiled navpp's kernels in 2.3 s (first run only; cached for next time)" in err) is shown
+    assert ("compiled navpp's kernels" in err) is shown
+    assert "compiled" not in captured.out
+    if not quiet:
+        assert all(flat(line) in err for line in computed.notes)   # printed with the other notes
+
+
 # --------------------------------------------------------------------------------- filters, simulate
 
 
@@ -226,14 +352,60 @@ def test_simulate_writes_log_and_is_reproducible(tmp_path: Path) -> None:
     assert len(read_lines(a / "imu.csv")) == 1 + 40 * 125 + 1
 
 
-@pytest.mark.parametrize("lever", ["1,2", "a,b,c"])
+@pytest.mark.parametrize("lever", ["1,2", "a,b,c", "1,2,nan"])
 def test_simulate_bad_lever_arm(tmp_path: Path, lever: str) -> None:
     out = tmp_path / "sim"
     res = invoke("simulate", out, "--duration", "40", "--lever-arm", lever)
-    assert res.exit_code != 0
+    assert res.exit_code == 2
     assert "Traceback" not in res.output
-    assert "--lever-arm" in res.output and "x,y,z" in res.output
+    assert (f"Error: Invalid value for '--lever-arm': needs three finite numbers 'x,y,z' (m), got {lever!r}"
+            in res.stderr.splitlines())
     assert not out.exists()
+
+
+@pytest.mark.parametrize("option, value, requirement", [
+    ("--seed", "-1", "a non-negative integer"),
+    ("--duration", "20", "a finite number of seconds >= 30"),
+    ("--duration", "inf", "a finite number of seconds >= 30"),
+    ("--duration", "nan", "a finite number of seconds >= 30"),
+    ("--imu-rate", "0", "a finite number of Hz > 0"),
+    ("--imu-rate", "inf", "a finite number of Hz > 0"),
+    ("--gnss-rate", "20", "a number of Hz within 1-10"),
+    ("--preset", "'cheap'", "one of consumer, automotive, tactical, navigation, ideal"),
+    ("--gnss-std-h", "-1", "a finite number of metres >= 0"),
+    ("--gnss-std-u", "nan", "a finite number of metres >= 0"),
+    ("--gnss-error", "'pink'", "'white' or 'correlated'"),
+    ("--still", "-5", "a finite number of seconds >= 0"),
+])
+def test_simulate_bad_option_names_it(tmp_path: Path, option: str, value: str, requirement: str) -> None:
+    out = tmp_path / "sim"
+    res = invoke("simulate", out, option, value.strip("'"))
+    assert res.exit_code == 2, (res.output, res.exception)
+    assert "Traceback" not in res.output and res.stdout == ""
+    assert f"Error: Invalid value for '{option}': must be {requirement}, got {value}" in res.stderr.splitlines()
+    assert not out.exists()
+
+
+def test_simulate_still_period_shortened_note(tmp_path: Path) -> None:
+    out = tmp_path / "sim"
+    res = invoke("simulate", out, "--duration", "40", "--still", "100", "--imu-rate", "10")
+    assert res.exit_code == 0, (res.output, res.exception)
+    assert flat(res.stderr) == "· still period shortened to 20 s: --still 100 s is more than half of --duration 40 s"
+    # oracle: the reference truth stands still for exactly the first 20 s, then moves
+    lines = read_lines(out / "reference.csv")
+    t = column(out / "reference.csv", "t")
+    speed = np.hypot(column(out / "reference.csv", "ve"), column(out / "reference.csv", "vn"))
+    t -= t[0]
+    assert len(lines) == len(t) + 1
+    assert np.all(speed[t <= 20.0] == 0.0)
+    assert np.all(speed[(t > 20.5)] > 0.0)
+    assert "(still 20 s first)" in (out / "navpp.toml").read_text()
+
+
+def test_simulate_no_note_when_still_fits(tmp_path: Path) -> None:
+    res = invoke("simulate", tmp_path / "sim", "--duration", "40", "--still", "20", "--imu-rate", "10")
+    assert res.exit_code == 0, (res.output, res.exception)
+    assert res.stderr == ""
 
 
 # --------------------------------------------------------------------------------- bad input

@@ -550,3 +550,34 @@ def test_error_not_utf8(tmp_path: Path) -> None:
     with pytest.raises(InputError) as info:
         read_csv_log(d)
     _assert_names(str(info.value), "gnss.csv", None, 1)
+
+
+def test_zero_std_is_an_error(tmp_path: Path) -> None:
+    header = [*GNSS_HEADER, "std_e", "std_n", "std_u"]
+    rows = [[*r, 1.0, 1.0, 2.0] for r in gnss_rows()]
+    rows[2][header.index("std_u")] = 0.0
+    msg = _error(tmp_path, gnss=(header, rows))
+    _assert_names(msg, "gnss.csv", "std_u", 4)
+    assert "zero" in msg
+
+
+def test_no_fix_rows_and_null_island_are_dropped(tmp_path: Path) -> None:
+    header = [*GNSS_HEADER, "fix"]
+    rows = [[*r, 1] for r in gnss_rows()]
+    rows[1][header.index("fix")] = 0
+    rows[2][1] = rows[2][2] = 0.0            # lat = lon = 0
+    rows += [[rows[-1][0] + 0.03 * k, 30.5, 114.25, 20.0, 4] for k in range(1, 3)]
+    rec = read_csv_log(make_log(tmp_path, gnss=(header, rows)))
+    assert len(rec.gnss) == len(rows) - 2
+    assert not np.any((rec.gnss.lat_deg == 0) & (rec.gnss.lon_deg == 0))
+    w = " ".join(rec.warnings)
+    assert "1 with fix = 0" in w and "1 at lat = lon = 0" in w and "line 3" in w
+
+
+@pytest.mark.parametrize("scale,unit", [(1e3, "milliseconds"), (1e9, "nanoseconds")])
+def test_stamps_not_in_seconds_are_named(tmp_path: Path, scale: float, unit: str) -> None:
+    imu = [[0.01 * k * scale, *row[1:]] for k, row in enumerate(imu_rows())]
+    gnss = [[(r[0] - T0) * scale, *r[1:]] for r in gnss_rows()]
+    msg = _error(tmp_path, imu=(IMU_HEADER, imu), gnss=(GNSS_HEADER, gnss))
+    _assert_names(msg, "imu.csv", "t", None)
+    assert unit in msg

@@ -220,3 +220,42 @@ def test_mounting_rotation_and_units_are_undone(short_sim, baseline, tmp_path):
     assert len(a) == len(b)
     d = position_errors_enu(b.lat_deg, b.lon_deg, b.alt, a.lat_deg, a.lon_deg, a.alt)
     assert np.abs(d).max() < 1e-3
+
+
+def _recording_with(edit_imu=None, edit_gnss=None, seed=13, duration=150.0):
+    from dataclasses import replace
+
+    sim = simulate(SimulationSpec(duration_s=duration, still_s=30.0, seed=seed))
+    rec = sim.recording()
+    if edit_imu is not None:
+        rec = replace(rec, imu=edit_imu(rec.imu))
+    if edit_gnss is not None:
+        rec = replace(rec, gnss=edit_gnss(rec.gnss))
+    return rec
+
+
+def test_accelerometer_in_g_is_a_clear_error():
+    from navpp.errors import InputError
+    from navpp.recording import ImuData
+
+    rec = _recording_with(edit_imu=lambda imu: ImuData(imu.t, imu.gyro, imu.accel / 9.80665))
+    cfg = config_from_dict({}, "test")
+    with pytest.raises(InputError, match='accel_units = "g"'):
+        engine.run(rec, cfg, api.make_filter("ekf", cfg))
+
+
+def test_gyro_in_deg_per_s_and_bad_gnss_are_warned_not_silent():
+    from navpp.recording import ImuData
+
+    rec = _recording_with(edit_imu=lambda imu: ImuData(imu.t, np.degrees(imu.gyro), imu.accel))
+    cfg = config_from_dict({}, "test")
+    res = engine.run(rec, cfg, api.make_filter("ekf", cfg))
+    text = " ".join(res.warnings)
+    assert 'gyro_units = "deg/s"' in text
+    assert "failed the innovation gate" in text or "times larger than the filter expects" in text
+
+
+def test_a_clean_run_has_no_warnings(drive):
+    _, _, res, _ = drive
+    assert res.warnings == ()
+    assert res.compile_s >= 0.0 and res.runtime_s > 0.0

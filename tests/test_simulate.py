@@ -235,6 +235,26 @@ def test_invalid_specs_are_config_errors():
             SimulationSpec(**kw)
 
 
+@pytest.mark.parametrize("kw, message", [
+    (dict(seed=-1), "simulate: seed must be a non-negative integer, got -1"),
+    (dict(seed=1.5), "simulate: seed must be a non-negative integer, got 1.5"),
+    (dict(duration_s=math.inf), "simulate: duration_s must be a finite number, got inf"),
+    (dict(imu_rate_hz=math.inf), "simulate: imu_rate_hz must be a finite number, got inf"),
+    (dict(still_s=math.nan), "simulate: still_s must be a finite number, got nan"),
+    (dict(gnss_std_h_m=math.inf), "simulate: gnss_std_h_m must be a finite number, got inf"),
+    (dict(lever_arm_m=(0.0, math.nan, 0.0)), "simulate: lever_arm_m must be finite, got (0.0, nan, 0.0)"),
+])
+def test_invalid_specs_name_the_field(kw, message) -> None:
+    with pytest.raises(ConfigError) as exc:
+        SimulationSpec(**kw)
+    assert str(exc.value) == message
+
+
+def test_still_effective_is_at_most_half_the_duration() -> None:
+    assert SimulationSpec(duration_s=50.0, still_s=100.0).still_effective_s == 25.0
+    assert SimulationSpec(duration_s=50.0, still_s=20.0).still_effective_s == 20.0
+
+
 # (5) GNSS ----------------------------------------------------------------------------------
 
 

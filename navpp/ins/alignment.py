@@ -56,23 +56,24 @@ class Alignment:
     P: np.ndarray                # (15, 15)
     still: tuple[float, float] | None
     lines: tuple[str, ...] = field(default_factory=tuple)
+    warnings: tuple[str, ...] = field(default_factory=tuple)
 
 
-def detect_still(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_duration: float,
-                 gyro_arw: float = 0.0, accel_vrw: float = 0.0, window_s: float = 0.5
-                 ) -> tuple[int, int] | None:
-    """First run of still windows lasting ``min_duration`` s: sample index range [i0, i1).
+def still_runs(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_duration: float,
+               gyro_arw: float = 0.0, accel_vrw: float = 0.0, window_s: float = 0.5) -> list[tuple[int, int]]:
+    """Runs of still IMU windows lasting at least ``min_duration`` s: sample index ranges [i0, i1).
 
     A window is still when the standard deviation of every specific-force axis is below
     ``max(0.05 m/s^2, 4 x white-noise sigma)`` and of every rate axis below
-    ``max(0.5 deg/s, 4 x sigma)``, and the mean rate is below 1 deg/s.
+    ``max(0.5 deg/s, 4 x sigma)``, and the mean rate is below 1 deg/s.  Smooth motion without
+    vibration passes this test too: :func:`align` confirms a run with the GNSS track.
     """
     n = t.shape[0]
     dt = float(np.median(np.diff(t))) if n > 1 else 1.0
     w = max(2, int(round(window_s / dt)))
     nw = n // w
     if nw == 0:
-        return None
+        return []
     sig_a = accel_vrw / math.sqrt(dt)
     sig_g = gyro_arw / math.sqrt(dt)
     thr_a = max(0.05, 4.0 * sig_a)
@@ -82,6 +83,7 @@ def detect_still(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_dura
     still = ((a.std(axis=1).max(axis=1) < thr_a) & (g.std(axis=1).max(axis=1) < thr_g)
              & (np.abs(g.mean(axis=1)).max(axis=1) < math.radians(1.0)))
     need = max(1, int(math.ceil(min_duration / (w * dt))))
+    runs = []
     k = 0
     while k < nw:
         if still[k]:
@@ -89,11 +91,45 @@ def detect_still(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_dura
             while j < nw and still[j]:
                 j += 1
             if j - k >= need:
-                return k * w, j * w
+                runs.append((k * w, j * w))
             k = j
         else:
             k += 1
-    return None
+    return runs
+
+
+def detect_still(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_duration: float,
+                 gyro_arw: float = 0.0, accel_vrw: float = 0.0, window_s: float = 0.5
+                 ) -> tuple[int, int] | None:
+    """The first of :func:`still_runs`, or None."""
+    runs = still_runs(t, gyro, accel, min_duration=min_duration, gyro_arw=gyro_arw, accel_vrw=accel_vrw,
+                      window_s=window_s)
+    return runs[0] if runs else None
+
+
+def gnss_speed_bound(gnss, sel: np.ndarray, lat: float, lon: float, h: float) -> tuple[float, float]:
+    """Horizontal speed (m/s) of the GNSS track over the fixes ``sel`` and its 1-sigma.
+
+    From GNSS velocity when the log has it (median), else from a straight-line fit of the
+    positions against time.  With fewer than 3 fixes and no velocity: (0, inf).
+    """
+    if gnss.vel_enu is not None and sel.any():
+        v = np.hypot(gnss.vel_enu[sel, 0], gnss.vel_enu[sel, 1])
+        sv = float(np.mean(gnss.std_vel_enu[sel][:, :2])) if gnss.std_vel_enu is not None else 0.1
+        return float(np.median(v)), sv
+    idx = np.nonzero(sel)[0]
+    if idx.size < 3:
+        return 0.0, math.inf
+    enu = geodesy.geodetic_to_enu(np.radians(gnss.lat_deg[idx]), np.radians(gnss.lon_deg[idx]), gnss.alt[idx],
+                                  lat, lon, h)
+    tt = gnss.t[idx] - gnss.t[idx].mean()
+    stt = float(np.sum(tt * tt))
+    if stt <= 0:
+        return 0.0, math.inf
+    ve = float(np.sum(tt * enu[:, 0]) / stt)
+    vn = float(np.sum(tt * enu[:, 1]) / stt)
+    sp = (float(np.mean(gnss.std_enu[idx][:, :2])) if gnss.std_enu is not None else 2.0)
+    return math.hypot(ve, vn), sp / math.sqrt(stt)
 
 
 def level(f_mean: np.ndarray) -> tuple[float, float]:
@@ -119,11 +155,36 @@ def _gnss_enu(gnss, lat0: float, lon0: float, h0: float) -> np.ndarray:
 def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: AlignmentSettings) -> Alignment:
     """Initial nominal state and covariance (see module docstring)."""
     lines: list[str] = []
+    warnings: list[str] = []
     lever = np.asarray(settings.lever_arm_b, dtype=float)
-    still = detect_still(t, gyro, accel, min_duration=settings.still_min_s,
-                         gyro_arw=settings.gyro_arw, accel_vrw=settings.accel_vrw)
     if len(gnss) == 0:
         raise InputError("no GNSS fixes: cannot initialise the position")
+    first_fix = float(gnss.t[0])
+    still = None
+    for i0, i1 in still_runs(t, gyro, accel, min_duration=settings.still_min_s,
+                             gyro_arw=settings.gyro_arw, accel_vrw=settings.accel_vrw):
+        t_s0, t_s1 = float(t[i0]), float(t[i1 - 1])
+        if t_s1 < first_fix:
+            lines.append(f"still period t = {t_s0:.2f} .. {t_s1:.2f} s not used: no GNSS fix yet")
+            continue
+        if t_s0 > max(float(t[0]), first_fix) + 5.0:
+            break      # the log starts in motion: a later stop would throw away all that came before
+        near = (gnss.t >= t_s0 - 0.5) & (gnss.t <= t_s1 + 0.5)
+        f_norm = float(np.linalg.norm(accel[i0:i1].mean(axis=0)))
+        lat_g = math.radians(float(np.mean(gnss.lat_deg[near]))) if near.any() else math.radians(float(gnss.lat_deg[0]))
+        g_local = float(geodesy.gravity(lat_g, float(np.mean(gnss.alt[near])) if near.any() else 0.0))
+        speed, speed_std = gnss_speed_bound(gnss, near, lat_g, math.radians(float(np.mean(gnss.lon_deg[near])))
+                                            if near.any() else 0.0, float(np.mean(gnss.alt[near])) if near.any() else 0.0)
+        if abs(f_norm - g_local) > 0.5 or speed > max(0.5, 3.0 * speed_std):
+            why = (f"specific force {f_norm:.2f} m/s^2, not gravity" if abs(f_norm - g_local) > 0.5
+                   else f"the GNSS track moves at {speed:.1f} m/s")
+            lines.append(f"quiet IMU at t = {t_s0:.2f} .. {t_s1:.2f} s is not a still period ({why})")
+            continue
+        if t_s0 < first_fix - 0.5:
+            # GNSS starts during the still period: still fine, the vehicle has not moved
+            lines.append(f"GNSS starts at t = {first_fix:.2f} s, inside the still period")
+        still = (i0, i1)
+        break
 
     if still is not None:
         i0, i1 = still
@@ -139,16 +200,19 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
         level_how = "static levelling"
         start = i0
         moving = False
+        if max(abs(roll), abs(pitch)) > math.radians(30.0):
+            warnings.append(f"the IMU is tilted by roll {math.degrees(roll):+.1f} deg, pitch {math.degrees(pitch):+.1f} "
+                            "deg at rest: if its axes are not forward-left-up (e.g. FRD), set [imu] mounting_rpy_deg")
     else:
-        lines.append(f"no still period of {settings.still_min_s:.1f} s found: starting in motion "
-                     "with roll = pitch = 0 (+-3 deg)")
+        start = min(int(np.searchsorted(t, first_fix)), len(t) - 1)
+        lines.append(f"no still period of {settings.still_min_s:.1f} s with GNSS found: starting in motion at "
+                     f"t = {float(t[start]):.2f} s with roll = pitch = 0 (+-3 deg)")
         roll = pitch = 0.0
         att_std = math.radians(3.0)
         level_how = "assumed level"
-        start = 0
-        i0 = i1 = 0
+        i0 = i1 = start
         moving = True
-        t_s0 = t_s1 = float(t[0])
+        t_s0 = t_s1 = float(t[start])
     if settings.roll is not None and settings.pitch is not None:
         roll, pitch = settings.roll, settings.pitch
         level_how = "config"
@@ -213,17 +277,24 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
                  f"({level_how}), heading {math.degrees(heading) % 360:.1f} deg +- "
                  f"{math.degrees(head_std):.1f} ({head_how})")
     lines.append(f"position: {len(idx)} GNSS fix(es) averaged; start at t = {t_start:.2f} s")
-    return Alignment(t_start, start, x, P, None if moving else (t_s0, t_s1), tuple(lines))
+    return Alignment(t_start, start, x, P, None if moving else (t_s0, t_s1), tuple(lines), tuple(warnings))
 
 
-def _gnss_velocity_at(gnss, t0: float, lat: float, lon: float, h: float) -> np.ndarray:
+def _gnss_velocity_at(gnss, t0: float, lat: float, lon: float, h: float, span: float = 2.0) -> np.ndarray:
+    """ENU velocity (m/s) at ``t0`` for a start in motion: the GNSS velocity nearest ``t0`` when
+    the log has it, else a straight-line fit of the positions over ``[t0, t0 + span]``."""
     if gnss.vel_enu is not None:
         k = int(np.argmin(np.abs(gnss.t - t0)))
         return np.array(gnss.vel_enu[k], dtype=float)
-    enu = _gnss_enu(gnss, lat, lon, h)
-    k = int(np.searchsorted(gnss.t, t0))
-    k = min(max(k, 1), len(gnss) - 1)
-    return (enu[k] - enu[k - 1]) / (gnss.t[k] - gnss.t[k - 1])
+    sel = (gnss.t >= t0 - 1e-9) & (gnss.t <= t0 + span)
+    if np.count_nonzero(sel) < 2:
+        k = min(max(int(np.searchsorted(gnss.t, t0)), 1), len(gnss) - 1)
+        sel = np.zeros(len(gnss), bool)
+        sel[k - 1:k + 1] = True
+    enu = geodesy.geodetic_to_enu(np.radians(gnss.lat_deg[sel]), np.radians(gnss.lon_deg[sel]), gnss.alt[sel],
+                                  lat, lon, h)
+    tt = gnss.t[sel] - gnss.t[sel].mean()
+    return (tt @ (enu - enu.mean(axis=0))) / float(tt @ tt)
 
 
 def _heading_from_gnss(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, fix_std, min_speed,

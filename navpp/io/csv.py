@@ -138,6 +138,11 @@ def read_csv_log(
             raise _need_more(imu, "at least 2 IMU samples are needed")
         t_imu, rates = imu.col("t"), imu.block(_IMU_RATE_COLS)
         imu_lines = imu.lines
+    _check_rate(imu, t_imu, "an IMU", 1.0, 100_000.0)
+    rate = 1.0 / float(np.median(np.diff(t_imu)))
+    if rate < 50.0:
+        warnings.append(f"{imu.path.name}: IMU rate {rate:.1f} Hz is low for strapdown navigation "
+                        "(100-200 Hz expected); processed anyway")
     _gap_warning(imu.path.name, t_imu, imu_lines, warnings)
     t_first = float(t_imu[0])
     t_last = float(t_imu[-1])
@@ -157,9 +162,11 @@ def read_csv_log(
         )
     gnss = _read_table(gnss_path, header, gnss_cols, warnings)
     _check_lat_lon(gnss)
-    _check_nonnegative(gnss, [c for g in (_GNSS_GROUPS[0], _GNSS_GROUPS[2]) for c in g])
+    _check_positive(gnss, [c for g in (_GNSS_GROUPS[0], _GNSS_GROUPS[2]) for c in g])
     _check_integral(gnss, _GNSS_SINGLES)
     gnss = _check_time(gnss, warnings)
+    gnss = _drop_invalid_fixes(gnss, warnings)
+    _check_rate(gnss, gnss.data["t"], "GNSS", 0.01, 1000.0)
     if gnss.n < 1:  # cannot happen after _read_table's row check; kept as the contract
         raise _need_more(gnss, "at least 1 GNSS fix is needed")
     t_gnss = gnss.col("t") + float(time_offset_s)
@@ -537,17 +544,66 @@ def _check_range(table: _Table, name: str, lo: float, hi: float, text: str, *, u
         )
 
 
-def _check_nonnegative(table: _Table, names: Sequence[str]) -> None:
+def _check_positive(table: _Table, names: Sequence[str]) -> None:
+    """Standard deviations must be > 0: a zero claims a perfect fix and breaks the filter."""
     names = [c for c in names if c in table.data]
     if not names:
         return
-    bad = np.column_stack([table.data[c] < 0 for c in names])
+    bad = np.column_stack([table.data[c] <= 0 for c in names])
     if bad.any():
         row, j = _first_true(bad)
+        value = float(table.data[names[j]][row])
+        what = "negative" if value < 0 else "zero"
         raise InputError(
-            f"{table.path}: line {table.lines[row]}, column {names[j]!r}: negative standard deviation "
-            f"{float(table.data[names[j]][row])!r}"
+            f"{table.path}: line {table.lines[row]}, column {names[j]!r}: {what} standard deviation "
+            f"{value!r}; it must be > 0 (leave the column out to use [gnss] default_std_m)"
         )
+
+
+def _drop_invalid_fixes(table: _Table, warnings: list[str]) -> _Table:
+    """Drop fixes flagged invalid (``fix`` = 0, the NMEA GGA 'no fix' quality) and fixes at
+    exactly lat = lon = 0 (a receiver's placeholder for 'no position'), with a count."""
+    bad = (table.data["lat"] == 0.0) & (table.data["lon"] == 0.0)
+    n_null = int(np.count_nonzero(bad))
+    n_nofix = 0
+    if "fix" in table.data:
+        nofix = table.data["fix"] == 0
+        n_nofix = int(np.count_nonzero(nofix & ~bad))
+        bad |= nofix
+    if not bad.any():
+        return table
+    first = int(table.lines[int(np.argmax(bad))])
+    parts = []
+    if n_nofix:
+        parts.append(f"{n_nofix} with fix = 0 (no fix)")
+    if n_null:
+        parts.append(f"{n_null} at lat = lon = 0")
+    warnings.append(f"{table.path.name}: dropped {' and '.join(parts)} (first at line {first})")
+    kept = table.take(~bad)
+    if kept.n == 0:
+        raise InputError(f"{table.path}: no valid fix: every row has fix = 0 or lat = lon = 0")
+    return kept
+
+
+def _check_rate(table: _Table, t: np.ndarray, what: str, low: float, high: float) -> None:
+    """A median sample interval far outside ``[1/high, 1/low]`` s means ``t`` is not in seconds."""
+    if t.shape[0] < 2:
+        return
+    dt = float(np.median(np.diff(t)))
+    if dt <= 0:
+        return
+    rate = 1.0 / dt
+    if low <= rate <= high:
+        return
+    hint = ""
+    for factor, unit in ((1e3, "milliseconds"), (1e6, "microseconds"), (1e9, "nanoseconds")):
+        if low <= rate * factor <= high:
+            hint = f"; are the stamps in {unit}? t must be in seconds"
+            break
+    raise InputError(
+        f"{table.path}: column 't': median sample interval {dt!r} s ({rate:.6g} Hz) is not plausible for "
+        f"{what} ({low:g}..{high:g} Hz){hint}"
+    )
 
 
 def _check_integral(table: _Table, names: Sequence[str]) -> None:
