@@ -88,42 +88,70 @@ def wrap_deg(angle: np.ndarray | float, low: float = -180.0) -> np.ndarray:
     return np.mod(np.asarray(angle, dtype=float) - low, 360.0) + low
 
 
+class _Bracket(NamedTuple):
+    """Indices and weights that interpolate a source series at new times: ``y[i0] + w (y[i1] - y[i0])``."""
+
+    i0: np.ndarray
+    i1: np.ndarray
+    w: np.ndarray
+
+    @classmethod
+    def of(cls, t_src: np.ndarray, t: np.ndarray) -> "_Bracket":
+        n = t_src.shape[0]
+        i1 = np.clip(np.searchsorted(t_src, t, side="right"), 1, max(n - 1, 1))
+        i0 = i1 - 1
+        if n == 1:
+            return cls(np.zeros(t.shape, int), np.zeros(t.shape, int), np.zeros(t.shape))
+        span = t_src[i1] - t_src[i0]
+        w = np.clip((t - t_src[i0]) / np.where(span > 0, span, 1.0), 0.0, 1.0)
+        return cls(i0, i1, w)
+
+    def linear(self, y: np.ndarray) -> np.ndarray:
+        y = np.asarray(y, dtype=float)
+        a, b = y[self.i0], y[self.i1]
+        w = self.w if y.ndim == 1 else self.w[:, None]
+        return a + w * (b - a)
+
+    def angle_deg(self, y: np.ndarray) -> np.ndarray:
+        """Angles (deg) along the shorter arc between the two samples (crossing 0/360 or +-180)."""
+        y = np.asarray(y, dtype=float)
+        a, b = y[self.i0], y[self.i1]
+        return a + self.w * wrap_deg(b - a)
+
+
 def _interp(t_src: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Linear interpolation of (N,) or (N, m) ``y`` at ``t``; one-sample sources are constant."""
-    y = np.asarray(y, dtype=float)
-    if y.ndim == 1:
-        return np.interp(t, t_src, y)
-    return np.stack([np.interp(t, t_src, y[:, j]) for j in range(y.shape[1])], axis=-1)
+    return _Bracket.of(np.asarray(t_src, dtype=float), np.asarray(t, dtype=float)).linear(y)
 
 
 def _interp_track(t_src: np.ndarray, lat_deg: np.ndarray, lon_deg: np.ndarray, alt: np.ndarray,
                   vel_enu: np.ndarray | None, rph_deg: np.ndarray | None,
                   t: np.ndarray) -> dict[str, np.ndarray]:
     """Interpolate a trajectory: positions, velocity and roll/pitch linearly; longitude and
-    heading on their unwrapped angles (across +-180 deg and 0/360 deg), then wrapped back."""
+    heading along the shorter arc between neighbouring samples (across +-180 deg and 0/360 deg).
+
+    Only the two samples around each requested time are touched, so interpolating an
+    IMU-rate solution at reference epochs costs no full-length temporaries.
+    """
     t_src = np.asarray(t_src, dtype=float)
     t = np.asarray(t, dtype=float)
     if t_src.size == 0:
         raise ValueError("cannot interpolate a trajectory with no epochs")
-    if t_src.size > 1 and np.any(np.diff(t_src) < 0):
+    if t_src.size > 1 and np.any(t_src[1:] < t_src[:-1]):
         raise InputError("trajectory times are not increasing; cannot interpolate")
-    lon_unwrapped = np.unwrap(np.asarray(lon_deg, dtype=float), period=360.0)
+    br = _Bracket.of(t_src, t)
     out = {
         "t": t,
-        "lat_deg": _interp(t_src, lat_deg, t),
-        "lon_deg": wrap_deg(_interp(t_src, lon_unwrapped, t)),
-        "alt": _interp(t_src, alt, t),
+        "lat_deg": br.linear(lat_deg),
+        "lon_deg": wrap_deg(br.angle_deg(lon_deg)),
+        "alt": br.linear(alt),
     }
     if vel_enu is not None:
-        out["vel_enu"] = _interp(t_src, vel_enu, t)
+        out["vel_enu"] = br.linear(vel_enu)
     if rph_deg is not None:
-        rph = np.asarray(rph_deg, dtype=float)
-        heading = np.unwrap(rph[:, 2], period=360.0)
-        out["rph_deg"] = np.stack([
-            _interp(t_src, rph[:, 0], t),
-            _interp(t_src, rph[:, 1], t),
-            wrap_deg(_interp(t_src, heading, t), 0.0),
-        ], axis=-1)
+        rph = np.asarray(rph_deg)
+        out["rph_deg"] = np.stack([br.linear(rph[:, 0]), br.linear(rph[:, 1]),
+                                   wrap_deg(br.angle_deg(rph[:, 2]), 0.0)], axis=-1)
     return out
 
 

@@ -78,10 +78,14 @@ def still_runs(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_durati
     sig_g = gyro_arw / math.sqrt(dt)
     thr_a = max(0.05, 4.0 * sig_a)
     thr_g = max(math.radians(0.5), 4.0 * sig_g)
-    a = accel[: nw * w].reshape(nw, w, 3)
-    g = gyro[: nw * w].reshape(nw, w, 3)
-    still = ((a.std(axis=1).max(axis=1) < thr_a) & (g.std(axis=1).max(axis=1) < thr_g)
-             & (np.abs(g.mean(axis=1)).max(axis=1) < math.radians(1.0)))
+    still = np.empty(nw, bool)
+    block = max(1, 20000 // w)                # windows per pass: bounded temporaries on long logs
+    for k0 in range(0, nw, block):
+        k1 = min(nw, k0 + block)
+        a = accel[k0 * w: k1 * w].reshape(k1 - k0, w, 3)
+        g = gyro[k0 * w: k1 * w].reshape(k1 - k0, w, 3)
+        still[k0:k1] = ((a.std(axis=1).max(axis=1) < thr_a) & (g.std(axis=1).max(axis=1) < thr_g)
+                        & (np.abs(g.mean(axis=1)).max(axis=1) < math.radians(1.0)))
     need = max(1, int(math.ceil(min_duration / (w * dt))))
     runs = []
     k = 0

@@ -136,7 +136,7 @@ def read_csv_log(
     else:
         if imu.n < 2:
             raise _need_more(imu, "at least 2 IMU samples are needed")
-        t_imu, rates = imu.col("t"), imu.block(_IMU_RATE_COLS)
+        t_imu, rates = imu.col("t"), None
         imu_lines = imu.lines
     _check_rate(imu, t_imu, "an IMU", 1.0, 100_000.0)
     rate = 1.0 / float(np.median(np.diff(t_imu)))
@@ -147,8 +147,13 @@ def read_csv_log(
     t_first = float(t_imu[0])
     t_last = float(t_imu[-1])
     t0_ns = _seconds_to_ns(t_first)
-    gyro = np.ascontiguousarray(rates[:, 0:3] * gyro_scale)
-    accel = np.ascontiguousarray(rates[:, 3:6] * accel_scale)
+    if rates is None:       # straight from the parsed columns: no (N, 6) intermediate copy
+        gyro = imu.vectors(_IMU_RATE_COLS[0:3], gyro_scale)
+        accel = imu.vectors(_IMU_RATE_COLS[3:6], accel_scale)
+    else:
+        gyro = np.ascontiguousarray(rates[:, 0:3] * gyro_scale)
+        accel = np.ascontiguousarray(rates[:, 3:6] * accel_scale)
+    del imu, rates
     imu_data = ImuData(t=t_imu - t_first, gyro=gyro, accel=accel)
 
     # GNSS ------------------------------------------------------------------------------------
@@ -326,6 +331,13 @@ class _Table:
     def block(self, names: Sequence[str]) -> np.ndarray:
         return np.column_stack([self.data[c] for c in names])
 
+    def vectors(self, names: Sequence[str], scale: float = 1.0) -> np.ndarray:
+        """(n, len(names)) C-contiguous array of the columns times ``scale``."""
+        out = np.empty((self.n, len(names)))
+        for j, c in enumerate(names):
+            np.multiply(self.data[c], scale, out=out[:, j])
+        return out
+
     def take(self, keep: np.ndarray) -> _Table:
         return _Table(self.path, {k: v[keep] for k, v in self.data.items()}, self.lines[keep])
 
@@ -466,8 +478,15 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
         raise _locate_non_numeric(path, wanted, positions, e) from e
     except (OSError, UnicodeDecodeError) as e:
         raise InputError(f"{path}: cannot read: {e}") from e
-    block = np.concatenate(parts) if parts else np.empty((0, len(wanted)))
-    del parts
+    # assemble chunk by chunk, releasing each one: the peak is the table plus one chunk
+    block = np.empty((sum(p.shape[0] for p in parts), len(wanted)))
+    row = 0
+    parts.reverse()
+    while parts:
+        part = parts.pop()
+        block[row:row + part.shape[0]] = part
+        row += part.shape[0]
+        del part
     finite = np.isfinite(block)
     n = block.shape[0]
     # Blank lines at the end of the file are harmless: drop them.
