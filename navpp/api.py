@@ -94,7 +94,7 @@ def make_filter(name: str, config: Config, *, seed: int | None = None):
     options = cls.options_from_mapping(opts, config.source)
     rng = np.random.default_rng(seed if seed is not None else (opt_seed if isinstance(opt_seed, int) else 0))
     return cls(options, gate_probability=config.gnss.gate_probability,
-               max_consecutive_rejects=config.gnss.max_consecutive_rejects, rng=rng)
+               reanchor_after_s=config.gnss.reanchor_after_s, rng=rng)
 
 
 def check_output_rate(rate_hz: object, what: str = "--output-rate") -> float:

@@ -381,8 +381,9 @@ class GnssConfig:
         Accepts a scalar (all axes) or [horizontal, vertical] and stores (e, n, u).
     default_vel_std_mps : float, m/s, > 0. Velocity 1 sigma used when the log has none.
     gate_probability : float in [0, 1). Chi-square innovation gate; 0 disables gating.
-    max_consecutive_rejects : int, >= 0. After this many rejected fixes in a row the next
-        one is accepted.
+    reanchor_after_s : float, s, > 0. When every fix has failed the gate for this long, the
+        next one is accepted and the position re-anchored on it (the filter, not the GNSS, is
+        then taken to be wrong); shorter bursts of outliers are rejected whole.
     time_offset_s : float, s. Added to GNSS stamps to put them on the IMU's time base.
     """
 
@@ -390,7 +391,7 @@ class GnssConfig:
     default_std_m: tuple[float, float, float] = (2.0, 2.0, 4.0)
     default_vel_std_mps: float = 0.1
     gate_probability: float = 0.9999
-    max_consecutive_rejects: int = 5
+    reanchor_after_s: float = 10.0
     time_offset_s: float = 0.0
 
     def __post_init__(self) -> None:
@@ -398,7 +399,7 @@ class GnssConfig:
         _set(self, "default_std_m", _std_triplet(self.default_std_m))
         _fix_float(self, "gnss", "default_vel_std_mps", minimum=0.0, strict_min=True)
         _fix_float(self, "gnss", "gate_probability", minimum=0.0, maximum=1.0, strict_max=True)
-        _as_int("gnss", "max_consecutive_rejects", self.max_consecutive_rejects, minimum=0)
+        _fix_float(self, "gnss", "reanchor_after_s", minimum=0.0, strict_min=True)
         _fix_float(self, "gnss", "time_offset_s")
 
 

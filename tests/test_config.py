@@ -189,7 +189,7 @@ accel_units = "g"
 [gnss]
 default_vel_std_mps = 0.2
 gate_probability = 0
-max_consecutive_rejects = 3
+reanchor_after_s = 3.0
 time_offset_s = -0.05
 [time]
 base = "gpst"
@@ -213,7 +213,7 @@ a = 1
     cfg = load_config(write(tmp_path, text))
     assert cfg.imu.mounting_rpy_deg == (180.0, 0.0, 90.0)
     assert cfg.gnss.gate_probability == 0.0
-    assert cfg.gnss.max_consecutive_rejects == 3
+    assert cfg.gnss.reanchor_after_s == 3.0
     assert cfg.time == dataclasses.replace(cfg.time, base="gpst", source="log")
     assert cfg.init.method == "config" and cfg.init.heading_deg == 45.0
     assert cfg.init.roll_deg == 1.5 and cfg.init.pitch_deg is None
@@ -314,7 +314,7 @@ def test_filter_section_must_hold_tables(tmp_path: Path) -> None:
         ("[gnss]\ndefault_std_m = [1, 2, 3, 4]\n", "default_std_m", "[1, 2, 3, 4]"),
         ('[gnss]\ndefault_std_m = "2"\n', "default_std_m", "'2'"),
         ("[gnss]\ndefault_vel_std_mps = false\n", "default_vel_std_mps", "False"),
-        ("[gnss]\nmax_consecutive_rejects = 2.5\n", "max_consecutive_rejects", "2.5"),
+        ('[gnss]\nreanchor_after_s = "10"\n', "reanchor_after_s", "'10'"),
         ('[gnss]\ntime_offset_s = "0.1"\n', "time_offset_s", "'0.1'"),
         ("[imu]\ngyro_bias_deg_per_h = nan\n", "gyro_bias_deg_per_h", "nan"),
         ('[init]\nheading_deg = "north"\n', "heading_deg", "'north'"),
@@ -355,7 +355,7 @@ def test_non_positive_corr_time_rejected(tmp_path: Path, key: str, value: str) -
         ("[gnss]\ndefault_vel_std_mps = 0\n", "default_vel_std_mps"),
         ("[gnss]\ngate_probability = 1.0\n", "gate_probability"),
         ("[gnss]\ngate_probability = -0.1\n", "gate_probability"),
-        ("[gnss]\nmax_consecutive_rejects = -1\n", "max_consecutive_rejects"),
+        ("[gnss]\nreanchor_after_s = 0\n", "reanchor_after_s"),
         ("[init]\npitch_deg = 95\n", "pitch_deg"),
         ("[init]\ngyrocompass_max_heading_std_deg = 0\n", "gyrocompass_max_heading_std_deg"),
         ("[output]\nrate_hz = 0\n", "rate_hz"),

@@ -259,3 +259,19 @@ def test_a_clean_run_has_no_warnings(drive):
     _, _, res, _ = drive
     assert res.warnings == ()
     assert res.compile_s >= 0.0 and res.runtime_s > 0.0
+
+
+def test_a_burst_of_outliers_is_rejected_whole():
+    from navpp.recording import GnssData
+
+    def burst(g):
+        lon = g.lon_deg.copy()
+        sel = (g.t >= 150.0) & (g.t < 153.0)
+        lon[sel] += np.degrees(30.0 / (6.39e6 * np.cos(np.radians(g.lat_deg[sel]))))   # 30 m east for 3 s
+        return GnssData(g.t, g.lat_deg.copy(), lon, g.alt.copy(), std_enu=g.std_enu)
+
+    _, rec, res = _modified_run(burst)
+    assert res.diagnostics.forced.sum() == 0
+    assert res.gnss_rejected >= 15
+    e, _ = _errors_at(rec, res.solution, np.arange(149.0, 160.0, 0.1))
+    assert np.abs(e[:, 0]).max() < 3.0

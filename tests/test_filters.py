@@ -70,7 +70,7 @@ def test_gate_rejects_outlier_then_forces_acceptance():
     model = LinearModel(np.eye(n), 1e-4 * np.eye(n))
     H = np.eye(n)
     R = np.eye(n)
-    filt = get_filter("ekf")(gate_probability=0.999, max_consecutive_rejects=2)
+    filt = get_filter("ekf")(gate_probability=0.999, reanchor_after_s=1.5)
     state = GaussianState(0.0, np.zeros(n), np.eye(n))
     outlier = LinearMeasurement(1.0, np.array([100.0, 0.0]), H, R)
     results = []
@@ -81,7 +81,7 @@ def test_gate_rejects_outlier_then_forces_acceptance():
         results.append(inn.accepted)
         if not inn.accepted:
             np.testing.assert_array_equal(state.x, before)   # a rejected fix changes nothing
-    # chi2(2) 99.9 % = 13.8: the 100 m outlier is rejected twice, then forced in
+    # chi2(2) 99.9 % = 13.8: the 100 m outlier is rejected at t = 1 and 2, forced in at t = 3
     assert results == [False, False, True]
     assert filt.rejected == 2
 

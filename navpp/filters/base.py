@@ -43,7 +43,7 @@ class Innovation:
 
     nu : (m,) innovation ``z ⊟ ẑ``; S : (m, m) its covariance incl. R; Pxz : (n, m);
     R : (m, m) measurement noise used; nis : ``nu^T S^-1 nu``; accepted : applied to the state;
-    forced : applied although it failed the gate (after ``max_consecutive_rejects`` rejections,
+    forced : applied although it failed the gate (after ``reanchor_after_s`` of rejections,
     with the covariance re-anchored first; ``nis`` is the value before re-anchoring).
     """
 
@@ -172,8 +172,9 @@ class Filter:
     ----------
     options : the filter's own ``Options`` dataclass (``[filter.<name>]`` in the config).
     gate_probability : chi-square gate on the NIS; 0 disables gating.
-    max_consecutive_rejects : after this many gated fixes in a row the next one is accepted
-        (a filter must not lock itself out after an outage).
+    reanchor_after_s : when every measurement has failed the gate for this long (s), the next
+        one is accepted with the covariance re-anchored on it (a filter must not lock itself
+        out); shorter bursts of outliers are rejected whole.
     rng : the only source of randomness for random filters.
     """
 
@@ -183,13 +184,13 @@ class Filter:
     Options: ClassVar[type] = NoOptions
 
     def __init__(self, options: Any = None, *, gate_probability: float = 0.0,
-                 max_consecutive_rejects: int = 5, rng: np.random.Generator | None = None) -> None:
+                 reanchor_after_s: float = 10.0, rng: np.random.Generator | None = None) -> None:
         self.options = options if options is not None else self.Options()
         self.gate_probability = float(gate_probability)
-        self.max_consecutive_rejects = int(max_consecutive_rejects)
+        self.reanchor_after_s = float(reanchor_after_s)
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self._gate_cache: dict[int, float] = {}
-        self._consecutive_rejects = 0
+        self._rejecting_since: float | None = None
         self.rejected = 0
 
     @classmethod
@@ -237,19 +238,21 @@ class Filter:
         S, K, nis = self._moments(state, pred, R)
         accepted = nis <= self.gate_threshold(pred.nu.shape[0])
         forced = False
-        if not accepted and self._consecutive_rejects >= self.max_consecutive_rejects:
-            # A run of rejections means the prior, not the measurements, is wrong: never lock
-            # the GNSS out. Re-anchor the covariance on this measurement, then apply it.
+        if (not accepted and self._rejecting_since is not None
+                and state.t - self._rejecting_since >= self.reanchor_after_s):
+            # Rejections for that long mean the prior, not the measurements, is wrong: never
+            # lock the GNSS out. Re-anchor the covariance on this measurement, then apply it.
             forced = accepted = True
             state = GaussianState(state.t, state.x, self._reanchored(state, meas, pred, R, nis))
             pred = self.predict_measurement(state, model, meas)
             S, K, _ = self._moments(state, pred, R)
         innovation = Innovation(state.t, pred.nu, S, pred.Pxz, R, nis, accepted, forced)
         if not accepted:
-            self._consecutive_rejects += 1
+            if self._rejecting_since is None:
+                self._rejecting_since = state.t
             self.rejected += 1
             return state, innovation
-        self._consecutive_rejects = 0
+        self._rejecting_since = None
         new = self.correct(state, model, pred, K, S, R)
         self.after_update(innovation, pred)
         return new, innovation
