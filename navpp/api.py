@@ -237,9 +237,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         if rate is not None and rate > imu_rate * 1.001:
             raise ConfigError(f"{rate_what} {rate:g} Hz is above the IMU rate of {log} ({imu_rate:.1f} Hz); "
                               "the trajectory cannot be finer than the IMU")
-        t_start = time.perf_counter()
         result = engine.run(rec, cfg, filt, progress=(lambda f: progress("filtering", f)) if progress else None)
-        runtime = time.perf_counter() - t_start
+        runtime = result.runtime_s        # without the one-off kernel compilation of a first run
         sol = result.solution
         sol_out = resample_solution(sol, rate) if rate is not None else sol
 
@@ -271,7 +270,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         remove_created_dirs(created)
         raise
     notes = tuple(cfg.notes) + tuple(result.alignment.lines)
-    return ProcessResult(filter_name, rec, sol_out, result, metrics, out, tuple(files), cfg, notes, tuple(rec.warnings))
+    warnings = tuple(rec.warnings) + tuple(result.warnings)
+    return ProcessResult(filter_name, rec, sol_out, result, metrics, out, tuple(files), cfg, notes, warnings)
 
 
 def simulate_log(out: str | Path, **spec: Any) -> Path:
