@@ -205,6 +205,23 @@ def test_process_duplicate_imu_stamps_warned(log_copy: Path, tmp_path: Path) -> 
     assert (out / "trajectory.csv").is_file()
 
 
+def test_process_gyro_in_deg_per_s_is_warned_even_when_quiet(log_copy: Path, tmp_path: Path) -> None:
+    imu = log_copy / "imu.csv"
+    lines = read_lines(imu)
+    rows = []
+    for line in lines[1:]:
+        f = line.split(",")
+        f[1:4] = [repr(float(v) * 180.0 / np.pi) for v in f[1:4]]
+        rows.append(",".join(f))
+    write_lines(imu, [lines[0], *rows])
+    res = invoke("process", log_copy, "--out", tmp_path / "out", "--quiet")
+    assert res.exit_code == 0, (res.output, res.exception)
+    text = flat(res.stderr)
+    assert 'gyro_units = "deg/s"' in text
+    assert "failed the innovation gate" in text
+    assert res.stdout.strip() == ""
+
+
 def test_process_rerun_without_reference_leaves_no_stale_metrics(log_copy: Path, tmp_path: Path) -> None:
     out = tmp_path / "out"
     res = invoke("process", log_copy, "--out", out, "--quiet")
