@@ -29,6 +29,7 @@ from .ins.strapdown import NOMINAL_BA, NOMINAL_BG
 from .recording import Recording, Solution
 
 ProgressFn = Callable[[float], None]   # called with the fraction done, 0..1
+KNOT_S = 1.0    # longest stretch without a covariance knot for the output sigma, s
 
 
 @dataclass(frozen=True)
@@ -179,8 +180,6 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     var = std ** 2
 
     m_ep = sel.size
-    var_prior = np.empty((m_ep, 3))
-    var_post = np.empty((m_ep, 3))
     nu = np.full((m_ep, 3), np.nan)
     nis = np.full(m_ep, np.nan)
     accepted = np.zeros(m_ep, bool)
@@ -188,19 +187,34 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     bias = np.empty((m_ep, 6))
     bias_var = np.empty((m_ep, 6))
     state = GaussianState(al.t, al.x, al.P)
-    var0 = np.diag(al.P)[POS].copy()
+    # covariance knots for the output's 1-sigma: (t, variance before, variance after an update);
+    # long gaps between fixes get a knot every KNOT_S so the sigma follows the real growth
+    knots: list[tuple[float, np.ndarray, np.ndarray]] = []
+
+    def knot(prior: np.ndarray | None = None) -> None:
+        v = state.P.diagonal()[POS].copy()
+        knots.append((state.t, v if prior is None else prior, v))
+
+    def coast_to(t_end: float) -> None:
+        nonlocal state
+        while t_end - state.t > 1.5 * KNOT_S:
+            state = filt.predict(state, model, (state.t, state.t + KNOT_S))
+            knot()
+
+    knot()
     tick = max(1, m_ep // 200)
     n_path = model.path.shape[1]
     idx = np.minimum(np.searchsorted(imu.t, tg), len(imu) - 1)
     k_sample = np.where(imu.t[idx] == tg, idx, -1)
     for k in range(m_ep):
+        coast_to(float(tg[k]))
         state = filt.predict(state, model, (state.t, float(tg[k])))
-        var_prior[k] = state.P.diagonal()[POS]
+        prior = state.P.diagonal()[POS].copy()
         meas = GnssPosition(float(tg[k]), float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever)
         state, inn = filt.update(state, model, meas)
         if inn.accepted and k_sample[k] >= 0:
             model.path[k_sample[k]] = state.x[:n_path]     # the epoch's own sample shows the posterior
-        var_post[k] = state.P.diagonal()[POS]
+        knot(prior)
         bias[k, :3] = state.x[NOMINAL_BG]
         bias[k, 3:] = state.x[NOMINAL_BA]
         bias_var[k, :3] = state.P.diagonal()[BG]
@@ -211,13 +225,11 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
         forced[k] = inn.forced
         if progress is not None and k % tick == 0:
             progress(k / m_ep)
+    # after the last fix the uncertainty keeps growing to the end of the log
+    coast_to(float(imu.t[-1]))
     if state.t < imu.t[-1]:
-        # after the last fix the uncertainty keeps growing: one more knot at the end of the log
         state = filt.predict(state, model, (state.t, float(imu.t[-1])))
-        var_end = np.diag(state.P)[POS]
-        tg = np.append(tg, state.t)
-        var_prior = np.vstack([var_prior, var_end])
-        var_post = np.vstack([var_post, var_end])
+        knot()
     if not np.all(np.isfinite(state.P)):
         raise FilterDivergedError(f"{filt.name}: covariance became non-finite by t = {state.t:.2f} s")
     if progress is not None:
@@ -226,11 +238,14 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     path = model.path[al.index:]
     model.path = None
     t_out = imu.t[al.index:]
-    std_out = _interpolated_std(t_out, al.t, var0, tg, var_prior, var_post)
+    kt = np.array([k[0] for k in knots])
+    k_prior = np.array([k[1] for k in knots])
+    k_post = np.array([k[2] for k in knots])
+    std_out = _interpolated_std(t_out, kt[0], k_post[0], kt[1:], k_prior[1:], k_post[1:])
     solution = solution_from_path(t_out, path, std_out, recording.t0_ns)
-    diag = Diagnostics(tg[:m_ep], nu, nis, accepted, forced)
+    diag = Diagnostics(tg, nu, nis, accepted, forced)
     bias_std = np.sqrt(bias_var)
-    biases = BiasHistory(tg[:m_ep], bias[:, :3], bias[:, 3:], bias_std[:, :3], bias_std[:, 3:])
+    biases = BiasHistory(tg, bias[:, :3], bias[:, 3:], bias_std[:, :3], bias_std[:, 3:])
     rejected = int((~accepted).sum())
     warnings += list(al.warnings)
     if rejected > 0.05 * m_ep:

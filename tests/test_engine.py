@@ -275,3 +275,23 @@ def test_a_burst_of_outliers_is_rejected_whole():
     assert res.gnss_rejected >= 15
     e, _ = _errors_at(rec, res.solution, np.arange(149.0, 160.0, 0.1))
     assert np.abs(e[:, 0]).max() < 3.0
+
+
+def test_sigma_during_an_outage_follows_the_drift():
+    # the output sigma inside a 60 s outage is neither optimistic nor wildly pessimistic: it is
+    # propagated (knots every second), not interpolated across the gap
+    from navpp.recording import GnssData
+
+    def outage(g):
+        keep = (g.t < 150.0) | (g.t > 210.0)
+        return GnssData(g.t[keep], g.lat_deg[keep], g.lon_deg[keep], g.alt[keep], std_enu=g.std_enu[keep])
+
+    zs = []
+    for seed in (8, 9, 10):
+        _, rec, res = _modified_run(outage, seed=seed)
+        e, it = _errors_at(rec, res.solution, np.arange(155.0, 209.0, 1.0))
+        zs.append(e[:, :2] / it["std_enu"][:, :2])
+        assert np.all(np.diff(it["std_enu"][:, 0]) > 0)          # growing all through the outage
+    z = np.concatenate(zs)
+    rms = np.sqrt(np.mean(z ** 2))
+    assert 0.3 < rms < 2.0, rms
