@@ -76,6 +76,8 @@ DEG_PER_H_TO_RAD_PER_S: Final[float] = DEG_TO_RAD / 3600.0
 """Gyro bias: deg/h -> rad/s."""
 MG_TO_MPS2: Final[float] = STANDARD_GRAVITY * 1e-3
 """Accelerometer bias: mg -> m/s^2."""
+MAX_LEVER_ARM_M: Final[float] = 100.0
+"""Longest plausible IMU-to-antenna lever arm (large ships); longer ones are unit mistakes."""
 
 # --------------------------------------------------------------------------- presets
 
@@ -385,6 +387,9 @@ class GnssConfig:
         next one is accepted and the position re-anchored on it (the filter, not the GNSS, is
         then taken to be wrong); shorter bursts of outliers are rejected whole.
     time_offset_s : float, s. Added to GNSS stamps to put them on the IMU's time base.
+    max_rejected_fraction : float in (0, 1]. A run in which a larger share of the fixes fails
+        the gate has diverged (the IMU and GNSS disagree): it stops with an error instead of
+        writing a trajectory.  1 never stops.
     """
 
     lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -393,9 +398,14 @@ class GnssConfig:
     gate_probability: float = 0.9999
     reanchor_after_s: float = 10.0
     time_offset_s: float = 0.0
+    max_rejected_fraction: float = 0.25
 
     def __post_init__(self) -> None:
         _set(self, "lever_arm_m", _as_vector("gnss", "lever_arm_m", self.lever_arm_m, 3))
+        if math.hypot(*self.lever_arm_m) > MAX_LEVER_ARM_M:
+            raise ConfigError(f"[gnss] lever_arm_m = {list(self.lever_arm_m)!r} is {math.hypot(*self.lever_arm_m):.0f} m "
+                              f"long (more than {MAX_LEVER_ARM_M:.0f} m): it must be in metres (millimetres?)")
+        _fix_float(self, "gnss", "max_rejected_fraction", minimum=0.0, maximum=1.0, strict_min=True)
         _set(self, "default_std_m", _std_triplet(self.default_std_m))
         _fix_float(self, "gnss", "default_vel_std_mps", minimum=0.0, strict_min=True)
         _fix_float(self, "gnss", "gate_probability", minimum=0.0, maximum=1.0, strict_max=True)

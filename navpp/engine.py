@@ -150,6 +150,42 @@ def check_imu_plausible(recording: Recording) -> list[str]:
     return warnings
 
 
+_CAUSES = ("check the IMU units and axes ([imu] mounting_rpy_deg), the lever arm, the time bases "
+           "([gnss] time_offset_s) and the GNSS standard deviations")
+_CHI2_3_MEDIAN = 2.365973884375338     # median of the chi-square distribution with 3 dof
+
+
+def _consistency_checks(source: str, name: str, config: Config, tg: np.ndarray, nis: np.ndarray,
+                        accepted: np.ndarray, noticed: list[str]) -> list[str]:
+    """After the run: stop a diverged filter, warn about a doubtful one.
+
+    More than ``[gnss] max_rejected_fraction`` of the fixes failing the gate means the filter
+    and the GNSS disagree for good (wrong units, axes, lever arm, time base or standard
+    deviations): FilterDivergedError, whose message carries what the run ``noticed`` before
+    (a likely cause).  Above 5 %, or with the median NIS far above the
+    chi-square median (innovations larger than the filter predicts), a warning.
+    """
+    m = tg.shape[0]
+    rejected = int(np.count_nonzero(~accepted))
+    finite = nis[np.isfinite(nis)]
+    scale = math.sqrt(float(np.median(finite)) / _CHI2_3_MEDIAN) if finite.size else 1.0
+    what = f"{rejected} of {m} GNSS fixes ({100.0 * rejected / max(m, 1):.0f}%) failed the innovation gate"
+    if m >= 20 and rejected > config.gnss.max_rejected_fraction * m:
+        first = float(tg[np.argmax(~accepted)])
+        raise FilterDivergedError(
+            f"{source}: {name} diverged: {what}, the first at t = {first:.1f} s, and the GNSS innovations are "
+            f"{scale:.1f} times larger than predicted; "
+            + ("; ".join(w.removeprefix(f"{source}: ") for w in noticed) + "; otherwise " if noticed else "")
+            + f"{_CAUSES} (set [gnss] max_rejected_fraction = 1 to write the trajectory anyway)")
+    warnings = []
+    if rejected > 0.05 * m:
+        warnings.append(f"{source}: {what}: the IMU and GNSS disagree; {_CAUSES}")
+    elif m >= 20 and scale > 1.5:
+        warnings.append(f"{source}: the GNSS innovations are {scale:.1f} times larger than the filter predicts: the "
+                        "GNSS standard deviations (or the IMU noise) are too optimistic")
+    return warnings
+
+
 def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
          cov_step_s: float) -> RunResult:
     t_wall = time.perf_counter()
@@ -248,16 +284,7 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     biases = BiasHistory(tg, bias[:, :3], bias[:, 3:], bias_std[:, :3], bias_std[:, 3:])
     rejected = int((~accepted).sum())
     warnings += list(al.warnings)
-    if rejected > 0.05 * m_ep:
-        warnings.append(f"{recording.source}: {rejected} of {m_ep} GNSS fixes ({100.0 * rejected / m_ep:.0f}%) failed "
-                        "the innovation gate: the IMU and GNSS disagree; check the IMU units and axes, the lever "
-                        "arm, the time bases and the GNSS standard deviations")
-    ok = accepted & ~forced
-    if ok.sum() >= 20:
-        mean_nis = float(np.mean(nis[ok])) / 3.0
-        if mean_nis > 3.0:
-            warnings.append(f"{recording.source}: GNSS innovations are {math.sqrt(mean_nis):.1f} times larger than "
-                            "the filter expects: the GNSS standard deviations or the IMU noise are too optimistic")
+    warnings += _consistency_checks(recording.source, filt.name, config, tg, nis, accepted, list(warnings))
     return RunResult(solution, biases, al, diag, m_ep, rejected, time.perf_counter() - t_wall, 0.0,
                      tuple(warnings))
 

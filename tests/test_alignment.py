@@ -152,3 +152,26 @@ def test_tilted_mounting_is_warned():
     gnss = GnssData(tg, np.full(tg.size, 45.0), np.full(tg.size, 7.0), np.full(tg.size, 300.0))
     al = align(t, np.tile(w, (n, 1)), np.tile(f, (n, 1)), gnss, AlignmentSettings(heading=0.5, method="config"))
     assert any("mounting_rpy_deg" in wline for wline in al.warnings)
+
+
+def test_config_heading_is_cross_checked_against_the_track():
+    sim = simulate(SimulationSpec(duration_s=200.0, still_s=30.0, seed=5, heading0_deg=30.0))
+    al = align(sim.imu.t, sim.imu.gyro, sim.imu.accel, sim.gnss, _settings(sim, heading=math.radians(60.0)))
+    assert any("differs by -30" in w and "not a ROS yaw" in w for w in al.warnings), al.warnings
+    assert math.degrees(sim_rph(al.x)[2]) == pytest.approx(60.0)          # the user's word stands
+    al = align(sim.imu.t, sim.imu.gyro, sim.imu.accel, sim.gnss, _settings(sim, heading=math.radians(30.5)))
+    assert al.warnings == ()
+
+
+def test_wrong_gnss_velocity_columns_are_caught_by_the_positions():
+    from dataclasses import replace
+
+    sim = simulate(SimulationSpec(duration_s=200.0, still_s=30.0, seed=5, heading0_deg=30.0, gnss_velocity=True))
+    g = sim.gnss
+    swapped = replace(g, vel_enu=g.vel_enu[:, [1, 0, 2]].copy())          # NED-style north, east
+    al = align(sim.imu.t, sim.imu.gyro, sim.imu.accel, swapped, _settings(sim))
+    assert any("GNSS velocity differs" in w for w in al.warnings)
+    err = math.remainder(math.degrees(sim_rph(al.x)[2]) - sim.reference.rph_deg[0, 2], 360.0)
+    assert abs(err) < 3.0
+    al = align(sim.imu.t, sim.imu.gyro, sim.imu.accel, g, _settings(sim))
+    assert al.warnings == ()

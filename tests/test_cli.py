@@ -205,7 +205,7 @@ def test_process_duplicate_imu_stamps_warned(log_copy: Path, tmp_path: Path) -> 
     assert (out / "trajectory.csv").is_file()
 
 
-def test_process_gyro_in_deg_per_s_is_warned_even_when_quiet(log_copy: Path, tmp_path: Path) -> None:
+def test_process_gyro_in_deg_per_s_is_a_divergence_naming_the_cause(log_copy: Path, tmp_path: Path) -> None:
     imu = log_copy / "imu.csv"
     lines = read_lines(imu)
     rows = []
@@ -215,10 +215,18 @@ def test_process_gyro_in_deg_per_s_is_warned_even_when_quiet(log_copy: Path, tmp
         rows.append(",".join(f))
     write_lines(imu, [lines[0], *rows])
     res = invoke("process", log_copy, "--out", tmp_path / "out", "--quiet")
+    msg = assert_one_line_error(res, tmp_path / "out")
+    assert "diverged" in msg and 'gyro_units = "deg/s"' in msg
+
+
+def test_process_warnings_are_printed_even_when_quiet(log_copy: Path, tmp_path: Path) -> None:
+    imu = log_copy / "imu.csv"
+    lines = read_lines(imu)
+    lines.insert(300, lines[299])
+    write_lines(imu, lines)
+    res = invoke("process", log_copy, "--out", tmp_path / "out", "--quiet")
     assert res.exit_code == 0, (res.output, res.exception)
-    text = flat(res.stderr)
-    assert 'gyro_units = "deg/s"' in text
-    assert "failed the innovation gate" in text
+    assert "duplicate timestamp" in flat(res.stderr)
     assert res.stdout.strip() == ""
 
 

@@ -244,15 +244,29 @@ def test_accelerometer_in_g_is_a_clear_error():
         engine.run(rec, cfg, api.make_filter("ekf", cfg))
 
 
-def test_gyro_in_deg_per_s_and_bad_gnss_are_warned_not_silent():
+def test_gyro_in_deg_per_s_stops_as_divergence_naming_the_cause():
+    from navpp.errors import FilterDivergedError
     from navpp.recording import ImuData
 
     rec = _recording_with(edit_imu=lambda imu: ImuData(imu.t, np.degrees(imu.gyro), imu.accel))
     cfg = config_from_dict({}, "test")
+    with pytest.raises(FilterDivergedError) as exc:
+        engine.run(rec, cfg, api.make_filter("ekf", cfg))
+    msg = str(exc.value)
+    assert "diverged" in msg and "failed the innovation gate" in msg and 'gyro_units = "deg/s"' in msg
+    # and with the stop disabled, the run completes and warns
+    cfg = config_from_dict({"gnss": {"max_rejected_fraction": 1.0}}, "test")
     res = engine.run(rec, cfg, api.make_filter("ekf", cfg))
-    text = " ".join(res.warnings)
-    assert 'gyro_units = "deg/s"' in text
-    assert "failed the innovation gate" in text or "times larger than the filter expects" in text
+    assert any("failed the innovation gate" in w for w in res.warnings)
+
+
+def test_optimistic_gnss_sigma_is_warned():
+    from dataclasses import replace as dc_replace
+
+    rec = _recording_with(edit_gnss=lambda g: dc_replace(g, std_enu=g.std_enu * 0.6))   # 1.7x too small
+    cfg = config_from_dict({}, "test")
+    res = engine.run(rec, cfg, api.make_filter("ekf", cfg))
+    assert any("too optimistic" in w or "failed the innovation gate" in w for w in res.warnings), res.warnings
 
 
 def test_a_clean_run_has_no_warnings(drive):

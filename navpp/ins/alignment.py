@@ -238,10 +238,24 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
     method = settings.method
     g_sigma = math.sqrt(settings.gyro_bias_sigma ** 2 + (settings.gyro_arw ** 2 / max(t_s1 - t_s0, 1e-3)))
     gc_std = g_sigma / (geodesy.OMEGA_E * max(math.cos(lat_a), 1e-3))
+    def track_heading(use_velocity: bool):
+        return _heading_from_gnss(t, gyro, gnss, t_start, t_s1, roll, pitch, lat_a, lon_a, h_a, fix_std,
+                                  settings.min_speed_mps, use_velocity=use_velocity)
+
     if settings.heading is not None and method in ("auto", "config"):
         heading = settings.heading
         head_std = math.radians(1.0)
         head_how = "config"
+        try:      # a cross-check, not a requirement: the track may be too short
+            h_trk, s_trk, _ = track_heading(use_velocity=False)
+        except InputError:
+            h_trk = None
+        if h_trk is not None:
+            diff = math.degrees(math.remainder(h_trk - heading, 2 * math.pi))
+            if abs(diff) > max(10.0, 3.0 * math.degrees(s_trk)):
+                warnings.append(f"[init] heading_deg = {math.degrees(heading):.1f} differs by {diff:+.1f} deg from the "
+                                f"heading of the GNSS track ({math.degrees(h_trk):.1f} +- {math.degrees(s_trk):.1f}): "
+                                "heading is clockwise from north, not a ROS yaw")
     elif method == "config":
         raise InputError("[init] method = 'config' needs heading_deg")
     elif not moving and (method == "gyrocompass" or (method == "auto" and gc_std < settings.gyrocompass_max_heading_std)):
@@ -252,9 +266,23 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
         if method == "auto" and not moving:
             lines.append(f"gyrocompassing not possible with this gyro (predicted 1-sigma "
                          f"{math.degrees(gc_std):.1f} deg): heading from the GNSS track")
-        heading, head_std, t_course = _heading_from_gnss(t, gyro, gnss, t_start, t_s1, roll, pitch, lat_a,
-                                                         lon_a, h_a, fix_std, settings.min_speed_mps)
+        heading, head_std, t_course = track_heading(use_velocity=gnss.vel_enu is not None)
         head_how = f"GNSS track up to t = {t_course:.2f} s, turns taken out with the gyro"
+        if gnss.vel_enu is not None:
+            # the velocity columns are easy to get wrong (NED, swapped, sign): check them against
+            # the positions, which cannot be
+            try:
+                h_pos, s_pos, _ = track_heading(use_velocity=False)
+            except InputError:
+                h_pos = None
+            if h_pos is not None:
+                diff = math.degrees(math.remainder(heading - h_pos, 2 * math.pi))
+                if abs(diff) > max(5.0, 3.0 * math.degrees(math.hypot(head_std, s_pos))):
+                    warnings.append(f"the course of the GNSS velocity differs by {diff:+.1f} deg from the GNSS "
+                                    "positions' track (are ve, vn swapped, NED or of the wrong sign?): heading "
+                                    "taken from the positions")
+                    heading, head_std = h_pos, s_pos
+                    head_how = "GNSS position track, turns taken out with the gyro"
 
     C = rph_to_dcm(roll, pitch, heading)
     # the GNSS fixes are of the antenna: remove the lever arm to get the IMU position
@@ -302,7 +330,7 @@ def _gnss_velocity_at(gnss, t0: float, lat: float, lon: float, h: float, span: f
 
 
 def _heading_from_gnss(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, fix_std, min_speed,
-                       path_length=150.0, min_length=30.0, max_window=120.0):
+                       use_velocity=True, path_length=150.0, min_length=30.0, max_window=120.0):
     """Heading at ``t_start`` from the GNSS track once moving, referred back with the gyro.
 
     Every GNSS displacement after the still period (from positions, or from GNSS velocity x dt
@@ -311,6 +339,7 @@ def _heading_from_gnss(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lo
     by that angle makes them all point along the start heading, and their sum (the first
     ``path_length`` metres of driving) gives it with the noise of a ``path_length`` chord, whatever
     the turns.  With positions, the start point is the mean of the still-period fixes.
+    ``use_velocity`` chooses GNSS velocity (when present) over positions.
     Returns (heading rad, 1-sigma rad, time the summed track ends).
     """
     C = rph_to_dcm(roll, pitch, 0.0)
@@ -322,7 +351,7 @@ def _heading_from_gnss(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lo
 
     after = gnss.t > t_still_end
     tg = gnss.t[after]
-    if gnss.vel_enu is not None:
+    if use_velocity and gnss.vel_enu is not None:
         v = gnss.vel_enu[after]
         moving = np.hypot(v[:, 0], v[:, 1]) > min_speed
         dt = np.diff(np.concatenate([[t_still_end], tg]))
