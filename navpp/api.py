@@ -129,6 +129,24 @@ def resample_solution(sol: Solution, rate_hz: float) -> Solution:
                     rph_deg=it["rph_deg"], std_enu=std, t0_ns=sol.t0_ns)
 
 
+def reference_checks(rec: Recording, cfg: Config, metrics: dict | None) -> list[str]:
+    """Warn when the raw GNSS disagrees with the reference far beyond its stated sigma: the
+    reference is then on another time base or datum, and every figure against it misleads."""
+    if metrics is None:
+        return []
+    raw = metrics.get("gnss_position_m", {}).get("horizontal")
+    if not raw:
+        return []
+    std = (rec.gnss.std_enu[:, :2] if rec.gnss.std_enu is not None
+           else np.asarray(cfg.gnss.default_std_m[:2])[None, :])
+    expected = float(np.sqrt(np.mean(np.sum(std ** 2, axis=1))))
+    if raw["rmse"] > max(5.0 * expected, 10.0):
+        return [f"{metrics['reference']}: the raw GNSS fixes are {raw['rmse']:.1f} m (horizontal RMSE) from the "
+                f"reference, {raw['rmse'] / expected:.0f} times their stated 1-sigma: the reference is probably on "
+                "another time base or datum, and the figures against it mislead"]
+    return []
+
+
 def default_out_dir(log: Path, filter_name: str) -> Path:
     stem = log.name if log.is_dir() else log.stem
     return Path("navpp-out") / f"{stem}-{filter_name}"
@@ -270,7 +288,7 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         remove_created_dirs(created)
         raise
     notes = tuple(cfg.notes) + tuple(result.alignment.lines)
-    warnings = tuple(rec.warnings) + tuple(result.warnings)
+    warnings = tuple(rec.warnings) + tuple(result.warnings) + tuple(reference_checks(rec, cfg, metrics))
     return ProcessResult(filter_name, rec, sol_out, result, metrics, out, tuple(files), cfg, notes, warnings)
 
 

@@ -230,6 +230,17 @@ def test_process_warnings_are_printed_even_when_quiet(log_copy: Path, tmp_path: 
     assert res.stdout.strip() == ""
 
 
+def test_process_reference_on_another_time_base_is_warned(log_copy: Path, tmp_path: Path) -> None:
+    ref = log_copy / "reference.csv"
+    lines = read_lines(ref)
+    shifted = [lines[0]] + [",".join([f"{float(line.split(',')[0]) + 18.0:.6f}", *line.split(",")[1:]])
+                            for line in lines[1:]]
+    write_lines(ref, shifted)                   # 18 s: GPS time vs UTC
+    res = invoke("process", log_copy, "--out", tmp_path / "out")
+    assert res.exit_code == 0, (res.output, res.exception)
+    assert "another time base or datum" in flat(res.stderr)
+
+
 def test_process_rerun_without_reference_leaves_no_stale_metrics(log_copy: Path, tmp_path: Path) -> None:
     out = tmp_path / "out"
     res = invoke("process", log_copy, "--out", out, "--quiet")
