@@ -571,7 +571,7 @@ def test_no_fix_rows_and_null_island_are_dropped(tmp_path: Path) -> None:
     assert len(rec.gnss) == len(rows) - 2
     assert not np.any((rec.gnss.lat_deg == 0) & (rec.gnss.lon_deg == 0))
     w = " ".join(rec.warnings)
-    assert "1 with fix = 0" in w and "1 at lat = lon = 0" in w and "line 3" in w
+    assert "1 fix with fix = 0" in w and "1 fix at lat = lon = 0" in w and "line 3" in w
 
 
 @pytest.mark.parametrize("scale,unit", [(1e3, "milliseconds"), (1e9, "nanoseconds")])

@@ -594,9 +594,9 @@ def _drop_invalid_fixes(table: _Table, warnings: list[str]) -> _Table:
     first = int(table.lines[int(np.argmax(bad))])
     parts = []
     if n_nofix:
-        parts.append(f"{n_nofix} with fix = 0 (no fix)")
+        parts.append(f"{n_nofix} fix{'es' if n_nofix > 1 else ''} with fix = 0 (no fix)")
     if n_null:
-        parts.append(f"{n_null} at lat = lon = 0")
+        parts.append(f"{n_null} fix{'es' if n_null > 1 else ''} at lat = lon = 0")
     warnings.append(f"{table.path.name}: dropped {' and '.join(parts)} (first at line {first})")
     kept = table.take(~bad)
     if kept.n == 0:
@@ -620,7 +620,7 @@ def _check_rate(table: _Table, t: np.ndarray, what: str, low: float, high: float
             hint = f"; are the stamps in {unit}? t must be in seconds"
             break
     raise InputError(
-        f"{table.path}: column 't': median sample interval {dt!r} s ({rate:.6g} Hz) is not plausible for "
+        f"{table.path}: column 't': median sample interval {dt:.6g} s ({rate:.6g} Hz) is not plausible for "
         f"{what} ({low:g}..{high:g} Hz){hint}"
     )
 
@@ -653,9 +653,14 @@ def _check_time(table: _Table, warnings: list[str]) -> _Table:
         return table
     n_dup = int(np.count_nonzero(dup))
     first_line = int(table.lines[int(np.argmax(dup)) + 1])
+    hint = ""
+    if n_dup > 0.01 * t.shape[0]:
+        step = float(np.min(dt[dt > 0])) if (dt > 0).any() else 0.0
+        hint = (f"; that many repeats mean the stamps are too coarse (steps of {step:.3g} s): write t with more "
+                "decimals")
     warnings.append(
         f"{table.path.name}: dropped {n_dup} duplicate timestamp{'s' if n_dup > 1 else ''} "
-        f"(first at line {first_line})"
+        f"(first at line {first_line}){hint}"
     )
     keep = np.concatenate(([True], ~dup))
     return table.take(keep)
@@ -674,7 +679,7 @@ def _gap_warning(file_name: str, t: np.ndarray, lines: np.ndarray, warnings: lis
     n_gaps = int(np.count_nonzero(gaps))
     warnings.append(
         f"{file_name}: {n_gaps} gap{'s' if n_gaps > 1 else ''} longer than {GAP_FACTOR} x the nominal "
-        f"interval {nominal:.4g} s ({1.0 / nominal:.4g} Hz); largest {float(dt[k]):.6g} s from "
+        f"interval {nominal:.4g} s ({1.0 / nominal:.4g} Hz); largest {float(dt[k]):.4g} s from "
         f"t={float(t[k])!r} (line {lines[k]}) to t={float(t[k + 1])!r} (line {lines[k + 1]})"
     )
 
