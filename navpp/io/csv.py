@@ -654,7 +654,7 @@ def _check_time(table: _Table, warnings: list[str]) -> _Table:
     n_dup = int(np.count_nonzero(dup))
     first_line = int(table.lines[int(np.argmax(dup)) + 1])
     hint = ""
-    if n_dup > 0.01 * t.shape[0]:
+    if n_dup >= 10 and n_dup > 0.01 * t.shape[0]:
         step = float(np.min(dt[dt > 0])) if (dt > 0).any() else 0.0
         hint = (f"; that many repeats mean the stamps are too coarse (steps of {step:.3g} s): write t with more "
                 "decimals")
