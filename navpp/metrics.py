@@ -304,9 +304,11 @@ def _gnss_position_metrics(gnss: GnssData, ref: ReferenceData,
         else:
             heading = _heading_from_velocity(r["vel_enu"]) if "vel_enu" in r else None
             if heading is None:
+                # no heading: only the vertical part of the lever arm is known (roll = pitch = 0)
                 mat_nb = None
-                note = ("lever arm ignored: the reference has no attitude and no velocity "
-                        "to take a heading from")
+                err = err - np.array([0.0, 0.0, lever[2]])
+                note = ("only the vertical part of the lever arm applied: the reference has no attitude and "
+                        "no velocity to take a heading from")
             else:
                 mat_nb = mat_nb_from_rph(np.stack([np.zeros_like(heading), np.zeros_like(heading),
                                                    heading], axis=-1))

@@ -261,7 +261,7 @@ def test_raw_gnss_stats_with_lever_arm_and_attitude():
     assert m0["gnss_position_m"]["3d"]["mae"] > 1.0
 
 
-def test_raw_gnss_lever_arm_from_velocity_heading_or_ignored():
+def test_raw_gnss_lever_arm_from_velocity_heading_or_vertical_only():
     n = 30
     vel = np.tile([5.0, 0.0, 0.0], (n, 1))  # due east: heading 90 deg
     ref = _reference(n=n, vel=vel)
@@ -276,8 +276,8 @@ def test_raw_gnss_lever_arm_from_velocity_heading_or_ignored():
 
     ref_bare = _reference(n=n)
     g = compute_metrics(sol, ref_bare, gnss=gnss, lever_arm_m=lever, **_kwargs())["gnss_position_m"]
-    assert g["east"]["mae"] == pytest.approx(1.0, abs=1e-3)  # lever arm not removed
-    assert "ignored" in g["note"]
+    assert g["east"]["mae"] == pytest.approx(1.0, abs=1e-3)  # horizontal lever arm not removed
+    assert "only the vertical part" in g["note"]
 
 
 def test_raw_gnss_outside_reference_span():
@@ -287,3 +287,13 @@ def test_raw_gnss_outside_reference_span():
     sol = _solution(ref.t, ref.lat_deg, ref.lon_deg, ref.alt)
     g = compute_metrics(sol, ref, gnss=gnss, **_kwargs())["gnss_position_m"]
     assert g["epochs"] == 0 and "note" in g
+
+
+def test_raw_gnss_vertical_lever_arm_without_reference_heading():
+    n = 20
+    t = np.arange(n, dtype=float)
+    ref = ReferenceData(t, np.full(n, 45.0), np.full(n, 7.0), np.full(n, 100.0))
+    sol = _solution(t, ref.lat_deg, ref.lon_deg, ref.alt)
+    gnss = GnssData(t, ref.lat_deg.copy(), ref.lon_deg.copy(), ref.alt + 1.5)   # antenna 1.5 m up
+    g = compute_metrics(sol, ref, gnss=gnss, lever_arm_m=(0.3, 0.0, 1.5), **_kwargs())["gnss_position_m"]
+    assert g["up"]["max"] == pytest.approx(0.0, abs=1e-6)
