@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import time
+from array import array
 from dataclasses import dataclass, replace
 from typing import Callable
 
@@ -225,11 +226,13 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     state = GaussianState(al.t, al.x, al.P)
     # covariance knots for the output's 1-sigma: (t, variance before, variance after an update);
     # long gaps between fixes get a knot every KNOT_S so the sigma follows the real growth
-    knots: list[tuple[float, np.ndarray, np.ndarray]] = []
+    knots = array("d")          # flat (t, prior E/N/U variance, posterior E/N/U variance) records
 
     def knot(prior: np.ndarray | None = None) -> None:
-        v = state.P.diagonal()[POS].copy()
-        knots.append((state.t, v if prior is None else prior, v))
+        v = state.P.diagonal()[POS]
+        knots.append(state.t)
+        knots.extend(v if prior is None else prior)
+        knots.extend(v)
 
     def coast_to(t_end: float) -> None:
         nonlocal state
@@ -274,9 +277,8 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     path = model.path[al.index:]
     model.path = None
     t_out = imu.t[al.index:]
-    kt = np.array([k[0] for k in knots])
-    k_prior = np.array([k[1] for k in knots])
-    k_post = np.array([k[2] for k in knots])
+    kn = np.frombuffer(knots, dtype=float).reshape(-1, 7)
+    kt, k_prior, k_post = kn[:, 0].copy(), kn[:, 1:4].copy(), kn[:, 4:7].copy()
     std_out = _interpolated_std(t_out, kt[0], k_post[0], kt[1:], k_prior[1:], k_post[1:])
     solution = solution_from_path(t_out, path, std_out, recording.t0_ns)
     diag = Diagnostics(tg, nu, nis, accepted, forced)

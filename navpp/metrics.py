@@ -107,15 +107,15 @@ class _Bracket(NamedTuple):
         return cls(i0, i1, w)
 
     def linear(self, y: np.ndarray) -> np.ndarray:
-        y = np.asarray(y, dtype=float)
-        a, b = y[self.i0], y[self.i1]
+        y = np.asarray(y)                     # index first, convert after: no full-length copy
+        a, b = y[self.i0].astype(float), y[self.i1].astype(float)
         w = self.w if y.ndim == 1 else self.w[:, None]
         return a + w * (b - a)
 
     def angle_deg(self, y: np.ndarray) -> np.ndarray:
         """Angles (deg) along the shorter arc between the two samples (crossing 0/360 or +-180)."""
-        y = np.asarray(y, dtype=float)
-        a, b = y[self.i0], y[self.i1]
+        y = np.asarray(y)
+        a, b = y[self.i0].astype(float), y[self.i1].astype(float)
         return a + self.w * wrap_deg(b - a)
 
 
