@@ -23,7 +23,6 @@ import numpy as np
 from numba import njit
 
 from .. import geodesy
-from .attitude import quat_mul, quat_normalize, rotvec_to_quat
 
 NOMINAL_SIZE = 16
 NOMINAL_Q = slice(0, 4)
