@@ -1,0 +1,199 @@
+"""Decoded ROS-log topics -> a validated :class:`navpp.recording.Recording`.
+
+Role detection: the IMU topic is the one ``sensor_msgs/Imu`` topic (``--imu-topic`` picks
+among several), the GNSS topic the one ``sensor_msgs/NavSatFix`` topic that is not the
+reference (``--gnss-topic`` picks), GNSS velocity the one Twist topic if there is exactly
+one.  Message semantics (ROS REP-145 and the message definitions):
+
+- stamps: header stamps by default (``[time] source = "header"``), record times with "log";
+- NavSatFix ``status < 0`` (no fix) and NaN positions are dropped and counted;
+- ``position_covariance_type`` 0 (unknown): the config's default std; otherwise the square
+  roots of the covariance diagonal (ENU, as the message defines it);
+- Imu orientation is ignored; covariance element 0 = -1 means "not provided".
+Every failure is an InputError naming the file, the topic and the message (index and time).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import InputError
+from ..recording import GnssData, ImuData, Recording, ReferenceData
+from .ros import FIX_TYPE, IMU_TYPE, TWIST_COV_TYPE, TWIST_TYPE, FixMessages, LogContents
+
+GAP_FACTOR = 2.5
+
+
+def topics_of_type(contents: LogContents, msgtype: str) -> list[str]:
+    return [t.topic for t in contents.topics if t.msgtype == msgtype]
+
+
+def choose_topic(contents: LogContents, msgtype: str, role: str, option: str, given: str | None,
+                 exclude: tuple[str, ...] = ()) -> str | None:
+    """The topic playing ``role``: ``given`` (checked), else the only candidate of ``msgtype``."""
+    candidates = [t for t in topics_of_type(contents, msgtype) if t not in exclude]
+    if given is not None:
+        known = {t.topic: t.msgtype for t in contents.topics}
+        if given not in known:
+            raise InputError(f"{contents.source}: no topic {given!r} ({option}); topics: "
+                             f"{', '.join(sorted(known)) or 'none'}")
+        if known[given] != msgtype:
+            raise InputError(f"{contents.source}: topic {given!r} ({option}) is {known[given]}, not {msgtype}")
+        return given
+    if len(candidates) > 1:
+        raise InputError(f"{contents.source}: several {msgtype} topics could be the {role}: "
+                         f"{', '.join(candidates)}; choose one with {option}")
+    return candidates[0] if candidates else None
+
+
+def _stamps(msgs, source: str) -> np.ndarray:
+    return np.asarray(msgs.log_ns if source == "log" else msgs.stamp_ns, dtype=np.int64)
+
+
+def _ordered(stamps: np.ndarray, what: str, warnings: list[str]) -> np.ndarray:
+    """Indices keeping strictly increasing stamps: duplicates dropped (counted); a stamp going
+    backwards is an error naming the message."""
+    d = np.diff(stamps)
+    back = np.nonzero(d < 0)[0]
+    if back.size:
+        k = int(back[0]) + 1
+        raise InputError(f"{what}: message {k} has stamp {stamps[k] * 1e-9:.9f} s, before message {k - 1} "
+                         f"({stamps[k - 1] * 1e-9:.9f} s): stamps go backwards (try [time] source = \"log\")")
+    keep = np.concatenate([[True], d > 0])
+    n_dup = int(np.count_nonzero(~keep))
+    if n_dup:
+        warnings.append(f"{what}: dropped {n_dup} message{'s' if n_dup > 1 else ''} with a repeated stamp "
+                        f"(first: message {int(np.argmin(keep))})")
+    return np.nonzero(keep)[0]
+
+
+def _finite_rows(arrays: list[np.ndarray], names: list[str], what: str, stamps: np.ndarray) -> None:
+    for a, name in zip(arrays, names, strict=True):
+        bad = ~np.isfinite(a)
+        if bad.ndim > 1:
+            bad = bad.any(axis=1)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise InputError(f"{what}: message {k} (t = {stamps[k] * 1e-9:.6f} s): non-finite {name}")
+
+
+def _gap_warning(what: str, t: np.ndarray, warnings: list[str]) -> None:
+    if t.shape[0] < 3:
+        return
+    dt = np.diff(t)
+    nominal = float(np.median(dt))
+    gaps = dt > GAP_FACTOR * nominal
+    if gaps.any():
+        k = int(np.argmax(np.where(gaps, dt, -np.inf)))
+        n = int(np.count_nonzero(gaps))
+        warnings.append(f"{what}: {n} gap{'s' if n > 1 else ''} longer than {GAP_FACTOR} x the nominal interval "
+                        f"{nominal:.4g} s; largest {float(dt[k]):.4g} s after message {k}")
+
+
+def _fixes(fix: FixMessages, source: str, what: str, default_std: tuple[float, float, float],
+           warnings: list[str]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Valid fixes of a NavSatFix topic: stamps (ns) and the GnssData columns."""
+    stamps = _stamps(fix, source)
+    valid = (np.asarray(fix.status) >= 0) & np.isfinite(fix.lat_deg) & np.isfinite(fix.lon_deg) & np.isfinite(fix.alt)
+    n_bad = int(np.count_nonzero(~valid))
+    if n_bad:
+        warnings.append(f"{what}: dropped {n_bad} of {valid.size} fixes with no fix (status < 0 or NaN position)")
+    idx = np.nonzero(valid)[0]
+    if idx.size == 0:
+        raise InputError(f"{what}: no valid fix (every message has status < 0 or a NaN position)")
+    idx = idx[_ordered(stamps[idx], what, warnings)]
+    cov = np.asarray(fix.cov, dtype=float)[idx]
+    ctype = np.asarray(fix.cov_type)[idx]
+    var = cov[:, [0, 4, 8]]
+    known = (ctype > 0) & np.all(np.isfinite(var) & (var > 0), axis=1)
+    std = np.where(known[:, None], np.sqrt(np.where(known[:, None], var, 1.0)), np.asarray(default_std)[None, :])
+    if (~known).any():
+        warnings.append(f"{what}: {int(np.count_nonzero(~known))} fixes without a usable position covariance: "
+                        f"[gnss] default_std_m = {list(default_std)} used for them")
+    cols = {"lat_deg": np.asarray(fix.lat_deg, float)[idx], "lon_deg": np.asarray(fix.lon_deg, float)[idx],
+            "alt": np.asarray(fix.alt, float)[idx], "std_enu": std,
+            "fix": np.asarray(fix.status)[idx].astype(np.int64)}
+    return stamps[idx], cols
+
+
+def recording_from_log(contents: LogContents, *, imu_topic: str | None = None, gnss_topic: str | None = None,
+                       reference_topic: str | None = None, time_source: str = "header",
+                       time_base: str = "unix", default_std_m=(2.0, 2.0, 4.0),
+                       gyro_scale: float = 1.0, accel_scale: float = 1.0) -> Recording:
+    """Pick the roles, apply the message semantics, validate, and build the Recording."""
+    src = contents.source
+    warnings = list(contents.warnings)
+    imu_name = choose_topic(contents, IMU_TYPE, "IMU", "--imu-topic", imu_topic)
+    if imu_name is None:
+        raise InputError(f"{src}: no {IMU_TYPE} topic; topics: "
+                         + (", ".join(f"{t.topic} ({t.msgtype})" for t in contents.topics) or "none"))
+    exclude = (reference_topic,) if reference_topic else ()
+    gnss_name = choose_topic(contents, FIX_TYPE, "GNSS", "--gnss-topic", gnss_topic, exclude)
+    if gnss_name is None:
+        raise InputError(f"{src}: no {FIX_TYPE} topic for the GNSS; topics: "
+                         + (", ".join(f"{t.topic} ({t.msgtype})" for t in contents.topics) or "none"))
+    if reference_topic is not None:
+        choose_topic(contents, FIX_TYPE, "reference", "--reference-topic", reference_topic)
+
+    imu = contents.imu.get(imu_name)
+    if imu is None or imu.stamp_ns.shape[0] == 0:
+        raise InputError(f"{src}: topic {imu_name!r} has no IMU message")
+    what = f"{src}: topic {imu_name!r}"
+    stamps = _stamps(imu, time_source)
+    _finite_rows([imu.gyro, imu.accel], ["angular_velocity", "linear_acceleration"], what, stamps)
+    keep = _ordered(stamps, what, warnings)
+    stamps = stamps[keep]
+    if stamps.shape[0] < 2:
+        raise InputError(f"{what}: at least 2 IMU messages are needed, found {stamps.shape[0]}")
+    t0_ns = int(stamps[0])
+    t_imu = (stamps - t0_ns) * 1e-9
+    rate = 1.0 / float(np.median(np.diff(t_imu)))
+    if rate < 50.0:
+        warnings.append(f"{what}: IMU rate {rate:.1f} Hz is low for strapdown navigation (100-200 Hz expected); "
+                        "processed anyway")
+    _gap_warning(what, t_imu, warnings)
+    imu_data = ImuData(t_imu, np.ascontiguousarray(np.asarray(imu.gyro, float)[keep] * gyro_scale),
+                       np.ascontiguousarray(np.asarray(imu.accel, float)[keep] * accel_scale))
+
+    fix = contents.fix.get(gnss_name)
+    if fix is None or fix.stamp_ns.shape[0] == 0:
+        raise InputError(f"{src}: topic {gnss_name!r} has no NavSatFix message")
+    what = f"{src}: topic {gnss_name!r}"
+    g_ns, cols = _fixes(fix, time_source, what, tuple(default_std_m), warnings)
+    t_gnss = (g_ns - t0_ns) * 1e-9
+    if not np.any((t_gnss >= 0) & (t_gnss <= t_imu[-1])):
+        raise InputError(f"{what}: no fix inside the IMU time span ({t0_ns * 1e-9:.3f} .. "
+                         f"{(t0_ns * 1e-9 + t_imu[-1]):.3f} s); check the stamps of both topics")
+    vel = std_vel = None
+    twists = topics_of_type(contents, TWIST_COV_TYPE) + topics_of_type(contents, TWIST_TYPE)
+    if len(twists) == 1 and twists[0] in contents.twist:
+        tw = contents.twist[twists[0]]
+        tw_ns = _stamps(tw, time_source)
+        j = np.clip(np.searchsorted(tw_ns, g_ns), 1, max(len(tw_ns) - 1, 1)) if len(tw_ns) > 1 else np.zeros_like(g_ns)
+        if len(tw_ns) > 1:
+            j = np.where(np.abs(tw_ns[j - 1] - g_ns) < np.abs(tw_ns[j] - g_ns), j - 1, j)
+        near = np.abs(tw_ns[j] - g_ns) < 0.05e9
+        if near.mean() > 0.9:
+            vel = np.where(near[:, None], np.asarray(tw.vel, float)[j], np.nan)
+            if tw.cov_diag is not None:
+                std_vel = np.sqrt(np.clip(np.asarray(tw.cov_diag, float)[j], 1e-6, None))
+            if not near.all():
+                ok = near
+                t_gnss, vel = t_gnss[ok], vel[ok]
+                std_vel = std_vel[ok] if std_vel is not None else None
+                cols = {k: v[ok] for k, v in cols.items()}
+        else:
+            warnings.append(f"{src}: GNSS velocity topic {twists[0]!r} does not line up with the fixes; not used")
+    gnss = GnssData(t_gnss, cols["lat_deg"], cols["lon_deg"], cols["alt"], std_enu=cols["std_enu"], vel_enu=vel,
+                    std_vel_enu=std_vel, fix=cols["fix"])
+
+    reference = None
+    if reference_topic is not None:
+        rfix = contents.fix.get(reference_topic)
+        if rfix is None or rfix.stamp_ns.shape[0] == 0:
+            raise InputError(f"{src}: reference topic {reference_topic!r} has no message")
+        r_ns, rcols = _fixes(rfix, time_source, f"{src}: topic {reference_topic!r}", tuple(default_std_m), warnings)
+        reference = ReferenceData((r_ns - t0_ns) * 1e-9, rcols["lat_deg"], rcols["lon_deg"], rcols["alt"],
+                                  source=f"{src}:{reference_topic}")
+    return Recording(imu=imu_data, gnss=gnss, t0_ns=t0_ns, time_base=time_base, reference=reference,
+                     source=src, warnings=tuple(warnings))
