@@ -55,26 +55,82 @@ def resolve_config(log: Path, config_path: str | Path | None) -> Config:
 
 
 def read_log(log: str | Path, config: Config, *, reference: str | Path | None = None,
-             progress: Callable[[float], None] | None = None) -> Recording:
-    """Read any supported log into a validated :class:`Recording`."""
+             progress: Callable[[float], None] | None = None, imu_topic: str | None = None,
+             gnss_topic: str | None = None, reference_topic: str | None = None,
+             gnss_file: str | Path | None = None) -> Recording:
+    """Read any supported log into a validated :class:`Recording`.
+
+    CSV log directories, MCAP files (ROS 2 or ROS 1 encoded), ROS 1 bags and ROS 2 bag
+    directories; the reader is chosen by content.  ``gnss_file`` (an RTKLIB .pos) replaces or
+    supplies the log's GNSS; ``reference`` (a CSV) or ``reference_topic`` gives the reference.
+    """
+    from dataclasses import replace
+
     from .io import csv as csv_io
+    from .io.detect import log_kind
 
     path = Path(log)
-    if not path.exists():
-        raise InputError(f"{path}: no such file or directory")
-    if csv_io.is_csv_log(path):
-        return csv_io.read_csv_log(path, reference=reference, time_base=config.time.base,
-                                   gyro_units=config.imu.gyro_units, accel_units=config.imu.accel_units,
-                                   time_offset_s=config.gnss.time_offset_s, progress=progress)
-    if path.is_dir():
-        present = [name for name in (csv_io.IMU_FILE, csv_io.GNSS_FILE) if (path / name).is_file()]
-        if len(present) == 1:  # half a CSV log: name the file that is missing
-            missing = csv_io.GNSS_FILE if present[0] == csv_io.IMU_FILE else csv_io.IMU_FILE
-            raise InputError(f"{path / missing}: file not found (a CSV log needs {csv_io.IMU_FILE} and "
-                             f"{csv_io.GNSS_FILE})")
-        raise InputError(f"{path}: not a navpp log directory (expected imu.csv and gnss.csv inside)")
-    raise InputError(f"{path}: unsupported log format {path.suffix or '(no suffix)'!r}; this version reads "
-                     "CSV log directories (imu.csv + gnss.csv)")
+    kind, where = log_kind(path)
+    if kind == "csv":
+        if imu_topic or gnss_topic or reference_topic:
+            raise ConfigError(f"{path}: --imu-topic, --gnss-topic and --reference-topic apply to ROS logs, "
+                              "not to a CSV log")
+        rec = csv_io.read_csv_log(where, reference=reference, time_base=config.time.base,
+                                  gyro_units=config.imu.gyro_units, accel_units=config.imu.accel_units,
+                                  time_offset_s=config.gnss.time_offset_s, progress=progress)
+    else:
+        rec = _read_ros_log(kind, where, config, imu_topic, gnss_topic, reference_topic, gnss_file is not None)
+        if reference is not None:
+            rec = replace(rec, reference=csv_io.read_reference_csv(reference, rec.t0_ns))
+    if gnss_file is not None:
+        from .io.rtklib import read_pos
+
+        gnss, warnings, _ = read_pos(gnss_file, time_base=config.time.base, t0_ns=rec.t0_ns)
+        if config.gnss.time_offset_s:
+            gnss = replace(gnss, t=gnss.t + config.gnss.time_offset_s)
+        rec = replace(rec, gnss=gnss, warnings=tuple(rec.warnings) + tuple(warnings))
+    return rec
+
+
+def _read_ros_log(kind: str, path: Path, config: Config, imu_topic: str | None, gnss_topic: str | None,
+                  reference_topic: str | None, gnss_from_file: bool) -> Recording:
+    from .io.assemble import choose_topic, recording_from_log
+    from .io.detect import list_topics, read_topics
+    from .io.ros import FIX_TYPE, IMU_TYPE, TWIST_COV_TYPE, TWIST_TYPE, LogContents
+
+    topics = list_topics(kind, path)
+    index = LogContents(str(path), topics)
+    wanted = [choose_topic(index, IMU_TYPE, "IMU", "--imu-topic", imu_topic)]
+    if not gnss_from_file:
+        wanted.append(choose_topic(index, FIX_TYPE, "GNSS", "--gnss-topic", gnss_topic,
+                                   (reference_topic,) if reference_topic else ()))
+        twists = [t.topic for t in topics if t.msgtype in (TWIST_COV_TYPE, TWIST_TYPE)]
+        if len(twists) == 1:
+            wanted.append(twists[0])
+    if reference_topic:
+        wanted.append(choose_topic(index, FIX_TYPE, "reference", "--reference-topic", reference_topic))
+    contents = read_topics(kind, path, [w for w in wanted if w])
+    if gnss_from_file and not any(t.msgtype == FIX_TYPE for t in contents.topics):
+        contents = _with_placeholder_fix(contents)
+    return recording_from_log(contents, imu_topic=imu_topic, gnss_topic=gnss_topic, reference_topic=reference_topic,
+                              time_source=config.time.source, time_base=config.time.base,
+                              default_std_m=config.gnss.default_std_m, gyro_scale=config.imu.gyro_scale,
+                              accel_scale=config.imu.accel_scale)
+
+
+def _with_placeholder_fix(contents):
+    """A log without GNSS whose GNSS comes from --gnss: give the assembler one IMU-timed fix
+    so it can build the Recording; the engine then uses the file's fixes."""
+    import numpy as np
+
+    from .io.ros import FIX_TYPE, FixMessages, TopicInfo
+
+    imu = next(iter(contents.imu.values()))
+    ns = imu.stamp_ns[:1]
+    fix = FixMessages("(--gnss)", ns, ns, np.zeros(1, np.int8), np.zeros(1), np.zeros(1), np.zeros(1),
+                      np.zeros((1, 9)), np.zeros(1, np.uint8))
+    return type(contents)(contents.source, contents.topics + (TopicInfo("(--gnss)", FIX_TYPE, 1),),
+                          contents.imu, {"(--gnss)": fix}, contents.twist, contents.warnings)
 
 
 def make_filter(name: str, config: Config, *, seed: int | None = None):
@@ -208,12 +264,16 @@ def _write_file(path: Path, write: Callable[[], None]) -> Path:
 def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | Config | None = None,
             reference: str | Path | None = None, out_dir: str | Path | None = None,
             output_rate_hz: float | None = None, progress: Callable[[str, float], None] | None = None,
-            write: bool = True) -> ProcessResult:
+            write: bool = True, imu_topic: str | None = None, gnss_topic: str | None = None,
+            reference_topic: str | None = None, gnss_file: str | Path | None = None) -> ProcessResult:
     """Read a log, run one filter, write trajectory (and metrics with a reference).
 
     Parameters
     ----------
-    log : a CSV log directory (imu.csv, gnss.csv, optional reference.csv).
+    log : a CSV log directory (imu.csv, gnss.csv, optional reference.csv), an MCAP file, a
+        ROS 1 bag or a ROS 2 bag directory.
+    imu_topic, gnss_topic, reference_topic : topic choices for ROS logs (see :func:`read_log`).
+    gnss_file : an RTKLIB .pos file replacing or supplying the log's GNSS.
     filter_name : registry name (``navpp filters``).
     config : a TOML path or a :class:`Config`; None looks for ``navpp.toml`` in the log
         directory, then uses the defaults (automotive preset).
@@ -246,7 +306,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         if progress:
             progress("reading", 0.0)
         rec = read_log(log, cfg, reference=reference,
-                       progress=(lambda f: progress("reading", f)) if progress else None)
+                       progress=(lambda f: progress("reading", f)) if progress else None, imu_topic=imu_topic,
+                       gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss_file)
         if progress:
             progress("reading", 1.0)
         imu_rate = rec.imu.rate_hz
@@ -298,3 +359,93 @@ def simulate_log(out: str | Path, **spec: Any) -> Path:
     sim = simulate(SimulationSpec(**spec))
     write_csv_log(sim, out)
     return Path(out)
+
+
+@dataclass(frozen=True)
+class StreamSummary:
+    """One row of ``navpp inspect``: a topic (ROS logs) or a file (CSV logs)."""
+
+    name: str
+    msgtype: str
+    count: int
+    rate_hz: float | None
+    first_s: float | None            # absolute stamps, s on the log's time base
+    last_s: float | None
+    gaps: int                        # intervals longer than 3 nominal periods
+    largest_gap_s: float | None
+    duplicates: int                  # repeated stamps
+    role: str
+
+
+def _stream_stats(stamps_ns) -> tuple[float | None, float | None, float | None, int, float | None, int]:
+    import numpy as np
+
+    t = np.asarray(stamps_ns, dtype=np.int64)
+    if t.size == 0:
+        return None, None, None, 0, None, 0
+    first, last = t[0] * 1e-9, t[-1] * 1e-9
+    if t.size < 2:
+        return None, first, last, 0, None, 0
+    d = np.diff(t) * 1e-9
+    dup = int(np.count_nonzero(d == 0))
+    pos = d[d > 0]
+    if pos.size == 0:
+        return None, first, last, 0, None, dup
+    nominal = float(np.median(pos))
+    gaps = d > 3.0 * nominal
+    return (1.0 / nominal, first, last, int(np.count_nonzero(gaps)),
+            float(d[gaps].max()) if gaps.any() else None, dup)
+
+
+def inspect(log: str | Path, *, config: str | Path | Config | None = None) -> tuple[str, list[StreamSummary]]:
+    """What a log holds and the role navpp would give each stream: (kind, rows)."""
+    import numpy as np
+    import pandas as pd
+
+    from .io.detect import list_topics, log_kind, read_topics
+    from .io.ros import FIX_TYPE, IMU_TYPE, SUPPORTED_TYPES, TWIST_COV_TYPE, TWIST_TYPE
+
+    path = Path(log)
+    kind, where = log_kind(path)
+    rows: list[StreamSummary] = []
+    if kind == "csv":
+        roles = {"imu.csv": "IMU", "gnss.csv": "GNSS", "reference.csv": "reference"}
+        for name, role in roles.items():
+            f = where / name
+            if not f.is_file():
+                continue
+            try:
+                t = pd.read_csv(f, usecols=["t"], dtype={"t": float}, engine="c")["t"].to_numpy()
+                ns = np.round(t * 1e9).astype(np.int64)
+            except (ValueError, KeyError) as exc:
+                raise InputError(f"{f}: cannot read column 't': {exc}") from None
+            columns = ", ".join(pd.read_csv(f, nrows=0).columns)
+            rate, first, last, gaps, largest, dup = _stream_stats(ns)
+            rows.append(StreamSummary(name, columns, int(ns.size), rate, first, last, gaps, largest, dup, role))
+        return kind, rows
+    topics = list_topics(kind, where)
+    wanted = [t.topic for t in topics if t.msgtype in SUPPORTED_TYPES]
+    contents = read_topics(kind, where, wanted)
+    n_imu = sum(t.msgtype == IMU_TYPE for t in topics)
+    n_fix = sum(t.msgtype == FIX_TYPE for t in topics)
+    n_twist = sum(t.msgtype in (TWIST_COV_TYPE, TWIST_TYPE) for t in topics)
+    for t in topics:
+        msgs = contents.imu.get(t.topic) or contents.fix.get(t.topic) or contents.twist.get(t.topic)
+        if msgs is not None:
+            rate, first, last, gaps, largest, dup = _stream_stats(msgs.stamp_ns)
+        else:
+            rate = (t.count - 1) / ((t.last_ns - t.first_ns) * 1e-9) if (t.first_ns is not None and t.last_ns
+                                                                          and t.last_ns > t.first_ns) else None
+            first = t.first_ns * 1e-9 if t.first_ns is not None else None
+            last = t.last_ns * 1e-9 if t.last_ns is not None else None
+            gaps, largest, dup = 0, None, 0
+        if t.msgtype == IMU_TYPE:
+            role = "IMU" if n_imu == 1 else "IMU? (choose with --imu-topic)"
+        elif t.msgtype == FIX_TYPE:
+            role = "GNSS" if n_fix == 1 else "GNSS or reference? (--gnss-topic / --reference-topic)"
+        elif t.msgtype in (TWIST_COV_TYPE, TWIST_TYPE):
+            role = "GNSS velocity" if n_twist == 1 else "not used (several velocity topics)"
+        else:
+            role = ""
+        rows.append(StreamSummary(t.topic, t.msgtype, t.count, rate, first, last, gaps, largest, dup, role))
+    return kind, rows

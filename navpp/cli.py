@@ -95,13 +95,20 @@ class _Progress:
 
 @app.command()
 def process(
-    log: Annotated[Path, typer.Argument(metavar="LOG", help="Log: a directory with imu.csv and gnss.csv "
-                                        "(reference.csv optional).")],
+    log: Annotated[Path, typer.Argument(metavar="LOG", help="Log: an MCAP file, a ROS 1 bag, a ROS 2 bag directory, "
+                                        "or a directory with imu.csv and gnss.csv (reference.csv optional).")],
     filter: Annotated[str, typer.Option("--filter", "-f", help="Filter name (see `navpp filters`).")] = "ekf",
     config: Annotated[Optional[Path], typer.Option(help="TOML config; default: navpp.toml in the log directory, "
                                                    "else the automotive preset.")] = None,
     reference: Annotated[Optional[Path], typer.Option(help="Reference CSV (t, lat, lon, alt[, ve, vn, vu, roll, "
                                                       "pitch, heading]); overrides reference.csv.")] = None,
+    imu_topic: Annotated[Optional[str], typer.Option(help="IMU topic (sensor_msgs/Imu) when a ROS log has several.")] = None,
+    gnss_topic: Annotated[Optional[str], typer.Option(
+        help="GNSS topic (sensor_msgs/NavSatFix) when a ROS log has several.")] = None,
+    reference_topic: Annotated[Optional[str], typer.Option(
+        help="A NavSatFix topic of the log to use as the reference (e.g. a DGPS receiver).")] = None,
+    gnss: Annotated[Optional[Path], typer.Option(
+        "--gnss", help="RTKLIB solution file (.pos) replacing or supplying the log's GNSS.")] = None,
     out: Annotated[Optional[Path], typer.Option(
         help="Output directory, created if needed.  [default: navpp-out/<log>-<filter>]")] = None,
     output_rate: Annotated[Optional[float], typer.Option(
@@ -118,7 +125,8 @@ def process(
 
         with _Progress(quiet) as prog:
             res = api.process(log, filter_name=filter, config=config, reference=reference, out_dir=out,
-                              output_rate_hz=output_rate, progress=prog)
+                              output_rate_hz=output_rate, progress=prog, imu_topic=imu_topic,
+                              gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss)
     except NavppError as exc:
         _fail(str(exc))
         return
@@ -232,6 +240,41 @@ def simulate(
               f"still period shortened to {spec.still_effective_s:g} s: --still {still:g} s is more than half "
               f"of --duration {duration:g} s")
     typer.echo(f"wrote {path}/imu.csv, gnss.csv, reference.csv, navpp.toml")
+
+
+@app.command("inspect")
+def inspect_cmd(
+    log: Annotated[Path, typer.Argument(metavar="LOG", help="An MCAP file, a ROS 1 bag, a ROS 2 bag directory, or a "
+                                        "CSV log directory.")],
+) -> None:
+    """List a log's topics (or CSV files): type, count, rate, time span, gaps, repeats, role."""
+    from .errors import NavppError
+
+    try:
+        from . import api
+
+        kind, rows = api.inspect(log)
+    except NavppError as exc:
+        _fail(str(exc))
+        return
+    from rich.console import Console
+    from rich.markup import escape
+    from rich.table import Table
+
+    tab = Table(title=f"{escape(str(log))} ({kind})")
+    for col, just in (("topic / file", "left"), ("type / columns", "left"), ("count", "right"), ("rate Hz", "right"),
+                      ("first t (s)", "right"), ("span s", "right"), ("gaps >3T", "right"),
+                      ("repeats", "right"), ("role", "left")):
+        tab.add_column(col, justify=just)
+    for r in rows:
+        span = f"{r.last_s - r.first_s:.1f}" if r.first_s is not None and r.last_s is not None else ""
+        gaps = f"{r.gaps} (max {r.largest_gap_s:.3g} s)" if r.gaps else "0"
+        tab.add_row(escape(r.name), escape(r.msgtype), str(r.count), f"{r.rate_hz:.1f}" if r.rate_hz else "",
+                    f"{r.first_s:.3f}" if r.first_s is not None else "", span, gaps, str(r.duplicates), r.role)
+    con = Console(highlight=False)
+    if not con.is_terminal:
+        con = Console(highlight=False, width=200)
+    con.print(tab)
 
 
 @app.command("filters")

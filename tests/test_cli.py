@@ -521,11 +521,18 @@ def test_directory_is_not_a_log(tmp_path: Path) -> None:
     assert str(log) in msg and "imu.csv" in msg and "gnss.csv" in msg
 
 
-def test_unsupported_suffix(tmp_path: Path) -> None:
+def test_not_a_log_file(tmp_path: Path) -> None:
     log, out = tmp_path / "drive.txt", tmp_path / "out"
     log.write_text("t,gx\n0,0\n")
     msg = assert_one_line_error(invoke("process", log, "--out", out), out)
-    assert str(log) in msg and "'.txt'" in msg and "unsupported" in msg
+    assert str(log) in msg and "not a log navpp reads" in msg
+
+
+def test_empty_file(tmp_path: Path) -> None:
+    log, out = tmp_path / "drive.mcap", tmp_path / "out"
+    log.write_bytes(b"")
+    msg = assert_one_line_error(invoke("process", log, "--out", out), out)
+    assert str(log) in msg and "empty file" in msg
 
 
 def test_gnss_outside_imu_span(log_copy: Path, tmp_path: Path) -> None:
@@ -575,3 +582,53 @@ def test_console_script_help() -> None:
     for command in ("process", "simulate", "filters"):
         assert command in proc.stdout
     assert "Traceback" not in proc.stderr
+
+
+def test_inspect_csv_log(sim_log_dir: Path) -> None:
+    res = invoke("inspect", sim_log_dir)
+    assert res.exit_code == 0, (res.output, res.exception)
+    text = res.stdout
+    for name, role, count in (("imu.csv", "IMU", "15001"), ("gnss.csv", "GNSS", "601"), ("reference.csv", "reference", "1201")):
+        line = next(line for line in text.splitlines() if name in line)
+        assert role in line and count in line, line
+    assert "125.0" in text
+
+
+def test_inspect_not_a_log(tmp_path: Path) -> None:
+    f = tmp_path / "x.bin"
+    f.write_bytes(b"\x00\x01garbage")
+    res = invoke("inspect", f)
+    assert res.exit_code == 1 and "not a log navpp reads" in flat(res.stderr)
+
+
+def _write_pos_gpst(path: Path, gnss_csv: Path) -> None:
+    """The fixes of a CSV log as an RTKLIB .pos in GPST (unix + 18 s since 2017)."""
+    import datetime as dt
+
+    lines = read_lines(gnss_csv)
+    cols = lines[0].split(",")
+    out = ["% program   : RTKPOST ver.2.4.3 b34",
+           "% (lat/lon/height=WGS84/ellipsoidal,Q=1:fix,2:float,3:sbas,4:dgps,5:single,6:ppp,ns=# of satellites)",
+           "%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)"
+           "  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio"]
+    for line in lines[1:]:
+        v = dict(zip(cols, line.split(","), strict=True))
+        t = dt.datetime(1970, 1, 1) + dt.timedelta(seconds=float(v["t"]) + 18.0)
+        stamp = t.strftime("%Y/%m/%d %H:%M:%S.") + f"{t.microsecond // 1000:03d}"
+        out.append(f"{stamp} {float(v['lat']):14.9f} {float(v['lon']):14.9f} {float(v['alt']):10.4f}   5  10 "
+                   f"{float(v['std_n']):8.4f} {float(v['std_e']):8.4f} {float(v['std_u']):8.4f}   0.0000   0.0000"
+                   "   0.0000   0.00    0.0")
+    path.write_text("\n".join(out) + "\n")
+
+
+def test_process_with_rtklib_gnss_matches_the_csv_gnss(log_copy: Path, tmp_path: Path) -> None:
+    pos = tmp_path / "rover.pos"
+    _write_pos_gpst(pos, log_copy / "gnss.csv")
+    base = invoke("process", log_copy, "--out", tmp_path / "a", "--quiet")
+    assert base.exit_code == 0, (base.output, base.exception)
+    (log_copy / "gnss.csv").write_text((log_copy / "gnss.csv").read_text().replace("1.8,1.8,2.5", "9.0,9.0,9.0"))
+    res = invoke("process", log_copy, "--gnss", pos, "--out", tmp_path / "b", "--quiet")
+    assert res.exit_code == 0, (res.output, res.exception)
+    a = json.loads((tmp_path / "a" / "metrics.json").read_text())["position_m"]["horizontal"]["rmse"]
+    b = json.loads((tmp_path / "b" / "metrics.json").read_text())["position_m"]["horizontal"]["rmse"]
+    assert b == pytest.approx(a, abs=0.02)
