@@ -1,0 +1,679 @@
+"""Read ROS bags with ``rosbags``: ROS 1 ``.bag`` files and ROS 2 bag directories.
+
+Handled through :class:`rosbags.highlevel.AnyReader`: ROS 1 bags (uncompressed, bz2 or lz4
+chunks), several ROS 1 files read as one (split bags, merged in log-time order), ROS 2 bag
+directories with ``sqlite3`` (``.db3``) or ``mcap`` storage (file or message compression
+too), and message definitions stored in the bag (no typestore entry is needed: AnyReader
+registers the bag's own definitions; a ROS 2 bag without any, as Foxy/Galactic wrote them,
+is decoded with the ROS 2 Humble definitions).
+
+Decoding: the raw payloads of each wanted topic are collected (no message objects) and
+handed to the vectorised decoder :func:`navpp.io.messages.decode` when it is importable and
+the bag's definition of the type has the standard layout; otherwise (or when it returns
+None) each message is deserialised by rosbags and its fields copied into the arrays.  Both
+give the same arrays (tested).
+
+Every failure is an :class:`~navpp.errors.InputError` with one line naming the file, and the
+topic and message where one is at fault.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager, suppress
+from dataclasses import dataclass
+from itertools import chain
+from pathlib import Path, PosixPath, WindowsPath
+from typing import Any
+
+import numpy as np
+
+from navpp.errors import InputError, NavppError
+from navpp.io.ros import (
+    FIX_TYPE,
+    IMU_TYPE,
+    SUPPORTED_TYPES,
+    TWIST_COV_TYPE,
+    TWIST_TYPE,
+    FixMessages,
+    ImuMessages,
+    LogContents,
+    TopicInfo,
+    TwistMessages,
+    normalise_type,
+)
+
+__all__ = ["list_topics", "read_rosbag"]
+
+_BAG_MAGIC = b"#ROSBAG V"
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+#: Fields each supported type must have (dotted paths), checked before decoding.
+_REQUIRED_FIELDS: dict[str, tuple[str, ...]] = {
+    IMU_TYPE: ("header.stamp.sec", "header.stamp.nanosec", "header.frame_id", "angular_velocity.x",
+               "angular_velocity.y", "angular_velocity.z", "angular_velocity_covariance",
+               "linear_acceleration.x", "linear_acceleration.y", "linear_acceleration.z",
+               "linear_acceleration_covariance"),
+    FIX_TYPE: ("header.stamp.sec", "header.stamp.nanosec", "header.frame_id", "status.status", "latitude",
+               "longitude", "altitude", "position_covariance", "position_covariance_type"),
+    TWIST_COV_TYPE: ("header.stamp.sec", "header.stamp.nanosec", "header.frame_id", "twist.twist.linear.x",
+                     "twist.twist.linear.y", "twist.twist.linear.z", "twist.covariance"),
+    TWIST_TYPE: ("header.stamp.sec", "header.stamp.nanosec", "header.frame_id", "twist.linear.x",
+                 "twist.linear.y", "twist.linear.z"),
+}
+
+Messages = ImuMessages | FixMessages | TwistMessages
+#: Locate ROS 1 payloads through the bag index (:func:`_collect_ros1`); tests switch it off
+#: to compare with rosbags' own iteration.
+_FAST_ROS1 = True
+
+_RESULT_CLASS = {IMU_TYPE: ImuMessages, FIX_TYPE: FixMessages, TWIST_COV_TYPE: TwistMessages,
+                 TWIST_TYPE: TwistMessages}
+
+
+# --------------------------------------------------------------------------- public API
+
+
+def list_topics(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -> tuple[TopicInfo, ...]:
+    """Every topic of a bag (or of several ROS 1 bag files read together), cheaply.
+
+    Counts come from the bag's index (ROS 1 chunk infos) or metadata (ROS 2
+    ``metadata.yaml`` / MCAP summary); no message is decoded.  ``first_ns`` / ``last_ns``
+    (log time) are filled for ROS 1 bags, whose index holds every message's time, and are
+    None for ROS 2 bags, whose metadata only gives the bag's overall span.
+
+    Raises
+    ------
+    InputError : not a bag, empty, truncated or damaged, unknown message definitions.
+    """
+    files = _check_paths(paths)
+    with _open(files) as reader:
+        infos = _topic_infos(reader)
+    if sum(t.count for t in infos) == 0:
+        raise InputError(f"{_label(files)}: the bag holds no messages")
+    return infos
+
+
+def read_rosbag(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
+                topics: Iterable[str] | None = None) -> LogContents:
+    """Decode a bag's IMU, NavSatFix and GNSS-velocity topics into numpy arrays.
+
+    Parameters
+    ----------
+    paths : a ROS 1 ``.bag`` file, several of them (a split recording, merged by log time),
+        or a ROS 2 bag directory (with ``metadata.yaml``; ``sqlite3`` or ``mcap`` storage).
+    topics : the topics to decode; None decodes every topic of a supported type
+        (``sensor_msgs/Imu``, ``sensor_msgs/NavSatFix``,
+        ``geometry_msgs/TwistWithCovarianceStamped``, ``geometry_msgs/TwistStamped``).
+
+    Returns
+    -------
+    LogContents : ``topics`` lists every topic of the bag (decoded ones with their exact
+        log-time span); ``imu`` / ``fix`` / ``twist`` hold the decoded topics.
+
+    Raises
+    ------
+    InputError : one line naming the file (and topic / message): not a bag, empty, truncated
+        or damaged, a ROS 2 directory without ``metadata.yaml``, an unknown topic or an
+        unsupported type asked for, a message definition without the needed fields, or a
+        message that cannot be decoded.
+    """
+    files = _check_paths(paths)
+    label = _label(files)
+    with _open(files) as reader:
+        infos = _topic_infos(reader)
+        if sum(t.count for t in infos) == 0:
+            raise InputError(f"{label}: the bag holds no messages")
+        by_name = {t.topic: t for t in infos}
+        wanted = _wanted_topics(label, infos, topics)
+        bag_topics = reader.topics
+        warnings: list[str] = []
+        std_store = _standard_typestore(reader)
+        plans = {}
+        for topic in wanted:
+            conns = bag_topics[topic].connections
+            plans[topic] = _plan(label, reader, std_store, topic, by_name[topic].msgtype, conns, warnings)
+        raw = _collect_ros1(reader, bag_topics, wanted) if not reader.is2 and _FAST_ROS1 else None
+        if raw is None:
+            raw = _collect(label, reader, [c for t in wanted for c in bag_topics[t].connections], wanted)
+        imu: dict[str, ImuMessages] = {}
+        fix: dict[str, FixMessages] = {}
+        twist: dict[str, TwistMessages] = {}
+        spans: dict[str, tuple[int, int | None, int | None]] = {}
+        for topic in wanted:
+            payloads = raw.pop(topic)
+            msgtype, rosname, standard = plans[topic]
+            msgs = _decode(label, reader, topic, msgtype, rosname, standard, by_name[topic].encoding, payloads)
+            log_ns = payloads.log_ns
+            spans[topic] = (log_ns.size, int(log_ns[0]), int(log_ns[-1])) if log_ns.size else (0, None, None)
+            del payloads
+            if isinstance(msgs, ImuMessages):
+                imu[topic] = msgs
+            elif isinstance(msgs, FixMessages):
+                fix[topic] = msgs
+            else:
+                twist[topic] = msgs
+        infos = tuple(
+            TopicInfo(t.topic, t.msgtype, *spans[t.topic], t.encoding) if t.topic in spans else t
+            for t in infos
+        )
+        return LogContents(label, infos, imu, fix, twist, tuple(warnings))
+
+
+# --------------------------------------------------------------------------- opening
+
+
+def _as_list(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -> list[Path]:
+    if isinstance(paths, (str, os.PathLike)):
+        return [Path(paths)]
+    return [Path(p) for p in paths]
+
+
+def _label(files: Sequence[Path]) -> str:
+    return str(files[0]) if len(files) == 1 else " + ".join(str(f) for f in files)
+
+
+def _head(path: Path, n: int = 16) -> bytes:
+    try:
+        with open(path, "rb") as f:
+            return f.read(n)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def _check_paths(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -> list[Path]:
+    """The bag paths, checked: they exist, are bags of one kind; ROS 1 files keep a ``.bag`` suffix
+    for AnyReader (which tells ROS 1 from ROS 2 by it)."""
+    files = _as_list(paths)
+    if not files:
+        raise InputError("no ROS bag given")
+    kinds = []
+    out: list[Path] = []
+    for p in files:
+        if not p.exists():
+            raise InputError(f"{p}: no such file or directory")
+        if p.is_dir():
+            if not (p / "metadata.yaml").is_file():
+                raise InputError(f"{p}: a ROS 2 bag directory needs metadata.yaml, and it has none (rosbag2 writes "
+                                 f"it when a recording closes; `ros2 bag reindex {p}` recreates it)")
+            kinds.append("ROS 2")
+            out.append(_as_seen_by_anyreader(p, ros1=False))
+            continue
+        head = _head(p)
+        if not head:
+            raise InputError(f"{p}: empty file")
+        if head.startswith(_BAG_MAGIC):
+            kinds.append("ROS 1")
+            out.append(_as_seen_by_anyreader(p, ros1=True))
+        elif (head.startswith(_SQLITE_MAGIC) and p.suffix == ".db3") or (head.startswith(_MCAP_MAGIC)
+                                                                        and p.suffix == ".mcap"):
+            kinds.append("ROS 2")  # a ROS 2 bag's storage file on its own: rosbags reads it too
+            out.append(p)
+        else:
+            raise InputError(f"{p}: not a ROS bag (expected a ROS 1 .bag file or a ROS 2 bag directory with "
+                             "metadata.yaml)")
+    if len(set(kinds)) > 1:
+        raise InputError(f"{_label(files)}: ROS 1 and ROS 2 bags cannot be read together")
+    return out
+
+
+class _BagPosixPath(PosixPath):
+    """A path that AnyReader takes for a ROS 1 bag (it tells ROS 1 from ROS 2 by the suffix)."""
+
+    @property
+    def suffix(self) -> str:
+        return ".bag"
+
+
+class _Ros2PosixPath(PosixPath):
+    """A path that AnyReader takes for ROS 2 (e.g. a bag directory named ``drive.bag``)."""
+
+    @property
+    def suffix(self) -> str:
+        return ""
+
+
+class _BagWindowsPath(WindowsPath):
+    @property
+    def suffix(self) -> str:
+        return ".bag"
+
+
+class _Ros2WindowsPath(WindowsPath):
+    @property
+    def suffix(self) -> str:
+        return ""
+
+
+def _as_seen_by_anyreader(p: Path, ros1: bool) -> Path:
+    """``p`` itself when its suffix tells AnyReader the right ROS version, else a view that does."""
+    if (p.suffix == ".bag") == ros1:
+        return p
+    if os.name == "nt":
+        return _BagWindowsPath(p) if ros1 else _Ros2WindowsPath(p)
+    return _BagPosixPath(p) if ros1 else _Ros2PosixPath(p)
+
+
+def _one_line(text: object, limit: int = 300) -> str:
+    s = " ".join(str(text).split())
+    return s if len(s) <= limit else s[: limit - 3] + "..."
+
+
+def _reason(exc: BaseException) -> str:
+    msg = _one_line(exc.args[0] if len(exc.args) == 1 else exc) if exc.args else type(exc).__name__
+    return msg.rstrip(".")
+
+
+def _ros1_index_pos(path: Path) -> int | None:
+    """``index_pos`` from a ROS 1 bag header (None when unreadable)."""
+    try:
+        with open(path, "rb") as f:
+            if not f.readline().startswith(_BAG_MAGIC):
+                return None
+            (hlen,) = struct.unpack("<I", f.read(4))
+            header = f.read(hlen)
+        i = 0
+        while i + 4 <= len(header):
+            (flen,) = struct.unpack_from("<I", header, i)
+            name, _, value = header[i + 4:i + 4 + flen].partition(b"=")
+            if name == b"index_pos" and len(value) == 8:
+                return int(struct.unpack("<Q", value)[0])
+            i += 4 + flen
+    except (OSError, struct.error):
+        return None
+    return None
+
+
+def _open_error(path: Path, kind: str, exc: BaseException) -> InputError:
+    reason = _reason(exc)
+    if kind == "ROS 1":
+        index_pos = _ros1_index_pos(path)
+        size = path.stat().st_size
+        if index_pos == 0:
+            return InputError(f"{path}: ROS 1 bag has no index (its recording was not closed properly); "
+                              f"run `rosbag reindex {path}` first")
+        if index_pos is not None and index_pos >= size:
+            return InputError(f"{path}: ROS 1 bag is truncated: its index should start at byte {index_pos} "
+                              f"but the file has {size} bytes")
+    if _is_definition_error(exc):
+        return InputError(f"{path}: the message definitions stored in the {kind} bag cannot be used: {reason}")
+    return InputError(f"{path}: cannot read {kind} bag: {reason}")
+
+
+def _is_definition_error(exc: BaseException) -> bool:
+    """A message-definition problem (AnyReader re-raises rosbags' TypesysError without its type)."""
+    from rosbags.typesys import TypesysError
+
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, TypesysError):
+            return True
+        seen = seen.__context__ if seen.__context__ is not seen else None
+    return "hash mismatch" in str(exc)
+
+
+@contextmanager
+def _open(files: Sequence[Path]) -> Iterator[Any]:
+    """An open AnyReader over ``files``; every failure to open becomes an InputError."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    is2 = any(f.suffix != ".bag" for f in files)
+    default = get_typestore(Stores.ROS2_HUMBLE if is2 else Stores.ROS1_NOETIC)
+    try:
+        reader = AnyReader(list(files), default_typestore=default)
+        reader.open()
+    except NavppError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds for damaged files (ReaderError, KeyError...)
+        raise _first_bad(files, is2, exc) from None
+    try:
+        yield reader
+    finally:
+        with suppress(Exception):  # closing a damaged bag must not hide the real error
+            reader.close()
+
+
+def _first_bad(files: Sequence[Path], is2: bool, exc: BaseException) -> InputError:
+    """Name the file that cannot be opened (with several files, open each to find it)."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    kind = "ROS 2" if is2 else "ROS 1"
+    if len(files) > 1:
+        default = get_typestore(Stores.ROS2_HUMBLE if is2 else Stores.ROS1_NOETIC)
+        for f in files:
+            try:
+                with AnyReader([f], default_typestore=default):
+                    pass
+            except Exception as one:  # noqa: BLE001 - reported below
+                return _open_error(f, kind, one)
+        label = _label(files)
+        return InputError(f"{label}: cannot read these {kind} bags together: {_reason(exc)}")
+    return _open_error(files[0], kind, exc)
+
+
+# --------------------------------------------------------------------------- topics
+
+
+def _topic_infos(reader: Any) -> tuple[TopicInfo, ...]:
+    infos = []
+    for name, info in reader.topics.items():
+        conns = info.connections
+        types = sorted({normalise_type(c.msgtype) for c in conns})
+        msgtype = types[0] if len(types) == 1 else ",".join(types)
+        if reader.is2:
+            encs = sorted({getattr(c.ext, "serialization_format", "") or "" for c in conns})
+            encoding = ",".join(encs)
+        else:
+            encoding = "ros1"
+        first = last = None
+        if not reader.is2:
+            times = [(idx[0].time, idx[-1].time) for c in conns if (idx := c.owner.indexes.get(c.id))]
+            if times:
+                first, last = min(t[0] for t in times), max(t[1] for t in times)
+        infos.append(TopicInfo(name, msgtype, int(info.msgcount), first, last, encoding))
+    return tuple(infos)
+
+
+def _wanted_topics(label: str, infos: Sequence[TopicInfo], topics: Iterable[str] | None) -> list[str]:
+    if topics is None:
+        return [t.topic for t in infos if t.msgtype in SUPPORTED_TYPES]
+    by_name = {t.topic: t for t in infos}
+    wanted: list[str] = []
+    for topic in topics:
+        if topic not in by_name:
+            raise InputError(f"{label}: no topic {topic!r}; topics: {', '.join(sorted(by_name)) or 'none'}")
+        if by_name[topic].msgtype not in SUPPORTED_TYPES:
+            raise InputError(f"{label}: topic {topic!r} is {by_name[topic].msgtype}, which navpp does not decode "
+                             f"(supported: {', '.join(SUPPORTED_TYPES)})")
+        if topic not in wanted:
+            wanted.append(topic)
+    return wanted
+
+
+# --------------------------------------------------------------------------- message layouts
+
+
+def _standard_typestore(reader: Any) -> Any:
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_HUMBLE if reader.is2 else Stores.ROS1_NOETIC)
+
+
+def _shape(ts: Any, msgtype: str, depth: int = 0) -> tuple:
+    """Field names and types of ``msgtype``, nested types expanded (constants ignored)."""
+    from rosbags.typesys.base import Nodetype
+
+    if depth > 20:
+        raise ValueError(f"message type {msgtype} nests too deeply")
+
+    def node(desc: tuple) -> tuple:
+        kind, arg = desc
+        if kind == Nodetype.BASE:
+            return ("base", arg[0])
+        if kind == Nodetype.NAME:
+            return ("msg", _shape(ts, arg, depth + 1))
+        if kind == Nodetype.ARRAY:
+            return ("array", node(arg[0]), arg[1])
+        return ("sequence", node(arg[0]))
+
+    return tuple((name, node(desc)) for name, desc in ts.fielddefs[msgtype][1])
+
+
+def _has_field(shape: tuple, dotted: str) -> bool:
+    fields = dict(shape)
+    head, _, rest = dotted.partition(".")
+    if head not in fields:
+        return False
+    if not rest:
+        return True
+    kind = fields[head]
+    return kind[0] == "msg" and _has_field(kind[1], rest)
+
+
+def _plan(label: str, reader: Any, std_store: Any, topic: str, msgtype: str, conns: Sequence[Any],
+          warnings: list[str]) -> tuple[str, str, bool]:
+    """(normalised type, rosbags type name, standard layout?) of a topic, validated before decoding."""
+    rosnames = {c.msgtype for c in conns}
+    if len(rosnames) != 1:
+        raise InputError(f"{label}: topic {topic!r} carries several message types ({', '.join(sorted(rosnames))})")
+    rosname = rosnames.pop()
+    try:
+        shape = _shape(reader.typestore, rosname)
+    except (KeyError, ValueError) as exc:
+        raise InputError(f"{label}: topic {topic!r}: the bag has no usable message definition for {msgtype} "
+                         f"({_reason(exc)})") from None
+    missing = [f for f in _REQUIRED_FIELDS[msgtype] if not _has_field(shape, f)]
+    if missing:
+        raise InputError(f"{label}: topic {topic!r}: the bag's definition of {msgtype} has no field "
+                         f"{', '.join(missing)}")
+    standard = shape == _shape(std_store, rosname)
+    if not standard:
+        warnings.append(f"{label}: topic {topic!r}: the bag's definition of {msgtype} differs from the standard "
+                        "one; decoded message by message")
+    return msgtype, rosname, standard
+
+
+# --------------------------------------------------------------------------- reading and decoding
+
+
+@dataclass
+class _Payloads:
+    """One topic's raw messages, in order: message ``i`` is ``buffer[starts[i]:starts[i] + lengths[i]]``
+    (one buffer instead of a Python object per message), with its log time ``log_ns[i]``."""
+
+    buffer: bytearray
+    starts: np.ndarray
+    lengths: np.ndarray
+    log_ns: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.starts.shape[0])
+
+    def message(self, i: int) -> bytes:
+        s = int(self.starts[i])
+        return bytes(self.buffer[s:s + int(self.lengths[i])])
+
+
+def _collect(label: str, reader: Any, conns: Sequence[Any], wanted: Sequence[str]) -> dict[str, _Payloads]:
+    """Raw payloads and log times of the wanted topics, in one pass over the bag."""
+    acc: dict[str, tuple[list[int], list[int], bytearray]] = {t: ([], [], bytearray()) for t in wanted}
+    last: list[Any] = [None, None]
+    if conns:
+        try:
+            for conn, t, data in reader.messages(connections=conns):
+                times, lengths, buf = acc[conn.topic]
+                times.append(t)
+                lengths.append(len(data))
+                buf += data
+                last[0] = conn.topic
+                last[1] = t
+        except NavppError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - damaged chunks / pages: rosbags' backends raise many kinds
+            topic, t = last
+            n = sum(len(v[0]) for v in acc.values())
+            where = (f"after message {len(acc[topic][0]) - 1} of topic {topic!r} (log time {t * 1e-9:.9f} s)"
+                     if topic is not None else "before the first message")
+            raise InputError(f"{label}: cannot read the bag {where}, {n} messages read: {_reason(exc)} "
+                             "(truncated or damaged file?)") from None
+    out = {}
+    for topic, (times, lengths, buf) in acc.items():
+        lens = np.array(lengths, dtype=np.int64)
+        starts = np.zeros(lens.size, dtype=np.int64)
+        np.cumsum(lens[:-1], out=starts[1:])
+        out[topic] = _Payloads(buf, starts, lens, np.array(times, dtype=np.int64))
+    return out
+
+
+#: Length of a ROS 1 message-data record header: the fields op (8 bytes with its length
+#: prefix), conn (13) and time (17), in any order.
+_ROS1_MSG_HEADER_LEN = 38
+_ROS1_OP_FIELD_POS = (0, 13, 17, 30)  # where the op field can start inside that header
+
+
+def _u32(b: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """Little-endian uint32 at each byte position of ``b`` (int64 result)."""
+    p = pos.astype(np.int64)
+    return (b[p].astype(np.int64) | (b[p + 1].astype(np.int64) << 8) | (b[p + 2].astype(np.int64) << 16)
+            | (b[p + 3].astype(np.int64) << 24))
+
+
+def _collect_ros1(reader: Any, bag_topics: Any, wanted: Sequence[str]) -> dict[str, _Payloads] | None:
+    """The ROS 1 fast path of :func:`_collect`: payloads located through the bag index.
+
+    rosbags' own message iteration parses a record header per message in Python; here each
+    needed chunk is decompressed once and its message records are located with numpy from
+    the index offsets that rosbags has already read.  The order is AnyReader's: by log time,
+    ties in file, connection and index order.  Returns None (the caller then uses rosbags'
+    iteration, which also reports damage precisely) when anything is not as expected.
+    """
+    try:
+        readers = list(reader.readers)
+        per_topic = {}
+        for topic in wanted:
+            parts_idx, parts_reader = [], []
+            for c in bag_topics[topic].connections:
+                owner = c.owner
+                ridx = next(i for i, r in enumerate(readers) if r is owner)
+                idx = owner.indexes[c.id]
+                a = np.fromiter(chain.from_iterable(idx), dtype=np.int64, count=3 * len(idx)).reshape(-1, 3)
+                parts_idx.append(a)
+                parts_reader.append(np.full(len(idx), ridx, dtype=np.int64))
+            a = np.concatenate(parts_idx) if parts_idx else np.zeros((0, 3), np.int64)
+            rdx = np.concatenate(parts_reader) if parts_reader else np.zeros(0, np.int64)
+            order = np.argsort(a[:, 0], kind="stable")
+            a, rdx = a[order], rdx[order]
+            key = (rdx << 48) | a[:, 1]  # (file, chunk position): chunk positions are < 2**48
+            group = np.argsort(key, kind="stable")
+            keys, first = np.unique(key[group], return_index=True)
+            bounds = dict(zip(keys.tolist(), zip(first.tolist(), [*first[1:].tolist(), len(group)])))
+            per_topic[topic] = (a, group, bounds, bytearray(), np.zeros(len(a), np.int64),
+                                np.zeros(len(a), np.int64))
+        all_keys = sorted({k for _, _, bounds, *_ in per_topic.values() for k in bounds})
+        for key in all_keys:
+            r = readers[key >> 48]
+            chunk = r.chunks[key & ((1 << 48) - 1)]
+            r.bio.seek(chunk.datapos)
+            raw = chunk.decompressor(r.bio.read(chunk.datasize))
+            b = np.frombuffer(raw, dtype=np.uint8)
+            for a, group, bounds, buf, topic_starts, topic_lengths in per_topic.values():
+                if key not in bounds:
+                    continue
+                lo, hi = bounds[key]
+                rows = group[lo:hi]
+                offs = a[rows, 2]
+                if offs.size == 0:
+                    continue
+                if offs.min() < 0 or offs.max() + 4 + _ROS1_MSG_HEADER_LEN + 4 > b.size:
+                    return None
+                if np.any(_u32(b, offs) != _ROS1_MSG_HEADER_LEN):
+                    return None
+                is_msg = np.zeros(offs.size, dtype=bool)
+                for p in _ROS1_OP_FIELD_POS:
+                    q = offs + 4 + p
+                    is_msg |= ((_u32(b, q) == 4) & (b[q + 4] == ord("o")) & (b[q + 5] == ord("p"))
+                               & (b[q + 6] == ord("=")) & (b[q + 7] == 2))
+                if not is_msg.all():
+                    return None
+                lengths = _u32(b, offs + 4 + _ROS1_MSG_HEADER_LEN)
+                starts = offs + 4 + _ROS1_MSG_HEADER_LEN + 4
+                if np.any(starts + lengths > b.size):
+                    return None
+                # copy this chunk's payloads of the topic to the end of the topic's buffer
+                ends = np.cumsum(lengths)
+                take = np.arange(int(ends[-1]), dtype=np.int64) + np.repeat(starts - (ends - lengths), lengths)
+                topic_starts[rows] = len(buf) + ends - lengths
+                topic_lengths[rows] = lengths
+                buf += memoryview(b[take])
+        return {t: _Payloads(buf, starts, lengths, np.ascontiguousarray(a[:, 0]))
+                for t, (a, _, _, buf, starts, lengths) in per_topic.items()}
+    except Exception:  # noqa: BLE001 - rosbags internals changed or the bag is damaged: use the library path
+        return None
+
+
+def _bulk_decoder() -> Callable[..., Any] | None:
+    """``navpp.io.messages.decode`` when that module exists, else None."""
+    try:
+        from navpp.io import messages
+    except ModuleNotFoundError as exc:
+        if exc.name == "navpp.io.messages":
+            return None
+        raise
+    return getattr(messages, "decode", None)
+
+
+def _decode(label: str, reader: Any, topic: str, msgtype: str, rosname: str, standard: bool, encoding: str,
+            payloads: _Payloads) -> Messages:
+    if standard and len(payloads):
+        decode = _bulk_decoder()
+        if decode is not None:
+            try:
+                out = decode(msgtype, encoding, (payloads.buffer, payloads.starts, payloads.lengths),
+                             payloads.log_ns, topic, source=label)
+            except InputError as exc:
+                text = str(exc)
+                raise InputError(text if text.startswith(label) else f"{label}: {text}") from None
+            if out is not None:
+                if not isinstance(out, _RESULT_CLASS[msgtype]):
+                    raise TypeError(f"navpp.io.messages.decode returned {type(out).__name__} for {msgtype}")
+                return out
+    return _decode_each(label, reader, topic, msgtype, rosname, payloads)
+
+
+def _decode_each(label: str, reader: Any, topic: str, msgtype: str, rosname: str, payloads: _Payloads) -> Messages:
+    """The library path: rosbags deserialises each message; fields are copied into arrays."""
+    msgs = []
+    log_ns = payloads.log_ns
+    for i in range(len(payloads)):
+        try:
+            msgs.append(reader.deserialize(payloads.message(i), rosname))
+        except Exception as exc:  # noqa: BLE001 - rosbags raises several kinds for bad payloads
+            raise InputError(f"{label}: topic {topic!r} message {i} (log time {log_ns[i] * 1e-9:.9f} s): cannot "
+                             f"decode {msgtype}: {_reason(exc)}") from None
+    n = len(msgs)
+    stamp_ns = np.fromiter((m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in msgs),
+                           dtype=np.int64, count=n)
+    frame_id = msgs[0].header.frame_id if msgs else ""
+
+    def vec(get: Callable[[Any], Any]) -> np.ndarray:
+        return np.array([(v.x, v.y, v.z) for v in map(get, msgs)], dtype=np.float64).reshape(n, 3)
+
+    def scalar(get: Callable[[Any], Any], dtype: Any) -> np.ndarray:
+        return np.fromiter(map(get, msgs), dtype=dtype, count=n)
+
+    if msgtype == IMU_TYPE:
+        return ImuMessages(
+            topic, stamp_ns, log_ns,
+            gyro=vec(lambda m: m.angular_velocity),
+            accel=vec(lambda m: m.linear_acceleration),
+            gyro_cov0=scalar(lambda m: m.angular_velocity_covariance[0], np.float64),
+            accel_cov0=scalar(lambda m: m.linear_acceleration_covariance[0], np.float64),
+            frame_id=frame_id,
+        )
+    if msgtype == FIX_TYPE:
+        cov = np.array([m.position_covariance for m in msgs], dtype=np.float64).reshape(n, -1)
+        if cov.shape[1] != 9:
+            raise InputError(f"{label}: topic {topic!r}: position_covariance has {cov.shape[1]} elements, expected 9")
+        return FixMessages(
+            topic, stamp_ns, log_ns,
+            status=scalar(lambda m: m.status.status, np.int8),
+            lat_deg=scalar(lambda m: m.latitude, np.float64),
+            lon_deg=scalar(lambda m: m.longitude, np.float64),
+            alt=scalar(lambda m: m.altitude, np.float64),
+            cov=cov,
+            cov_type=scalar(lambda m: m.position_covariance_type, np.uint8),
+            frame_id=frame_id,
+        )
+    if msgtype == TWIST_COV_TYPE:
+        cov = np.array([m.twist.covariance for m in msgs], dtype=np.float64).reshape(n, -1)
+        if cov.shape[1] != 36:
+            raise InputError(f"{label}: topic {topic!r}: twist.covariance has {cov.shape[1]} elements, expected 36")
+        return TwistMessages(topic, stamp_ns, log_ns, vel=vec(lambda m: m.twist.twist.linear),
+                             cov_diag=np.ascontiguousarray(cov[:, [0, 7, 14]]), frame_id=frame_id)
+    return TwistMessages(topic, stamp_ns, log_ns, vel=vec(lambda m: m.twist.linear), cov_diag=None,
+                         frame_id=frame_id)
