@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Sequence
+from decimal import Decimal
 from fractions import Fraction
 from pathlib import Path
 
@@ -89,10 +90,12 @@ def test_round_trip_exact(tmp_path: Path) -> None:
     assert rec.source == str(d)
     assert rec.warnings == ()
     assert rec.reference is None
-    np.testing.assert_array_equal(rec.imu.t, t - t[0])
+    text_t = [Decimal(line.split(",")[0]) for line in (d / "imu.csv").read_text().splitlines()[1:]]
+    np.testing.assert_allclose(rec.imu.t, [float(v - text_t[0]) for v in text_t], rtol=0, atol=1e-12)
     np.testing.assert_array_equal(rec.imu.gyro, gyro)
     np.testing.assert_array_equal(rec.imu.accel, accel)
-    np.testing.assert_array_equal(rec.gnss.t, tg - t[0])
+    text_g = [Decimal(line.split(",")[0]) for line in (d / "gnss.csv").read_text().splitlines()[1:]]
+    np.testing.assert_allclose(rec.gnss.t, [float(v - text_t[0]) for v in text_g], rtol=0, atol=1e-12)
     for name, key in [("lat_deg", "lat"), ("lon_deg", "lon"), ("alt", "alt")]:
         np.testing.assert_array_equal(getattr(rec.gnss, name), g[key])
     np.testing.assert_array_equal(rec.gnss.std_enu, np.column_stack([g["std_e"], g["std_n"], g["std_u"]]))
@@ -110,8 +113,21 @@ def test_t0_ns_is_exact_value_of_the_stamp(tmp_path: Path) -> None:
     t0 = 1_700_000_000.123456
     d = make_log(tmp_path, imu=(IMU_HEADER, imu_rows(t0=t0)), gnss=(GNSS_HEADER, gnss_rows(t0=t0)))
     rec = read_csv_log(d)
-    assert rec.t0_ns == round(Fraction(t0) * 10**9)
-    assert abs(rec.t0_ns - 1_700_000_000_123_456_000) < 200  # float64 resolution at 1.7e9 s
+    # the decimal text of the stamp, exactly: not float64's nearest value (~100 ns off here)
+    assert rec.t0_ns == 1_700_000_000_123_456_000
+    assert round(Fraction(t0) * 10**9) != rec.t0_ns
+
+
+def test_stamps_with_more_decimals_than_float64_holds_are_exact(tmp_path: Path) -> None:
+    d = tmp_path / "log"
+    d.mkdir()
+    stamps = [f"1700000000.{k:09d}" for k in (1, 8000003, 16000007, 24000011)]   # ns resolution
+    rows = "\n".join(f"{s},0,0,0,0,0,9.8" for s in stamps)
+    (d / "imu.csv").write_text("t,gx,gy,gz,ax,ay,az\n" + rows + "\n")
+    (d / "gnss.csv").write_text(f"t,lat,lon,alt\n{stamps[1]},45,7,300\n")
+    rec = read_csv_log(d)
+    assert rec.t0_ns == 1_700_000_000_000_000_001
+    np.testing.assert_allclose(rec.imu.t * 1e9, [0, 8000002, 16000006, 24000010], rtol=0, atol=1e-6)
 
 
 def test_optional_columns_absent_give_none(tmp_path: Path) -> None:
@@ -140,7 +156,8 @@ def test_reference_auto_pickup(tmp_path: Path) -> None:
     ref = rec.reference
     assert ref is not None
     assert ref.source == str(d / "reference.csv")
-    np.testing.assert_array_equal(ref.t, np.array([r[0] for r in ref_rows]) - T0)
+    # the stamps as written (decimal text), not float64's nearest values: exactly k * 0.02 s
+    np.testing.assert_allclose(ref.t, 0.02 * np.arange(4), rtol=0, atol=1e-12)
     np.testing.assert_array_equal(ref.vel_enu, [[1.0, 2.0, 0.0]] * 4)
     np.testing.assert_array_equal(ref.rph_deg, [[1.0, -2.0, 270.0]] * 4)
 
@@ -203,8 +220,8 @@ def test_increments_constant_rate(tmp_path: Path) -> None:
     d = _increment_log(tmp_path, t, rate, np.zeros(6))
     rec = read_csv_log(d, time_base="relative")
     assert len(rec.imu) == 19  # first row dropped
-    assert rec.t0_ns == round(Fraction(float(t[1])) * 10**9)
-    np.testing.assert_array_equal(rec.imu.t, t[1:] - t[1])
+    assert rec.t0_ns == 10_010_000_000                      # "10.01" as written
+    np.testing.assert_allclose(rec.imu.t, 0.01 * np.arange(19), rtol=0, atol=1e-12)
     np.testing.assert_allclose(rec.imu.gyro, np.tile(rate[:3], (19, 1)), rtol=0, atol=1e-12)
     np.testing.assert_allclose(rec.imu.accel, np.tile(rate[3:], (19, 1)), rtol=0, atol=1e-12)
 

@@ -146,7 +146,10 @@ def read_csv_log(
     _gap_warning(imu.path.name, t_imu, imu_lines, warnings)
     t_first = float(t_imu[0])
     t_last = float(t_imu[-1])
-    t0_ns = _seconds_to_ns(t_first)
+    imu_ns = _stamps_ns(imu, header)
+    if imu_format == "increments":
+        imu_ns = imu_ns[1:]
+    t0_ns = int(imu_ns[0])
     if rates is None:       # straight from the parsed columns: no (N, 6) intermediate copy
         gyro = imu.vectors(_IMU_RATE_COLS[0:3], gyro_scale)
         accel = imu.vectors(_IMU_RATE_COLS[3:6], accel_scale)
@@ -154,7 +157,7 @@ def read_csv_log(
         gyro = np.ascontiguousarray(rates[:, 0:3] * gyro_scale)
         accel = np.ascontiguousarray(rates[:, 3:6] * accel_scale)
     del imu, rates
-    imu_data = ImuData(t=t_imu - t_first, gyro=gyro, accel=accel)
+    imu_data = ImuData(t=(imu_ns - t0_ns) * 1e-9, gyro=gyro, accel=accel)
 
     # GNSS ------------------------------------------------------------------------------------
     gnss_path = log_dir / GNSS_FILE
@@ -166,6 +169,7 @@ def read_csv_log(
             "'ve', 'vn', 'vu'"
         )
     gnss = _read_table(gnss_path, header, gnss_cols, warnings)
+    gnss_header = header
     _check_lat_lon(gnss)
     _check_positive(gnss, [c for g in (_GNSS_GROUPS[0], _GNSS_GROUPS[2]) for c in g])
     _check_integral(gnss, _GNSS_SINGLES)
@@ -193,7 +197,7 @@ def read_csv_log(
             + "); kept, but the engine ignores them"
         )
     gnss_data = GnssData(
-        t=t_gnss - t_first,
+        t=(_stamps_ns(gnss, gnss_header) + round(float(time_offset_s) * 1e9) - t0_ns) * 1e-9,
         lat_deg=gnss.col("lat"),
         lon_deg=gnss.col("lon"),
         alt=gnss.col("alt"),
@@ -255,9 +259,7 @@ def read_reference_csv(
     ref = _check_time(ref, warnings)
     if warnings_out is not None:
         warnings_out.extend(warnings)
-    # (t - whole seconds) is exact in float64; the sub-second part of t0 is then subtracted.
-    sec, frac_ns = divmod(int(t0_ns), 1_000_000_000)
-    t_rel = (ref.col("t") - float(sec)) - frac_ns * 1e-9
+    t_rel = (_stamps_ns(ref, header) - int(t0_ns)) * 1e-9
     return ReferenceData(
         t=t_rel,
         lat_deg=ref.col("lat"),
@@ -352,6 +354,42 @@ def _check_options(time_base: str, gyro_units: str, accel_units: str) -> tuple[f
             f"accel units {accel_units!r} are not one of {', '.join(map(repr, ACCEL_UNITS))}"
         )
     return GYRO_UNITS[gyro_units], ACCEL_UNITS[accel_units]
+
+
+def _stamp_decimals(path: Path, header: list[str], max_lines: int = 2000) -> int:
+    """Most decimals written in the ``t`` column over the first data lines."""
+    j = header.index("t")
+    d = 0
+    with open(path, encoding="utf-8-sig", errors="replace") as f:
+        next(f, None)
+        for _, line in zip(range(max_lines), f):
+            cells = line.split(",")
+            if len(cells) > j:
+                cell = cells[j].strip()
+                if "." in cell and "e" not in cell.lower():
+                    d = max(d, len(cell.split(".", 1)[1]))
+    return d
+
+
+def _stamps_ns(table: _Table, header: list[str]) -> np.ndarray:
+    """The ``t`` column as exact integer nanoseconds (what the file says, not float64's nearest
+    value): rounding at the written number of decimals recovers the text exactly while
+    ``|t| 10^d < 2^51``; beyond that (e.g. unix stamps with 7+ decimals) the column is re-read
+    as text."""
+    t = table.data["t"]
+    d = min(_stamp_decimals(table.path, header), 9)
+    if t.size == 0 or float(np.max(np.abs(t))) * 10.0 ** d < 2.0 ** 51:
+        return np.round(t * 10.0 ** d).astype(np.int64) * 10 ** (9 - d)
+    text = pd.read_csv(table.path, usecols=["t"], dtype={"t": str}, encoding="utf-8-sig",
+                       skip_blank_lines=False)["t"].to_numpy()[table.lines - 2]
+    out = np.empty(text.shape[0], dtype=np.int64)
+    for k, cell in enumerate(text):
+        cell = cell.strip()
+        neg = cell.startswith("-")
+        whole, _, frac = cell.lstrip("+-").partition(".")
+        v = int(whole or "0") * 1_000_000_000 + int((frac[:9] or "0").ljust(9, "0"))
+        out[k] = -v if neg else v
+    return out
 
 
 def _seconds_to_ns(t: float) -> int:
