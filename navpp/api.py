@@ -42,16 +42,20 @@ class ProcessResult:
     warnings: tuple[str, ...] = field(default_factory=tuple)   # what the data made us do
 
 
+def companion(log: Path, name: str) -> Path | None:
+    """A file that goes with a log: ``name`` inside a log directory; else ``<stem>.<name>``
+    beside the log; else ``name`` in the log's directory (shared by the logs there)."""
+    candidates = [log / name] if log.is_dir() else []
+    candidates += [log.parent / f"{log.stem if log.is_file() else log.name}.{name}", log.parent / name]
+    return next((c for c in candidates if c.is_file()), None)
+
+
 def resolve_config(log: Path, config_path: str | Path | None) -> Config:
-    """Explicit ``--config``; else ``navpp.toml`` beside/inside the log; else built-in defaults."""
+    """Explicit ``--config``; else the log's ``navpp.toml`` (:func:`companion`); else defaults."""
     if config_path is not None:
         return load_config(config_path)
-    base = log if log.is_dir() else log.parent
-    candidate = base / CONFIG_IN_LOG_DIR
-    if candidate.is_file():
-        cfg = load_config(candidate)
-        return cfg
-    return load_config(None)
+    found = companion(log, CONFIG_IN_LOG_DIR)
+    return load_config(found)
 
 
 def read_log(log: str | Path, config: Config, *, reference: str | Path | None = None,
@@ -80,6 +84,8 @@ def read_log(log: str | Path, config: Config, *, reference: str | Path | None = 
                                   time_offset_s=config.gnss.time_offset_s, progress=progress)
     else:
         rec = _read_ros_log(kind, where, config, imu_topic, gnss_topic, reference_topic, gnss_file is not None)
+        if reference is None and reference_topic is None:
+            reference = companion(path, csv_io.REFERENCE_FILE)       # e.g. drive.reference.csv
         if reference is not None:
             rec = replace(rec, reference=csv_io.read_reference_csv(reference, rec.t0_ns))
     if gnss_file is not None:
