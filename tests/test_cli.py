@@ -632,3 +632,21 @@ def test_process_with_rtklib_gnss_matches_the_csv_gnss(log_copy: Path, tmp_path:
     a = json.loads((tmp_path / "a" / "metrics.json").read_text())["position_m"]["horizontal"]["rmse"]
     b = json.loads((tmp_path / "b" / "metrics.json").read_text())["position_m"]["horizontal"]["rmse"]
     assert b == pytest.approx(a, abs=0.02)
+
+
+def test_split_ros1_recording_as_a_directory(sim_log_dir: Path, tmp_path: Path) -> None:
+    from navpp.io.csv import read_csv_log
+    from navpp.io.roswrite import write_ros1_bag, write_ros2_bag
+
+    rec = read_csv_log(sim_log_dir)
+    split = tmp_path / "split"
+    split.mkdir()
+    write_ros1_bag(rec, split / "drive_0.bag", time_range=(0.0, 60.0))
+    write_ros1_bag(rec, split / "drive_1.bag", time_range=(60.0, 1e9))
+    whole = tmp_path / "whole"
+    write_ros2_bag(rec, whole)
+    cfg = sim_log_dir / "navpp.toml"
+    a = invoke("process", split, "--config", cfg, "--out", tmp_path / "a", "-q")
+    b = invoke("process", whole, "--config", cfg, "--out", tmp_path / "b", "-q")
+    assert a.exit_code == 0 and b.exit_code == 0, (a.output, b.output)
+    assert (tmp_path / "a" / "trajectory.csv").read_bytes() == (tmp_path / "b" / "trajectory.csv").read_bytes()

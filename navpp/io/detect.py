@@ -1,8 +1,9 @@
 """Which reader a log needs, chosen by content (magic bytes), not only by suffix.
 
 Kinds: ``csv`` (a directory with imu.csv and gnss.csv), ``mcap`` (an MCAP file, ROS 2 or
-ROS 1 encoded), ``ros1`` (a ROS 1 .bag file), ``ros2`` (a ROS 2 bag directory with
-metadata.yaml; its .db3 or .mcap file may be given instead).
+ROS 1 encoded), ``ros1`` (a ROS 1 .bag file, or a directory of the .bag files of a split
+recording), ``ros2`` (a ROS 2 bag directory with metadata.yaml; its .db3 file may be given
+instead).
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ def log_kind(path: Path) -> tuple[str, Path]:
             return "csv", path
         if (path / "metadata.yaml").is_file():
             return "ros2", path
+        if any(path.glob("*.bag")):
+            return "ros1", path          # a split ROS 1 recording: every .bag file in it
         present = [name for name in (IMU_FILE, GNSS_FILE) if (path / name).is_file()]
         if len(present) == 1:  # half a CSV log: name the file that is missing
             missing = GNSS_FILE if present[0] == IMU_FILE else IMU_FILE
@@ -55,13 +58,20 @@ def log_kind(path: Path) -> tuple[str, Path]:
                      "imu.csv and gnss.csv)")
 
 
+def _bag_paths(kind: str, path: Path):
+    """The files of a split ROS 1 recording given as a directory, else the path itself."""
+    if kind == "ros1" and path.is_dir():
+        return sorted(path.glob("*.bag"))
+    return path
+
+
 def list_topics(kind: str, path: Path) -> tuple[TopicInfo, ...]:
     """Every topic of a ROS log, cheaply (summary or index)."""
     if kind == "mcap":
         from .mcap import list_topics as lt
     else:
         from .rosbag import list_topics as lt
-    return lt(path)
+    return lt(_bag_paths(kind, path))
 
 
 def read_topics(kind: str, path: Path, topics: list[str]) -> LogContents:
@@ -72,4 +82,4 @@ def read_topics(kind: str, path: Path, topics: list[str]) -> LogContents:
         return read_mcap(path, topics)
     from .rosbag import read_rosbag
 
-    return read_rosbag(path, topics)
+    return read_rosbag(_bag_paths(kind, path), topics)
