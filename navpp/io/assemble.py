@@ -46,6 +46,12 @@ def choose_topic(contents: LogContents, msgtype: str, role: str, option: str, gi
     return candidates[0] if candidates else None
 
 
+def _stamp_text(ns) -> str:
+    """An absolute ns stamp as exact decimal seconds (float64 seconds are ~0.2 us coarse)."""
+    sec, frac = divmod(int(ns), 1_000_000_000)
+    return f"{sec}.{frac:09d} s"
+
+
 def _stamps(msgs, source: str) -> np.ndarray:
     return np.asarray(msgs.log_ns if source == "log" else msgs.stamp_ns, dtype=np.int64)
 
@@ -57,8 +63,8 @@ def _ordered(stamps: np.ndarray, what: str, warnings: list[str]) -> np.ndarray:
     back = np.nonzero(d < 0)[0]
     if back.size:
         k = int(back[0]) + 1
-        raise InputError(f"{what}: message {k} has stamp {stamps[k] * 1e-9:.9f} s, before message {k - 1} "
-                         f"({stamps[k - 1] * 1e-9:.9f} s): stamps go backwards (try [time] source = \"log\")")
+        raise InputError(f"{what}: message {k} has stamp {_stamp_text(stamps[k])}, before message {k - 1} "
+                         f"({_stamp_text(stamps[k - 1])}): stamps go backwards (try [time] source = \"log\")")
     keep = np.concatenate([[True], d > 0])
     n_dup = int(np.count_nonzero(~keep))
     if n_dup:
@@ -74,7 +80,7 @@ def _finite_rows(arrays: list[np.ndarray], names: list[str], what: str, stamps: 
             bad = bad.any(axis=1)
         if bad.any():
             k = int(np.argmax(bad))
-            raise InputError(f"{what}: message {k} (t = {stamps[k] * 1e-9:.6f} s): non-finite {name}")
+            raise InputError(f"{what}: message {k} (t = {_stamp_text(stamps[k])}): non-finite {name}")
 
 
 def _gap_warning(what: str, t: np.ndarray, warnings: list[str]) -> None:
@@ -91,8 +97,9 @@ def _gap_warning(what: str, t: np.ndarray, warnings: list[str]) -> None:
 
 
 def _fixes(fix: FixMessages, source: str, what: str, default_std: tuple[float, float, float],
-           warnings: list[str]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Valid fixes of a NavSatFix topic: stamps (ns) and the GnssData columns."""
+           warnings: list[str], std_used: bool = True) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Valid fixes of a NavSatFix topic: stamps (ns) and the GnssData columns.  ``std_used``
+    False (the reference, whose std nothing uses): no warning about missing covariances."""
     stamps = _stamps(fix, source)
     valid = (np.asarray(fix.status) >= 0) & np.isfinite(fix.lat_deg) & np.isfinite(fix.lon_deg) & np.isfinite(fix.alt)
     n_bad = int(np.count_nonzero(~valid))
@@ -107,7 +114,7 @@ def _fixes(fix: FixMessages, source: str, what: str, default_std: tuple[float, f
     var = cov[:, [0, 4, 8]]
     known = (ctype > 0) & np.all(np.isfinite(var) & (var > 0), axis=1)
     std = np.where(known[:, None], np.sqrt(np.where(known[:, None], var, 1.0)), np.asarray(default_std)[None, :])
-    if (~known).any():
+    if std_used and (~known).any():
         warnings.append(f"{what}: {int(np.count_nonzero(~known))} fixes without a usable position covariance: "
                         f"[gnss] default_std_m = {list(default_std)} used for them")
     cols = {"lat_deg": np.asarray(fix.lat_deg, float)[idx], "lon_deg": np.asarray(fix.lon_deg, float)[idx],
@@ -120,7 +127,27 @@ def recording_from_log(contents: LogContents, *, imu_topic: str | None = None, g
                        reference_topic: str | None = None, time_source: str = "header",
                        time_base: str = "unix", default_std_m=(2.0, 2.0, 4.0),
                        gyro_scale: float = 1.0, accel_scale: float = 1.0) -> Recording:
-    """Pick the roles, apply the message semantics, validate, and build the Recording."""
+    """Pick the roles, apply the message semantics, validate, and build the Recording.
+
+    When the reader found the log cut off, a failure here (a missing topic, too few messages)
+    says so too: the cut is the likely cause.
+    """
+    try:
+        return _assemble(contents, imu_topic=imu_topic, gnss_topic=gnss_topic, reference_topic=reference_topic,
+                         time_source=time_source, time_base=time_base, default_std_m=default_std_m,
+                         gyro_scale=gyro_scale, accel_scale=accel_scale)
+    except InputError as exc:
+        cut = [w for w in contents.warnings if "the recording is cut off" in w]
+        if not cut:
+            raise
+        note = cut[0].removeprefix(f"{contents.source}: ")
+        raise InputError(f"{exc} ({note})") from None
+
+
+def _assemble(contents: LogContents, *, imu_topic: str | None = None, gnss_topic: str | None = None,
+              reference_topic: str | None = None, time_source: str = "header",
+              time_base: str = "unix", default_std_m=(2.0, 2.0, 4.0),
+              gyro_scale: float = 1.0, accel_scale: float = 1.0) -> Recording:
     src = contents.source
     warnings = list(contents.warnings)
     imu_name = choose_topic(contents, IMU_TYPE, "IMU", "--imu-topic", imu_topic)
@@ -192,7 +219,8 @@ def recording_from_log(contents: LogContents, *, imu_topic: str | None = None, g
         rfix = contents.fix.get(reference_topic)
         if rfix is None or rfix.stamp_ns.shape[0] == 0:
             raise InputError(f"{src}: reference topic {reference_topic!r} has no message")
-        r_ns, rcols = _fixes(rfix, time_source, f"{src}: topic {reference_topic!r}", tuple(default_std_m), warnings)
+        r_ns, rcols = _fixes(rfix, time_source, f"{src}: topic {reference_topic!r}", tuple(default_std_m), warnings,
+                             std_used=False)
         reference = ReferenceData((r_ns - t0_ns) * 1e-9, rcols["lat_deg"], rcols["lon_deg"], rcols["alt"],
                                   source=f"{src}:{reference_topic}")
     return Recording(imu=imu_data, gnss=gnss, t0_ns=t0_ns, time_base=time_base, reference=reference,
