@@ -16,7 +16,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .config import Config, load_config
-from .errors import ConfigError, InputError
+from .errors import ConfigError, InputError, NavppError
 from .recording import Recording, Solution
 
 CONFIG_IN_LOG_DIR = "navpp.toml"
@@ -321,7 +321,13 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         if rate is not None and rate > imu_rate * 1.001:
             raise ConfigError(f"{rate_what} {rate:g} Hz is above the IMU rate of {log} ({imu_rate:.1f} Hz); "
                               "the trajectory cannot be finer than the IMU")
-        result = engine.run(rec, cfg, filt, progress=(lambda f: progress("filtering", f)) if progress else None)
+        try:
+            result = engine.run(rec, cfg, filt, progress=(lambda f: progress("filtering", f)) if progress else None)
+        except NavppError as exc:
+            cut = [w for w in rec.warnings if "the recording is cut off" in w]
+            if cut:       # the likely reason: say it in the one line
+                raise type(exc)(f"{exc} ({cut[0]})") from None
+            raise
         runtime = result.runtime_s        # without the one-off kernel compilation of a first run
         sol = result.solution
         sol_out = resample_solution(sol, rate) if rate is not None else sol
@@ -403,8 +409,9 @@ def _stream_stats(stamps_ns) -> tuple[float | None, float | None, float | None, 
             float(d[gaps].max()) if gaps.any() else None, dup)
 
 
-def inspect(log: str | Path, *, config: str | Path | Config | None = None) -> tuple[str, list[StreamSummary]]:
-    """What a log holds and the role navpp would give each stream: (kind, rows)."""
+def inspect(log: str | Path, *, config: str | Path | Config | None = None
+            ) -> tuple[str, list[StreamSummary], tuple[str, ...]]:
+    """What a log holds and the role navpp would give each stream: (kind, rows, reader warnings)."""
     import numpy as np
     import pandas as pd
 
@@ -428,7 +435,7 @@ def inspect(log: str | Path, *, config: str | Path | Config | None = None) -> tu
             columns = ", ".join(pd.read_csv(f, nrows=0).columns)
             rate, first, last, gaps, largest, dup = _stream_stats(ns)
             rows.append(StreamSummary(name, columns, int(ns.size), rate, first, last, gaps, largest, dup, role))
-        return kind, rows
+        return kind, rows, ()
     topics = list_topics(kind, where)
     wanted = [t.topic for t in topics if t.msgtype in SUPPORTED_TYPES]
     contents = read_topics(kind, where, wanted)
@@ -454,4 +461,4 @@ def inspect(log: str | Path, *, config: str | Path | Config | None = None) -> tu
         else:
             role = ""
         rows.append(StreamSummary(t.topic, t.msgtype, t.count, rate, first, last, gaps, largest, dup, role))
-    return kind, rows
+    return kind, rows, tuple(contents.warnings)

@@ -253,7 +253,7 @@ def inspect_cmd(
     try:
         from . import api
 
-        kind, rows = api.inspect(log)
+        kind, rows, warnings = api.inspect(log)
     except NavppError as exc:
         _fail(str(exc))
         return
@@ -275,6 +275,9 @@ def inspect_cmd(
     if not con.is_terminal:
         con = Console(highlight=False, width=200)
     con.print(tab)
+    err = Console(stderr=True, highlight=False, soft_wrap=True)
+    for line in warnings:
+        err.print(f"[yellow]warning:[/] {escape(line)}")
 
 
 @app.command("filters")

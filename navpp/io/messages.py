@@ -500,8 +500,16 @@ class TopicDecoder:
             raise InputError(f"{self._where(index, int(log_ns[i]))}: unsupported CDR encapsulation "
                              f"0x{kind:04x} (navpp reads plain CDR, little or big endian)")
         if self._lib is None:
-            self._lib = _library_decoder(self.msgtype, self.encoding, self.schema_name,
-                                         self.schema_text)
+            import contextlib
+            import io
+
+            try:   # the bundled definition parser also prints to stderr: keep the one-line contract
+                with contextlib.redirect_stderr(io.StringIO()):
+                    self._lib = _library_decoder(self.msgtype, self.encoding, self.schema_name,
+                                                 self.schema_text)
+            except Exception as exc:  # noqa: BLE001 - a broken definition is bad input
+                raise InputError(f"{self._where(index, int(log_ns[i]))}: cannot parse the message definition "
+                                 f"of {self.msgtype} ({type(exc).__name__}: {exc})") from None
         try:
             msg = self._lib(payload)
             _row_from_object(self.msgtype, msg, table[i])
