@@ -25,6 +25,7 @@ from mcap_ros2.writer import Writer as Ros2Writer
 from rosbags.typesys import Stores, get_typestore
 
 from navpp.errors import InputError
+from ros_oracles import expected_from_objects, ros2_name
 from navpp.io.mcap import list_topics, read_mcap
 from navpp.io.ros import (
     FIX_TYPE,
@@ -41,11 +42,6 @@ STRING_TYPE = "std_msgs/String"
 TYPES = (*SUPPORTED_TYPES, STRING_TYPE)
 T0_NS = 1_700_000_000_123_456_789
 PERIOD_NS = 8_000_000  # 125 Hz
-
-
-def ros2_name(msgtype: str) -> str:
-    pkg, name = msgtype.split("/")
-    return f"{pkg}/msg/{name}"
 
 
 MSGDEF2 = {t: STORE2.generate_msgdef(ros2_name(t), ros_version=2)[0] for t in TYPES}
@@ -206,38 +202,6 @@ def library_arrays(path: Path) -> tuple[dict[str, tuple[str, dict[str, np.ndarra
         arrays["log_ns"] = np.array(logs, dtype=np.int64)
         out[topic] = (msgtype, arrays)
     return out, {t: tuple(s) for t, s in spans.items()}
-
-
-def expected_from_objects(msgtype: str, msgs: list) -> dict[str, np.ndarray]:
-    def stamp(m) -> int:
-        s = m.header.stamp
-        if hasattr(s, "nanosec"):
-            return int(s.sec) * 1_000_000_000 + int(s.nanosec)
-        return int(s.secs) * 1_000_000_000 + int(s.nsecs)
-
-    def xyz(v) -> list[float]:
-        return [v.x, v.y, v.z]
-
-    out = {"stamp_ns": np.array([stamp(m) for m in msgs], dtype=np.int64)}
-    if msgtype == IMU_TYPE:
-        out["gyro"] = np.array([xyz(m.angular_velocity) for m in msgs]).reshape(-1, 3)
-        out["accel"] = np.array([xyz(m.linear_acceleration) for m in msgs]).reshape(-1, 3)
-        out["gyro_cov0"] = np.array([m.angular_velocity_covariance[0] for m in msgs])
-        out["accel_cov0"] = np.array([m.linear_acceleration_covariance[0] for m in msgs])
-    elif msgtype == FIX_TYPE:
-        out["status"] = np.array([m.status.status for m in msgs], dtype=np.int8)
-        out["lat_deg"] = np.array([m.latitude for m in msgs])
-        out["lon_deg"] = np.array([m.longitude for m in msgs])
-        out["alt"] = np.array([m.altitude for m in msgs])
-        out["cov"] = np.array([list(m.position_covariance) for m in msgs]).reshape(-1, 9)
-        out["cov_type"] = np.array([m.position_covariance_type for m in msgs], dtype=np.uint8)
-    elif msgtype == TWIST_COV_TYPE:
-        out["vel"] = np.array([xyz(m.twist.twist.linear) for m in msgs]).reshape(-1, 3)
-        out["cov_diag"] = np.array([[m.twist.covariance[k] for k in (0, 7, 14)]
-                                    for m in msgs]).reshape(-1, 3)
-    else:
-        out["vel"] = np.array([xyz(m.twist.linear) for m in msgs]).reshape(-1, 3)
-    return out
 
 
 def decoded(contents) -> dict:
