@@ -309,3 +309,31 @@ def test_sigma_during_an_outage_follows_the_drift():
     z = np.concatenate(zs)
     rms = np.sqrt(np.mean(z ** 2))
     assert 0.3 < rms < 2.0, rms
+
+
+@pytest.mark.parametrize("name", ["ckf", "ukf"])
+def test_sigma_point_filters_on_the_ins_match_the_ekf(name):
+    # points pushed through the real strapdown: on a well-observed drive the result must be as
+    # accurate and as consistent as the linearised EKF
+    sim = simulate(SimulationSpec(duration_s=300.0, seed=21, still_s=30.0))
+    rec = sim.recording()
+    cfg = config_from_dict({"imu": {"preset": "automotive"}}, "test")
+    out = {}
+    for f in ("ekf", name):
+        res = engine.run(rec, cfg, api.make_filter(f, cfg))
+        m = compute_metrics(res.solution, rec.reference, filter_name=f, log="sim", reference="truth", runtime_s=0.0,
+                            imu_samples=len(rec.imu), gnss_epochs=res.gnss_epochs, gnss_rejected=res.gnss_rejected)
+        out[f] = (m["position_m"]["horizontal"]["rmse"], np.sqrt(np.mean(_normalised_errors(rec, res.solution) ** 2, axis=0)))
+    assert out[name][0] <= 1.15 * out["ekf"][0], out
+    assert np.all(out[name][1] < 2.0), out
+
+
+def test_ukf_options_are_validated():
+    from navpp.errors import ConfigError
+    from navpp.filters import get_filter
+
+    assert get_filter("ukf").options_from_mapping({"alpha": 0.5}).alpha == 0.5
+    with pytest.raises(ConfigError, match="alpha"):
+        get_filter("ukf").options_from_mapping({"alpha": -1.0}, "cfg.toml")
+    with pytest.raises(ConfigError, match="did you mean 'kappa'"):
+        get_filter("ukf").options_from_mapping({"kapa": 1.0}, "cfg.toml")

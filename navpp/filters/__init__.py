@@ -4,6 +4,6 @@
 """
 
 from .base import FILTERS, Filter, GaussianState, Innovation, get_filter, register
-from . import ekf  # noqa: F401  (registers "ekf")
+from . import ckf, ekf, ukf  # noqa: F401  (register "ckf", "ekf", "ukf")
 
 __all__ = ["FILTERS", "Filter", "GaussianState", "Innovation", "get_filter", "register"]

@@ -1,0 +1,62 @@
+"""Sigma-point filters: the template shared by the CKF, UKF and their adaptive variants.
+
+Points are drawn in the model's error space around the mean (``x ⊞ dX_i``), pushed through
+the model itself (on the INS: every point through the real strapdown over the IMU samples of
+the interval, in one compiled call), brought back to error space about the propagated
+nominal, and recombined.  Covariances come from centred deviations, never from raw second
+moments (ALGORITHMS.md).  A rule (:mod:`navpp.filters.rules`) decides the points and weights.
+
+References: paper 001 eqs 3-18, paper 003 eqs 19-34 (CKF); Wan & van der Merwe (2000) (UKF).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import FilterDivergedError
+from .base import Filter, GaussianState, MeasurementPrediction, symmetrise
+
+
+def _factor(P: np.ndarray, t: float, name: str) -> np.ndarray:
+    try:
+        return np.linalg.cholesky(symmetrise(P))
+    except np.linalg.LinAlgError:
+        raise FilterDivergedError(f"{name}: covariance is not positive definite at t={t:.3f} s") from None
+
+
+def _weighted_cov(wc: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``sum_i wc_i A_i B_i^T`` for centred deviation rows ``A`` (m, p), ``B`` (m, q)."""
+    return (A * wc[:, None]).T @ B
+
+
+class SigmaPointFilter(Filter):
+    """Template: subclasses provide :meth:`rule` (and may override the hooks of :class:`Filter`)."""
+
+    def rule(self):
+        raise NotImplementedError
+
+    def weights_for(self, wm: np.ndarray, wc: np.ndarray, *, measurement: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Hook: the weights actually used (random-weighting filters override)."""
+        return wm, wc
+
+    def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> GaussianState:
+        S = _factor(state.P, state.t, self.name)
+        dX, wm, wc = self.rule().points(S)
+        wm, wc = self.weights_for(wm, wc, measurement=False)
+        x_ref, dY = model.propagate_points(state.x, dX, interval)    # f(x ⊞ dX_i) ⊟ f(x)
+        mean = wm @ dY
+        dev = dY - mean
+        P = _weighted_cov(wc, dev, dev) + model.process_noise(state.x, interval)
+        return GaussianState(interval[1], model.plus(x_ref, mean), symmetrise(P))
+
+    def predict_measurement(self, state: GaussianState, model, meas) -> MeasurementPrediction:
+        S = _factor(state.P, state.t, self.name)
+        dX, wm, wc = self.rule().points(S)
+        wm, wc = self.weights_for(wm, wc, measurement=True)
+        Z = meas.predict_points(state.x, dX)                          # h(x ⊞ dX_i) ⊟ h(x)
+        z_mean = wm @ Z
+        x_mean = wm @ dX
+        dz = Z - z_mean
+        nu = meas.innovation_at(state.x) - z_mean
+        return MeasurementPrediction(nu, symmetrise(_weighted_cov(wc, dz, dz)),
+                                     _weighted_cov(wc, dX - x_mean, dz), None)
