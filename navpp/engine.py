@@ -36,13 +36,15 @@ KNOT_S = 1.0    # longest stretch without a covariance knot for the output sigma
 @dataclass(frozen=True)
 class Diagnostics:
     """Per-GNSS-epoch record of what the filter saw: t (s), innovation nu (M, 3) ENU m,
-    NIS, accepted flag, forced flag (accepted after a run of rejections)."""
+    NIS, accepted flag, forced flag (accepted after a run of rejections), and the 1-sigma of the
+    measurement noise the filter used, r_std (M, 3) m (what an adaptive filter decided)."""
 
     t: np.ndarray
     nu: np.ndarray
     nis: np.ndarray
     accepted: np.ndarray
     forced: np.ndarray
+    r_std: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -221,6 +223,7 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     nis = np.full(m_ep, np.nan)
     accepted = np.zeros(m_ep, bool)
     forced = np.zeros(m_ep, bool)
+    r_std = np.full((m_ep, 3), np.nan)
     bias = np.empty((m_ep, 6))
     bias_var = np.empty((m_ep, 6))
     state = GaussianState(al.t, al.x, al.P)
@@ -262,6 +265,7 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
         nis[k] = inn.nis
         accepted[k] = inn.accepted
         forced[k] = inn.forced
+        r_std[k] = np.sqrt(np.diagonal(inn.R))
         if progress is not None and k % tick == 0:
             progress(k / m_ep)
     # after the last fix the uncertainty keeps growing to the end of the log
@@ -281,7 +285,7 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     kt, k_prior, k_post = kn[:, 0].copy(), kn[:, 1:4].copy(), kn[:, 4:7].copy()
     std_out = _interpolated_std(t_out, kt[0], k_post[0], kt[1:], k_prior[1:], k_post[1:])
     solution = solution_from_path(t_out, path, std_out, recording.t0_ns)
-    diag = Diagnostics(tg, nu, nis, accepted, forced)
+    diag = Diagnostics(tg, nu, nis, accepted, forced, r_std)
     bias_std = np.sqrt(bias_var)
     biases = BiasHistory(tg, bias[:, :3], bias[:, 3:], bias_std[:, :3], bias_std[:, 3:])
     rejected = int((~accepted).sum())

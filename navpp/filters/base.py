@@ -182,6 +182,9 @@ class Filter:
     paper: ClassVar[str] = ""
     summary: ClassVar[str] = ""
     Options: ClassVar[type] = NoOptions
+    #: options under which the filter is the plain Kalman filter (adaptation off): the oracle
+    #: tests run every registered filter with these against the closed-form update
+    oracle_options: ClassVar[dict[str, Any]] = {}
 
     def __init__(self, options: Any = None, *, gate_probability: float = 0.0,
                  reanchor_after_s: float = 10.0, rng: np.random.Generator | None = None) -> None:
@@ -216,6 +219,10 @@ class Filter:
     def predict_measurement(self, state: GaussianState, model: Any, meas: Any) -> MeasurementPrediction:
         raise NotImplementedError
 
+    def adjust_prediction(self, pred: MeasurementPrediction) -> MeasurementPrediction:
+        """Hook: e.g. remove an estimated measurement-noise mean from the innovation."""
+        return pred
+
     def measurement_noise(self, meas: Any, pred: MeasurementPrediction) -> np.ndarray:
         """R to use for this update; adaptive filters override."""
         return meas.R
@@ -233,7 +240,7 @@ class Filter:
         return thr
 
     def update(self, state: GaussianState, model: Any, meas: Any) -> tuple[GaussianState, Innovation]:
-        pred = self.predict_measurement(state, model, meas)
+        pred = self.adjust_prediction(self.predict_measurement(state, model, meas))
         R = self.measurement_noise(meas, pred)
         S, K, nis = self._moments(state, pred, R)
         accepted = nis <= self.gate_threshold(pred.nu.shape[0])
@@ -244,7 +251,7 @@ class Filter:
             # lock the GNSS out. Re-anchor the covariance on this measurement, then apply it.
             forced = accepted = True
             state = GaussianState(state.t, state.x, self._reanchored(state, meas, pred, R, nis))
-            pred = self.predict_measurement(state, model, meas)
+            pred = self.adjust_prediction(self.predict_measurement(state, model, meas))
             S, K, _ = self._moments(state, pred, R)
         innovation = Innovation(state.t, pred.nu, S, pred.Pxz, R, nis, accepted, forced)
         if not accepted:
