@@ -115,3 +115,15 @@ def test_divergence_is_reported_not_propagated():
     state = filt.predict(GaussianState(0.0, np.zeros(n), np.eye(n)), model, (0.0, 1.0))
     with pytest.raises(FilterDivergedError, match="t=1.000"):
         filt.update(state, model, LinearMeasurement(1.0, np.ones(n), np.eye(n), np.eye(n)))
+
+
+def test_sigma_point_filter_repairs_a_slightly_indefinite_covariance():
+    n = 3
+    model = LinearModel(np.eye(n), 1e-3 * np.eye(n))
+    P = np.diag([1.0, 1.0, -1e-9])                       # lost definiteness by round-off
+    filt = get_filter("ckf")()
+    state = filt.predict(GaussianState(0.0, np.zeros(n), P), model, (0.0, 1.0))
+    assert filt.repairs == 1
+    assert np.all(np.linalg.eigvalsh(state.P) > 0)
+    with pytest.raises(Exception, match="not positive definite"):
+        filt.predict(GaussianState(0.0, np.zeros(n), np.full((n, n), np.nan)), model, (0.0, 1.0))

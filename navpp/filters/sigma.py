@@ -17,11 +17,19 @@ from ..errors import FilterDivergedError
 from .base import Filter, GaussianState, MeasurementPrediction, symmetrise
 
 
-def _factor(P: np.ndarray, t: float, name: str) -> np.ndarray:
+def _factor(P: np.ndarray, t: float, name: str, filt: "SigmaPointFilter | None" = None) -> np.ndarray:
+    """Lower Cholesky factor of P; a P that lost positive definiteness (random weights can do
+    that) is repaired by clipping its eigenvalues, and the repair is counted on ``filt``."""
+    P = symmetrise(P)
     try:
-        return np.linalg.cholesky(symmetrise(P))
+        return np.linalg.cholesky(P)
     except np.linalg.LinAlgError:
-        raise FilterDivergedError(f"{name}: covariance is not positive definite at t={t:.3f} s") from None
+        if filt is None or not np.all(np.isfinite(P)):
+            raise FilterDivergedError(f"{name}: covariance is not positive definite at t={t:.3f} s") from None
+    vals, vecs = np.linalg.eigh(P)
+    floor = max(float(vals.max()), 1e-300) * 1e-12
+    filt.repairs += 1
+    return np.linalg.cholesky(symmetrise((vecs * np.maximum(vals, floor)) @ vecs.T))
 
 
 def _weighted_cov(wc: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -32,6 +40,8 @@ def _weighted_cov(wc: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
 class SigmaPointFilter(Filter):
     """Template: subclasses provide :meth:`rule` (and may override the hooks of :class:`Filter`)."""
 
+    repairs = 0      # covariances repaired by eigenvalue clipping (counted, reported)
+
     def rule(self):
         raise NotImplementedError
 
@@ -40,7 +50,7 @@ class SigmaPointFilter(Filter):
         return wm, wc
 
     def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> GaussianState:
-        S = _factor(state.P, state.t, self.name)
+        S = _factor(state.P, state.t, self.name, self)
         dX, wm, wc = self.rule().points(S)
         wm, wc = self.weights_for(wm, wc, measurement=False)
         x_ref, dY = model.propagate_points(state.x, dX, interval)    # f(x ⊞ dX_i) ⊟ f(x)
@@ -50,7 +60,7 @@ class SigmaPointFilter(Filter):
         return GaussianState(interval[1], model.plus(x_ref, mean), symmetrise(P))
 
     def predict_measurement(self, state: GaussianState, model, meas) -> MeasurementPrediction:
-        S = _factor(state.P, state.t, self.name)
+        S = _factor(state.P, state.t, self.name, self)
         dX, wm, wc = self.rule().points(S)
         wm, wc = self.weights_for(wm, wc, measurement=True)
         Z = meas.predict_points(state.x, dX)                          # h(x ⊞ dX_i) ⊟ h(x)
