@@ -21,10 +21,12 @@ def _factor(P: np.ndarray, t: float, name: str, filt: "SigmaPointFilter | None" 
     """Lower Cholesky factor of P; a P that lost positive definiteness (random weights can do
     that) is repaired by clipping its eigenvalues, and the repair is counted on ``filt``."""
     P = symmetrise(P)
+    if not np.all(np.isfinite(P)):
+        raise FilterDivergedError(f"{name}: covariance is not finite at t={t:.3f} s (not positive definite)")
     try:
         return np.linalg.cholesky(P)
     except np.linalg.LinAlgError:
-        if filt is None or not np.all(np.isfinite(P)):
+        if filt is None:
             raise FilterDivergedError(f"{name}: covariance is not positive definite at t={t:.3f} s") from None
     vals, vecs = np.linalg.eigh(P)
     floor = max(float(vals.max()), 1e-300) * 1e-12
