@@ -45,3 +45,14 @@ def expected_from_objects(msgtype: str, msgs: list) -> dict[str, np.ndarray]:
     else:
         out["vel"] = np.array([xyz(m.twist.linear) for m in msgs]).reshape(-1, 3)
     return out
+
+
+def fill_genpy(target, values: dict) -> None:
+    """Set a genpy (ROS 1) message object's fields from a nested dict (stamp as sec/nanosec)."""
+    for key, value in values.items():
+        if key == "stamp":
+            target.stamp.secs, target.stamp.nsecs = value["sec"], value["nanosec"]
+        elif isinstance(value, dict):
+            fill_genpy(getattr(target, key), value)
+        else:
+            setattr(target, key, value)

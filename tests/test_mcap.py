@@ -25,7 +25,7 @@ from mcap_ros2.writer import Writer as Ros2Writer
 from rosbags.typesys import Stores, get_typestore
 
 from navpp.errors import InputError
-from ros_oracles import expected_from_objects, ros2_name
+from ros_oracles import expected_from_objects, fill_genpy, ros2_name
 from navpp.io.mcap import list_topics, read_mcap
 from navpp.io.ros import (
     FIX_TYPE,
@@ -90,16 +90,7 @@ def make_message(msgtype: str, i: int) -> dict:
 def genpy_message(msgtype: str, values: dict):
     obj = GENPY[msgtype]()
 
-    def fill(target, vals: dict) -> None:
-        for key, value in vals.items():
-            if key == "stamp":
-                target.stamp.secs, target.stamp.nsecs = value["sec"], value["nanosec"]
-            elif isinstance(value, dict):
-                fill(getattr(target, key), value)
-            else:
-                setattr(target, key, value)
-
-    fill(obj, values)
+    fill_genpy(obj, values)
     return obj
 
 

@@ -22,7 +22,7 @@ from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
 from rosbags.typesys import Stores, get_typestore
 
 from navpp.errors import InputError
-from ros_oracles import expected_from_objects, ros2_name
+from ros_oracles import expected_from_objects, fill_genpy, ros2_name
 from navpp.io.messages import (
     TopicDecoder,
     build_messages,
@@ -97,16 +97,7 @@ def ros1_payload(msgtype: str, message: dict) -> bytes:
     """ROS 1 serialization by genpy (the serializer mcap_ros1's writer uses)."""
     obj = GENPY[msgtype]()
 
-    def fill(target, values: dict) -> None:
-        for key, value in values.items():
-            if key == "stamp":
-                target.stamp.secs, target.stamp.nsecs = value["sec"], value["nanosec"]
-            elif isinstance(value, dict):
-                fill(getattr(target, key), value)
-            else:
-                setattr(target, key, value)
-
-    fill(obj, message)
+    fill_genpy(obj, message)
     buf = io.BytesIO()
     obj.serialize(buf)
     return buf.getvalue()

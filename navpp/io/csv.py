@@ -30,7 +30,6 @@ import csv
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -390,11 +389,6 @@ def _stamps_ns(table: _Table, header: list[str]) -> np.ndarray:
         v = int(whole or "0") * 1_000_000_000 + int((frac[:9] or "0").ljust(9, "0"))
         out[k] = -v if neg else v
     return out
-
-
-def _seconds_to_ns(t: float) -> int:
-    """Exact integer ns of a float64 number of seconds (no float rounding of ``t * 1e9``)."""
-    return round(Fraction(t) * 1_000_000_000)
 
 
 def _names(names: Sequence[str]) -> str:
