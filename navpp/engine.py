@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import time
 from array import array
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -37,7 +37,10 @@ KNOT_S = 1.0    # longest stretch without a covariance knot for the output sigma
 class Diagnostics:
     """Per-GNSS-epoch record of what the filter saw: t (s), innovation nu (M, 3) ENU m,
     NIS, accepted flag, forced flag (accepted after a run of rejections), and the 1-sigma of the
-    measurement noise the filter used, r_std (M, 3) m (what an adaptive filter decided)."""
+    measurement noise the filter used, r_std (M, 3) m (what an adaptive filter decided).
+    ``adaptive`` holds the rest of what an adaptive filter decided after each epoch (its
+    :meth:`~navpp.filters.base.Filter.noise_report`, e.g. VCE's process-noise group factors):
+    name -> (M, k) array."""
 
     t: np.ndarray
     nu: np.ndarray
@@ -45,6 +48,7 @@ class Diagnostics:
     accepted: np.ndarray
     forced: np.ndarray
     r_std: np.ndarray
+    adaptive: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -224,6 +228,7 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     accepted = np.zeros(m_ep, bool)
     forced = np.zeros(m_ep, bool)
     r_std = np.full((m_ep, 3), np.nan)
+    adaptive: dict[str, np.ndarray] = {}
     bias = np.empty((m_ep, 6))
     bias_var = np.empty((m_ep, 6))
     state = GaussianState(al.t, al.x, al.P)
@@ -266,6 +271,10 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
         accepted[k] = inn.accepted
         forced[k] = inn.forced
         r_std[k] = np.sqrt(np.diagonal(inn.R))
+        for name, value in filt.noise_report().items():
+            if name not in adaptive:
+                adaptive[name] = np.full((m_ep, np.size(value)), np.nan)
+            adaptive[name][k] = value
         if progress is not None and k % tick == 0:
             progress(k / m_ep)
     # after the last fix the uncertainty keeps growing to the end of the log
@@ -285,7 +294,7 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     kt, k_prior, k_post = kn[:, 0].copy(), kn[:, 1:4].copy(), kn[:, 4:7].copy()
     std_out = _interpolated_std(t_out, kt[0], k_post[0], kt[1:], k_prior[1:], k_post[1:])
     solution = solution_from_path(t_out, path, std_out, recording.t0_ns)
-    diag = Diagnostics(tg, nu, nis, accepted, forced, r_std)
+    diag = Diagnostics(tg, nu, nis, accepted, forced, r_std, adaptive)
     bias_std = np.sqrt(bias_var)
     biases = BiasHistory(tg, bias[:, :3], bias[:, 3:], bias_std[:, :3], bias_std[:, 3:])
     rejected = int((~accepted).sum())

@@ -227,6 +227,17 @@ class Filter:
         """R to use for this update; adaptive filters override."""
         return meas.R
 
+    def process_noise(self, model: Any, x: np.ndarray, interval: tuple[float, float]) -> np.ndarray:
+        """Additive process noise Qd over ``interval`` for sigma-point time updates; adaptive
+        filters (VCE) override to rescale the model's noise groups."""
+        return model.process_noise(x, interval)
+
+    def noise_report(self) -> dict[str, np.ndarray]:
+        """What an adaptive filter has decided so far (e.g. VCE group factors), recorded by the
+        engine after every GNSS epoch: name -> 1-D array, fixed length per name.  The R used is
+        recorded separately from the :class:`Innovation`."""
+        return {}
+
     def after_update(self, innovation: Innovation, pred: MeasurementPrediction) -> None:
         """Called after every gated update; adaptive filters learn here."""
 

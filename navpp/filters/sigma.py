@@ -58,7 +58,7 @@ class SigmaPointFilter(Filter):
         x_ref, dY = model.propagate_points(state.x, dX, interval)    # f(x ⊞ dX_i) ⊟ f(x)
         mean = wm @ dY
         dev = dY - mean
-        P = _weighted_cov(wc, dev, dev) + model.process_noise(state.x, interval)
+        P = _weighted_cov(wc, dev, dev) + self.process_noise(model, state.x, interval)
         return GaussianState(interval[1], model.plus(x_ref, mean), symmetrise(P))
 
     def predict_measurement(self, state: GaussianState, model, meas) -> MeasurementPrediction:
