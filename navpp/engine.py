@@ -295,7 +295,7 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     std_out = _interpolated_std(t_out, kt[0], k_post[0], kt[1:], k_prior[1:], k_post[1:])
     solution = solution_from_path(t_out, path, std_out, recording.t0_ns)
     diag = Diagnostics(tg, nu, nis, accepted, forced, r_std, adaptive)
-    bias_std = np.sqrt(bias_var)
+    bias_std = np.sqrt(np.maximum(bias_var, 0.0))     # a diverged run is reported by the checks below
     biases = BiasHistory(tg, bias[:, :3], bias[:, 3:], bias_std[:, :3], bias_std[:, 3:])
     rejected = int((~accepted).sum())
     warnings += list(al.warnings)

@@ -50,3 +50,17 @@ class UnscentedRule:
         wm[0] = lam / c
         wc[0] = lam / c + 1.0 - self.alpha ** 2 + self.beta
         return dX, wm, wc
+
+
+@dataclass(frozen=True)
+class DirichletWeights:
+    """Random weights ``beta ~ Dirichlet(1, ..., 1)`` over ``m`` points (paper 001 eq 23).
+
+    The paper draws them as the gaps between sorted uniforms, ``beta_j = U_(j) - U_(j-1)``;
+    ``Generator.dirichlet`` samples the same distribution.  Every vector sums to 1 and has
+    non-negative entries, mean ``1/m`` each.
+    """
+
+    def draw(self, rng: np.random.Generator, m: int, size: int | None = None) -> np.ndarray:
+        """One (m,) weight vector, or (size, m) when ``size`` is given."""
+        return rng.dirichlet(np.ones(m), size=size)
