@@ -23,7 +23,7 @@ CONFIG_IN_LOG_DIR = "navpp.toml"
 #: Files navpp writes into an output directory.  After a successful run, any of these that the
 #: run did not write (e.g. metrics from an earlier run with a reference) are removed, so the
 #: directory never mixes results of different runs.  Only these exact names are touched.
-OUTPUT_FILES = ("trajectory.csv", "metrics.json", "metrics.md")
+OUTPUT_FILES = ("trajectory.csv", "diagnostics.csv", "metrics.json", "metrics.md")
 
 
 @dataclass(frozen=True)
@@ -343,6 +343,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         if write:
             files.append(_write_file(out / "trajectory.csv", lambda: writers.write_trajectory_csv(
                 out / "trajectory.csv", sol_out, t0_s=rec.t0_ns * 1e-9)))
+            files.append(_write_file(out / "diagnostics.csv", lambda: writers.write_diagnostics_csv(
+                out / "diagnostics.csv", result.diagnostics, t0_s=rec.t0_ns * 1e-9)))
             if metrics is not None:
                 files.append(_write_file(out / "metrics.json",
                                          lambda: writers.write_metrics_json(out / "metrics.json", metrics)))

@@ -192,7 +192,7 @@ def test_output_rate_equal_to_imu_rate_is_fine(sim_log_dir: Path, tmp_path: Path
 def test_rerun_without_reference_removes_stale_metrics(log_copy: Path, tmp_path: Path) -> None:
     out = tmp_path / "out"
     first = api.process(log_copy, out_dir=out)
-    assert sorted(p.name for p in first.files) == ["metrics.json", "metrics.md", "trajectory.csv"]
+    assert sorted(p.name for p in first.files) == ["diagnostics.csv", "metrics.json", "metrics.md", "trajectory.csv"]
     # files that are not navpp's own outputs (or only look alike) are left alone
     keep = {"notes.txt": b"mine\n", "metrics.json.bak": b"{}", "old": None}
     for name, data in keep.items():
@@ -201,8 +201,8 @@ def test_rerun_without_reference_removes_stale_metrics(log_copy: Path, tmp_path:
 
     (log_copy / "reference.csv").unlink()
     second = api.process(log_copy, out_dir=out, output_rate_hz=5.0)
-    assert second.files == (out / "trajectory.csv",)
-    assert sorted(p.name for p in out.iterdir()) == ["metrics.json.bak", "notes.txt", "old", "trajectory.csv"]
+    assert second.files == (out / "trajectory.csv", out / "diagnostics.csv")
+    assert sorted(p.name for p in out.iterdir()) == ["diagnostics.csv", "metrics.json.bak", "notes.txt", "old", "trajectory.csv"]
     assert (out / "old" / "metrics.md").is_file()
     lines = (out / "trajectory.csv").read_text().splitlines()
     t = np.array([float(line.split(",", 1)[0]) for line in lines[1:]])

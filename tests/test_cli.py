@@ -120,7 +120,7 @@ def test_process_trajectory_one_row_per_imu_sample(processed, sim_log_dir: Path)
 def test_process_metrics_files(processed, sim_log_dir: Path) -> None:
     _, out = processed
     assert (out / "metrics.md").is_file()
-    assert sorted(p.name for p in out.iterdir()) == ["metrics.json", "metrics.md", "trajectory.csv"]
+    assert sorted(p.name for p in out.iterdir()) == ["diagnostics.csv", "metrics.json", "metrics.md", "trajectory.csv"]
     m = json.loads((out / "metrics.json").read_text())
     assert METRICS_KEYS <= set(m)
     assert m["filter"] == "ekf"
@@ -162,7 +162,7 @@ def test_process_without_reference_writes_trajectory_only(log_copy: Path, tmp_pa
     out = tmp_path / "out"
     res = invoke("process", log_copy, "--out", out)
     assert res.exit_code == 0, (res.output, res.exception)
-    assert sorted(p.name for p in out.iterdir()) == ["trajectory.csv"]
+    assert sorted(p.name for p in out.iterdir()) == ["diagnostics.csv", "trajectory.csv"]
     assert "position error" not in res.stdout
     assert "trajectory.csv" in flat(res.stdout)
 
@@ -245,14 +245,14 @@ def test_process_rerun_without_reference_leaves_no_stale_metrics(log_copy: Path,
     out = tmp_path / "out"
     res = invoke("process", log_copy, "--out", out, "--quiet")
     assert res.exit_code == 0, (res.output, res.exception)
-    assert sorted(p.name for p in out.iterdir()) == ["metrics.json", "metrics.md", "trajectory.csv"]
+    assert sorted(p.name for p in out.iterdir()) == ["diagnostics.csv", "metrics.json", "metrics.md", "trajectory.csv"]
     first = (out / "trajectory.csv").read_bytes()
     (log_copy / "reference.csv").unlink()
     res = invoke("process", log_copy, "--out", out, "--output-rate", "10")
     assert res.exit_code == 0, (res.output, res.exception)
-    assert sorted(p.name for p in out.iterdir()) == ["trajectory.csv"]
+    assert sorted(p.name for p in out.iterdir()) == ["diagnostics.csv", "trajectory.csv"]
     assert (out / "trajectory.csv").read_bytes() != first
-    assert res.stdout.splitlines()[-1] == f"wrote {out / 'trajectory.csv'}"
+    assert res.stdout.splitlines()[-1] == f"wrote {out / 'trajectory.csv'}, {out / 'diagnostics.csv'}"
 
 
 def test_process_out_is_an_existing_file(sim_log_dir: Path, tmp_path: Path) -> None:

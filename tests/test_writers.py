@@ -17,6 +17,7 @@ from navpp.io.writers import (
     TRAJECTORY_DECIMALS,
     atomic_write,
     format_fixed_columns,
+    write_diagnostics_csv,
     write_metrics_json,
     write_metrics_md,
     write_trajectory_csv,
@@ -243,3 +244,25 @@ def test_metrics_md_without_optional_sections(tmp_path):
     text = (tmp_path / "metrics.md").read_text()
     assert "## Position" in text and "## Velocity" not in text and "## Raw GNSS" not in text
     assert math.isclose(m["runtime_s"], 12.5)
+
+
+def test_diagnostics_csv_round_trips_every_epoch(tmp_path):
+    from navpp.engine import Diagnostics
+
+    rng = np.random.default_rng(3)
+    m = 40
+    diag = Diagnostics(t=np.arange(m) * 0.2 + 0.2, nu=rng.normal(size=(m, 3)), nis=rng.chisquare(3, m),
+                       accepted=rng.uniform(size=m) > 0.1, forced=np.zeros(m, bool),
+                       r_std=rng.uniform(1, 3, (m, 3)),
+                       adaptive={"q_factor": rng.uniform(0.1, 10, (m, 4)), "fading": rng.uniform(1, 2, (m, 1))})
+    path = tmp_path / "diagnostics.csv"
+    write_diagnostics_csv(path, diag, t0_s=1700000000.0)
+    df = pd.read_csv(path)
+    assert list(df.columns) == ["t", "nu_e", "nu_n", "nu_u", "nis", "accepted", "forced", "r_std_e", "r_std_n",
+                                "r_std_u", "q_factor_0", "q_factor_1", "q_factor_2", "q_factor_3", "fading"]
+    np.testing.assert_allclose(df["t"] - 1700000000.0, diag.t, atol=1e-6)
+    np.testing.assert_allclose(df[["nu_e", "nu_n", "nu_u"]], diag.nu, atol=5e-5)
+    np.testing.assert_array_equal(df["accepted"].to_numpy(bool), diag.accepted)
+    np.testing.assert_allclose(df[["q_factor_0", "q_factor_1", "q_factor_2", "q_factor_3"]],
+                               diag.adaptive["q_factor"], atol=5e-7)
+    np.testing.assert_allclose(df["fading"], diag.adaptive["fading"][:, 0], atol=5e-7)

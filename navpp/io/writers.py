@@ -33,6 +33,7 @@ __all__ = [
     "TRAJECTORY_DECIMALS",
     "atomic_write",
     "format_fixed_columns",
+    "write_diagnostics_csv",
     "write_metrics_json",
     "write_metrics_md",
     "write_trajectory_csv",
@@ -328,6 +329,48 @@ def write_trajectory_csv(path: str | os.PathLike[str], sol: Solution, *, t0_s: f
             fields = [_time_field(np.asarray(sol.t)[start:stop], t0_s)]
             fields += [_field_from_values(np.asarray(c, dtype=np.float64)[start:stop], d)
                        for c, d in zip(columns, TRAJECTORY_DECIMALS[1:])]
+            f.write(memoryview(_layout(fields, stop - start)))
+
+    atomic_write(path, write, mode="wb")
+
+
+def diagnostics_columns(diag: Any) -> tuple[list[str], list[np.ndarray], list[int]]:
+    """Column names, (M,) value arrays and decimals of ``diagnostics.csv`` (after ``t``).
+
+    ``nu_e, nu_n, nu_u`` GNSS innovation (ENU m), ``nis``, ``accepted``, ``forced`` (0/1),
+    ``r_std_e, r_std_n, r_std_u`` the measurement 1-sigma the filter used (m), then each entry
+    of the filter's noise report (``name`` when it has one value, ``name_<i>`` otherwise).
+    """
+    nu = np.asarray(diag.nu, dtype=np.float64)
+    r = np.asarray(diag.r_std, dtype=np.float64)
+    names = ["nu_e", "nu_n", "nu_u", "nis", "accepted", "forced", "r_std_e", "r_std_n", "r_std_u"]
+    cols = [nu[:, 0], nu[:, 1], nu[:, 2], np.asarray(diag.nis, dtype=np.float64),
+            np.asarray(diag.accepted, dtype=np.float64), np.asarray(diag.forced, dtype=np.float64),
+            r[:, 0], r[:, 1], r[:, 2]]
+    decimals = [4, 4, 4, 4, 0, 0, 4, 4, 4]
+    for key, values in getattr(diag, "adaptive", {}).items():
+        v = np.asarray(values, dtype=np.float64).reshape(len(diag.t), -1)
+        for i in range(v.shape[1]):
+            names.append(key if v.shape[1] == 1 else f"{key}_{i}")
+            cols.append(v[:, i])
+            decimals.append(6)
+    return names, cols, decimals
+
+
+def write_diagnostics_csv(path: str | os.PathLike[str], diag: Any, *, t0_s: float) -> None:
+    """Write ``diagnostics.csv``: one row per GNSS epoch the filter saw (:func:`diagnostics_columns`),
+    ``t`` in seconds on the log's time base (``t0_s + diag.t``).  Written atomically."""
+    names, cols, decimals = diagnostics_columns(diag)
+    header = (",".join(["t", *names]) + "\n").encode("ascii")
+    t = np.asarray(diag.t, dtype=np.float64)
+    n = t.shape[0]
+
+    def write(f: IO[bytes]) -> None:
+        f.write(header)
+        for start in range(0, n, _CHUNK_ROWS):
+            stop = min(n, start + _CHUNK_ROWS)
+            fields = [_time_field(t[start:stop], t0_s)]
+            fields += [_field_from_values(c[start:stop], d) for c, d in zip(cols, decimals)]
             f.write(memoryview(_layout(fields, stop - start)))
 
     atomic_write(path, write, mode="wb")
