@@ -169,6 +169,140 @@ def _print_summary(res, quiet: bool) -> None:
     con.print(escape("wrote " + ", ".join(str(p) for p in res.files)))
 
 
+DEFAULT_COMPARE = "ekf,aekf,ckf,vce-ckf,rwckf"
+
+
+@app.command()
+def compare(
+    logs: Annotated[list[Path], typer.Argument(metavar="LOG...", help="Logs to process (any format `process` reads).")],
+    filters: Annotated[str, typer.Option(help="Comma-separated filter names (see `navpp filters`).")] = DEFAULT_COMPARE,
+    config: Annotated[Optional[Path], typer.Option(help="TOML config for every log; default: each log's navpp.toml, "
+                                                   "else the automotive preset.")] = None,
+    reference: Annotated[Optional[Path], typer.Option(help="Reference CSV (one log only); default: each log's "
+                                                      "reference.csv.")] = None,
+    imu_topic: Annotated[Optional[str], typer.Option(help="IMU topic for ROS logs with several.")] = None,
+    gnss_topic: Annotated[Optional[str], typer.Option(help="GNSS topic for ROS logs with several.")] = None,
+    reference_topic: Annotated[Optional[str], typer.Option(help="A NavSatFix topic to use as the reference.")] = None,
+    out: Annotated[Path, typer.Option(help="Directory for summary.csv, created if needed.")] = Path("navpp-out/compare"),
+    json_out: Annotated[bool, typer.Option("--json", help="Print the summary rows as JSON on stdout instead of "
+                                           "the table.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars.")] = False,
+) -> None:
+    """Run several filters on each log; print the MAE/RMSE table and write summary.csv.
+
+    A filter that fails on a log is a row with the reason; the command then exits with 1
+    after writing everything else.
+    """
+    from .errors import ConfigError, NavppError
+
+    try:
+        from . import api
+        from . import compare as cmp
+
+        names = cmp.parse_filters(filters)
+        if reference is not None and len(logs) > 1:
+            raise ConfigError("--reference names one reference file; with several logs put a "
+                                  "reference.csv (or <log>.reference.csv) beside each log")
+        created = api.prepare_out_dir(out, "--out")
+        try:
+            with _Progress(quiet or json_out) as prog:
+                rows = cmp.compare(logs, names, config=config, reference=reference, imu_topic=imu_topic,
+                                   gnss_topic=gnss_topic, reference_topic=reference_topic, progress=prog)
+            cmp.write_summary(out / "summary.csv", rows)
+        except BaseException:
+            api.remove_created_dirs(created)
+            raise
+    except NavppError as exc:
+        _fail(str(exc))
+        return
+    _print_comparison(rows, out / "summary.csv", json_out)
+    failed = [r for r in rows if r.status != "ok"]
+    if failed:
+        _fail(f"{len(failed)} of {len(rows)} runs failed: "
+              + "; ".join(f"{r.filter} on {r.log}: {r.status}" for r in failed))
+
+
+def _print_comparison(rows, summary_path: Path, json_out: bool) -> None:
+    import json
+
+    from rich import box
+    from rich.console import Console
+    from rich.markup import escape
+    from rich.table import Table
+
+    if json_out:
+        typer.echo(json.dumps([r.summary() for r in rows], indent=1))
+        return
+    con = Console(highlight=False, soft_wrap=True)
+    with_ref = any(r.metrics is not None for r in rows)
+    tab = Table(title="position error vs reference, m (E = longitude, N = latitude); GNSS fixes rejected; "
+                "filter time s" if with_ref else "no reference: GNSS fixes rejected; filter time s",
+                box=box.SIMPLE_HEAD, pad_edge=False)
+    cols = ["log", "filter"]
+    if with_ref:
+        cols += ["H MAE", "H RMSE", "E RMSE", "N RMSE", "U RMSE"]
+    cols += ["rej.", "s"]
+    for c in cols:
+        tab.add_column(c, justify="left" if c in ("log", "filter") else "right", no_wrap=True)
+    best: dict[str, float] = {}
+    for r in rows:
+        if r.metrics is not None:
+            h = r.metrics["position_m"]["horizontal"]["rmse"]
+            best[r.log] = min(best.get(r.log, h), h)
+    for r in rows:
+        cells = [escape(Path(r.log).name), r.filter]
+        if r.status != "ok":
+            cells += ["failed"] + [""] * (len(cols) - 3)
+            tab.add_row(*cells, style="red")
+            continue
+        if with_ref:
+            if r.metrics is None:
+                cells += [""] * 5
+            else:
+                p = r.metrics["position_m"]
+                h = f"{p['horizontal']['rmse']:.3f}"
+                if p["horizontal"]["rmse"] == best.get(r.log):
+                    h = f"[bold]{h}[/]"
+                cells += [f"{p['horizontal']['mae']:.3f}", h, f"{p['east']['rmse']:.3f}", f"{p['north']['rmse']:.3f}",
+                          f"{p['up']['rmse']:.3f}"]
+        cells += [str(r.gnss_rejected), f"{r.runtime_s:.2f}"]
+        tab.add_row(*cells)
+    con.print(tab)
+    con.print(escape(f"wrote {summary_path}"))
+
+
+@app.command()
+def bench(
+    name: Annotated[Optional[str], typer.Argument(metavar="NAME", help="Benchmark name; omit to list them.")] = None,
+    runs: Annotated[Optional[int], typer.Option(help="Monte Carlo runs  [default: the paper's]",
+                                                callback=_require(lambda v: v >= 1, "an integer >= 1"))] = None,
+    seed: Annotated[int, typer.Option(help="Seed of the simulated truth and of random filters.",
+                                      callback=_require(lambda v: v >= 0, "an integer >= 0"))] = 0,
+    filters: Annotated[Optional[str], typer.Option(help="Comma-separated filters  [default: the paper's "
+                                                   "comparison]")] = None,
+) -> None:
+    """Run one of the papers' benchmarks and print our figures next to the paper's."""
+    from .errors import NavppError
+
+    try:
+        from .filters import benchmarks
+
+        if name is None:
+            benchmarks._load()
+            for key, b in sorted(benchmarks.BENCHMARKS.items()):
+                typer.echo(f"{key:<20} {b.title}  [{b.default_runs} runs; {', '.join(b.filters)}]")
+            return
+        chosen = None
+        if filters is not None:
+            from .compare import parse_filters
+            chosen = parse_filters(filters)
+        result = benchmarks.run_benchmark(name, runs=runs, seed=seed, filters=chosen)
+    except NavppError as exc:
+        _fail(str(exc))
+        return
+    typer.echo(benchmarks.format_result(result))
+
+
 PRESETS = ("consumer", "automotive", "tactical", "navigation", "ideal")
 
 
