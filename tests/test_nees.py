@@ -81,7 +81,7 @@ def _nees_runs(name: str, runs: int, steps: int = 40, seed: int = 0) -> np.ndarr
             truth = model.Phi @ truth + Lq @ rng.normal(size=4)
             z = RangeBearing.h(truth) + np.sqrt(np.diag(R)) * rng.normal(size=2)
             state = filt.predict(state, model, (k * DT, (k + 1) * DT))
-            state, inn = filt.update(state, model, RangeBearing((k + 1) * DT, z, R))
+            state, _ = filt.update(state, model, RangeBearing((k + 1) * DT, z, R))
             e = truth - state.x
             out[run, k] = e @ np.linalg.solve(state.P, e)
     return out
