@@ -136,30 +136,81 @@ class RWCKF(SigmaPointFilter):
         w = np.linalg.solve(L, pred.nu)
         return float(w @ w + 2.0 * np.log(np.diagonal(L)).sum())
 
+    def _scores(self, state: GaussianState, model, meas, betas: np.ndarray) -> np.ndarray:
+        """Selection score of every candidate weight vector (rows of ``betas``, (C, 2n)), all
+        candidates at once: one batched factorisation and one call of the measurement model.
+
+        Candidate c's prior is ``x_ref ⊞ M_c`` (``M_c = beta_c dY``) with its covariance; its
+        cubature points are taken relative to ``x_ref`` as ``x_ref ⊞ (M_c + dX)``, which equals
+        ``(x_ref ⊞ M_c) ⊞ dX`` except for the second-order composition of attitude errors.  The
+        chosen candidate's update itself goes through the exact template path.
+        """
+        n = state.P.shape[0]
+        m = 2 * n
+        C = betas.shape[0]
+        random_cov = self.options.covariance == "random"
+        pending = self._pending
+        if pending is not None and pending[0] is state:
+            _, x_ref, dY, Q, wc = pending
+            M = betas @ dY                                            # (C, n) candidate means about x_ref
+            if random_cov:
+                dev = dY[None, :, :] - M[:, None, :]
+                P = np.einsum("ci,cij,cik->cjk", betas, dev, dev) + Q
+            else:
+                D = M - wc @ dY
+                P = state.P[None] + D[:, :, None] * D[:, None, :]
+        else:                                                         # no kept time update: weights on the measurement only
+            x_ref, M = state.x, np.zeros((C, n))
+            P = np.broadcast_to(state.P, (C, n, n))
+        S = np.linalg.cholesky(0.5 * (P + np.swapaxes(P, 1, 2)))       # (C, n, n)
+        cols = np.sqrt(n) * np.swapaxes(S, 1, 2)                       # row i = sqrt(n) S e_i
+        dX = np.concatenate([cols, -cols], axis=1)                     # (C, m, n)
+        pts = np.concatenate([M, (M[:, None, :] + dX).reshape(C * m, n)])
+        Zall = meas.predict_points(x_ref, pts)
+        Z0, Z = Zall[:C], Zall[C:].reshape(C, m, -1) - Zall[:C, None, :]
+        z_hat = np.einsum("ci,cip->cp", betas, Z)
+        nu = meas.innovation_at(x_ref)[None, :] - Z0 - z_hat
+        if self.options.select == "residual":
+            return np.einsum("cp,cp->c", nu, nu)
+        wz = betas if random_cov else np.full((C, m), 1.0 / m)
+        dz = Z - z_hat[:, None, :]
+        Pzz = np.einsum("ci,cip,ciq->cpq", wz, dz, dz) + self.measurement_noise(meas, None)
+        L = np.linalg.cholesky(0.5 * (Pzz + np.swapaxes(Pzz, 1, 2)))
+        w = np.linalg.solve(L, nu[:, :, None])[:, :, 0]
+        return np.einsum("cp,cp->c", w, w) + 2.0 * np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1)
+
     def update(self, state: GaussianState, model, meas):
         m = 2 * state.P.shape[0]
         cands = self._candidates(m)
-        best, best_state, best_score = None, state, np.inf
+        best = cands[0]
         if len(cands) > 1:
-            for beta in cands:
-                self._beta = beta
-                prior = self._prior_with(beta, state, model)
-                try:
-                    pred = self.adjust_prediction(self.predict_measurement(prior, model, meas))
-                    score = self._score(pred, self.measurement_noise(meas, pred))
-                except np.linalg.LinAlgError:
-                    continue                   # a candidate that breaks definiteness is not a candidate
-                if score < best_score:
-                    best, best_state, best_score = beta, prior, score
-        else:
-            best = cands[0]
-            best_state = self._prior_with(best, state, model)
+            betas = np.vstack([np.full(m, 1.0 / m) if b is None else b for b in cands])
+            try:
+                scores = self._scores(state, model, meas, betas)
+            except np.linalg.LinAlgError:
+                scores = np.array([self._score_one(b, state, model, meas) for b in cands])
+            scores = np.where(np.isfinite(scores), scores, np.inf)
+            best = cands[int(np.argmin(scores))]
+        best_state = self._prior_with(best, state, model)
         self._beta = best
         self._pending = None
         self.epochs += 1
         self.chosen_uniform += best is None
         try:
             return super().update(best_state, model, meas)
+        finally:
+            self._beta = None
+
+    def _score_one(self, beta, state: GaussianState, model, meas) -> float:
+        """One candidate's score through the template path (used when a batched factorisation
+        fails: a candidate that breaks definiteness is not a candidate)."""
+        self._beta = beta
+        try:
+            prior = self._prior_with(beta, state, model)
+            pred = self.adjust_prediction(self.predict_measurement(prior, model, meas))
+            return self._score(pred, self.measurement_noise(meas, pred))
+        except (np.linalg.LinAlgError, FloatingPointError):
+            return np.inf
         finally:
             self._beta = None
 
