@@ -135,6 +135,21 @@ def test_gnss_jacobian_matches_finite_differences(drive):
     np.testing.assert_allclose(meas.predict_points(x, dX), dX @ H.T, atol=1e-3 * np.abs(dX @ H.T).max())
 
 
+@pytest.mark.parametrize("lever", [(0.5, -0.3, 1.2), (0.0, 0.0, 0.0)])
+def test_gnss_points_equal_the_measurement_of_each_point(drive, lever):
+    """predict_points = innovation difference of every perturbed state, h(x ⊞ dX) - h(x),
+    computed point by point through ⊞ and the innovation (the definition, as the oracle)."""
+    sim, *_ = drive
+    x = _truth_state(sim, 78.0)
+    lever = np.array(lever)
+    meas = M.GnssPosition(78.0, x[7], x[8], x[9], np.eye(3), lever)
+    dX = np.random.default_rng(4).normal(size=(31, 15)) * np.array([3e-2] * 3 + [1.0] * 3 + [5.0] * 3
+                                                                    + [1e-4] * 3 + [1e-2] * 3)
+    expected = np.array([meas.innovation_at(x) - meas.innovation_at(M.plus(x, d)) for d in dX])
+    # the innovation of a perturbed state uses that state's radii: curvature terms ~ |d|^2 / R ~ 4e-6 m
+    np.testing.assert_allclose(meas.predict_points(x, dX), expected, rtol=0, atol=2e-5)
+
+
 def test_reanchor_restarts_position_block():
     P = np.full((15, 15), 0.01) + np.eye(15)
     nu = np.array([20.0, -1.0, 0.5])

@@ -17,10 +17,14 @@ class LinearModel:
     """``x_k = Phi x_{k-1} + w``, ``w ~ N(0, Q)``, for any interval (``Phi``, ``Q`` per step).
 
     Phi : (n, n); Q : (n, n).
+    Q_groups : optional split of Q by noise source for variance component estimation, a tuple
+        of ``(name, (n, n) array)`` summing to Q (e.g. paper 003's coordinated turn: ``q1`` for
+        both position-velocity blocks, ``q2`` for the turn rate).  See :meth:`noise_groups`.
     """
 
     Phi: np.ndarray
     Q: np.ndarray
+    Q_groups: tuple[tuple[str, np.ndarray], ...] | None = None
 
     @property
     def dim(self) -> int:
@@ -39,6 +43,24 @@ class LinearModel:
 
     def process_noise(self, x: np.ndarray, interval) -> np.ndarray:
         return self.Q
+
+    def noise_groups(self, x: np.ndarray, interval) -> tuple[list[str], np.ndarray]:
+        """Q split by noise source: ``(names, Qs (G, n, n))`` with ``Qs.sum(0) == Q``.
+
+        ``Q_groups`` when given; otherwise one group per nonzero diagonal element of a
+        diagonal Q (``q0``, ``q1``, ... by state index: paper 003's per-element factors), else
+        the single group ``Q``.
+        """
+        if self.Q_groups is not None:
+            return [name for name, _ in self.Q_groups], np.array([np.asarray(q, dtype=float) for _, q in self.Q_groups])
+        Q = np.asarray(self.Q, dtype=float)
+        d = np.diagonal(Q)
+        if np.count_nonzero(Q - np.diag(d)) == 0:
+            idx = np.flatnonzero(d)
+            Qs = np.zeros((idx.size, Q.shape[0], Q.shape[0]))
+            Qs[np.arange(idx.size), idx, idx] = d[idx]
+            return [f"q{i}" for i in idx], Qs
+        return ["Q"], Q[None, :, :].copy()
 
     def propagate_points(self, x: np.ndarray, dX: np.ndarray, interval) -> tuple[np.ndarray, np.ndarray]:
         return self.Phi @ x, dX @ self.Phi.T

@@ -194,6 +194,60 @@ def integrate_with_jacobian(x, t, gyro, accel, t_start, t_end, out, record, psd,
     return _transition_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd, inv_tau_g, inv_tau_a)
 
 
+#: process-noise groups of the 15-state model (VCE): name -> error-state indices driven by it.
+#: White noise enters the attitude and velocity errors in ENU (``G Qc G^T`` is diagonal and
+#: isotropic, :meth:`NoiseModel.psd`); the bias drives act on the body-FLU bias states.
+NOISE_GROUPS_TRIAD: tuple[tuple[str, tuple[int, ...]], ...] = (
+    ("gyro_white", (0, 1, 2)), ("accel_white", (3, 4, 5)), ("gyro_bias", (9, 10, 11)), ("accel_bias", (12, 13, 14)))
+NOISE_GROUPS_AXIS: tuple[tuple[str, tuple[int, ...]], ...] = tuple(
+    (f"{name}_{axis}", (idx,))
+    for name, first, axes in (("gyro_white", 0, "enu"), ("accel_white", 3, "enu"),
+                              ("gyro_bias", 9, "xyz"), ("accel_bias", 12, "xyz"))
+    for idx, axis in zip(range(first, first + 3), axes))
+
+
+@njit(cache=True)
+def _noise_groups_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd_groups, inv_tau_g, inv_tau_a):
+    """Qd of every noise group over the strapdown's segments, in one pass, (G, 15, 15).
+
+    Same discretisation as :func:`_transition_from_segments` (Phi_j to third order, Qd_j by the
+    trapezoid), with the psd masked to one group at a time: Qd is linear in the psd, so the
+    groups sum to the interval's Qd.
+    """
+    G = psd_groups.shape[0]
+    Qg = np.zeros((G, 15, 15))
+    F_prev_state = x_start
+    for j in range(n_seg):
+        T = seg_T[j]
+        F = 0.5 * (error_dynamics(F_prev_state, seg_fn[j], inv_tau_g, inv_tau_a)
+                   + error_dynamics(seg_x[j], seg_fn[j], inv_tau_g, inv_tau_a))
+        FT = F * T
+        FT2 = FT @ FT
+        Phi_j = np.eye(15) + FT + 0.5 * FT2 + (FT2 @ FT) / 6.0
+        for g in range(G):
+            psd = psd_groups[g]
+            Qd_j = Phi_j * (psd * (0.5 * T)) @ Phi_j.T
+            for k in range(15):
+                Qd_j[k, k] += 0.5 * T * psd[k]
+            Qg[g] = Phi_j @ Qg[g] @ Phi_j.T + Qd_j
+        F_prev_state = seg_x[j]
+    return Qg
+
+
+@njit(cache=True)
+def integrate_noise_groups(x, t, gyro, accel, t_start, t_end, psd_groups, inv_tau_g, inv_tau_a, cov_step_s):
+    """Propagate nominal ``x`` (in place, nothing recorded) and return the interval's Qd per
+    noise group, (G, 15, 15), the psd of group g being ``psd_groups[g]`` (15,)."""
+    m = int((t_end - t_start) / cov_step_s) + 2
+    seg_x = np.empty((m, 16))
+    seg_fn = np.empty((m, 3))
+    seg_T = np.empty(m)
+    x_start = x.copy()
+    unused = np.empty((1, PATH_SIZE))
+    n_seg = _integrate_nominal(x, t, gyro, accel, t_start, t_end, unused, False, cov_step_s, seg_x, seg_fn, seg_T)
+    return _noise_groups_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd_groups, inv_tau_g, inv_tau_a)
+
+
 @njit(cache=True, inline="always")
 def _wrap_pi(a):
     """Angle difference wrapped to [-pi, pi) (longitude across the antimeridian)."""
@@ -307,6 +361,41 @@ class InsModel:
                                         self.cov_step_s)
         return Qd
 
+    def noise_groups(self, x: np.ndarray, interval: tuple[float, float], per: str = "triad"
+                     ) -> tuple[list[str], np.ndarray]:
+        """Qd over the interval split by noise source (for variance component estimation).
+
+        Parameters
+        ----------
+        x : nominal state (16,) at ``interval[0]``.
+        interval : (t_start, t_end), s.
+        per : ``"triad"``: four groups ``gyro_white, accel_white, gyro_bias, accel_bias``;
+            ``"axis"``: twelve, one per axis (white noise per ENU axis, ``_e/_n/_u``; bias drive
+            per body FLU axis, ``_x/_y/_z``).  Groups whose psd is zero are left out.
+
+        Returns
+        -------
+        names : list of G group names; Qs : (G, 15, 15), summing to :meth:`process_noise`.
+        """
+        table = {"triad": NOISE_GROUPS_TRIAD, "axis": NOISE_GROUPS_AXIS}.get(per)
+        if table is None:
+            raise ValueError(f"noise_groups: per must be 'triad' or 'axis', got {per!r}")
+        names, rows = [], []
+        for name, idx in table:
+            mask = np.zeros(N_ERR)
+            mask[list(idx)] = 1.0
+            psd = self._psd * mask
+            if np.any(psd > 0.0):
+                names.append(name)
+                rows.append(psd)
+        if not rows:
+            return [], np.zeros((0, N_ERR, N_ERR))
+        xn = x.copy()
+        Qs = integrate_noise_groups(xn, self.t, self.gyro, self.accel, interval[0], interval[1],
+                                    np.ascontiguousarray(np.array(rows)), self._inv_tau[0], self._inv_tau[1],
+                                    self.cov_step_s)
+        return names, 0.5 * (Qs + Qs.transpose(0, 2, 1))
+
     def propagate_points(self, x: np.ndarray, dX: np.ndarray, interval: tuple[float, float]
                          ) -> tuple[np.ndarray, np.ndarray]:
         """Push error points ``dX`` (m, 15) around ``x`` through the strapdown.
@@ -386,11 +475,21 @@ def _gnss_jacobian(x, lever):
 
 @njit(cache=True)
 def _gnss_points(x, dX, lever):
+    """``h(x ⊞ dX_k) ⊟ h(x)`` for error points ``dX`` (m, 15): ENU m, (m, 3).
+
+    ``minus(plus(x, d), x)`` returns the position part of ``d`` unchanged (both use the radii
+    at ``x``), so the antenna moves by ``d[6:9]`` plus the change of the rotated lever arm,
+    ``(exp([phi x]) - I) C a``; written that way it costs one small rotation per point instead
+    of a quaternion round trip (the sigma-point filters call this for every candidate point).
+    """
     m = dX.shape[0]
     Z = np.empty((m, 3))
     a0 = antenna_offset_enu(x, lever)
+    has_lever = lever[0] != 0.0 or lever[1] != 0.0 or lever[2] != 0.0
     for k in range(m):
-        xk = plus(x, dX[k])
-        # position difference back in ENU metres about x, plus the rotated lever arm
-        Z[k] = minus(xk, x)[6:9] + antenna_offset_enu(xk, lever) - a0
+        Z[k, 0] = dX[k, 6]
+        Z[k, 1] = dX[k, 7]
+        Z[k, 2] = dX[k, 8]
+        if has_lever:
+            Z[k] += quat_to_dcm(rotvec_to_quat(dX[k, 0:3])) @ a0 - a0
     return Z
