@@ -4,6 +4,6 @@
 """
 
 from .base import FILTERS, Filter, GaussianState, Innovation, get_filter, register
-from . import aekf, ckf, ekf, rwckf, ukf, vce_ckf  # noqa: F401  (register the filters)
+from . import aekf, aukf, ckf, ekf, rwckf, sif, ukf, vce_ckf  # noqa: F401  (register the filters)
 
 __all__ = ["FILTERS", "Filter", "GaussianState", "Innovation", "get_filter", "register"]
