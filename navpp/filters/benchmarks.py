@@ -77,6 +77,45 @@ def _load() -> None:
     from . import bench_sins, bench_small  # noqa: F401
 
 
+def parse_filter_spec(spec: str) -> tuple[str, dict]:
+    """``"rwckf"`` -> ("rwckf", {}); ``"rwckf[covariance=random; candidates=32]"`` -> the name and
+    its options (values read as TOML values, bare words as strings), checked against the
+    filter's Options (ConfigError naming the key otherwise)."""
+    import tomllib
+
+    from . import get_filter
+
+    spec = spec.strip()
+    name, opts = spec, {}
+    if "[" in spec:
+        if not spec.endswith("]"):
+            raise ConfigError(f"filter {spec!r}: write options as name[key=value; key=value]")
+        name, body = spec[:-1].split("[", 1)
+        name = name.strip()
+        for item in filter(None, (part.strip() for part in body.split(";"))):
+            if "=" not in item:
+                raise ConfigError(f"filter {spec!r}: option {item!r} is not key=value")
+            key, value = (v.strip() for v in item.split("=", 1))
+            try:
+                opts[key] = tomllib.loads(f"v = {value}")["v"]
+            except tomllib.TOMLDecodeError:
+                opts[key] = value
+    cls = get_filter(name)
+    cls.options_from_mapping(opts, f"filter {spec!r}")
+    return name, opts
+
+
+def make_bench_filter(spec: str, seed: int):
+    """A fresh filter for a benchmark run, as :func:`navpp.api.make_filter` builds it from the
+    spec's options: a seeded generator and the chi-square gate off (the papers' filters do not
+    gate; navpp's gate is a GNSS setting)."""
+    from ..api import make_filter
+    from ..config import Config, GnssConfig
+
+    name, opts = parse_filter_spec(spec)
+    return make_filter(name, Config(gnss=GnssConfig(gate_probability=0.0), filters={name: opts}), seed=seed)
+
+
 def get_benchmark(name: str) -> Benchmark:
     _load()
     try:
@@ -94,9 +133,8 @@ def run_benchmark(name: str, *, runs: int | None = None, seed: int = 0,
     if n < 1:
         raise ConfigError(f"--runs must be >= 1, got {n}")
     chosen = tuple(filters) if filters else bench.filters
-    from . import get_filter
     for f in chosen:
-        get_filter(f)                     # unknown names fail with the list
+        parse_filter_spec(f)              # unknown names and options fail with the choices
     t0 = time.perf_counter()
     result = bench.run(n, int(seed), chosen)
     result.seconds = time.perf_counter() - t0
