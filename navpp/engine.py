@@ -294,7 +294,15 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     kt, k_prior, k_post = kn[:, 0].copy(), kn[:, 1:4].copy(), kn[:, 4:7].copy()
     std_out = _interpolated_std(t_out, kt[0], k_post[0], kt[1:], k_prior[1:], k_post[1:])
     solution = solution_from_path(t_out, path, std_out, recording.t0_ns)
-    diag = Diagnostics(tg, nu, nis, accepted, forced, r_std, adaptive)
+    labels = filt.noise_report_labels()
+    named: dict[str, np.ndarray] = {}
+    for key, values in adaptive.items():
+        lab = labels.get(key)
+        if lab is not None and len(lab) == values.shape[1] and values.shape[1] > 1:
+            named.update({f"{key}_{name}": values[:, [i]] for i, name in enumerate(lab)})
+        else:
+            named[key] = values
+    diag = Diagnostics(tg, nu, nis, accepted, forced, r_std, named)
     bias_std = np.sqrt(np.maximum(bias_var, 0.0))     # a diverged run is reported by the checks below
     biases = BiasHistory(tg, bias[:, :3], bias[:, 3:], bias_std[:, :3], bias_std[:, 3:])
     rejected = int((~accepted).sum())

@@ -343,3 +343,22 @@ def test_vce_ckf_beats_the_ekf_when_the_configured_std_is_wrong():
     for s in (4.0, 0.25):
         assert h[s, "vce-ckf"] < h[s, "ekf"]
         assert h[s, "vce-ckf"] <= 1.2 * h[1.0, "ekf"]
+
+
+def test_diagnostics_name_the_groups_and_record_the_r_that_was_used(sim_log_dir, tmp_path):
+    """diagnostics.csv: one column per VCE factor, named; the R used at epoch k+1 is the
+    configured R scaled by the factor learnt after epoch k (the file checked against itself)."""
+    import pandas as pd
+
+    from navpp import api
+
+    res = api.process(sim_log_dir, filter_name="vce-ckf", out_dir=tmp_path / "out")
+    df = pd.read_csv(tmp_path / "out" / "diagnostics.csv")
+    for name in ("q_factor_gyro_white", "q_factor_accel_white", "q_factor_gyro_bias", "q_factor_accel_bias",
+                 "r_factor_e", "r_factor_n", "r_factor_u"):
+        assert name in df.columns
+    given = res.recording.gnss.std_enu[np.searchsorted(res.recording.gnss.t, res.run.diagnostics.t)]
+    ok = df["accepted"].to_numpy(bool)[:-1]
+    for i, axis in enumerate("enu"):
+        expected = given[1:, i] * np.sqrt(df[f"r_factor_{axis}"].to_numpy()[:-1])
+        np.testing.assert_allclose(df[f"r_std_{axis}"].to_numpy()[1:][ok], expected[ok], rtol=2e-4, atol=2e-4)

@@ -232,6 +232,11 @@ class Filter:
         filters (VCE) override to rescale the model's noise groups."""
         return model.process_noise(x, interval)
 
+    def noise_report_labels(self) -> dict[str, list[str]]:
+        """Names of the elements of :meth:`noise_report` entries that have several (e.g. VCE's
+        noise groups); entries without labels are numbered."""
+        return {}
+
     def noise_report(self) -> dict[str, np.ndarray]:
         """What an adaptive filter has decided so far (e.g. VCE group factors), recorded by the
         engine after every GNSS epoch: name -> 1-D array, fixed length per name.  The R used is

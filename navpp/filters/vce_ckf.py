@@ -55,6 +55,7 @@ class VCECKF(SigmaPointFilter):
         return super().predict_measurement(state, model, meas)
 
     def measurement_noise(self, meas, pred: MeasurementPrediction) -> np.ndarray:
+        self._axes = getattr(meas, "axes", None)
         return self.adapter.measurement_noise(meas.R)
 
     def after_update(self, innovation: Innovation, pred: MeasurementPrediction) -> None:
@@ -62,3 +63,9 @@ class VCECKF(SigmaPointFilter):
 
     def noise_report(self) -> dict[str, np.ndarray]:
         return self.adapter.report()
+
+    def noise_report_labels(self) -> dict[str, list[str]]:
+        labels = {"q_factor": self.q_group_names}
+        if getattr(self, "_axes", None):
+            labels["r_factor"] = list(self._axes)
+        return labels

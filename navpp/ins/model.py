@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from numba import njit
@@ -427,6 +428,7 @@ class GnssPosition:
     h: float     # m
     R: np.ndarray
     lever_arm_b: np.ndarray
+    axes: ClassVar[tuple[str, ...]] = ("e", "n", "u")     # names of the measurement's elements
 
     def innovation_at(self, x: np.ndarray) -> np.ndarray:
         return _gnss_innovation(x, self.lat, self.lon, self.h, self.lever_arm_b)
