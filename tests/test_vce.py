@@ -303,7 +303,10 @@ def test_ins_run_matches_the_ckf_and_learns_r():
     h = {k: v.metrics["position_m"]["horizontal"]["rmse"] for k, v in out.items()}
     print(f"horizontal RMSE on sample_data/drive: ckf {h['ckf']:.3f} m, vce-ckf {h['vce-ckf']:.3f} m")
     assert h["vce-ckf"] <= 1.1 * h["ckf"], h
-    ad = out["vce-ckf"].run.diagnostics.adaptive
+    named = out["vce-ckf"].run.diagnostics.adaptive
+    groups = ("gyro_white", "accel_white", "gyro_bias", "accel_bias")
+    ad = {"q_factor": np.hstack([named[f"q_factor_{g}"] for g in groups]),
+          "r_factor": np.hstack([named[f"r_factor_{a}"] for a in "enu"])}
     m = out["vce-ckf"].run.gnss_epochs
     assert ad["q_factor"].shape == (m, 4) and ad["r_factor"].shape == (m, 3)
     assert np.all((ad["r_factor"] >= 0.1) & (ad["r_factor"] <= 10.0))
