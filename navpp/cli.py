@@ -281,8 +281,11 @@ def bench(
     filters: Annotated[Optional[str], typer.Option(help="Comma-separated filters  [default: the paper's "
                                                    "comparison]")] = None,
 ) -> None:
-    """Run one of the papers' benchmarks and print our figures next to the paper's."""
-    from .errors import NavppError
+    """Run one of the papers' benchmarks and print our figures next to the paper's.
+
+    Filters may carry options: --filters "rwckf,rwckf[covariance=random; candidates=32]".
+    """
+    from .errors import ConfigError, NavppError
 
     try:
         from .filters import benchmarks
@@ -294,8 +297,11 @@ def bench(
             return
         chosen = None
         if filters is not None:
-            from .compare import parse_filters
-            chosen = parse_filters(filters)
+            chosen = [f.strip() for f in filters.split(",") if f.strip()]
+            if not chosen:
+                raise ConfigError("--filters: give at least one filter, e.g. --filters ckf,vce-ckf")
+            for spec in chosen:
+                benchmarks.parse_filter_spec(spec)
         result = benchmarks.run_benchmark(name, runs=runs, seed=seed, filters=chosen)
     except NavppError as exc:
         _fail(str(exc))

@@ -94,3 +94,19 @@ def test_one_reference_for_several_logs_is_refused(sim_log_dir: Path, tmp_path: 
     res = invoke("compare", sim_log_dir, other, "--reference", sim_log_dir / "reference.csv", "--out", tmp_path / "c")
     assert res.exit_code == 1
     assert "beside each log" in " ".join(res.stderr.split())
+
+
+def test_bench_lists_runs_and_refuses_bad_arguments():
+    res = invoke("bench")
+    assert res.exit_code == 0, res.output
+    for name in ("paper001-tracking", "paper002-sins", "paper003-bearing", "paper003-turn"):
+        assert name in res.stdout
+    res = invoke("bench", "paper003-turn", "--runs", "1", "--seed", "3")
+    assert res.exit_code == 0, res.output
+    assert "(1 run, seed 3" in res.stdout and "vce-ckf" in res.stdout and "VCE r_factor range" in res.stdout
+    res = invoke("bench", "paper003-tunr")
+    assert res.exit_code == 1 and "unknown benchmark 'paper003-tunr'" in " ".join(res.stderr.split())
+    res = invoke("bench", "paper003-turn", "--runs", "0")
+    assert res.exit_code == 2
+    res = invoke("bench", "paper003-turn", "--runs", "1", "--filters", "ckf,vce-ckf[windw=10]")
+    assert res.exit_code == 1 and "did you mean 'window'" in " ".join(res.stderr.split())
