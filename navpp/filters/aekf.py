@@ -42,13 +42,13 @@ class _AdaptiveEKF(EKF):
 
 @register("aekf")
 class AEKF(_AdaptiveEKF):
-    paper = "paper 002 section 3 (improved Sage-Husa)"
+    paper = "paper 002 section 3, eqs 6-16 (improved Sage-Husa)"
     summary = "Improved adaptive EKF: R learnt from the innovations (gain with R_k-1, no -HPH' term)."
     improved = True
 
 
 @register("sage-husa")
 class SageHusaEKF(_AdaptiveEKF):
-    paper = "paper 002 section 3 (standard Sage-Husa)"
+    paper = "paper 002 section 3, eqs 6-13 (standard Sage-Husa)"
     summary = "Standard Sage-Husa adaptive EKF: R_k = (1-d) R_k-1 + d (e e' - H P H'), before the gain."
     improved = False

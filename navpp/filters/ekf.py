@@ -14,7 +14,7 @@ from .base import Filter, GaussianState, MeasurementPrediction, register, symmet
 
 @register("ekf")
 class EKF(Filter):
-    paper = "paper 002, section 2"
+    paper = "paper 002 section 2, eqs 1-3"
     summary = "Closed-loop error-state extended Kalman filter (the reference filter)."
 
     def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> GaussianState:
