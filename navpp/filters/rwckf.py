@@ -85,6 +85,7 @@ class RWCKF(SigmaPointFilter):
         self._beta: np.ndarray | None = None           # the epoch's weights (None: uniform)
         self._pending: tuple | None = None             # (prior state, f(x), dY, Q) of the last time update
         self.chosen_uniform = 0                        # epochs where the uniform vector won
+        self.last_weights: np.ndarray | None = None    # the weights chosen at the last epoch
         self.epochs = 0
 
     def rule(self) -> CubatureRule:
@@ -194,6 +195,7 @@ class RWCKF(SigmaPointFilter):
         best_state = self._prior_with(best, state, model)
         self._beta = best
         self._pending = None
+        self.last_weights = np.full(m, 1.0 / m) if best is None else np.asarray(best, dtype=float)
         self.epochs += 1
         self.chosen_uniform += best is None
         try:
@@ -215,5 +217,10 @@ class RWCKF(SigmaPointFilter):
             self._beta = None
 
     def noise_report(self) -> dict[str, np.ndarray]:
-        """Fraction of epochs so far where the uniform (CKF) weights won the selection."""
-        return {"uniform_chosen_fraction": np.array([self.chosen_uniform / max(self.epochs, 1)])}
+        """The weights chosen at the last epoch (``weights``, (2n,), points ``+sqrt(n) S e_i``
+        first, then the minus points) and the fraction of epochs so far where the uniform (CKF)
+        weights won the selection."""
+        out = {"uniform_chosen_fraction": np.array([self.chosen_uniform / max(self.epochs, 1)])}
+        if self.last_weights is not None:
+            out["weights"] = self.last_weights.copy()
+        return out
