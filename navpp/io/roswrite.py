@@ -22,6 +22,13 @@ What is written
 - ``sensor_msgs/NavSatFix`` on ``reference_topic`` (when given and the recording has a
   reference): the reference position, covariance type 0, frame ``"reference"``.
 
+The same bulk serialisation packs navpp's *output* messages for ``trajectory.mcap``
+(:mod:`navpp.io.mcap_out`): ``nav_msgs/Odometry``, ``tf2_msgs/TFMessage``,
+``geometry_msgs/Vector3Stamped`` and navpp's ``navpp_msgs/FilterDiagnostics``.  The ``pack_*``
+functions return the messages as one packed numpy array (row ``i`` is message ``i``'s payload),
+which a container writer copies without making one Python object per message; the
+``encode_*`` functions return the same payloads as a list of ``bytes``.
+
 Time: header stamps are the absolute stamps ``t0_ns + round(t * 1e9)`` (integer ns, see
 :func:`stamps_ns`); the log (receive) time of each message is its stamp plus
 ``log_offset_ns``.  Messages of all topics are written in log-time order.
@@ -53,14 +60,27 @@ from navpp.io.writers import atomic_write
 from navpp.recording import Recording
 
 __all__ = [
+    "FILTER_DIAGNOSTICS_MSGDEF",
+    "FILTER_DIAGNOSTICS_TYPE",
     "IMU_MSGDEF",
     "NAVSATFIX_MSGDEF",
+    "ODOMETRY_MSGDEF",
+    "TF_MESSAGE_MSGDEF",
     "TWIST_STAMPED_MSGDEF",
     "TWIST_WITH_COVARIANCE_STAMPED_MSGDEF",
+    "VECTOR3_STAMPED_MSGDEF",
     "encode_imu",
     "encode_navsatfix",
     "encode_twist",
     "encode_twist_with_covariance",
+    "pack_filter_diagnostics",
+    "pack_imu",
+    "pack_navsatfix",
+    "pack_odometry",
+    "pack_tf_message",
+    "pack_twist_with_covariance",
+    "pack_vector3_stamped",
+    "payload_bytes",
     "stamps_ns",
     "write_mcap_ros2",
     "write_ros1_bag",
@@ -135,6 +155,58 @@ TWIST_STAMPED_MSGDEF = _concatenated(
      ("geometry_msgs/Twist", _TWIST), ("geometry_msgs/Vector3", _VECTOR3)],
 )
 
+_POINT = "float64 x\nfloat64 y\nfloat64 z\n"
+_POSE = "geometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n"
+_POSE_WITH_COVARIANCE = "geometry_msgs/Pose pose\nfloat64[36] covariance\n"
+_TRANSFORM = "geometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation\n"
+_TRANSFORM_STAMPED = "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n"
+
+#: ``nav_msgs/msg/Odometry`` (ROS 2 Humble definition, comments removed).
+ODOMETRY_MSGDEF = _concatenated(
+    "std_msgs/Header header\n"
+    "string child_frame_id\n"
+    "geometry_msgs/PoseWithCovariance pose\n"
+    "geometry_msgs/TwistWithCovariance twist\n",
+    [("std_msgs/Header", _HEADER), ("builtin_interfaces/Time", _TIME),
+     ("geometry_msgs/PoseWithCovariance", _POSE_WITH_COVARIANCE), ("geometry_msgs/Pose", _POSE),
+     ("geometry_msgs/Point", _POINT), ("geometry_msgs/Quaternion", _QUATERNION),
+     ("geometry_msgs/TwistWithCovariance", _TWIST_WITH_COVARIANCE), ("geometry_msgs/Twist", _TWIST),
+     ("geometry_msgs/Vector3", _VECTOR3)],
+)
+
+#: ``tf2_msgs/msg/TFMessage`` (ROS 2 Humble definition).
+TF_MESSAGE_MSGDEF = _concatenated(
+    "geometry_msgs/TransformStamped[] transforms\n",
+    [("geometry_msgs/TransformStamped", _TRANSFORM_STAMPED), ("std_msgs/Header", _HEADER),
+     ("builtin_interfaces/Time", _TIME), ("geometry_msgs/Transform", _TRANSFORM),
+     ("geometry_msgs/Vector3", _VECTOR3), ("geometry_msgs/Quaternion", _QUATERNION)],
+)
+
+#: ``geometry_msgs/msg/Vector3Stamped`` (ROS 2 Humble definition).
+VECTOR3_STAMPED_MSGDEF = _concatenated(
+    "std_msgs/Header header\ngeometry_msgs/Vector3 vector\n",
+    [("std_msgs/Header", _HEADER), ("builtin_interfaces/Time", _TIME), ("geometry_msgs/Vector3", _VECTOR3)],
+)
+
+#: Name of navpp's own per-GNSS-epoch filter diagnostics message (:data:`FILTER_DIAGNOSTICS_MSGDEF`).
+FILTER_DIAGNOSTICS_TYPE = "navpp_msgs/msg/FilterDiagnostics"
+
+#: ``navpp_msgs/msg/FilterDiagnostics``: what the filter saw and decided at one GNSS epoch.  Plain
+#: fields and arrays of primitives, so plotting tools address every number by a path
+#: (``nis``, ``innovation_enu[0]``, ``values[3]``).
+FILTER_DIAGNOSTICS_MSGDEF = _concatenated(
+    "# navpp: the filter's view of one GNSS position fix.\n"
+    "std_msgs/Header header  # stamp: the GNSS epoch\n"
+    "float64[3] innovation_enu  # m, measured minus predicted antenna position, east/north/up\n"
+    "float64 nis  # normalised innovation squared (chi-square with 3 dof when consistent)\n"
+    "bool accepted  # passed the innovation gate and was applied\n"
+    "bool forced  # applied after a run of rejections although outside the gate\n"
+    "float64[3] r_std_enu  # m, 1-sigma of the measurement noise the filter used, east/north/up\n"
+    "string[] names  # the filter's adaptive quantities (the same list in every message of a file)\n"
+    "float64[] values  # their values after this epoch, in the order of names\n",
+    [("std_msgs/Header", _HEADER), ("builtin_interfaces/Time", _TIME)],
+)
+
 _IMU = "sensor_msgs/msg/Imu"
 _FIX = "sensor_msgs/msg/NavSatFix"
 _TWIST_COV = "geometry_msgs/msg/TwistWithCovarianceStamped"
@@ -145,6 +217,9 @@ _MSGDEFS = {
     _FIX: NAVSATFIX_MSGDEF,
     _TWIST_COV: TWIST_WITH_COVARIANCE_STAMPED_MSGDEF,
     _TWIST_STAMPED: TWIST_STAMPED_MSGDEF,
+    "nav_msgs/msg/Odometry": ODOMETRY_MSGDEF,
+    "tf2_msgs/msg/TFMessage": TF_MESSAGE_MSGDEF,
+    "geometry_msgs/msg/Vector3Stamped": VECTOR3_STAMPED_MSGDEF,
 }
 
 _ENCODINGS = ("cdr", "ros1")
@@ -247,7 +322,15 @@ def _vectors(name: str, a: np.ndarray, n: int, width: int = 3) -> np.ndarray:
 def encode_imu(stamps: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, encoding: str,
                frame_id: str = "imu_link", gyro_var: float | None = None,
                accel_var: float | None = None) -> list[bytes]:
-    """Serialise ``sensor_msgs/Imu`` messages in bulk.
+    """Serialise ``sensor_msgs/Imu`` messages in bulk: :func:`pack_imu` as N ``bytes``."""
+    return _payloads(pack_imu(stamps, gyro, accel, encoding=encoding, frame_id=frame_id, gyro_var=gyro_var,
+                              accel_var=accel_var))
+
+
+def pack_imu(stamps: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, encoding: str,
+             frame_id: str = "imu_link", gyro_var: float | None = None,
+             accel_var: float | None = None) -> np.ndarray:
+    """Serialise ``sensor_msgs/Imu`` messages in bulk, as a packed array.
 
     Parameters
     ----------
@@ -259,7 +342,8 @@ def encode_imu(stamps: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, encod
 
     Returns
     -------
-    list of N ``bytes`` payloads.  Orientation: identity, ``orientation_covariance[0] = -1``.
+    (N,) structured array whose row ``i`` (``arr[i].tobytes()``) is message ``i``'s payload
+    (see :func:`payload_bytes`).  Orientation: identity, ``orientation_covariance[0] = -1``.
     """
     s = _stamps_array(stamps)
     n = s.size
@@ -281,13 +365,22 @@ def encode_imu(stamps: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, encod
         arr["angular_velocity_covariance"][:, [0, 4, 8]] = gyro_var
     if accel_var is not None:
         arr["linear_acceleration_covariance"][:, [0, 4, 8]] = accel_var
-    return _payloads(arr)
+    return arr
 
 
 def encode_navsatfix(stamps: np.ndarray, lat_deg: np.ndarray, lon_deg: np.ndarray, alt: np.ndarray, *,
                      encoding: str, frame_id: str = "gnss", cov_diag: np.ndarray | None = None,
                      status: int | np.ndarray = 0, service: int = 1) -> list[bytes]:
-    """Serialise ``sensor_msgs/NavSatFix`` messages in bulk.
+    """Serialise ``sensor_msgs/NavSatFix`` messages in bulk: :func:`pack_navsatfix` as N ``bytes``."""
+    return _payloads(pack_navsatfix(stamps, lat_deg, lon_deg, alt, encoding=encoding, frame_id=frame_id,
+                                    cov_diag=cov_diag, status=status, service=service))
+
+
+def pack_navsatfix(stamps: np.ndarray, lat_deg: np.ndarray, lon_deg: np.ndarray, alt: np.ndarray, *,
+                   encoding: str, frame_id: str = "gnss", cov_diag: np.ndarray | None = None,
+                   status: int | np.ndarray = 0, service: int = 1) -> np.ndarray:
+    """Serialise ``sensor_msgs/NavSatFix`` messages in bulk, as a packed array (one row per
+    message, see :func:`pack_imu`).
 
     Parameters
     ----------
@@ -322,13 +415,21 @@ def encode_navsatfix(stamps: np.ndarray, lat_deg: np.ndarray, lon_deg: np.ndarra
     if cov_diag is not None:
         arr["position_covariance"][:, [0, 4, 8]] = _vectors("cov_diag", cov_diag, n)
         arr["position_covariance_type"] = 2
-    return _payloads(arr)
+    return arr
 
 
 def encode_twist_with_covariance(stamps: np.ndarray, vel: np.ndarray, *, encoding: str,
                                  frame_id: str = "gnss",
                                  cov_diag: np.ndarray | None = None) -> list[bytes]:
-    """Serialise ``geometry_msgs/TwistWithCovarianceStamped`` in bulk.
+    """Serialise ``geometry_msgs/TwistWithCovarianceStamped`` in bulk: :func:`pack_twist_with_covariance`
+    as N ``bytes``."""
+    return _payloads(pack_twist_with_covariance(stamps, vel, encoding=encoding, frame_id=frame_id,
+                                                cov_diag=cov_diag))
+
+
+def pack_twist_with_covariance(stamps: np.ndarray, vel: np.ndarray, *, encoding: str,
+                               frame_id: str = "gnss", cov_diag: np.ndarray | None = None) -> np.ndarray:
+    """Serialise ``geometry_msgs/TwistWithCovarianceStamped`` in bulk, as a packed array.
 
     vel : (N, 3) m/s into ``twist.twist.linear``; angular zero.  cov_diag : (N, 3) m^2/s^2
     into covariance elements 0, 7, 14 (None -> all zero).
@@ -345,7 +446,7 @@ def encode_twist_with_covariance(stamps: np.ndarray, vel: np.ndarray, *, encodin
     arr["linear"] = _vectors("vel", vel, n)
     if cov_diag is not None:
         arr["covariance"][:, [0, 7, 14]] = _vectors("cov_diag", cov_diag, n)
-    return _payloads(arr)
+    return arr
 
 
 def encode_twist(stamps: np.ndarray, vel: np.ndarray, *, encoding: str, frame_id: str = "gnss") -> list[bytes]:
@@ -360,6 +461,162 @@ def encode_twist(stamps: np.ndarray, vel: np.ndarray, *, encoding: str, frame_id
     _fill_header(arr, lay, s, frame)
     arr["linear"] = _vectors("vel", vel, n)
     return _payloads(arr)
+
+
+def payload_bytes(arr: np.ndarray) -> list[bytes]:
+    """The payloads of a packed array (from a ``pack_*`` function) as N ``bytes``."""
+    return _payloads(arr)
+
+
+def _diagonal(name: str, values: np.ndarray, n: int, width: int) -> np.ndarray:
+    """(n, width) float64 from (width,) or (n, width) values (broadcast)."""
+    v = np.asarray(values, dtype=np.float64)
+    if v.shape not in ((width,), (n, width)):
+        raise ValueError(f"{name} has shape {v.shape}, expected ({width},) or ({n}, {width})")
+    return np.broadcast_to(v, (n, width))
+
+
+def pack_odometry(stamps: np.ndarray, position: np.ndarray, orientation_xyzw: np.ndarray,
+                  linear: np.ndarray, angular: np.ndarray, *, encoding: str, frame_id: str = "map",
+                  child_frame_id: str = "base_link", pose_var: np.ndarray | None = None,
+                  twist_var: np.ndarray | None = None) -> np.ndarray:
+    """Serialise ``nav_msgs/Odometry`` messages in bulk, as a packed array (see :func:`pack_imu`).
+
+    Parameters
+    ----------
+    stamps : (N,) int, header stamps in ns.
+    position : (N, 3) float, m, ``pose.pose.position`` in ``frame_id``.
+    orientation_xyzw : (N, 4) float, ``pose.pose.orientation`` (x, y, z, w): the rotation taking
+        ``child_frame_id`` vectors into ``frame_id``.
+    linear, angular : (N, 3) float, m/s and rad/s, ``twist.twist`` (in ``child_frame_id``, as
+        the message defines it).
+    encoding : ``"cdr"`` or ``"ros1"``.
+    pose_var, twist_var : (6,) or (N, 6) float, the diagonals of ``pose.covariance`` and
+        ``twist.covariance`` (x, y, z, rotation about x, y, z); off-diagonal elements are 0.
+        None: all zero.
+    """
+    s = _stamps_array(stamps)
+    n = s.size
+    lay = _Layout(encoding)
+    frame = lay.header(frame_id)
+    child = lay.string("child_frame_id", child_frame_id)
+    lay.field("position", "f8", 3)
+    lay.field("orientation", "f8", 4)
+    lay.field("pose_covariance", "f8", 36)
+    lay.field("linear", "f8", 3)
+    lay.field("angular", "f8", 3)
+    lay.field("twist_covariance", "f8", 36)
+    arr = lay.array(n)
+    _fill_header(arr, lay, s, frame)
+    arr["child_frame_id_len"] = len(child)
+    if child:
+        arr["child_frame_id"] = child
+    arr["position"] = _vectors("position", position, n)
+    arr["orientation"] = _vectors("orientation_xyzw", orientation_xyzw, n, 4)
+    arr["linear"] = _vectors("linear", linear, n)
+    arr["angular"] = _vectors("angular", angular, n)
+    diag = [0, 7, 14, 21, 28, 35]
+    if pose_var is not None:
+        arr["pose_covariance"][:, diag] = _diagonal("pose_var", pose_var, n, 6)
+    if twist_var is not None:
+        arr["twist_covariance"][:, diag] = _diagonal("twist_var", twist_var, n, 6)
+    return arr
+
+
+def pack_tf_message(stamps: np.ndarray, translation: np.ndarray, rotation_xyzw: np.ndarray, *,
+                    encoding: str, frame_id: str = "map", child_frame_id: str = "base_link") -> np.ndarray:
+    """Serialise ``tf2_msgs/TFMessage`` messages of one transform each, in bulk, as a packed array.
+
+    Transform ``i``: ``frame_id`` -> ``child_frame_id`` at ``stamps[i]`` with ``translation``
+    (N, 3) m (the child's origin in ``frame_id``) and ``rotation_xyzw`` (N, 4) (the rotation
+    taking ``child_frame_id`` vectors into ``frame_id``).
+    """
+    s = _stamps_array(stamps)
+    n = s.size
+    lay = _Layout(encoding)
+    lay.field("transforms_len", "u4")
+    frame = lay.header(frame_id)
+    child = lay.string("child_frame_id", child_frame_id)
+    lay.field("translation", "f8", 3)
+    lay.field("rotation", "f8", 4)
+    arr = lay.array(n)
+    arr["transforms_len"] = 1
+    _fill_header(arr, lay, s, frame)
+    arr["child_frame_id_len"] = len(child)
+    if child:
+        arr["child_frame_id"] = child
+    arr["translation"] = _vectors("translation", translation, n)
+    arr["rotation"] = _vectors("rotation_xyzw", rotation_xyzw, n, 4)
+    return arr
+
+
+def pack_vector3_stamped(stamps: np.ndarray, vector: np.ndarray, *, encoding: str,
+                         frame_id: str = "base_link") -> np.ndarray:
+    """Serialise ``geometry_msgs/Vector3Stamped`` messages (vector (N, 3)) in bulk, as a packed array."""
+    s = _stamps_array(stamps)
+    n = s.size
+    lay = _Layout(encoding)
+    frame = lay.header(frame_id)
+    lay.field("vector", "f8", 3)
+    arr = lay.array(n)
+    _fill_header(arr, lay, s, frame)
+    arr["vector"] = _vectors("vector", vector, n)
+    return arr
+
+
+def pack_filter_diagnostics(stamps: np.ndarray, innovation_enu: np.ndarray, nis: np.ndarray,
+                            accepted: np.ndarray, forced: np.ndarray, r_std_enu: np.ndarray,
+                            names: Sequence[str], values: np.ndarray, *, encoding: str,
+                            frame_id: str = "map") -> np.ndarray:
+    """Serialise ``navpp_msgs/FilterDiagnostics`` (:data:`FILTER_DIAGNOSTICS_MSGDEF`) in bulk.
+
+    Parameters
+    ----------
+    stamps : (N,) int, header stamps in ns.
+    innovation_enu, r_std_enu : (N, 3) float, m.
+    nis : (N,) float.
+    accepted, forced : (N,) bool.
+    names : K names, the same in every message.
+    values : (N, K) float.
+    encoding : ``"cdr"`` or ``"ros1"``.
+
+    Returns
+    -------
+    A packed array (see :func:`pack_imu`): with the names fixed, every message has the same size.
+    """
+    s = _stamps_array(stamps)
+    n = s.size
+    k = len(names)
+    lay = _Layout(encoding)
+    frame = lay.header(frame_id)
+    lay.field("innovation_enu", "f8", 3)
+    lay.field("nis", "f8")
+    lay.field("accepted", "u1")
+    lay.field("forced", "u1")
+    lay.field("r_std_enu", "f8", 3)
+    lay.field("names_len", "u4")
+    stored = [lay.string(f"name_{i}", str(name)) for i, name in enumerate(names)]
+    lay.field("values_len", "u4")
+    if k:
+        lay.field("values", "f8", k)
+    arr = lay.array(n)
+    _fill_header(arr, lay, s, frame)
+    arr["innovation_enu"] = _vectors("innovation_enu", innovation_enu, n)
+    arr["r_std_enu"] = _vectors("r_std_enu", r_std_enu, n)
+    for name, v, dtype in (("nis", nis, np.float64), ("accepted", accepted, bool), ("forced", forced, bool)):
+        a = np.asarray(v, dtype=dtype)
+        if a.shape != (n,):
+            raise ValueError(f"{name} has shape {a.shape}, expected ({n},)")
+        arr[name] = a
+    arr["names_len"] = k
+    for i, raw in enumerate(stored):
+        arr[f"name_{i}_len"] = len(raw)
+        if raw:
+            arr[f"name_{i}"] = raw
+    arr["values_len"] = k
+    if k:
+        arr["values"] = _vectors("values", values, n, k)
+    return arr
 
 
 # --------------------------------------------------------------------------- recording -> message streams
