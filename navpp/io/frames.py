@@ -58,7 +58,7 @@ def body_to_map(solution: Solution, anchor: Anchor) -> np.ndarray:
     c_nb = rph_to_dcm(rph[:, 0], rph[:, 1], rph[:, 2])
     m_p = geodesy.mat_enu_from_ecef(np.radians(solution.lat_deg), np.radians(solution.lon_deg))
     m_a = geodesy.mat_enu_from_ecef(np.radians(anchor.lat_deg), np.radians(anchor.lon_deg))
-    return np.einsum("ij,nkj,nkl->nil", m_a, m_p, c_nb)
+    return np.einsum("ij,nkj,nkl->nil", m_a, m_p, c_nb, optimize=True)
 
 
 def quat_xyzw(mats: np.ndarray) -> np.ndarray:
