@@ -27,10 +27,20 @@ Error state (15 elements, in this order)
 
 Public API
 ----------
-``navpp.process(log, filter_name="ekf", ...)`` -> :class:`navpp.api.ProcessResult`;
-``navpp.simulate_log(out, **spec)``; the containers in :mod:`navpp.recording`; the filter
-registry ``navpp.filters.FILTERS``.  Heavy modules are imported on first use, so
-``import navpp`` (and ``navpp --help``) stays fast.
+``navpp.process(log, filter_name="ekf", formats=None, ...)`` -> :class:`navpp.api.ProcessResult`
+(:func:`navpp.api.process`): ``result.trajectory`` and ``result.diagnostics`` are pandas
+DataFrames with the columns of ``trajectory.csv`` / ``diagnostics.csv`` (``t`` in seconds on
+the log's time base), ``result.metrics`` the dict of ``metrics.json`` (None without a
+reference)::
+
+    import navpp
+    res = navpp.process("drive.mcap", filter_name="aekf", formats="csv,tum,geojson")
+    res.trajectory[["t", "lat", "lon"]]
+
+``navpp.compare(logs, filters, ...)`` runs several filters on several logs
+(:func:`navpp.comparison.compare`); ``navpp.simulate_log(out, **spec)``; the containers in
+:mod:`navpp.recording`; the filter registry ``navpp.filters.FILTERS``.  Heavy modules are
+imported on first use, so ``import navpp`` (and ``navpp --help``) stays fast.
 """
 
 from __future__ import annotations
@@ -38,7 +48,17 @@ from __future__ import annotations
 from typing import Any
 
 __version__ = "0.1.0"
-__all__ = ["process", "simulate_log", "__version__"]
+__all__ = ["__version__", "compare", "process", "simulate_log"]
+
+
+def _compare(*args: Any, **kwargs: Any) -> Any:
+    """Run several filters on several logs: :func:`navpp.comparison.compare` (see its docstring).
+
+    Resolved when called, so ``navpp.compare`` exists before :mod:`navpp.comparison` is imported.
+    """
+    from .comparison import compare
+
+    return compare(*args, **kwargs)
 
 
 def __getattr__(name: str) -> Any:
@@ -46,4 +66,12 @@ def __getattr__(name: str) -> Any:
         from . import api
 
         return getattr(api, name)
+    if name == "compare":
+        try:
+            from .comparison import compare
+        except ModuleNotFoundError as exc:
+            if exc.name != f"{__name__}.comparison":
+                raise
+            return _compare          # not there yet: look again at call time
+        return compare
     raise AttributeError(f"module 'navpp' has no attribute {name!r}")

@@ -8,27 +8,50 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
 import tempfile
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-from .config import Config, load_config
+from .config import Config, load_config, parse_formats
 from .errors import ConfigError, InputError, NavppError
 from .recording import Recording, Solution
 
 CONFIG_IN_LOG_DIR = "navpp.toml"
 #: Files navpp writes into an output directory.  After a successful run, any of these that the
-#: run did not write (e.g. metrics from an earlier run with a reference) are removed, so the
-#: directory never mixes results of different runs.  Only these exact names are touched.
-OUTPUT_FILES = ("trajectory.csv", "diagnostics.csv", "metrics.json", "metrics.md")
+#: run did not write (e.g. metrics from an earlier run with a reference, or a trajectory.kml
+#: from a run with ``--format kml``) are removed, so the directory never mixes results of
+#: different runs.  Only these exact names are touched.
+OUTPUT_FILES = ("trajectory.csv", "diagnostics.csv", "metrics.json", "metrics.md", "trajectory.mcap",
+                "trajectory.tum", "trajectory.geojson", "trajectory.kml")
+#: The file each ``--format`` / ``[output] formats`` name writes.
+FORMAT_FILES = {"csv": "trajectory.csv", "mcap": "trajectory.mcap", "tum": "trajectory.tum",
+                "geojson": "trajectory.geojson", "kml": "trajectory.kml"}
 
 
 @dataclass(frozen=True)
 class ProcessResult:
-    """Outcome of :func:`process`: the solution, metrics (None without a reference), files."""
+    """Outcome of :func:`process`.
+
+    Attributes
+    ----------
+    filter_name : the filter's registry name.
+    recording : the log as read (:class:`~navpp.recording.Recording`).
+    solution : the solution as written (at the output rate), ``t`` in s relative to
+        ``solution.t0_ns``.
+    run : the engine's ``RunResult`` (full-rate solution, biases, alignment, diagnostics).
+    metrics : the content of ``metrics.json`` (dict), None without a reference.
+    out_dir, files : the output directory and the files written (empty with ``write=False``).
+    config : the configuration used.
+    notes, warnings : lines for the user.
+    trajectory : pandas.DataFrame (property) with exactly ``trajectory.csv``'s columns.
+    diagnostics : pandas.DataFrame (property) with exactly ``diagnostics.csv``'s columns.
+    """
 
     filter_name: str
     recording: Recording
@@ -40,6 +63,31 @@ class ProcessResult:
     config: Config
     notes: tuple[str, ...] = field(default_factory=tuple)      # what was chosen (config, alignment)
     warnings: tuple[str, ...] = field(default_factory=tuple)   # what the data made us do
+
+    @cached_property
+    def trajectory(self):
+        """The solution as a ``pandas.DataFrame`` with ``trajectory.csv``'s columns.
+
+        ``t, lat, lon, alt, ve, vn, vu, roll, pitch, heading, std_e, std_n, std_u``, all
+        float64: ``t`` in s on the log's own time base (absolute, as in the CSV), lat/lon deg,
+        alt m above the WGS-84 ellipsoid, velocity m/s ENU, roll/pitch/heading deg (navigation
+        convention, heading clockwise from north), position 1-sigma m.  One row per row of
+        ``trajectory.csv`` (the output rate), at full precision (the CSV rounds to 1 us,
+        1e-9 deg and 1e-4).  Available with ``write=False`` too; built once per result.
+        """
+        from .io.exports import trajectory_frame
+
+        return trajectory_frame(self.solution)
+
+    @cached_property
+    def diagnostics(self):
+        """The filter's per-GNSS-epoch record as a ``pandas.DataFrame`` with
+        ``diagnostics.csv``'s columns: ``t`` (s on the log's time base), innovation
+        ``nu_e, nu_n, nu_u`` (m, ENU), ``nis``, ``accepted``, ``forced`` (0/1), ``r_std_e,
+        r_std_n, r_std_u`` (m) and the filter's adaptive quantities."""
+        from .io.exports import diagnostics_frame
+
+        return diagnostics_frame(self.run.diagnostics, self.recording.t0_ns)
 
 
 def companion(log: Path, name: str) -> Path | None:
@@ -202,9 +250,9 @@ def reference_checks(rec: Recording, cfg: Config, metrics: dict | None) -> list[
            else np.asarray(cfg.gnss.default_std_m[:2])[None, :])
     expected = float(np.sqrt(np.mean(np.sum(std ** 2, axis=1))))
     if raw["rmse"] > max(5.0 * expected, 10.0):
-        return [f"{metrics['reference']}: the raw GNSS fixes are {raw['rmse']:.1f} m (horizontal RMSE) from the "
-                f"reference, {raw['rmse'] / expected:.0f} times their stated 1-sigma: the reference is probably on "
-                "another time base or datum, and the figures against it mislead"]
+        return [(f"{metrics['reference']}: the raw GNSS fixes are {raw['rmse']:.1f} m (horizontal RMSE) from the "
+                 f"reference, {raw['rmse'] / expected:.0f} times their stated 1-sigma: the reference is probably on "
+                 "another time base or datum, and the figures against it mislead")]
     return []
 
 
@@ -267,12 +315,85 @@ def _write_file(path: Path, write: Callable[[], None]) -> Path:
     return path
 
 
+def write_outputs(out: Path, outputs: Sequence[tuple[str, Callable[[Path], None]]]) -> list[Path]:
+    """Write a run's files into ``out`` all together, then remove its stale :data:`OUTPUT_FILES`.
+
+    Each ``(name, write)`` is called as ``write(path)`` on a path inside a hidden staging
+    directory in ``out``; only when every writer has succeeded are the files renamed to
+    ``out / name`` (keeping the permissions of a file they replace).  If any writer fails,
+    nothing in ``out`` changes: the previous run's outputs stay whole and consistent with each
+    other.  The staging directory is always removed.
+
+    Returns the paths written, in the order given.  Raises :class:`InputError` naming the
+    file (``out / name``) that could not be written or the stale output that could not be
+    removed; other exceptions of a writer propagate unchanged.
+    """
+    try:
+        staging = Path(tempfile.mkdtemp(dir=out, prefix=".navpp-run-"))
+    except OSError as exc:
+        raise InputError(f"{out}: cannot write there ({_os_reason(exc)})") from None
+    written: list[Path] = []
+    try:
+        for name, write in outputs:
+            _write_file(out / name, lambda write=write, name=name: write(staging / name))
+        for name, _ in outputs:
+            staged, target = staging / name, out / name
+            try:
+                if target.is_file():
+                    os.chmod(staged, target.stat().st_mode & 0o7777)
+                os.replace(staged, target)
+            except OSError as exc:
+                raise InputError(f"{target}: cannot write ({_os_reason(exc)})") from None
+            written.append(target)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    for name in OUTPUT_FILES:          # stale results of an earlier run: not ours any more
+        stale = out / name
+        if stale not in written and stale.is_file():
+            try:
+                stale.unlink()
+            except OSError as exc:
+                raise InputError(f"{stale}: cannot remove this output of an earlier run "
+                                 f"({_os_reason(exc)})") from None
+    return written
+
+
+def check_formats(formats: str | Sequence[str] | None, embed_input: bool, cfg: Config) -> tuple[str, ...]:
+    """The output formats of a run: ``formats`` if given (``--format``), else the config's.
+
+    Raises :class:`ConfigError` for an unknown name and for ``embed_input`` without ``mcap``.
+    """
+    if formats is not None:
+        chosen, what = parse_formats(formats, "formats"), "--format"
+    else:
+        chosen, what = cfg.output.formats, f"{cfg.source}: [output] formats"
+    if embed_input and "mcap" not in chosen:
+        raise ConfigError(f"--embed-input copies the input log into trajectory.mcap, but {what} is "
+                          f"{','.join(chosen)}: add mcap (e.g. --format {','.join((*chosen, 'mcap'))})")
+    return chosen
+
+
+def _mcap_writer() -> Callable[..., None]:
+    try:
+        from .io.mcap_out import write_trajectory_mcap
+    except ImportError as exc:
+        raise ConfigError(f"the mcap output format is not available ({exc})") from None
+    return write_trajectory_mcap
+
+
 def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | Config | None = None,
             reference: str | Path | None = None, out_dir: str | Path | None = None,
             output_rate_hz: float | None = None, progress: Callable[[str, float], None] | None = None,
             write: bool = True, imu_topic: str | None = None, gnss_topic: str | None = None,
-            reference_topic: str | None = None, gnss_file: str | Path | None = None) -> ProcessResult:
+            reference_topic: str | None = None, gnss_file: str | Path | None = None,
+            formats: str | Sequence[str] | None = None, embed_input: bool = False) -> ProcessResult:
     """Read a log, run one filter, write trajectory (and metrics with a reference).
+
+    ``navpp.process`` is this function.  Example::
+
+        res = navpp.process("drive.mcap", filter_name="aekf", formats=["csv", "tum"])
+        res.trajectory          # pandas.DataFrame, trajectory.csv's columns
+        res.metrics             # dict as metrics.json, or None without a reference
 
     Parameters
     ----------
@@ -292,9 +413,27 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         ``[output] rate_hz``; None and no config rate: one row per IMU sample.
     progress : ``progress(stage, fraction)`` for progress bars.
     write : False computes everything and writes nothing.
+    formats : output formats (a list or a comma-separated string) among ``csv`` (trajectory.csv),
+        ``mcap`` (trajectory.mcap), ``tum`` (trajectory.tum), ``geojson`` (trajectory.geojson),
+        ``kml`` (trajectory.kml); see :mod:`navpp.io.exports`.  Overrides ``[output]
+        formats``; None uses it (default ``csv``).  ``diagnostics.csv`` and, with a
+        reference, ``metrics.json`` and ``metrics.md`` are always written.  All files of a
+        run appear together: if one cannot be written, the directory keeps the previous
+        run's files unchanged (:func:`write_outputs`).
+    embed_input : copy the input log's messages into trajectory.mcap (needs ``mcap``).
+
+    Returns
+    -------
+    ProcessResult : with ``trajectory`` and ``diagnostics`` as pandas DataFrames and
+        ``metrics`` as a dict (None without a reference).
+
+    Raises
+    ------
+    NavppError : ConfigError for bad options or config (unknown formats, ``embed_input``
+        without ``mcap``), InputError for unreadable input or unwritable output,
+        FilterDivergedError when the filter diverges; each with a one-line message.
     """
     from . import engine
-    from .io import writers
     from .metrics import compute_metrics
 
     log = Path(log)
@@ -305,6 +444,9 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         rate, rate_what = cfg.output.rate_hz, f"{cfg.source}: [output] rate_hz"
         if rate is not None:
             rate = check_output_rate(rate, rate_what)
+    chosen_formats = check_formats(formats, embed_input, cfg)
+    if write and "mcap" in chosen_formats:
+        _mcap_writer()                # before the run: not available is a ConfigError now, not after it
     filt = make_filter(filter_name, cfg)
     out = Path(out_dir) if out_dir is not None else default_out_dir(log, filter_name)
     created = prepare_out_dir(out, "--out" if out_dir is not None else "output directory") if write else []
@@ -341,29 +483,45 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
 
         files: list[Path] = []
         if write:
-            files.append(_write_file(out / "trajectory.csv", lambda: writers.write_trajectory_csv(
-                out / "trajectory.csv", sol_out, t0_s=rec.t0_ns * 1e-9)))
-            files.append(_write_file(out / "diagnostics.csv", lambda: writers.write_diagnostics_csv(
-                out / "diagnostics.csv", result.diagnostics, t0_s=rec.t0_ns * 1e-9)))
-            if metrics is not None:
-                files.append(_write_file(out / "metrics.json",
-                                         lambda: writers.write_metrics_json(out / "metrics.json", metrics)))
-                files.append(_write_file(out / "metrics.md",
-                                         lambda: writers.write_metrics_md(out / "metrics.md", metrics)))
-            for name in OUTPUT_FILES:          # stale results of an earlier run: not ours any more
-                stale = out / name
-                if stale not in files and stale.is_file():
-                    try:
-                        stale.unlink()
-                    except OSError as exc:
-                        raise InputError(f"{stale}: cannot remove this output of an earlier run "
-                                         f"({_os_reason(exc)})") from None
+            outputs = _outputs(chosen_formats, log=log, rec=rec, sol_out=sol_out, result=result, metrics=metrics,
+                               filter_name=filter_name, embed_input=embed_input)
+            files = write_outputs(out, outputs)
     except BaseException:
         remove_created_dirs(created)
         raise
     notes = tuple(cfg.notes) + tuple(result.alignment.lines)
     warnings = tuple(rec.warnings) + tuple(result.warnings) + tuple(reference_checks(rec, cfg, metrics))
     return ProcessResult(filter_name, rec, sol_out, result, metrics, out, tuple(files), cfg, notes, warnings)
+
+
+def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solution, result: Any,
+             metrics: dict | None, filter_name: str, embed_input: bool) -> list[tuple[str, Callable[[Path], None]]]:
+    """``(file name, writer(path))`` for every file of a run, in the order they are listed."""
+    from .io import exports, writers
+
+    t0_s = rec.t0_ns * 1e-9
+    outputs: list[tuple[str, Callable[[Path], None]]] = []
+    if "csv" in formats:
+        outputs.append(("trajectory.csv", lambda p: writers.write_trajectory_csv(p, sol_out, t0_s=t0_s)))
+    outputs.append(("diagnostics.csv", lambda p: writers.write_diagnostics_csv(p, result.diagnostics, t0_s=t0_s)))
+    if metrics is not None:
+        outputs.append(("metrics.json", lambda p: writers.write_metrics_json(p, metrics)))
+        outputs.append(("metrics.md", lambda p: writers.write_metrics_md(p, metrics)))
+    named = {"filter_name": filter_name, "log": str(log)}
+    for fmt in formats:
+        if fmt == "tum":
+            outputs.append((FORMAT_FILES[fmt], lambda p: exports.write_tum(p, sol_out, rec, **named)))
+        elif fmt == "geojson":
+            outputs.append((FORMAT_FILES[fmt], lambda p: exports.write_geojson(p, sol_out, rec, metrics=metrics,
+                                                                              **named)))
+        elif fmt == "kml":
+            outputs.append((FORMAT_FILES[fmt], lambda p: exports.write_kml(p, sol_out, rec, metrics=metrics,
+                                                                          **named)))
+        elif fmt == "mcap":
+            outputs.append((FORMAT_FILES[fmt], lambda p: _mcap_writer()(
+                p, solution=sol_out, recording=rec, diagnostics=result.diagnostics, biases=result.biases,
+                embed_input=embed_input, input_log=log, filter_name=filter_name)))
+    return outputs
 
 
 def simulate_log(out: str | Path, **spec: Any) -> Path:

@@ -93,6 +93,19 @@ class _Progress:
             self.bar.__exit__(*exc)
 
 
+def _process_formats(value: str | None) -> tuple[str, ...] | None:
+    """``--format`` callback: the names as a tuple; a usage error (exit 2) listing the valid ones."""
+    if value is None:
+        return None
+    from .config import parse_formats
+    from .errors import ConfigError
+
+    try:
+        return parse_formats(value, "--format")
+    except ConfigError as exc:
+        raise typer.BadParameter(str(exc).removeprefix("--format: ")) from None
+
+
 @app.command()
 def process(
     log: Annotated[Path, typer.Argument(metavar="LOG", help="Log: an MCAP file, a ROS 1 bag, a ROS 2 bag directory, "
@@ -114,19 +127,30 @@ def process(
     output_rate: Annotated[Optional[float], typer.Option(
         help="Trajectory rate in Hz, at most the IMU rate.  [default: every IMU sample]",
         callback=_require(_finite(0.0, strict=True), "a finite number of Hz > 0"))] = None,
+    formats: Annotated[str | None, typer.Option(
+        "--format", callback=_process_formats,
+        help="Trajectory files, comma separated: csv (trajectory.csv), mcap, tum (for evo), geojson, kml; "
+             "diagnostics.csv is always written.  [default: [output] formats of the config, else csv]")] = None,
+    embed_input: Annotated[bool, typer.Option(
+        "--embed-input", help="Copy the input log's messages into trajectory.mcap (needs mcap in --format).")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars, notes or summary (warnings about "
                                         "the data are still printed).")] = False,
 ) -> None:
-    """Process one log with one filter; write trajectory.csv (and metrics with a reference)."""
+    """Process one log with one filter; write trajectory.csv or the --format files, diagnostics.csv,
+    and metrics with a reference."""
     from .errors import NavppError
 
+    if embed_input and formats is not None and "mcap" not in formats:
+        raise typer.BadParameter(f"needs mcap among --format (got {','.join(formats)}), e.g. --format "
+                                 f"{','.join((*formats, 'mcap'))}", param_hint="'--embed-input'")
     try:
         from . import api
 
         with _Progress(quiet) as prog:
             res = api.process(log, filter_name=filter, config=config, reference=reference, out_dir=out,
                               output_rate_hz=output_rate, progress=prog, imu_topic=imu_topic,
-                              gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss)
+                              gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss,
+                              formats=formats, embed_input=embed_input)
     except NavppError as exc:
         _fail(str(exc))
         return
@@ -176,53 +200,94 @@ DEFAULT_COMPARE = "ekf,aekf,ckf,vce-ckf,rwckf"
 def compare(
     logs: Annotated[list[Path], typer.Argument(metavar="LOG...", help="Logs to process (any format `process` reads).")],
     filters: Annotated[str, typer.Option(help="Comma-separated filter names (see `navpp filters`).")] = DEFAULT_COMPARE,
-    config: Annotated[Optional[Path], typer.Option(help="TOML config for every log; default: each log's navpp.toml, "
+    config: Annotated[Path | None, typer.Option(help="TOML config for every log; default: each log's navpp.toml, "
                                                    "else the automotive preset.")] = None,
-    reference: Annotated[Optional[Path], typer.Option(help="Reference CSV (one log only); default: each log's "
+    reference: Annotated[Path | None, typer.Option(help="Reference CSV (one log only); default: each log's "
                                                       "reference.csv.")] = None,
-    imu_topic: Annotated[Optional[str], typer.Option(help="IMU topic for ROS logs with several.")] = None,
-    gnss_topic: Annotated[Optional[str], typer.Option(help="GNSS topic for ROS logs with several.")] = None,
-    reference_topic: Annotated[Optional[str], typer.Option(help="A NavSatFix topic to use as the reference.")] = None,
-    out: Annotated[Path, typer.Option(help="Directory for summary.csv, created if needed.")] = Path("navpp-out/compare"),
-    json_out: Annotated[bool, typer.Option("--json", help="Print the summary rows as JSON on stdout instead of "
-                                           "the table.")] = False,
+    imu_topic: Annotated[str | None, typer.Option(help="IMU topic for ROS logs with several.")] = None,
+    gnss_topic: Annotated[str | None, typer.Option(help="GNSS topic for ROS logs with several.")] = None,
+    reference_topic: Annotated[str | None, typer.Option(help="A NavSatFix topic to use as the reference.")] = None,
+    out: Annotated[Path, typer.Option(help="Directory for summary.csv, report.md, report.html and the figures, "
+                                      "created if needed.")] = Path("navpp-out/compare"),
+    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Worker processes: runs (log x filter) in parallel.",
+                                      callback=_require(lambda v: v >= 1, "an integer >= 1"))] = 1,
+    baseline: Annotated[Path | None, typer.Option(
+        help="CI gate: an earlier summary.csv. Rows are matched by log and filter (the log's name when the "
+             "path differs); exit 3 if a horizontal or up RMSE is worse by more than --tolerance. Rows missing "
+             "from the baseline are listed, not failed.")] = None,
+    tolerance: Annotated[str | None, typer.Option(
+        metavar="PCT", help="Allowed worsening against --baseline, percent: 5% or 5 (a value exactly at the limit "
+                            "passes).  [default: 5%]")] = None,
+    max_rmse: Annotated[str | None, typer.Option(
+        "--max-rmse", metavar="KEY=M,...", help="CI gate: RMSE limits in metres, keys H (horizontal), E, N, U, 3D, "
+                                                "e.g. H=1.0,U=1.5; exit 3 if a run exceeds one (or has no reference).")
+    ] = None,
+    json_out: Annotated[bool, typer.Option("--json", help="Print the summary rows, the gate verdict and the exit "
+                                           "code as JSON on stdout instead of the table.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars.")] = False,
 ) -> None:
-    """Run several filters on each log; print the MAE/RMSE table and write summary.csv.
+    """Run several filters on each log; print the MAE/RMSE table; write summary.csv and the report.
 
-    A filter that fails on a log is a row with the reason; the command then exits with 1
-    after writing everything else.
+    A log that cannot be read or a filter that fails is a row with the reason; the command then
+    exits with 1 after writing everything else.  Exit 3: a CI gate (--baseline, --max-rmse)
+    failed; the regressions are listed on stderr.  Exit 2: bad arguments.
     """
+    from . import comparison as cmp
     from .errors import ConfigError, NavppError
 
+    tol, base_rows, limits = cmp.DEFAULT_TOLERANCE_PCT, None, None
+    try:
+        if tolerance is not None:
+            if baseline is None:
+                raise ConfigError("--tolerance applies to --baseline; give --baseline SUMMARY.csv too")
+            tol = cmp.parse_tolerance(tolerance)
+        if max_rmse is not None:
+            limits = cmp.parse_limits(max_rmse)
+        if baseline is not None:
+            base_rows = cmp.read_baseline(baseline)
+    except ConfigError as exc:
+        raise typer.BadParameter(str(exc)) from None
     try:
         from . import api
-        from . import compare as cmp
 
         names = cmp.parse_filters(filters)
-        if reference is not None and len(logs) > 1:
-            raise ConfigError("--reference names one reference file; with several logs put a "
-                                  "reference.csv (or <log>.reference.csv) beside each log")
         created = api.prepare_out_dir(out, "--out")
         try:
             with _Progress(quiet or json_out) as prog:
-                rows = cmp.compare(logs, names, config=config, reference=reference, imu_topic=imu_topic,
-                                   gnss_topic=gnss_topic, reference_topic=reference_topic, progress=prog)
-            cmp.write_summary(out / "summary.csv", rows)
+                result = cmp.compare(logs, names, config=config, reference=reference, imu_topic=imu_topic,
+                                     gnss_topic=gnss_topic, reference_topic=reference_topic, jobs=jobs,
+                                     out_dir=out, progress=prog)
         except BaseException:
             api.remove_created_dirs(created)
             raise
     except NavppError as exc:
         _fail(str(exc))
         return
-    _print_comparison(rows, out / "summary.csv", json_out)
-    failed = [r for r in rows if r.status != "ok"]
+    verdict = None
+    if base_rows is not None or limits is not None:
+        verdict = result.gate(baseline=base_rows, tolerance_pct=tol, max_rmse=limits)
+    failed = result.failed
+    code = 1 if failed else 3 if verdict is not None and not verdict.passed else 0
+    _print_comparison(result, json_out, verdict, code)
     if failed:
-        _fail(f"{len(failed)} of {len(rows)} runs failed: "
-              + "; ".join(f"{r.filter} on {r.log}: {r.status}" for r in failed))
+        groups: dict[tuple[str, str], list[str]] = {}
+        for r in failed:
+            groups.setdefault((r.log, r.status), []).append(r.filter)
+        _fail(f"{len(failed)} of {len(result.rows)} runs failed: "
+              + "; ".join(f"{', '.join(f)} on {log}: {status}" for (log, status), f in groups.items()))
+    if code == 3:
+        from rich.console import Console
+        from rich.markup import escape
+
+        Console(stderr=True, highlight=False, soft_wrap=True).print(
+            f"[bold red]navpp: error:[/] {escape(f'CI gate failed: {len(verdict.failures)} of {verdict.checks} checks')}"
+            " (listed above)")
+        raise typer.Exit(3)
 
 
-def _print_comparison(rows, summary_path: Path, json_out: bool) -> None:
+def _print_comparison(result, json_out: bool, verdict=None, exit_code: int = 0) -> None:
+    """The summary table on stdout (best per column and log in bold), or the JSON document;
+    warnings, gate notes and the gate's regressions on stderr."""
     import json
 
     from rich import box
@@ -230,45 +295,77 @@ def _print_comparison(rows, summary_path: Path, json_out: bool) -> None:
     from rich.markup import escape
     from rich.table import Table
 
+    from .report import best_cells
+
+    rows = result.rows
+    err = Console(stderr=True, highlight=False, soft_wrap=True)
+    for line in dict.fromkeys(w for r in rows for w in r.warnings):
+        err.print(f"[yellow]warning:[/] {escape(line)}")
+    if verdict is not None:
+        for line in verdict.notes:
+            _note(err, line)
+        if verdict.failures:
+            _print_gate(verdict)
     if json_out:
-        typer.echo(json.dumps([r.summary() for r in rows], indent=1))
+        doc = {"rows": [r.summary_record() for r in rows], "runs": len(rows), "failed": len(result.failed),
+               "gate": verdict.as_dict() if verdict is not None else None,
+               "files": [str(p) for p in result.files], "exit_code": exit_code}
+        typer.echo(json.dumps(doc, indent=1))
         return
     con = Console(highlight=False, soft_wrap=True)
+    if not con.is_terminal:
+        con = Console(highlight=False, width=200)
     with_ref = any(r.metrics is not None for r in rows)
-    tab = Table(title="position error vs reference, m (E = longitude, N = latitude); GNSS fixes rejected; "
-                "filter time s" if with_ref else "no reference: GNSS fixes rejected; filter time s",
+    tab = Table(title="position error vs reference, m (best per log in bold)" if with_ref else "no reference",
+                caption=("E = longitude, N = latitude; " if with_ref else "")
+                + "rej. = GNSS fixes rejected by the gate; s = filter run time",
                 box=box.SIMPLE_HEAD, pad_edge=False)
-    cols = ["log", "filter"]
-    if with_ref:
-        cols += ["H MAE", "H RMSE", "E RMSE", "N RMSE", "U RMSE"]
-    cols += ["rej.", "s"]
+    metric_cols = [("horizontal_mae", "H MAE"), ("horizontal_rmse", "H RMSE"), ("east_rmse", "E RMSE"),
+                   ("north_rmse", "N RMSE"), ("up_rmse", "U RMSE")]
+    cols = ["log", "filter"] + ([h for _, h in metric_cols] if with_ref else []) + ["rej.", "s"]
     for c in cols:
         tab.add_column(c, justify="left" if c in ("log", "filter") else "right", no_wrap=True)
-    best: dict[str, float] = {}
-    for r in rows:
-        if r.metrics is not None:
-            h = r.metrics["position_m"]["horizontal"]["rmse"]
-            best[r.log] = min(best.get(r.log, h), h)
-    for r in rows:
+    best = best_cells(rows, [c for c, _ in metric_cols])
+    for i, r in enumerate(rows):
         cells = [escape(Path(r.log).name), r.filter]
-        if r.status != "ok":
+        if not r.ok:
             cells += ["failed"] + [""] * (len(cols) - 3)
             tab.add_row(*cells, style="red")
             continue
         if with_ref:
-            if r.metrics is None:
-                cells += [""] * 5
-            else:
-                p = r.metrics["position_m"]
-                h = f"{p['horizontal']['rmse']:.3f}"
-                if p["horizontal"]["rmse"] == best.get(r.log):
-                    h = f"[bold]{h}[/]"
-                cells += [f"{p['horizontal']['mae']:.3f}", h, f"{p['east']['rmse']:.3f}", f"{p['north']['rmse']:.3f}",
-                          f"{p['up']['rmse']:.3f}"]
+            s = r.summary()
+            for c, _ in metric_cols:
+                v = s.get(c)
+                text = f"{v:.3f}" if isinstance(v, float) else ""
+                cells.append(f"[bold]{text}[/]" if text and (i, c) in best else text)
         cells += [str(r.gnss_rejected), f"{r.runtime_s:.2f}"]
         tab.add_row(*cells)
     con.print(tab)
-    con.print(escape(f"wrote {summary_path}"))
+    if result.files:
+        names = [p.name for p in result.files if p.suffix != ".png"]
+        n_png = sum(p.suffix == ".png" for p in result.files)
+        con.print(escape(f"wrote {', '.join(str(result.out_dir / n) for n in names)}"
+                         + (f" and {n_png} figure{'s' * (n_png != 1)}" if n_png else "")))
+
+
+def _print_gate(verdict) -> None:
+    """The CI gate's regressions as a short table on stderr."""
+    from rich import box
+    from rich.console import Console
+    from rich.markup import escape
+    from rich.table import Table
+
+    err = Console(stderr=True, highlight=False, soft_wrap=True)
+    if not err.is_terminal:
+        err = Console(stderr=True, highlight=False, width=200)
+    tab = Table(title="CI gate: regressions (m)", box=box.SIMPLE_HEAD, pad_edge=False)
+    for c in ("log", "filter", "metric", "gate", "baseline/limit", "allowed", "value", "worse %"):
+        tab.add_column(c, justify="left" if c in ("log", "filter", "metric", "gate") else "right", no_wrap=True)
+    for f in verdict.failures:
+        worse = "" if f.worse_pct is None else "inf" if f.worse_pct == float("inf") else f"{f.worse_pct:+.1f}"
+        tab.add_row(escape(Path(f.log).name), f.filter, f.metric, f.gate, f"{f.reference:.4f}", f"{f.allowed:.4f}",
+                    "none" if f.value is None else f"{f.value:.4f}", worse)
+    err.print(tab)
 
 
 @app.command()

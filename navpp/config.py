@@ -60,6 +60,7 @@ __all__ = [
     "VehicleConfig",
     "config_from_dict",
     "load_config",
+    "parse_formats",
 ]
 
 # --------------------------------------------------------------------------- unit factors
@@ -485,8 +486,12 @@ class OutputConfig:
     Attributes
     ----------
     rate_hz : float or None, Hz, > 0. Output rate; None writes one row per IMU sample.
-    formats : tuple of str. Subset of ``OUTPUT_FORMATS``, non-empty, duplicates dropped.
-        TOML may give a list or one comma-separated string (``"csv,mcap"``).
+    formats : tuple of str. Subset of ``OUTPUT_FORMATS``, non-empty, duplicates dropped;
+        default ``("csv",)``.  ``csv`` -> trajectory.csv, ``mcap`` -> trajectory.mcap,
+        ``tum`` -> trajectory.tum, ``geojson`` -> trajectory.geojson, ``kml`` ->
+        trajectory.kml; diagnostics.csv (and metrics with a reference) are always written.
+        TOML may give a list or one comma-separated string (``"csv,mcap"``); ``navpp
+        process --format`` overrides it.
     """
 
     rate_hz: float | None = None
@@ -494,15 +499,40 @@ class OutputConfig:
 
     def __post_init__(self) -> None:
         _fix_optional_float(self, "output", "rate_hz", minimum=0.0, strict_min=True)
-        raw: object = self.formats
-        if isinstance(raw, str):
-            raw = [part.strip() for part in raw.split(",") if part.strip()]
-        if not isinstance(raw, list | tuple) or not raw:
-            raise ConfigError(
-                f"[output] formats must be a non-empty list of format names, got {self.formats!r}"
-            )
-        formats = [_as_choice("output", "formats", f, OUTPUT_FORMATS) for f in raw]
-        _set(self, "formats", tuple(dict.fromkeys(formats)))
+        _set(self, "formats", parse_formats(self.formats, "[output] formats"))
+
+
+def parse_formats(value: object, what: str) -> tuple[str, ...]:
+    """Output format names from a list or a comma-separated string, validated.
+
+    Parameters
+    ----------
+    value : e.g. ``["csv", "tum"]`` or ``"csv, tum"``; each a name of ``OUTPUT_FORMATS``.
+    what : where the value came from (``"[output] formats"``, ``"--format"``); every
+        message starts with ``f"{what}: "``.
+
+    Returns
+    -------
+    tuple of str : the names in the given order, duplicates dropped.
+
+    Raises
+    ------
+    ConfigError : empty, not a list/string, or an unknown name (the message lists the valid
+        names and suggests the nearest).
+    """
+    raw: object = value
+    if isinstance(raw, str):
+        raw = [part.strip() for part in raw.split(",") if part.strip()]
+    if not isinstance(raw, list | tuple) or not raw:
+        raise ConfigError(f"{what}: must be a non-empty list of format names, got {value!r}")
+    listed = ", ".join(repr(c) for c in OUTPUT_FORMATS)
+    for name in raw:
+        if not (isinstance(name, str) and name in OUTPUT_FORMATS):
+            msg = f"{what}: unknown format {name!r}; valid formats: {listed}"
+            if isinstance(name, str) and (near := _nearest(name, OUTPUT_FORMATS)) is not None:
+                msg += f" (did you mean {near!r}?)"
+            raise ConfigError(msg)
+    return tuple(dict.fromkeys(raw))
 
 
 _SECTIONS: Final[dict[str, type]] = {
