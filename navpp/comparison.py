@@ -594,11 +594,17 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
              for i, log in enumerate(logs) for j, name in enumerate(names)]
     workers = min(jobs, len(tasks))
     out = Path(out_dir) if out_dir is not None else None
+    # created (and proved writable) before any run; removed again if the comparison fails
+    created = api.prepare_out_dir(out, "out_dir") if out is not None else []
     draw = _FigurePlan(logs, names) if report and out is not None else None
-    if workers == 1:
-        outcomes, plots = _run_serial(tasks, progress, draw)
-    else:
-        outcomes, plots = _run_parallel(tasks, workers, progress, draw)
+    try:
+        if workers == 1:
+            outcomes, plots = _run_serial(tasks, progress, draw)
+        else:
+            outcomes, plots = _run_parallel(tasks, workers, progress, draw)
+    except BaseException:
+        api.remove_created_dirs(created)
+        raise
     rows = tuple(o.row for o in outcomes)
     log_series = {o.row.log: o.log_series for o in outcomes if tasks[o.index].log_series}
     run_series = {(o.row.log, o.row.filter): o.series for o in outcomes if o.series is not None}

@@ -389,3 +389,11 @@ def test_parallel_schedule_is_log_by_log_costliest_first():
              for i, log in enumerate(["b", "a"]) for j, f in enumerate(["ekf", "ckf", "rwckf"])]
     assert [(t.log, t.filter) for t in _schedule(tasks)] == [
         ("b", "rwckf"), ("b", "ckf"), ("b", "ekf"), ("a", "rwckf"), ("a", "ckf"), ("a", "ekf")]
+
+
+def test_python_api_creates_the_output_directory(sim_log_dir, tmp_path):
+    import navpp
+
+    out = tmp_path / "new" / "cmp"
+    res = navpp.compare([sim_log_dir], ["ekf"], out_dir=out, report=False)
+    assert (out / "summary.csv").is_file() and res.summary["filter"].tolist() == ["ekf"]
