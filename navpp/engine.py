@@ -25,7 +25,7 @@ from .filters.base import Filter, GaussianState
 from .ins.alignment import Alignment, AlignmentSettings, align
 from numba import njit
 
-from .ins.model import BA, BG, POS, GnssPosition, InsModel, NoiseModel
+from .ins.model import BA, BG, LONG_GAP_PERIODS, POS, GnssPosition, InsModel, NoiseModel
 from .ins.strapdown import NOMINAL_BA, NOMINAL_BG
 from .recording import Recording, Solution
 
@@ -157,6 +157,135 @@ def check_imu_plausible(recording: Recording) -> list[str]:
     return warnings
 
 
+#: Saturation: a channel whose extreme value is held for this many consecutive samples.
+SATURATION_RUN = 3
+#: ... and only when that extreme is physically large (rad/s, m/s^2): a noise-free or coarse
+#: IMU at rest legitimately repeats small values.
+SATURATION_FLOOR = {"gyro": 1.0, "accel": 15.0}
+
+
+def _t_text(t: float) -> str:
+    return f"t = {t:.3f} s"
+
+
+def _imu_gaps(source: str, t: np.ndarray) -> list[str]:
+    """One warning line for IMU intervals longer than
+    :data:`navpp.ins.model.LONG_GAP_PERIODS` nominal periods: the strapdown integrates across
+    them with their true length and the model adds the unseen motion to the covariance
+    (:meth:`navpp.ins.model.InsModel.gap_noise`), but the user must know where they are."""
+    if t.shape[0] < 3:
+        return []
+    dt = np.diff(t)
+    nominal = float(np.median(dt))
+    long_ = np.nonzero(dt > LONG_GAP_PERIODS * nominal)[0]
+    if long_.size == 0:
+        return []
+    k0, kmax = int(long_[0]), int(long_[np.argmax(dt[long_])])
+    n = long_.size
+    line = (f"{source}: IMU: {n} gap{'s' if n > 1 else ''} longer than {LONG_GAP_PERIODS:g} periods "
+            f"({LONG_GAP_PERIODS * nominal:.3g} s), {float(dt[long_].sum()):.3g} s in all: first at "
+            f"{_t_text(float(t[k0]))} ({float(dt[k0]):.3g} s), longest at {_t_text(float(t[kmax]))} "
+            f"({float(dt[kmax]):.3g} s); integrated across with the true interval, the unseen motion added to "
+            "the uncertainty")
+    return [line]
+
+
+def _saturation(source: str, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
+                gyro_range: float | None, accel_range: float | None) -> list[str]:
+    """Warn about IMU channels that look clipped.
+
+    A sample is suspect when its channel sits at the channel's extreme value (max or min over
+    the log, at least :data:`SATURATION_FLOOR` in magnitude) for at least
+    :data:`SATURATION_RUN` consecutive samples, or when ``|value|`` reaches a configured range
+    (rad/s for the gyro, m/s^2 for the accelerometer; None: not checked).  The filter still
+    uses those samples (there is nothing better to use), so the warning says where the
+    solution is not to be trusted.
+    """
+    out = []
+    for name, data, rng in (("gyro", gyro, gyro_range), ("accel", accel, accel_range)):
+        flag = np.zeros(data.shape[0], bool)
+        for axis in range(3):
+            v = data[:, axis]
+            for ext in (float(v.max()), float(v.min())):
+                if abs(ext) < SATURATION_FLOOR[name]:
+                    continue
+                at = v == ext
+                # runs of >= SATURATION_RUN: a sample and its SATURATION_RUN - 1 successors all at ext
+                run = at.copy()
+                for j in range(1, SATURATION_RUN):
+                    run[:-j] &= at[j:]
+                    run[-j:] = False
+                if run.any():
+                    for j in range(SATURATION_RUN):     # mark the whole run, not only its starts
+                        flag[j:] |= run[:data.shape[0] - j]
+            if rng is not None:
+                flag |= np.abs(v) >= rng
+        if flag.any():
+            idx = np.nonzero(flag)[0]
+            unit = "rad/s" if name == "gyro" else "m/s^2"
+            out.append(f"{source}: IMU {name}: {idx.size} sample{'s' if idx.size > 1 else ''} look saturated "
+                       f"(held at the extreme value{' or beyond the configured range' if rng is not None else ''}, "
+                       f"up to {float(np.abs(data[idx]).max()):.4g} {unit}) from {_t_text(float(t[idx[0]]))} to "
+                       f"{_t_text(float(t[idx[-1]]))}: the solution around them is not to be trusted")
+    return out
+
+
+def _overlap(source: str, t_imu: np.ndarray, t_gnss: np.ndarray) -> list[str]:
+    """One line when the IMU and GNSS spans only partly overlap: only the overlap is GNSS-aided;
+    IMU time before the first fix waits for it (alignment), IMU time after the last fix is
+    free inertial (its uncertainty grows), fixes outside the IMU span are ignored."""
+    if t_gnss.size == 0:
+        return []
+    i0, i1, g0, g1 = float(t_imu[0]), float(t_imu[-1]), float(t_gnss[0]), float(t_gnss[-1])
+    nominal = float(np.median(np.diff(t_gnss))) if t_gnss.size > 1 else 1.0
+    tol = max(2.0 * nominal, 1.0)           # a fix or two missing at either end is not worth a line
+    if abs(g0 - i0) <= tol and abs(g1 - i1) <= tol:
+        return []
+    lo, hi = max(i0, g0), min(i1, g1)
+    notes = []
+    if lo - i0 > tol:
+        notes.append(f"no fix for the first {lo - i0:.1f} s of IMU")
+    if i1 - hi > tol:
+        notes.append(f"the last {i1 - hi:.1f} s of IMU are free inertial")
+    outside = int(np.count_nonzero((t_gnss < i0) | (t_gnss > i1)))
+    if outside:
+        notes.append(f"{outside} fix{'es' if outside > 1 else ''} outside the IMU span ignored")
+    if not notes:
+        return []
+    return [f"{source}: the IMU ({_t_text(i0)} .. {i1:.3f} s) and GNSS ({_t_text(g0)} .. {g1:.3f} s) only partly "
+            f"overlap: GNSS-aided {lo:.3f} .. {hi:.3f} s; " + "; ".join(notes)]
+
+
+def check_data(recording: Recording, config: Config | None = None) -> list[str]:
+    """Data faults the engine copes with but the user must hear of, one line each, with times.
+
+    IMU gaps longer than :data:`~navpp.ins.model.LONG_GAP_PERIODS` periods, saturated IMU channels (see
+    :func:`_saturation`; ranges from ``[imu] gyro_range_rps`` / ``accel_range_mps2`` when the
+    configuration has them), and IMU / GNSS spans that only partly overlap.  Times are s
+    relative to the recording's first IMU stamp.
+    """
+    imu = recording.imu
+    src = recording.source
+    imu_cfg = getattr(config, "imu", None)
+    out = _imu_gaps(src, imu.t)
+    out += _saturation(src, imu.t, imu.gyro, imu.accel, getattr(imu_cfg, "gyro_range_rps", None),
+                       getattr(imu_cfg, "accel_range_mps2", None))
+    out += _overlap(src, imu.t, recording.gnss.t)
+    return out
+
+
+def _state_fault(state: GaussianState) -> str | None:
+    """What is wrong with a filter state (non-finite state or covariance, a covariance that is
+    not positive definite on its diagonal), or None."""
+    if not np.all(np.isfinite(state.x)):
+        return "the state became non-finite (NaN or inf)"
+    if not np.all(np.isfinite(state.P)):
+        return "the covariance became non-finite (NaN or inf)"
+    if not np.all(np.diagonal(state.P) > 0.0):
+        return "the covariance lost positive definiteness (a variance <= 0)"
+    return None
+
+
 _CAUSES = ("check the IMU units and axes ([imu] mounting_rpy_deg), the lever arm, the time bases "
            "([gnss] time_offset_s) and the GNSS standard deviations")
 _CHI2_3_MEDIAN = 2.365973884375338     # median of the chi-square distribution with 3 dof
@@ -197,6 +326,7 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
          cov_step_s: float) -> RunResult:
     t_wall = time.perf_counter()
     warnings = check_imu_plausible(recording)
+    warnings += check_data(recording, config)
     imu, gnss = recording.imu, recording.gnss
     gyro, accel = imu.gyro, imu.accel
     if any(a != 0.0 for a in config.imu.mounting_rpy_deg):
@@ -253,37 +383,62 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     n_path = model.path.shape[1]
     idx = np.minimum(np.searchsorted(imu.t, tg), len(imu) - 1)
     k_sample = np.where(imu.t[idx] == tg, idx, -1)
-    for k in range(m_ep):
-        coast_to(float(tg[k]))
-        state = filt.predict(state, model, (state.t, float(tg[k])))
-        prior = state.P.diagonal()[POS].copy()
-        meas = GnssPosition(float(tg[k]), float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever)
-        state, inn = filt.update(state, model, meas)
-        if inn.accepted and k_sample[k] >= 0:
-            model.path[k_sample[k]] = state.x[:n_path]     # the epoch's own sample shows the posterior
-        knot(prior)
-        bias[k, :3] = state.x[NOMINAL_BG]
-        bias[k, 3:] = state.x[NOMINAL_BA]
-        bias_var[k, :3] = state.P.diagonal()[BG]
-        bias_var[k, 3:] = state.P.diagonal()[BA]
-        nu[k] = inn.nu
-        nis[k] = inn.nis
-        accepted[k] = inn.accepted
-        forced[k] = inn.forced
-        r_std[k] = np.sqrt(np.diagonal(inn.R))
-        for name, value in filt.noise_report().items():
-            if name not in adaptive:
-                adaptive[name] = np.full((m_ep, np.size(value)), np.nan)
-            adaptive[name][k] = value
-        if progress is not None and k % tick == 0:
-            progress(k / m_ep)
-    # after the last fix the uncertainty keeps growing to the end of the log
-    coast_to(float(imu.t[-1]))
-    if state.t < imu.t[-1]:
-        state = filt.predict(state, model, (state.t, float(imu.t[-1])))
-        knot()
-    if not np.all(np.isfinite(state.P)):
-        raise FilterDivergedError(f"{filt.name}: covariance became non-finite by t = {state.t:.2f} s")
+    def _epochs() -> None:
+        nonlocal state, last_good
+        for k in range(m_ep):
+            coast_to(float(tg[k]))
+            state = filt.predict(state, model, (state.t, float(tg[k])))
+            prior = state.P.diagonal()[POS].copy()
+            meas = GnssPosition(float(tg[k]), float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever)
+            checked(float(tg[k]))                   # the prediction
+            state, inn = filt.update(state, model, meas)
+            checked(float(tg[k]))                   # the update
+            if inn.accepted:
+                last_good = float(tg[k])
+            if inn.accepted and k_sample[k] >= 0:
+                model.path[k_sample[k]] = state.x[:n_path]     # the epoch's own sample shows the posterior
+            knot(prior)
+            bias[k, :3] = state.x[NOMINAL_BG]
+            bias[k, 3:] = state.x[NOMINAL_BA]
+            bias_var[k, :3] = state.P.diagonal()[BG]
+            bias_var[k, 3:] = state.P.diagonal()[BA]
+            nu[k] = inn.nu
+            nis[k] = inn.nis
+            accepted[k] = inn.accepted
+            forced[k] = inn.forced
+            r_std[k] = np.sqrt(np.diagonal(inn.R))
+            for name, value in filt.noise_report().items():
+                if name not in adaptive:
+                    adaptive[name] = np.full((m_ep, np.size(value)), np.nan)
+                adaptive[name][k] = value
+            if progress is not None and k % tick == 0:
+                progress(k / m_ep)
+        # after the last fix the uncertainty keeps growing to the end of the log
+        coast_to(float(imu.t[-1]))
+        if state.t < imu.t[-1]:
+            state = filt.predict(state, model, (state.t, float(imu.t[-1])))
+            knot()
+        checked(state.t)
+
+    last_good: float | None = None       # time of the last accepted GNSS update
+
+    def diverged(t: float, why: str) -> FilterDivergedError:
+        good = (f"the last good epoch (accepted GNSS update) was t = {last_good:.3f} s" if last_good is not None
+                else f"no GNSS update had been accepted yet (alignment at t = {al.t:.3f} s)")
+        return FilterDivergedError(f"{recording.source}: {filt.name} diverged at t = {t:.3f} s: {why}; {good}; "
+                                   f"nothing written; {_CAUSES}")
+
+    def checked(t: float) -> None:
+        fault = _state_fault(state)
+        if fault is not None:
+            raise diverged(t, fault)
+
+    try:
+        _epochs()
+    except FilterDivergedError as exc:
+        if str(exc).startswith(f"{recording.source}: {filt.name} diverged at"):
+            raise
+        raise diverged(state.t, str(exc).removeprefix(f"{filt.name}: ")) from None
     if progress is not None:
         progress(1.0)
 

@@ -12,6 +12,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .errors import InputError
+
+#: A stamp may step back by at most this much (s) and still be taken for a reordered message
+#: (sorted into place); a larger step back is a clock jump or a concatenated log: an error.
+MAX_REORDER_S = 1.0
+
 
 def _readonly(*arrays: np.ndarray | None) -> None:
     for a in arrays:
@@ -42,6 +48,12 @@ class ImuData:
                 f"ImuData shapes: t {self.t.shape}, gyro {self.gyro.shape}, accel {self.accel.shape}; "
                 "expected (N,), (N, 3), (N, 3)"
             )
+        if n > 1:
+            bad = ~(np.diff(self.t) > 0.0)          # also catches NaN stamps
+            if bad.any():
+                k = int(np.argmax(bad))
+                raise ValueError(f"ImuData.t must be strictly increasing: t[{k + 1}] = {float(self.t[k + 1])!r} "
+                                 f"after t[{k}] = {float(self.t[k])!r} (readers sort and drop duplicates)")
         _readonly(self.t, self.gyro, self.accel)
 
     def __len__(self) -> int:
@@ -53,6 +65,77 @@ class ImuData:
         if len(self) < 2:
             return float("nan")
         return float(1.0 / np.median(np.diff(self.t)))
+
+
+def _stamp_s(ns: int) -> str:
+    sec, frac = divmod(int(ns), 1_000_000_000)
+    return f"{sec}.{frac:09d} s"
+
+
+def order_samples(stamps_ns: np.ndarray, values: np.ndarray, what: str,
+                  warnings: list[str]) -> np.ndarray:
+    """Indices that put a stream's samples in strictly increasing stamp order, deterministically.
+
+    The policy every reader shares (one warning line per kind, naming ``what``, the count and
+    the first stamp concerned):
+
+    - out-of-order samples (a stamp earlier than the one before, by at most
+      :data:`MAX_REORDER_S`) are sorted into place (stable sort: equal stamps keep their order
+      in the log);
+    - exact duplicates (same stamp, same values) are dropped;
+    - conflicting duplicates (same stamp, different values) keep the first in log order and
+      drop the others: one stamp can carry one measurement only, and the first is what a
+      real-time system would have used;
+    - a step back of more than :data:`MAX_REORDER_S` is a clock jump, not a reordering:
+      :class:`~navpp.errors.InputError`.
+
+    Parameters
+    ----------
+    stamps_ns : (N,) int64, absolute stamps in ns, in log order.
+    values : (N, k) float, the sample's values (compared for duplicates); (N,) accepted.
+    what : the stream, as it should appear in messages (file and topic / column).
+    warnings : list the warnings are appended to.
+
+    Returns
+    -------
+    (M,) int index into the inputs, M <= N, giving strictly increasing stamps.
+    """
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    vals = np.asarray(values, dtype=float).reshape(stamps.shape[0], -1)
+    d = np.diff(stamps)
+    back = np.nonzero(d < 0)[0]
+    if back.size:
+        worst = int(back[np.argmin(d[back])])
+        if -int(d[worst]) > MAX_REORDER_S * 1e9:
+            k = worst + 1
+            raise InputError(
+                f"{what}: sample {k} has stamp {_stamp_s(stamps[k])}, {-int(d[worst]) * 1e-9:.3f} s before sample "
+                f"{k - 1} ({_stamp_s(stamps[k - 1])}): a clock jump (more than {MAX_REORDER_S:g} s back), not a "
+                "reordering; split the log or check its time source")
+        k = int(back[0]) + 1
+        warnings.append(f"{what}: {back.size} sample{'s' if back.size > 1 else ''} out of stamp order, sorted "
+                        f"(first: sample {k} at {_stamp_s(stamps[k])})")
+        order = np.argsort(stamps, kind="stable")
+    else:
+        order = np.arange(stamps.shape[0])
+    s = stamps[order]
+    same = np.concatenate([[False], s[1:] == s[:-1]])
+    if not same.any():
+        return order
+    # a duplicate is compared with the first sample of its stamp (NaN == NaN counts as equal)
+    first = np.maximum.accumulate(np.where(same, 0, np.arange(s.shape[0])))
+    v, v0 = vals[order], vals[order[first]]
+    equal = np.all((v == v0) | (np.isnan(v) & np.isnan(v0)), axis=1)
+    exact, conflict = same & equal, same & ~equal
+    for mask, kind, action in ((exact, "exact duplicate", "dropped"),
+                               (conflict, "conflicting duplicate", "dropped, the first sample of each stamp kept")):
+        n = int(np.count_nonzero(mask))
+        if n:
+            j = int(np.argmax(mask))
+            warnings.append(f"{what}: {n} {kind}{'s' if n > 1 else ''} (a stamp repeated"
+                            + (" with different values" if mask is conflict else "")
+                            + f") {action} (first at {_stamp_s(s[j])}, sample {int(order[j])})")
+    return order[~same]
 
 
 @dataclass(frozen=True)

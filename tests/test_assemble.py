@@ -86,7 +86,7 @@ def test_no_fix_dropped_and_unknown_covariance_uses_default(rec):
     assert "dropped 3 of" in text and "default_std_m" in text
 
 
-def test_nan_and_backwards_stamps_are_errors_naming_the_message(rec):
+def test_nan_stamps_and_clock_jumps_are_errors_naming_the_message(rec):
     imu = _imu_msgs(rec)
     gyro = imu.gyro.copy()
     gyro[100, 1] = np.nan
@@ -94,9 +94,18 @@ def test_nan_and_backwards_stamps_are_errors_naming_the_message(rec):
     with pytest.raises(InputError, match=r"topic '/imu/data': message 100 .*angular_velocity"):
         recording_from_log(_contents([bad], [_fix_msgs(rec)]))
     ns = imu.stamp_ns.copy()
-    ns[200], ns[201] = ns[201], ns[200]
-    with pytest.raises(InputError, match="message 201 .* stamps go backwards"):
+    ns[201:] -= 2_000_000_000                   # the clock steps 2 s back: not a reordering
+    with pytest.raises(InputError, match=r"sample 201 .* clock jump"):
         recording_from_log(_contents([_imu_msgs(rec, stamps=ns)], [_fix_msgs(rec)]))
+
+
+def test_reordered_stamps_are_sorted_and_warned(rec):
+    ns = _imu_msgs(rec).stamp_ns.copy()
+    ns[200], ns[201] = ns[201], ns[200]
+    out = recording_from_log(_contents([_imu_msgs(rec, stamps=ns)], [_fix_msgs(rec)]))
+    np.testing.assert_allclose(out.imu.t, rec.imu.t, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(out.imu.gyro[[200, 201]], rec.imu.gyro[[201, 200]])   # values follow stamps
+    assert any("1 sample out of stamp order, sorted (first: sample 201" in w for w in out.warnings)
 
 
 def test_duplicate_stamps_dropped(rec):
@@ -104,7 +113,8 @@ def test_duplicate_stamps_dropped(rec):
     ns[11] = ns[10]
     out = recording_from_log(_contents([_imu_msgs(rec, stamps=ns)], [_fix_msgs(rec)]))
     assert len(out.imu) == len(rec.imu) - 1
-    assert any("repeated stamp" in w for w in out.warnings)
+    np.testing.assert_array_equal(out.imu.gyro[10], rec.imu.gyro[10])      # the first of the stamp kept
+    assert any("1 conflicting duplicate" in w and "sample 11" in w for w in out.warnings)
 
 
 def test_gnss_velocity_from_the_twist_topic(rec):

@@ -46,6 +46,21 @@ POS = slice(6, 9)
 BG = slice(9, 12)
 BA = slice(12, 15)
 
+#: An IMU interval longer than this many nominal sample periods is a long gap (dropped
+#: messages, a logger stall).  The strapdown integrates across any gap with its true length,
+#: interpolating the rates linearly; across a long gap the motion it cannot see is added to the
+#: covariance (:meth:`InsModel.gap_noise`).  Shorter gaps (a few dropped samples) cost nothing
+#: measurable at vehicle dynamics and are integrated silently.
+LONG_GAP_PERIODS = 5.0
+#: Unseen motion across a long gap of length T (s): the true specific force and rate depart
+#: from the linear interpolation by a 1-sigma of ``min(JERK * T, ACCEL)`` (m/s^2, per ENU axis)
+#: and ``min(ANG_ACCEL * T, RATE)`` (rad/s, per axis), constant over the gap: typical land
+#: vehicle dynamics (braking / cornering), conservative for slower platforms.
+GAP_JERK = 2.0              # m/s^3
+GAP_ACCEL = 1.0             # m/s^2
+GAP_ANG_ACCEL = 0.2         # rad/s^2
+GAP_RATE = 0.1              # rad/s
+
 _DGDH_H1 = geodesy._H1
 _DGDH_H1_LAT = geodesy._H1_LAT
 _DGDH_H2 = geodesy._H2
@@ -335,6 +350,45 @@ class InsModel:
         self._inv_tau = self.noise.inv_tau()
         if self.path is None:
             self.path = np.full((self.t.shape[0], PATH_SIZE), np.nan)
+        # long gaps: (start, end) times of IMU intervals over LONG_GAP_PERIODS nominal periods
+        dt = np.diff(self.t)
+        k = np.nonzero(dt > LONG_GAP_PERIODS * np.median(dt))[0] if dt.size > 1 else np.zeros(0, int)
+        self.gaps = np.column_stack([self.t[k], self.t[k + 1]]) if k.size else np.zeros((0, 2))
+
+    def gap_noise(self, interval: tuple[float, float]) -> np.ndarray | None:
+        """Covariance (15, 15) of the motion the IMU did not see in the long gaps inside
+        ``interval`` (None when there is none), referred to the interval's end.
+
+        The specific force and rate depart from the strapdown's linear interpolation by
+        constants ``df`` (m/s^2, ENU) and ``dw`` (rad/s) over a gap of length ``T`` ending ``r``
+        seconds before the interval's end (sigmas: :data:`GAP_JERK` ... :data:`GAP_RATE`): the
+        attitude error is ``dw T``, the velocity error ``df T``, the position error
+        ``df (T^2 / 2 + T r)``.  Couplings through the specific force and the Earth's rotation
+        over the gap are neglected (second order over a gap of seconds).
+        """
+        if self.gaps.shape[0] == 0:
+            return None
+        t0, t1 = interval
+        Q = None
+        first = int(np.searchsorted(self.gaps[:, 1], t0, side="right"))     # gaps are sorted and disjoint
+        last = int(np.searchsorted(self.gaps[:, 0], t1, side="left"))
+        for a, b in self.gaps[first:last]:
+            lo, hi = max(a, t0), min(b, t1)
+            if hi <= lo:
+                continue
+            T, r = hi - lo, t1 - hi
+            sf = min(GAP_JERK * T, GAP_ACCEL)
+            sw = min(GAP_ANG_ACCEL * T, GAP_RATE)
+            sp = T * T / 2.0 + T * r
+            if Q is None:
+                Q = np.zeros((N_ERR, N_ERR))
+            for i in range(3):
+                Q[i, i] += (sw * T) ** 2
+                Q[3 + i, 3 + i] += (sf * T) ** 2
+                Q[6 + i, 6 + i] += (sf * sp) ** 2
+                Q[3 + i, 6 + i] += sf * sf * T * sp
+                Q[6 + i, 3 + i] += sf * sf * T * sp
+        return Q
 
     # ⊞ / ⊟ -----------------------------------------------------------------------------------
     @staticmethod
@@ -352,7 +406,8 @@ class InsModel:
         Phi, Qd = integrate_with_jacobian(xn, self.t, self.gyro, self.accel, interval[0], interval[1],
                                           self.path, True, self._psd, self._inv_tau[0], self._inv_tau[1],
                                           self.cov_step_s)
-        return xn, Phi, Qd
+        Qg = self.gap_noise(interval)
+        return xn, Phi, (Qd if Qg is None else Qd + Qg)
 
     def process_noise(self, x: np.ndarray, interval: tuple[float, float]) -> np.ndarray:
         """Qd over the interval (additive noise for sigma-point filters)."""
@@ -360,7 +415,8 @@ class InsModel:
         _, Qd = integrate_with_jacobian(xn, self.t, self.gyro, self.accel, interval[0], interval[1],
                                         self.path, False, self._psd, self._inv_tau[0], self._inv_tau[1],
                                         self.cov_step_s)
-        return Qd
+        Qg = self.gap_noise(interval)
+        return Qd if Qg is None else Qd + Qg
 
     def noise_groups(self, x: np.ndarray, interval: tuple[float, float], per: str = "triad"
                      ) -> tuple[list[str], np.ndarray]:

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
-from ..recording import GnssData, ImuData, Recording, ReferenceData
+from ..recording import GnssData, ImuData, Recording, ReferenceData, order_samples
 from .ros import FIX_TYPE, IMU_TYPE, TWIST_COV_TYPE, TWIST_TYPE, FixMessages, LogContents
 
 GAP_FACTOR = 2.5
@@ -56,21 +56,14 @@ def _stamps(msgs, source: str) -> np.ndarray:
     return np.asarray(msgs.log_ns if source == "log" else msgs.stamp_ns, dtype=np.int64)
 
 
-def _ordered(stamps: np.ndarray, what: str, warnings: list[str]) -> np.ndarray:
-    """Indices keeping strictly increasing stamps: duplicates dropped (counted); a stamp going
-    backwards is an error naming the message."""
-    d = np.diff(stamps)
-    back = np.nonzero(d < 0)[0]
-    if back.size:
-        k = int(back[0]) + 1
-        raise InputError(f"{what}: message {k} has stamp {_stamp_text(stamps[k])}, before message {k - 1} "
-                         f"({_stamp_text(stamps[k - 1])}): stamps go backwards (try [time] source = \"log\")")
-    keep = np.concatenate([[True], d > 0])
-    n_dup = int(np.count_nonzero(~keep))
-    if n_dup:
-        warnings.append(f"{what}: dropped {n_dup} message{'s' if n_dup > 1 else ''} with a repeated stamp "
-                        f"(first: message {int(np.argmin(keep))})")
-    return np.nonzero(keep)[0]
+def _ordered(stamps: np.ndarray, values: np.ndarray, what: str, warnings: list[str]) -> np.ndarray:
+    """Indices putting messages in strictly increasing stamp order: the shared policy of
+    :func:`navpp.recording.order_samples` (reordered messages sorted, exact duplicates dropped,
+    conflicting duplicates keep the first, a clock jump back is an error), all warned."""
+    try:
+        return order_samples(stamps, values, what, warnings)
+    except InputError as exc:
+        raise InputError(f'{exc} (try [time] source = "log")') from None
 
 
 def _finite_rows(arrays: list[np.ndarray], names: list[str], what: str, stamps: np.ndarray) -> None:
@@ -93,7 +86,8 @@ def _gap_warning(what: str, t: np.ndarray, warnings: list[str]) -> None:
         k = int(np.argmax(np.where(gaps, dt, -np.inf)))
         n = int(np.count_nonzero(gaps))
         warnings.append(f"{what}: {n} gap{'s' if n > 1 else ''} longer than {GAP_FACTOR} x the nominal interval "
-                        f"{nominal:.4g} s; largest {float(dt[k]):.4g} s after message {k}")
+                        f"{nominal:.4g} s; largest {float(dt[k]):.4g} s from t = {float(t[k]):.3f} s (message {k}, "
+                        "t relative to the first IMU stamp)")
 
 
 def _fixes(fix: FixMessages, source: str, what: str, default_std: tuple[float, float, float],
@@ -108,7 +102,9 @@ def _fixes(fix: FixMessages, source: str, what: str, default_std: tuple[float, f
     idx = np.nonzero(valid)[0]
     if idx.size == 0:
         raise InputError(f"{what}: no valid fix (every message has status < 0 or a NaN position)")
-    idx = idx[_ordered(stamps[idx], what, warnings)]
+    values = np.column_stack([np.asarray(fix.lat_deg, float)[idx], np.asarray(fix.lon_deg, float)[idx],
+                              np.asarray(fix.alt, float)[idx]])
+    idx = idx[_ordered(stamps[idx], values, what, warnings)]
     cov = np.asarray(fix.cov, dtype=float)[idx]
     ctype = np.asarray(fix.cov_type)[idx]
     var = cov[:, [0, 4, 8]]
@@ -126,8 +122,11 @@ def _fixes(fix: FixMessages, source: str, what: str, default_std: tuple[float, f
 def recording_from_log(contents: LogContents, *, imu_topic: str | None = None, gnss_topic: str | None = None,
                        reference_topic: str | None = None, time_source: str = "header",
                        time_base: str = "unix", default_std_m=(2.0, 2.0, 4.0),
-                       gyro_scale: float = 1.0, accel_scale: float = 1.0) -> Recording:
+                       gyro_scale: float = 1.0, accel_scale: float = 1.0, time_offset_s: float = 0.0) -> Recording:
     """Pick the roles, apply the message semantics, validate, and build the Recording.
+
+    ``time_offset_s`` (s, ``[gnss] time_offset_s``) is added to every GNSS fix stamp (not to
+    the reference): a receiver whose fixes are stamped 0.2 s late needs -0.2.
 
     When the reader found the log cut off, a failure here (a missing topic, too few messages)
     says so too: the cut is the likely cause.
@@ -135,7 +134,7 @@ def recording_from_log(contents: LogContents, *, imu_topic: str | None = None, g
     try:
         return _assemble(contents, imu_topic=imu_topic, gnss_topic=gnss_topic, reference_topic=reference_topic,
                          time_source=time_source, time_base=time_base, default_std_m=default_std_m,
-                         gyro_scale=gyro_scale, accel_scale=accel_scale)
+                         gyro_scale=gyro_scale, accel_scale=accel_scale, time_offset_s=time_offset_s)
     except InputError as exc:
         cut = [w for w in contents.warnings if "the recording is cut off" in w]
         if not cut:
@@ -147,7 +146,7 @@ def recording_from_log(contents: LogContents, *, imu_topic: str | None = None, g
 def _assemble(contents: LogContents, *, imu_topic: str | None = None, gnss_topic: str | None = None,
               reference_topic: str | None = None, time_source: str = "header",
               time_base: str = "unix", default_std_m=(2.0, 2.0, 4.0),
-              gyro_scale: float = 1.0, accel_scale: float = 1.0) -> Recording:
+              gyro_scale: float = 1.0, accel_scale: float = 1.0, time_offset_s: float = 0.0) -> Recording:
     src = contents.source
     warnings = list(contents.warnings)
     imu_name = choose_topic(contents, IMU_TYPE, "IMU", "--imu-topic", imu_topic)
@@ -168,7 +167,7 @@ def _assemble(contents: LogContents, *, imu_topic: str | None = None, gnss_topic
     what = f"{src}: topic {imu_name!r}"
     stamps = _stamps(imu, time_source)
     _finite_rows([imu.gyro, imu.accel], ["angular_velocity", "linear_acceleration"], what, stamps)
-    keep = _ordered(stamps, what, warnings)
+    keep = _ordered(stamps, np.hstack([np.asarray(imu.gyro, float), np.asarray(imu.accel, float)]), what, warnings)
     stamps = stamps[keep]
     if stamps.shape[0] < 2:
         raise InputError(f"{what}: at least 2 IMU messages are needed, found {stamps.shape[0]}")
@@ -187,6 +186,7 @@ def _assemble(contents: LogContents, *, imu_topic: str | None = None, gnss_topic
         raise InputError(f"{src}: topic {gnss_name!r} has no NavSatFix message")
     what = f"{src}: topic {gnss_name!r}"
     g_ns, cols = _fixes(fix, time_source, what, tuple(default_std_m), warnings)
+    g_ns = g_ns + round(float(time_offset_s) * 1e9)
     t_gnss = (g_ns - t0_ns) * 1e-9
     if not np.any((t_gnss >= 0) & (t_gnss <= t_imu[-1])):
         raise InputError(f"{what}: no fix inside the IMU time span ({t0_ns * 1e-9:.3f} .. "
@@ -195,7 +195,7 @@ def _assemble(contents: LogContents, *, imu_topic: str | None = None, gnss_topic
     twists = topics_of_type(contents, TWIST_COV_TYPE) + topics_of_type(contents, TWIST_TYPE)
     if len(twists) == 1 and twists[0] in contents.twist:
         tw = contents.twist[twists[0]]
-        tw_ns = _stamps(tw, time_source)
+        tw_ns = _stamps(tw, time_source) + round(float(time_offset_s) * 1e9)   # same receiver
         j = np.clip(np.searchsorted(tw_ns, g_ns), 1, max(len(tw_ns) - 1, 1)) if len(tw_ns) > 1 else np.zeros_like(g_ns)
         if len(tw_ns) > 1:
             j = np.where(np.abs(tw_ns[j - 1] - g_ns) < np.abs(tw_ns[j] - g_ns), j - 1, j)
