@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from .config import Config, load_config, parse_formats
+from .config import Config, check_outages, load_config, parse_formats
 from .errors import ConfigError, InputError, NavppError
 from .recording import Recording, Solution
 
@@ -49,6 +49,8 @@ class ProcessResult:
     out_dir, files : the output directory and the files written (empty with ``write=False``).
     config : the configuration used.
     notes, warnings : lines for the user.
+    outages : one dict per simulated GNSS outage window: ``start_s``, ``duration_s``,
+        ``end_s`` (s from the log start) and ``gnss_removed`` (fixes removed); empty without.
     trajectory : pandas.DataFrame (property) with exactly ``trajectory.csv``'s columns.
     diagnostics : pandas.DataFrame (property) with exactly ``diagnostics.csv``'s columns.
     """
@@ -63,6 +65,7 @@ class ProcessResult:
     config: Config
     notes: tuple[str, ...] = field(default_factory=tuple)      # what was chosen (config, alignment)
     warnings: tuple[str, ...] = field(default_factory=tuple)   # what the data made us do
+    outages: tuple[dict, ...] = field(default_factory=tuple)   # simulated GNSS outage windows
 
     @cached_property
     def trajectory(self):
@@ -169,7 +172,7 @@ def _read_ros_log(kind: str, path: Path, config: Config, imu_topic: str | None, 
     return recording_from_log(contents, imu_topic=imu_topic, gnss_topic=gnss_topic, reference_topic=reference_topic,
                               time_source=config.time.source, time_base=config.time.base,
                               default_std_m=config.gnss.default_std_m, gyro_scale=config.imu.gyro_scale,
-                              accel_scale=config.imu.accel_scale)
+                              accel_scale=config.imu.accel_scale, time_offset_s=config.gnss.time_offset_s)
 
 
 def _with_placeholder_fix(contents):
@@ -386,7 +389,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
             output_rate_hz: float | None = None, progress: Callable[[str, float], None] | None = None,
             write: bool = True, imu_topic: str | None = None, gnss_topic: str | None = None,
             reference_topic: str | None = None, gnss_file: str | Path | None = None,
-            formats: str | Sequence[str] | None = None, embed_input: bool = False) -> ProcessResult:
+            formats: str | Sequence[str] | None = None, embed_input: bool = False,
+            gnss_outages: Sequence[tuple[float, float]] | None = None) -> ProcessResult:
     """Read a log, run one filter, write trajectory (and metrics with a reference).
 
     ``navpp.process`` is this function.  Example::
@@ -421,6 +425,11 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         run appear together: if one cannot be written, the directory keeps the previous
         run's files unchanged (:func:`write_outputs`).
     embed_input : copy the input log's messages into trajectory.mcap (needs ``mcap``).
+    gnss_outages : simulated GNSS outages, ``[(start_s, duration_s), ...]``: seconds from the
+        log start (its first IMU sample), ``start >= 0``, ``duration > 0``, each window inside
+        the log (:class:`InputError` otherwise).  The fixes with ``start <= t <= start +
+        duration`` are removed before filtering (the INS coasts through), and the metrics
+        report each window (``metrics["outages"]``).  Overrides ``[gnss] outages``; None uses it.
 
     Returns
     -------
@@ -447,6 +456,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     chosen_formats = check_formats(formats, embed_input, cfg)
     if write and "mcap" in chosen_formats:
         _mcap_writer()                # before the run: not available is a ConfigError now, not after it
+    windows = (check_outages(gnss_outages, "gnss_outages") if gnss_outages is not None
+               else cfg.gnss.outages)
     filt = make_filter(filter_name, cfg)
     out = Path(out_dir) if out_dir is not None else default_out_dir(log, filter_name)
     created = prepare_out_dir(out, "--out" if out_dir is not None else "output directory") if write else []
@@ -458,6 +469,7 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
                        gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss_file)
         if progress:
             progress("reading", 1.0)
+        rec, outages = apply_outages(rec, windows, str(log))
         imu_rate = rec.imu.rate_hz
         # 0.1 % slack: the IMU rate is a median of stamp differences (jitter, stamp rounding)
         if rate is not None and rate > imu_rate * 1.001:
@@ -479,7 +491,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
             metrics = compute_metrics(
                 sol, rec.reference, filter_name=filter_name, log=str(log), reference=rec.reference.source or "",
                 runtime_s=runtime, imu_samples=len(rec.imu), gnss_epochs=result.gnss_epochs,
-                gnss_rejected=result.gnss_rejected, gnss=rec.gnss, lever_arm_m=cfg.gnss.lever_arm_m)
+                gnss_rejected=result.gnss_rejected, gnss=rec.gnss, lever_arm_m=cfg.gnss.lever_arm_m,
+                outages=windows, outages_removed=[o["gnss_removed"] for o in outages])
 
         files: list[Path] = []
         if write:
@@ -489,9 +502,84 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     except BaseException:
         remove_created_dirs(created)
         raise
-    notes = tuple(cfg.notes) + tuple(result.alignment.lines)
-    warnings = tuple(rec.warnings) + tuple(result.warnings) + tuple(reference_checks(rec, cfg, metrics))
-    return ProcessResult(filter_name, rec, sol_out, result, metrics, out, tuple(files), cfg, notes, warnings)
+    notes = tuple(cfg.notes) + tuple(result.alignment.lines) + tuple(
+        f"GNSS outage {o['start_s']:g}-{o['end_s']:g} s ({o['duration_s']:g} s from the log start): "
+        f"{o['gnss_removed']} fixes removed, the INS coasts" for o in outages)
+    warnings = (tuple(rec.warnings) + tuple(result.warnings) + tuple(forced_fix_warnings(rec, cfg, result))
+                + tuple(reference_checks(rec, cfg, metrics)))
+    return ProcessResult(filter_name, rec, sol_out, result, metrics, out, tuple(files), cfg, notes, warnings,
+                         tuple(outages))
+
+
+def apply_outages(rec: Recording, windows: Sequence[tuple[float, float]],
+                  label: str) -> tuple[Recording, list[dict]]:
+    """Remove the GNSS fixes inside simulated outage windows.
+
+    Parameters
+    ----------
+    rec : the recording; its times are s from the log start (the first IMU sample).
+    windows : validated ``(start_s, duration_s)`` pairs (:func:`navpp.config.check_outages`).
+    label : how the log is named in error messages.
+
+    Returns
+    -------
+    The recording without the fixes at ``start <= t <= start + duration`` of any window (its
+    IMU and reference untouched), and one dict per window: ``start_s``, ``duration_s``,
+    ``end_s``, ``gnss_removed`` (fixes inside that window; overlapping windows count a fix in each).
+
+    Raises
+    ------
+    InputError
+        A window that does not lie inside the log's IMU span.
+    """
+    from dataclasses import fields, replace
+
+    if not windows:
+        return rec, []
+    t_end = float(rec.imu.t[-1]) if len(rec.imu) else 0.0
+    t = np.asarray(rec.gnss.t, dtype=float)
+    drop = np.zeros(t.shape, bool)
+    info = []
+    for start, dur in windows:
+        end = start + dur
+        if end > t_end + 1e-9:
+            raise InputError(f"{label}: GNSS outage {start:g}:{dur:g} ({start:g}-{end:g} s) lies outside the log, "
+                             f"which spans 0-{t_end:.3f} s from its first IMU sample")
+        inside = (t >= start) & (t <= end)
+        drop |= inside
+        info.append({"start_s": float(start), "duration_s": float(dur), "end_s": float(end),
+                     "gnss_removed": int(np.count_nonzero(inside))})
+    if drop.any():
+        keep = ~drop
+        g = rec.gnss
+        cut = {f.name: np.asarray(getattr(g, f.name))[keep] for f in fields(g)
+               if isinstance(getattr(g, f.name), np.ndarray) and getattr(g, f.name).shape[:1] == t.shape}
+        rec = replace(rec, gnss=replace(g, **cut))
+    return rec, info
+
+
+#: At most this many times are named in the forced-fix warning.
+FORCED_TIMES_SHOWN = 8
+
+
+def forced_fix_warnings(rec: Recording, cfg: Config, result: Any) -> list[str]:
+    """A warning when fixes were forced through the gate after a long run of rejections.
+
+    The filter then re-anchors its position covariance on the fix (it takes itself, not the
+    GNSS, to be wrong), and the trajectory may jump there: the user should know when.
+    """
+    diag = getattr(result, "diagnostics", None)
+    forced = np.asarray(getattr(diag, "forced", ()), dtype=bool)
+    if not forced.any():
+        return []
+    times = np.asarray(diag.t, dtype=float)[forced]
+    shown = ", ".join(f"{x:.1f}" for x in times[:FORCED_TIMES_SHOWN])
+    more = f" and {times.size - FORCED_TIMES_SHOWN} more" if times.size > FORCED_TIMES_SHOWN else ""
+    n = int(times.size)
+    line = (f"{rec.source}: {n} GNSS fix{'es' if n > 1 else ''} force-admitted after "
+            f"{cfg.gnss.reanchor_after_s:g} s of gate rejections, with the position covariance re-anchored "
+            f"(the solution may jump there), at t = {shown}{more} s from the log start")
+    return [line]
 
 
 def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solution, result: Any,

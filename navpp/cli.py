@@ -106,6 +106,30 @@ def _process_formats(value: str | None) -> tuple[str, ...] | None:
         raise typer.BadParameter(str(exc).removeprefix("--format: ")) from None
 
 
+def _gnss_outages(values: list[str] | None) -> tuple[tuple[float, float], ...] | None:
+    """``--gnss-outage START:DUR`` callback: ``((start_s, duration_s), ...)``; a usage error (exit 2)
+    unless START is a finite number >= 0 and DUR one > 0 (s)."""
+    if not values:
+        return None
+    from .config import check_outages
+    from .errors import ConfigError
+
+    pairs = []
+    for text in values:
+        parts = text.split(":")
+        try:
+            if len(parts) != 2:
+                raise ValueError
+            pairs.append((float(parts[0]), float(parts[1])))
+        except ValueError:
+            raise typer.BadParameter(f"must be START:DURATION in seconds from the log start (e.g. 120:30), "
+                                     f"got {text!r}") from None
+    try:
+        return check_outages(pairs, "--gnss-outage")
+    except ConfigError as exc:
+        raise typer.BadParameter(str(exc).removeprefix("--gnss-outage: ")) from None
+
+
 @app.command()
 def process(
     log: Annotated[Path, typer.Argument(metavar="LOG", help="Log: an MCAP file, a ROS 1 bag, a ROS 2 bag directory, "
@@ -133,6 +157,10 @@ def process(
              "diagnostics.csv is always written.  [default: [output] formats of the config, else csv]")] = None,
     embed_input: Annotated[bool, typer.Option(
         "--embed-input", help="Copy the input log's messages into trajectory.mcap (needs mcap in --format).")] = False,
+    gnss_outage: Annotated[Optional[list[str]], typer.Option(
+        "--gnss-outage", metavar="START:DUR", callback=_gnss_outages,
+        help="Simulate a GNSS outage: drop the fixes from START for DUR seconds (s from the log start, the "
+             "first IMU sample); repeatable.  The metrics report each window.  [default: [gnss] outages]")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars, notes or summary (warnings about "
                                         "the data are still printed).")] = False,
 ) -> None:
@@ -150,7 +178,7 @@ def process(
             res = api.process(log, filter_name=filter, config=config, reference=reference, out_dir=out,
                               output_rate_hz=output_rate, progress=prog, imu_topic=imu_topic,
                               gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss,
-                              formats=formats, embed_input=embed_input)
+                              formats=formats, embed_input=embed_input, gnss_outages=gnss_outage)
     except NavppError as exc:
         _fail(str(exc))
         return
@@ -190,7 +218,29 @@ def _print_summary(res, quiet: bool) -> None:
         for name, s in rows:
             tab.add_row(name, *(f"{s[k]:.3f}" if k in s else "" for k in ("mae", "rmse", "max", "p95")))
         con.print(tab)
+    for line in outage_lines(res):
+        con.print(escape(line))
     con.print(escape("wrote " + ", ".join(str(p) for p in res.files)))
+
+
+def outage_lines(res) -> list[str]:
+    """One summary line per simulated GNSS outage window: fixes removed and, with a reference,
+    the position error at its end and inside it (m)."""
+    windows = (res.metrics or {}).get("outages") or list(getattr(res, "outages", ()))
+    lines = []
+    for w in windows:
+        head = (f"GNSS outage {w['start_s']:g}-{w['end_s']:g} s ({w['duration_s']:g} s, "
+                f"{w.get('gnss_removed', 0)} fixes removed)")
+        if "horizontal_m" in w:
+            h, v = w["horizontal_m"], w["vertical_m"]
+            lines.append(f"{head}: at its end horizontal {h['end']:.2f} m, vertical {v['end']:.2f} m; inside: "
+                         f"horizontal max {h['max']:.2f} m, RMSE {h['rmse']:.2f} m, vertical max {v['max']:.2f} m, "
+                         f"RMSE {v['rmse']:.2f} m ({w['epochs']} reference epochs)")
+        elif res.metrics is not None:
+            lines.append(f"{head}: no reference epoch inside")
+        else:
+            lines.append(head)
+    return lines
 
 
 DEFAULT_COMPARE = "ekf,aekf,ckf,vce-ckf,rwckf"

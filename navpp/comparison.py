@@ -238,7 +238,9 @@ class _RecordingCache:
                                    progress=(lambda f: progress(label, f)) if progress else None)
                 if progress:
                     progress(label, 1.0)
-                self.value = (cfg, rec)
+                # [gnss] outages of the log's config: the same simulated outages as `navpp process`
+                rec, removed = api.apply_outages(rec, cfg.gnss.outages, str(log))
+                self.value = (cfg, rec, [w["gnss_removed"] for w in removed])
             except NavppError as exc:
                 self.value = exc
             except Exception as exc:  # noqa: BLE001  (a bug, or a file no reader expected: a row, not a crash)
@@ -268,7 +270,7 @@ def _execute(task: _Task, cache: _RecordingCache, progress: ProgressFn | None) -
     from .metrics import compute_metrics
 
     try:
-        cfg, rec = cache.get(task, progress)
+        cfg, rec, removed = cache.get(task, progress)
     except NavppError as exc:
         return _failed(task, str(exc))
     log_series = None
@@ -283,7 +285,8 @@ def _execute(task: _Task, cache: _RecordingCache, progress: ProgressFn | None) -
                                       reference=rec.reference.source or "", runtime_s=res.runtime_s,
                                       imu_samples=len(rec.imu), gnss_epochs=res.gnss_epochs,
                                       gnss_rejected=res.gnss_rejected, gnss=rec.gnss,
-                                      lever_arm_m=cfg.gnss.lever_arm_m)
+                                      lever_arm_m=cfg.gnss.lever_arm_m, outages=cfg.gnss.outages,
+                                      outages_removed=removed)
         series = _run_series(rec, res, filt) if task.series else None
     except NavppError as exc:
         return _failed(task, str(exc), log_series)

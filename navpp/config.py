@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import numbers
 import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
@@ -58,6 +59,7 @@ __all__ = [
     "OutputConfig",
     "TimeConfig",
     "VehicleConfig",
+    "check_outages",
     "config_from_dict",
     "load_config",
     "parse_formats",
@@ -373,6 +375,39 @@ def _std_triplet(value: object) -> tuple[float, float, float]:
     )
 
 
+def check_outages(value: object, what: str = "[gnss] outages") -> tuple[tuple[float, float], ...]:
+    """Simulated GNSS outage windows as ``((start_s, duration_s), ...)``.
+
+    Parameters
+    ----------
+    value : a sequence of ``[start, duration]`` pairs, s: ``start`` from the log start (the
+        first IMU sample), finite and >= 0; ``duration`` finite and > 0.
+    what : how the value is named in the error message.
+
+    Raises
+    ------
+    ConfigError
+        Not a list of pairs of numbers, or a number out of range.
+    """
+    if value is None:
+        return ()
+    if isinstance(value, str | bytes) or not isinstance(value, Sequence):
+        raise ConfigError(f"{what} must be a list of [start, duration] pairs (s), got {value!r}")
+    out = []
+    for pair in value:
+        ok = (not isinstance(pair, str | bytes) and isinstance(pair, Sequence) and len(pair) == 2
+              and all(isinstance(v, numbers.Real) and not isinstance(v, bool) for v in pair))
+        if not ok:
+            raise ConfigError(f"{what}: each window must be [start, duration] in s, got {pair!r}")
+        start, dur = float(pair[0]), float(pair[1])
+        if not (math.isfinite(start) and start >= 0.0):
+            raise ConfigError(f"{what}: start must be a finite number of s >= 0 (from the log start), got {pair[0]!r}")
+        if not (math.isfinite(dur) and dur > 0.0):
+            raise ConfigError(f"{what}: duration must be a finite number of s > 0, got {pair[1]!r}")
+        out.append((start, dur))
+    return tuple(out)
+
+
 @dataclass(frozen=True)
 class GnssConfig:
     """``[gnss]``: antenna lever arm, default measurement noise and outlier gate.
@@ -391,6 +426,10 @@ class GnssConfig:
     max_rejected_fraction : float in (0, 1]. A run in which a larger share of the fixes fails
         the gate has diverged (the IMU and GNSS disagree): it stops with an error instead of
         writing a trajectory.  1 never stops.
+    outages : ((start_s, duration_s), ...). Simulated GNSS outages: the fixes inside each
+        window (s from the log start, the first IMU sample) are removed before filtering and
+        the metrics report each window separately; ``navpp process --gnss-outage`` replaces them.
+        Applied by ``navpp process`` / :func:`navpp.api.process` (not yet by ``navpp compare``).
     """
 
     lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -400,8 +439,10 @@ class GnssConfig:
     reanchor_after_s: float = 10.0
     time_offset_s: float = 0.0
     max_rejected_fraction: float = 0.25
+    outages: tuple[tuple[float, float], ...] = ()
 
     def __post_init__(self) -> None:
+        _set(self, "outages", check_outages(self.outages))
         _set(self, "lever_arm_m", _as_vector("gnss", "lever_arm_m", self.lever_arm_m, 3))
         if math.hypot(*self.lever_arm_m) > MAX_LEVER_ARM_M:
             raise ConfigError(f"[gnss] lever_arm_m = {list(self.lever_arm_m)!r} is {math.hypot(*self.lever_arm_m):.0f} m "

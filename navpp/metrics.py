@@ -12,7 +12,8 @@ Steps, each a tested function of its own:
 4. :func:`error_stats` reduces errors to MAE / RMSE / max / p95 per axis, horizontally and in 3-D.
 
 :func:`compute_metrics` chains them into the ``metrics.json`` structure of INTERFACES.md and,
-when given the raw GNSS fixes, adds their own accuracy against the reference antenna position.
+when given the raw GNSS fixes, adds their own accuracy against the reference antenna position;
+with simulated GNSS outages, :func:`outage_metrics` adds the errors inside each window.
 
 All angles here are in degrees, navigation convention (heading clockwise from north, pitch
 nose up, roll right side down); body frame FLU, navigation frame ENU.
@@ -36,6 +37,7 @@ __all__ = [
     "error_stats",
     "interpolate_solution",
     "mat_nb_from_rph",
+    "outage_metrics",
     "position_errors_enu",
     "wrap_deg",
 ]
@@ -325,10 +327,51 @@ def _gnss_position_metrics(gnss: GnssData, ref: ReferenceData,
     return out
 
 
+def outage_metrics(t: np.ndarray, err: np.ndarray, windows: Sequence[tuple[float, float]],
+                   removed: Sequence[int] | None = None) -> list[dict[str, Any]]:
+    """Position errors inside GNSS outage windows, one dict per window.
+
+    Parameters
+    ----------
+    t : (K,) float, s, times of the compared reference epochs (relative to the log start),
+        increasing.
+    err : (K, 3) float, m, estimate minus reference at ``t``, ENU.
+    windows : ``(start_s, duration_s)`` pairs; a window holds the epochs with
+        ``start <= t <= start + duration`` (both ends included, as the removed fixes).
+    removed : GNSS fixes removed per window (reported as ``gnss_removed``), optional.
+
+    Returns
+    -------
+    list of dicts: ``start_s``, ``duration_s``, ``end_s`` (s), ``epochs`` (reference epochs
+    inside), ``gnss_removed`` (if given), and when ``epochs > 0``: ``end_epoch_s`` (time of the
+    last reference epoch inside the window, where the "end" errors are taken), ``horizontal_m``
+    (``hypot(east, north)``) and ``vertical_m`` (``|up|``), each ``{"end", "max", "rmse"}`` in m.
+    """
+    t = np.asarray(t, dtype=float)
+    err = np.asarray(err, dtype=float).reshape(-1, 3)
+    out: list[dict[str, Any]] = []
+    for k, (start, dur) in enumerate(windows):
+        start, dur = float(start), float(dur)
+        end = start + dur
+        inside = np.flatnonzero((t >= start) & (t <= end))
+        w: dict[str, Any] = {"start_s": start, "duration_s": dur, "end_s": end, "epochs": int(inside.size)}
+        if removed is not None:
+            w["gnss_removed"] = int(removed[k])
+        if inside.size:
+            e = err[inside]
+            for name, a in (("horizontal_m", np.hypot(e[:, 0], e[:, 1])), ("vertical_m", np.abs(e[:, 2]))):
+                w[name] = {"end": float(a[-1]), "max": float(a.max()), "rmse": float(np.sqrt(np.mean(a * a)))}
+            w["end_epoch_s"] = float(t[inside[-1]])
+        out.append(w)
+    return out
+
+
 def compute_metrics(sol: Solution, ref: ReferenceData, *, filter_name: str, log: str,
                     reference: str, runtime_s: float, imu_samples: int, gnss_epochs: int,
                     gnss_rejected: int, gnss: GnssData | None = None,
-                    lever_arm_m: Sequence[float] = (0.0, 0.0, 0.0)) -> dict[str, Any]:
+                    lever_arm_m: Sequence[float] = (0.0, 0.0, 0.0),
+                    outages: Sequence[tuple[float, float]] = (),
+                    outages_removed: Sequence[int] | None = None) -> dict[str, Any]:
     """The ``metrics.json`` structure (INTERFACES.md) of a solution against a reference.
 
     Keys: ``filter``, ``log``, ``reference``, ``epochs`` (reference epochs inside the solution
@@ -344,6 +387,11 @@ def compute_metrics(sol: Solution, ref: ReferenceData, *, filter_name: str, log:
     the heading of the reference velocity with zero roll and pitch, else the lever arm is
     ignored).  It holds :func:`error_stats` plus ``epochs`` (fixes compared) and, when the lever
     arm could not be applied in full, a ``note``.
+
+    With ``outages`` (``(start_s, duration_s)`` windows of removed GNSS, s from the log start),
+    also ``outages``: :func:`outage_metrics` of the position errors, one dict per window (the
+    other figures stay over the whole run); ``outages_removed`` gives the fixes removed per
+    window.
 
     Parameters
     ----------
@@ -401,4 +449,6 @@ def compute_metrics(sol: Solution, ref: ReferenceData, *, filter_name: str, log:
     metrics["gnss_rejected"] = int(gnss_rejected)
     if gnss is not None:
         metrics["gnss_position_m"] = _gnss_position_metrics(gnss, ref, lever_arm_m)
+    if len(outages):
+        metrics["outages"] = outage_metrics(assoc.t, pos_err, outages, outages_removed)
     return metrics

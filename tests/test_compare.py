@@ -397,3 +397,17 @@ def test_python_api_creates_the_output_directory(sim_log_dir, tmp_path):
     out = tmp_path / "new" / "cmp"
     res = navpp.compare([sim_log_dir], ["ekf"], out_dir=out, report=False)
     assert (out / "summary.csv").is_file() and res.summary["filter"].tolist() == ["ekf"]
+
+
+def test_config_outages_apply_to_compare_as_to_process(log_copy):
+    toml = log_copy / "navpp.toml"
+    text = toml.read_text()
+    text = text.replace("[gnss]", "[gnss]\noutages = [[60.0, 20.0]]", 1) if "[gnss]" in text \
+        else text + "\n[gnss]\noutages = [[60.0, 20.0]]\n"
+    toml.write_text(text)
+    from navpp.comparison import compare as run_compare
+
+    row = run_compare([log_copy], ["ekf"], report=False).rows[0]
+    single = api.process(log_copy, filter_name="ekf", write=False)
+    assert row.metrics["outages"] == single.metrics["outages"] and len(row.metrics["outages"]) == 1
+    assert row.gnss_epochs == single.run.gnss_epochs

@@ -2,7 +2,8 @@
 
 Both are the EKF with a measurement-noise adapter (:mod:`navpp.filters.noise`); the improved
 one gains with the previous epoch's R and drops the ``- H P- H^T`` term, so R stays positive
-definite.  Only fixes that pass the innovation gate are learnt into R.
+definite.  Only fixes that pass the innovation gate are learnt into R (not those forced
+through it after a run of rejections).
 
 References: paper 002 section 3; ALGORITHMS.md "Sage-Husa and the improved adaptive EKF".
 """
@@ -37,6 +38,8 @@ class _AdaptiveEKF(EKF):
         return self.adapter.noise_for_gain(meas.R, self._nu_raw, self._HPHt)
 
     def after_update(self, innovation: Innovation, pred: MeasurementPrediction) -> None:
+        if innovation.forced:      # admitted after a run of rejections: an outlier-sized innovation
+            return
         self.adapter.learn(self._nu_raw)
 
 

@@ -467,8 +467,30 @@ def metrics_markdown(metrics: Mapping[str, Any]) -> str:
             out += [f"Note: {g['note']}", ""]
         if any(row in g for row in _POSITION_ROWS):
             out += _stats_table(g, _POSITION_ROWS, "m")
+    if m.get("outages"):
+        out += _outage_table(m["outages"])
     out += ["", f"GNSS epochs rejected by the filter: {m.get('gnss_rejected', 0)}", ""]
     return "\n".join(out)
+
+
+def _outage_table(windows: Any) -> list[str]:
+    """The "Simulated GNSS outages" section of ``metrics.md``: one row per window."""
+    out = ["", "## Simulated GNSS outages (m)", "",
+           ("The GNSS fixes inside each window (s from the log start) were removed before filtering; "
+            "the INS coasted.  Errors at the last reference epoch inside the window (end) and over "
+            "the reference epochs inside it; horizontal = hypot(east, north), vertical = |up|.  "
+            "The figures above are over the whole run, outages included."), "",
+           ("| window (s) | fixes removed | epochs | horiz. end | horiz. max | horiz. RMSE "
+            "| vert. end | vert. max | vert. RMSE |"),
+           "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for w in windows:
+        cells = [f"{float(w['start_s']):g}-{float(w['end_s']):g}", str(w.get("gnss_removed", "")),
+                 str(w.get("epochs", 0))]
+        for part in ("horizontal_m", "vertical_m"):
+            s = w.get(part) or {}
+            cells += [_num(s.get(k), 4) if k in s else "" for k in ("end", "max", "rmse")]
+        out.append("| " + " | ".join(cells) + " |")
+    return out
 
 
 def write_metrics_md(path: str | os.PathLike[str], metrics: Mapping[str, Any]) -> None:
