@@ -407,8 +407,8 @@ def _read_header(path: Path) -> list[str]:
     try:
         with path.open(newline="", encoding="utf-8-sig") as f:
             row = next(csv.reader(f), None)
-    except UnicodeDecodeError as e:
-        raise InputError(f"{path}: line 1: not a UTF-8 text file ({e.reason} at byte {e.start})") from e
+    except UnicodeDecodeError as e:      # decoded a block at a time: the bad byte may be on a later line
+        raise _utf8_error(path, e) from e
     except (OSError, csv.Error) as e:
         raise InputError(f"{path}: line 1: cannot read the header: {e}") from e
     if row is None:
@@ -506,9 +506,11 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
                         progress(min(fh.tell() / size, 1.0))
     except pd.errors.ParserError as e:
         raise InputError(f"{path}: {_parser_message(e, len(header))}") from e
+    except UnicodeDecodeError as e:       # a ValueError too: catch it first
+        raise _utf8_error(path, e) from e
     except ValueError as e:
         raise _locate_non_numeric(path, wanted, positions, e) from e
-    except (OSError, UnicodeDecodeError) as e:
+    except OSError as e:
         raise InputError(f"{path}: cannot read: {e}") from e
     # assemble chunk by chunk, releasing each one: the peak is the table plus one chunk
     block = np.empty((sum(p.shape[0] for p in parts), len(wanted)))
@@ -552,7 +554,25 @@ def _parser_message(e: Exception, n_header: int) -> str:
     m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", str(e))
     if m:
         return f"line {m.group(2)}: {m.group(3)} fields, but the header (line 1) has {n_header} columns"
+    m = re.search(r"EOF inside string starting at row (\d+)", str(e))
+    if m:      # the parser counts rows from 0 at the header
+        return f"line {int(m.group(1)) + 1}: a quote (\") opens a field that is never closed"
     return f"cannot parse as CSV: {str(e).strip().splitlines()[-1]}"
+
+
+def _utf8_error(path: Path, cause: UnicodeDecodeError) -> InputError:
+    """The first line of ``path`` that is not valid UTF-8, as an InputError naming it."""
+    try:
+        with open(path, "rb") as f:
+            for number, line in enumerate(f, start=1):
+                try:
+                    line.decode("utf-8")
+                except UnicodeDecodeError as e:
+                    return InputError(f"{path}: line {number}: not a UTF-8 text file ({e.reason} at byte {e.start} "
+                                      "of the line)")
+    except OSError as e:
+        return InputError(f"{path}: cannot read: {e.strerror or e}")
+    return InputError(f"{path}: not a UTF-8 text file ({cause.reason})")
 
 
 def _locate_non_numeric(path: Path, wanted: list[str], positions: list[int], cause: Exception) -> InputError:

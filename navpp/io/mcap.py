@@ -364,13 +364,23 @@ class _FastReader:
 
     # -- records ---------------------------------------------------------------------------
 
-    def _other(self, buf: np.ndarray, op: int, pos: int, length: int, file_pos: int) -> None:
+    def _other(self, buf: np.ndarray, op: int, pos: int, length: int, file_pos: int, *,
+               in_chunk: bool = False) -> None:
         from mcap.records import Channel, Schema
 
-        if op == _OP_SCHEMA:
-            self.reg.add_schema(_parse_record(Schema, buf[pos:pos + length]))
-        elif op == _OP_CHANNEL:
-            self.reg.add_channel(_parse_record(Channel, buf[pos:pos + length]))
+        if op in (_OP_SCHEMA, _OP_CHANNEL):
+            cls = Schema if op == _OP_SCHEMA else Channel
+            try:
+                record = _parse_record(cls, buf[pos:pos + length])
+            except Exception as exc:  # noqa: BLE001 - mcap raises EndOfFile, UnicodeDecodeError, struct.error...
+                reason = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+                where = f"in the chunk at byte {file_pos}" if in_chunk else f"at byte {file_pos}"
+                raise InputError(f"{self.source}: {cls.__name__} record {where} is corrupted: "
+                                 f"{' '.join(reason.split())}") from None
+            if op == _OP_SCHEMA:
+                self.reg.add_schema(record)
+            else:
+                self.reg.add_channel(record)
         elif op == _OP_CHUNK:
             self._chunk(buf, pos, length, file_pos, partial=False)
 
@@ -446,7 +456,7 @@ class _FastReader:
         for op, rpos, rlen in zip(scan.rec_op.tolist(), scan.rec_pos.tolist(),
                                   scan.rec_len.tolist()):
             if op in (_OP_SCHEMA, _OP_CHANNEL):
-                self._other(arr, op, rpos, rlen, file_pos)
+                self._other(arr, op, rpos, rlen, file_pos, in_chunk=True)
         self._messages(arr, scan, 0, scan.chan.shape[0])
 
     def _decompress(self, compression: str, data: memoryview, usize: int, *,

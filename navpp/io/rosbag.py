@@ -145,6 +145,9 @@ def read_rosbag(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]
         spans: dict[str, tuple[int, int | None, int | None]] = {}
         for topic in wanted:
             payloads = raw.pop(topic)
+            if reader.is2 and len(payloads) == 0 and by_name[topic].count > 0:
+                raise InputError(f"{label}: topic {topic!r}: metadata.yaml lists {by_name[topic].count} messages but "
+                                 "the bag's storage holds none (the metadata does not match the storage file)")
             msgtype, rosname, standard = plans[topic]
             msgs = _decode(label, reader, topic, msgtype, rosname, standard, by_name[topic].encoding, payloads)
             log_ns = payloads.log_ns
@@ -331,10 +334,32 @@ def _open(files: Sequence[Path]) -> Iterator[Any]:
     except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds for damaged files (ReaderError, KeyError...)
         raise _first_bad(files, is2, exc) from None
     try:
+        if is2:
+            _check_ros2_connections(files, reader)
         yield reader
     finally:
         with suppress(Exception):  # closing a damaged bag must not hide the real error
             reader.close()
+
+
+def _check_ros2_connections(files: Sequence[Path], reader: Any) -> None:
+    """InputError naming metadata.yaml when a topic entry lacks a usable name, type or count
+    (rosbags takes damaged metadata as it is and fails later with a TypeError)."""
+    where = files[0] / "metadata.yaml" if files[0].is_dir() else files[0]
+    for i, conn in enumerate(reader.connections):
+        checks = (("name", conn.topic, isinstance(conn.topic, str) and bool(conn.topic)),
+                  ("type", conn.msgtype, isinstance(conn.msgtype, str) and "/" in conn.msgtype),
+                  ("message_count", conn.msgcount,
+                   isinstance(conn.msgcount, int) and not isinstance(conn.msgcount, bool) and conn.msgcount >= 0))
+        for field, value, ok in checks:
+            if not ok:
+                raise InputError(f"{where}: topic entry {i + 1} has an invalid {field} ({_one_line(repr(value), 60)}); "
+                                 "the bag's metadata is damaged")
+    fmt = [getattr(c.ext, "serialization_format", None) for c in reader.connections]
+    for i, value in enumerate(fmt):
+        if not isinstance(value, str):
+            raise InputError(f"{where}: topic entry {i + 1} has an invalid serialization_format "
+                             f"({_one_line(repr(value), 60)}); the bag's metadata is damaged")
 
 
 def _first_bad(files: Sequence[Path], is2: bool, exc: BaseException) -> InputError:
@@ -656,7 +681,7 @@ def _decode_each(label: str, reader: Any, topic: str, msgtype: str, rosname: str
             frame_id=frame_id,
         )
     if msgtype == FIX_TYPE:
-        cov = np.array([m.position_covariance for m in msgs], dtype=np.float64).reshape(n, -1)
+        cov = np.array([m.position_covariance for m in msgs], dtype=np.float64).reshape(n, -1 if n else 9)
         if cov.shape[1] != 9:
             raise InputError(f"{label}: topic {topic!r}: position_covariance has {cov.shape[1]} elements, expected 9")
         return FixMessages(
@@ -670,7 +695,7 @@ def _decode_each(label: str, reader: Any, topic: str, msgtype: str, rosname: str
             frame_id=frame_id,
         )
     if msgtype == TWIST_COV_TYPE:
-        cov = np.array([m.twist.covariance for m in msgs], dtype=np.float64).reshape(n, -1)
+        cov = np.array([m.twist.covariance for m in msgs], dtype=np.float64).reshape(n, -1 if n else 36)
         if cov.shape[1] != 36:
             raise InputError(f"{label}: topic {topic!r}: twist.covariance has {cov.shape[1]} elements, expected 36")
         return TwistMessages(topic, stamp_ns, log_ns, vel=vec(lambda m: m.twist.twist.linear),

@@ -61,6 +61,8 @@ _NS = timebase.NS
 _JST_OFFSET_NS = 9 * 3600 * _NS
 _WEEK_NS = timebase.SECONDS_PER_WEEK * _NS
 _GPS_EPOCH_NS = timebase.GPS_EPOCH_UNIX * _NS
+#: The last GPS week whose times (with a day to spare for time-system shifts) fit int64 ns.
+_MAX_WEEK = (np.iinfo(np.int64).max - _GPS_EPOCH_NS) // _WEEK_NS - 1
 
 # Column names that make a '%' line the column header, and the position format they imply.
 _POS_FORMATS = {
@@ -377,8 +379,13 @@ def _parse_fast(data: list[tuple[int, str]], layout: dict):
     elif not calendar.any():
         if not d0.str.fullmatch(r"\d+").all() or not d1.str.fullmatch(r"\d+(\.\d{0,9})?").all():
             return None
+        if (d0.str.len() > 6).any():       # beyond int64 ns: the slow path names the line
+            return None
         week = d0.astype(np.int64).to_numpy()
-        tow = np.round(d1.astype(np.float64).to_numpy() * _NS).astype(np.int64)
+        tow_s = d1.astype(np.float64).to_numpy()
+        if np.any(tow_s > _WEEK_NS / _NS) or np.any(week > _MAX_WEEK):     # before the int cast can overflow
+            return None
+        tow = np.round(tow_s * _NS).astype(np.int64)
         if np.any(tow > _WEEK_NS):
             return None
         t = _GPS_EPOCH_NS + week * _WEEK_NS + tow
@@ -448,11 +455,17 @@ def _parse_times(name: str, rows: list[tuple[int, list[str]]]) -> np.ndarray:
                 tow = _decimal_ns(tod)
                 if tow > _WEEK_NS:
                     raise ValueError(tod)
+                if int(d) > _MAX_WEEK:
+                    raise OverflowError(d)
                 out[k] = _GPS_EPOCH_NS + int(d) * _WEEK_NS + tow
         except ValueError:
             raise InputError(
                 f"{name}: line {lineno}: bad time {d + ' ' + tod!r}, expected "
                 "'yyyy/mm/dd hh:mm:ss.sss' or 'week tow'"
+            ) from None
+        except OverflowError:      # a year or GPS week beyond what int64 ns can hold
+            raise InputError(
+                f"{name}: line {lineno}: time {d + ' ' + tod!r} is out of range (after the year 2262)"
             ) from None
     return out
 
