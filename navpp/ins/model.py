@@ -178,19 +178,29 @@ def _transition_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd, inv_tau
     F_prev_state = x_start
     for j in range(n_seg):
         T = seg_T[j]
-        F = 0.5 * (error_dynamics(F_prev_state, seg_fn[j], inv_tau_g, inv_tau_a)
-                   + error_dynamics(seg_x[j], seg_fn[j], inv_tau_g, inv_tau_a))
-        FT = F * T
-        FT2 = FT @ FT
-        Phi_j = np.eye(15) + FT + 0.5 * FT2 + (FT2 @ FT) / 6.0
-        # Qd_j = (Phi_j GQG Phi_j^T + GQG) T / 2 with GQG = diag(psd)
-        Qd_j = Phi_j * (psd * (0.5 * T)) @ Phi_j.T
-        for k in range(15):
-            Qd_j[k, k] += 0.5 * T * psd[k]
+        Phi_j = _segment_phi(F_prev_state, seg_x[j], seg_fn[j], T, inv_tau_g, inv_tau_a)
         Phi = Phi_j @ Phi
-        Qd = Phi_j @ Qd @ Phi_j.T + Qd_j
+        Qd = Phi_j @ Qd @ Phi_j.T + _segment_qd(Phi_j, psd, T)
         F_prev_state = seg_x[j]
     return Phi, Qd
+
+
+@njit(cache=True)
+def _segment_phi(x_start, x_end, fn, T, inv_tau_g, inv_tau_a):
+    """Phi of one segment: F the mean of F at its start and end states, to third order in FT."""
+    F = 0.5 * (error_dynamics(x_start, fn, inv_tau_g, inv_tau_a) + error_dynamics(x_end, fn, inv_tau_g, inv_tau_a))
+    FT = F * T
+    FT2 = FT @ FT
+    return np.eye(15) + FT + 0.5 * FT2 + (FT2 @ FT) / 6.0
+
+
+@njit(cache=True)
+def _segment_qd(Phi_j, psd, T):
+    """Qd of one segment by the trapezoid: (Phi_j GQG Phi_j^T + GQG) T / 2 with GQG = diag(psd)."""
+    Qd_j = Phi_j * (psd * (0.5 * T)) @ Phi_j.T
+    for k in range(15):
+        Qd_j[k, k] += 0.5 * T * psd[k]
+    return Qd_j
 
 
 @njit(cache=True)
@@ -235,17 +245,9 @@ def _noise_groups_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd_groups
     F_prev_state = x_start
     for j in range(n_seg):
         T = seg_T[j]
-        F = 0.5 * (error_dynamics(F_prev_state, seg_fn[j], inv_tau_g, inv_tau_a)
-                   + error_dynamics(seg_x[j], seg_fn[j], inv_tau_g, inv_tau_a))
-        FT = F * T
-        FT2 = FT @ FT
-        Phi_j = np.eye(15) + FT + 0.5 * FT2 + (FT2 @ FT) / 6.0
+        Phi_j = _segment_phi(F_prev_state, seg_x[j], seg_fn[j], T, inv_tau_g, inv_tau_a)
         for g in range(G):
-            psd = psd_groups[g]
-            Qd_j = Phi_j * (psd * (0.5 * T)) @ Phi_j.T
-            for k in range(15):
-                Qd_j[k, k] += 0.5 * T * psd[k]
-            Qg[g] = Phi_j @ Qg[g] @ Phi_j.T + Qd_j
+            Qg[g] = Phi_j @ Qg[g] @ Phi_j.T + _segment_qd(Phi_j, psd_groups[g], T)
         F_prev_state = seg_x[j]
     return Qg
 
