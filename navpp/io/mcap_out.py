@@ -99,7 +99,7 @@ import numpy as np
 from numba import njit
 
 from navpp.io import frames, roswrite
-from navpp.io.writers import atomic_write
+from navpp.io.writers import adaptive_columns, atomic_write
 from navpp.recording import Recording, Solution
 
 __all__ = [
@@ -267,22 +267,6 @@ def _solution_streams(solution: Solution, recording: Recording, diagnostics: Any
     if diagnostics is not None:
         streams.append(_diagnostics_stream(recording, diagnostics))
     return streams, anchor
-
-
-def adaptive_columns(diagnostics: Any) -> tuple[list[str], np.ndarray]:
-    """Names and (M, K) values of every adaptive quantity in ``diagnostics.adaptive``.
-
-    An entry ``name -> (M, k)`` gives ``name`` when k is 1, else ``name_0 .. name_<k-1>``: the
-    column names of ``diagnostics.csv``.
-    """
-    m = len(diagnostics.t)
-    names: list[str] = []
-    cols: list[np.ndarray] = []
-    for key, values in getattr(diagnostics, "adaptive", {}).items():
-        v = np.asarray(values, dtype=np.float64).reshape(m, -1)
-        names += [key] if v.shape[1] == 1 else [f"{key}_{i}" for i in range(v.shape[1])]
-        cols.append(v)
-    return names, (np.concatenate(cols, axis=1) if cols else np.zeros((m, 0)))
 
 
 def _diagnostics_stream(recording: Recording, diagnostics: Any) -> _Stream:

@@ -334,6 +334,22 @@ def write_trajectory_csv(path: str | os.PathLike[str], sol: Solution, *, t0_s: f
     atomic_write(path, write, mode="wb")
 
 
+def adaptive_columns(diagnostics: Any) -> tuple[list[str], np.ndarray]:
+    """Names and (M, K) values of every adaptive quantity in ``diagnostics.adaptive``.
+
+    An entry ``name -> (M, k)`` gives ``name`` when k is 1, else ``name_0 .. name_<k-1>``: the
+    column names of ``diagnostics.csv`` (and of the MCAP diagnostics' ``names``).
+    """
+    m = len(diagnostics.t)
+    names: list[str] = []
+    cols: list[np.ndarray] = []
+    for key, values in getattr(diagnostics, "adaptive", {}).items():
+        v = np.asarray(values, dtype=np.float64).reshape(m, -1)
+        names += [key] if v.shape[1] == 1 else [f"{key}_{i}" for i in range(v.shape[1])]
+        cols.append(v)
+    return names, (np.concatenate(cols, axis=1) if cols else np.zeros((m, 0)))
+
+
 def diagnostics_columns(diag: Any) -> tuple[list[str], list[np.ndarray], list[int]]:
     """Column names, (M,) value arrays and decimals of ``diagnostics.csv`` (after ``t``).
 
@@ -348,12 +364,10 @@ def diagnostics_columns(diag: Any) -> tuple[list[str], list[np.ndarray], list[in
             np.asarray(diag.accepted, dtype=np.float64), np.asarray(diag.forced, dtype=np.float64),
             r[:, 0], r[:, 1], r[:, 2]]
     decimals = [4, 4, 4, 4, 0, 0, 4, 4, 4]
-    for key, values in getattr(diag, "adaptive", {}).items():
-        v = np.asarray(values, dtype=np.float64).reshape(len(diag.t), -1)
-        for i in range(v.shape[1]):
-            names.append(key if v.shape[1] == 1 else f"{key}_{i}")
-            cols.append(v[:, i])
-            decimals.append(6)
+    adaptive_names, values = adaptive_columns(diag)
+    names += adaptive_names
+    cols += list(values.T)
+    decimals += [6] * len(adaptive_names)
     return names, cols, decimals
 
 
