@@ -801,15 +801,17 @@ def write_summary(path: Path, rows: Sequence[CompareRow]) -> Path:
     return path
 
 
-def write_text_file(path: Path, text: str) -> None:
-    """``text`` to ``path`` atomically (UTF-8); :class:`~navpp.errors.InputError` naming the file."""
+def write_text_file(path: Path, data: str | bytes) -> None:
+    """``data`` to ``path`` atomically (text as UTF-8, bytes as they are);
+    :class:`~navpp.errors.InputError` naming the file."""
+    from .api import _os_reason
     from .errors import InputError
     from .io.writers import atomic_write
 
     try:
-        atomic_write(path, lambda f: f.write(text))
+        atomic_write(path, lambda f: f.write(data), mode="wb" if isinstance(data, bytes) else "w")
     except OSError as exc:
-        raise InputError(f"{path}: cannot write ({(exc.strerror or str(exc)).lower()})") from None
+        raise InputError(f"{path}: cannot write ({_os_reason(exc)})") from None
 
 
 # --------------------------------------------------------------------------- CI gates

@@ -417,21 +417,16 @@ def write_report(out_dir: Path, rows: Sequence[CompareRow], plots: Mapping[str, 
     write.  Returns the files written.  :class:`~navpp.errors.InputError` if one cannot be written."""
     import navpp
 
+    from .api import _os_reason
+    from .comparison import write_text_file
     from .errors import InputError
-    from .io.writers import atomic_write
 
     out_dir = Path(out_dir)
     sections = build_sections(rows, plots)
     files: list[Path] = []
 
     def put(path: Path, data: str | bytes) -> None:
-        try:
-            if isinstance(data, bytes):
-                atomic_write(path, lambda f: f.write(data), mode="wb")
-            else:
-                atomic_write(path, lambda f: f.write(data))
-        except OSError as exc:
-            raise InputError(f"{path}: cannot write ({(exc.strerror or str(exc)).lower()})") from None
+        write_text_file(path, data)
         files.append(path)
 
     for sec in sections:
@@ -447,5 +442,5 @@ def write_report(out_dir: Path, rows: Sequence[CompareRow], plots: Mapping[str, 
                 old.unlink()
             except OSError as exc:
                 raise InputError(f"{old}: cannot remove this figure of an earlier comparison "
-                                 f"({(exc.strerror or str(exc)).lower()})") from None
+                                 f"({_os_reason(exc)})") from None
     return files
