@@ -40,7 +40,7 @@ import numpy as np
 
 from .base import GaussianState, MeasurementPrediction, register, symmetrise
 from .rules import CubatureRule, DirichletWeights
-from .sigma import SigmaPointFilter, _factor, _weighted_cov
+from .sigma import SigmaPointFilter, combine_points
 
 SELECT = ("likelihood", "residual", "none")
 COVARIANCE = ("uniform", "random")
@@ -96,22 +96,10 @@ class RWCKF(SigmaPointFilter):
             return wm, wc
         return self._beta, (self._beta if self.options.covariance == "random" else wc)
 
-    # time update: uniform weights, the points kept for the epoch's weights ------------------
-    def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> GaussianState:
-        S = _factor(state.P, state.t, self.name, self)
-        dX, wm, wc = self.rule().points(S)
-        x_ref, dY = model.propagate_points(state.x, dX, interval)
-        Q = self.process_noise(model, state.x, interval)
-        out = self._combine(model, interval[1], x_ref, dY, wm, wc, Q)
-        self._pending = (out, x_ref, dY, Q, wc)
-        return out
-
-    @staticmethod
-    def _combine(model, t: float, x_ref: np.ndarray, dY: np.ndarray, wm: np.ndarray, wc: np.ndarray,
-                 Q: np.ndarray) -> GaussianState:
-        mean = wm @ dY
-        dev = dY - mean
-        return GaussianState(t, model.plus(x_ref, mean), symmetrise(_weighted_cov(wc, dev, dev) + Q))
+    # time update: the template's (uniform weights); its points are kept for the epoch's weights
+    def after_predict(self, prior: GaussianState, x_ref: np.ndarray, dY: np.ndarray, Q: np.ndarray,
+                      wc: np.ndarray) -> None:
+        self._pending = (prior, x_ref, dY, Q, wc)
 
     # measurement update: choose the epoch's weight vector, then the shared template ---------
     def _candidates(self, m: int) -> list[np.ndarray | None]:
@@ -127,8 +115,8 @@ class RWCKF(SigmaPointFilter):
         if beta is None or pending is None or pending[0] is not state:
             return state
         _, x_ref, dY, Q, wc = pending
-        return self._combine(model, state.t, x_ref, dY, beta,
-                             beta if self.options.covariance == "random" else wc, Q)
+        return combine_points(model, state.t, x_ref, dY, beta,
+                              beta if self.options.covariance == "random" else wc, Q)
 
     def _score(self, pred: MeasurementPrediction, R: np.ndarray) -> float:
         if self.options.select == "residual":

@@ -39,6 +39,15 @@ def _weighted_cov(wc: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return (A * wc[:, None]).T @ B
 
 
+def combine_points(model, t: float, x_ref: np.ndarray, dY: np.ndarray, wm: np.ndarray, wc: np.ndarray,
+                   Q: np.ndarray) -> GaussianState:
+    """The Gaussian at ``t`` of propagated error points ``dY`` about ``x_ref``: mean ``x_ref ⊞
+    wm dY``, covariance of the deviations from that mean weighted by ``wc``, plus ``Q``."""
+    mean = wm @ dY
+    dev = dY - mean
+    return GaussianState(t, model.plus(x_ref, mean), symmetrise(_weighted_cov(wc, dev, dev) + Q))
+
+
 class SigmaPointFilter(Filter):
     """Template: subclasses provide :meth:`rule` (and may override the hooks of :class:`Filter`)."""
 
@@ -56,10 +65,14 @@ class SigmaPointFilter(Filter):
         dX, wm, wc = self.rule().points(S)
         wm, wc = self.weights_for(wm, wc, measurement=False)
         x_ref, dY = model.propagate_points(state.x, dX, interval)    # f(x ⊞ dX_i) ⊟ f(x)
-        mean = wm @ dY
-        dev = dY - mean
-        P = _weighted_cov(wc, dev, dev) + self.process_noise(model, state.x, interval)
-        return GaussianState(interval[1], model.plus(x_ref, mean), symmetrise(P))
+        Q = self.process_noise(model, state.x, interval)
+        out = combine_points(model, interval[1], x_ref, dY, wm, wc, Q)
+        self.after_predict(out, x_ref, dY, Q, wc)
+        return out
+
+    def after_predict(self, prior: GaussianState, x_ref: np.ndarray, dY: np.ndarray, Q: np.ndarray,
+                      wc: np.ndarray) -> None:
+        """Hook: the propagated points of a time update (RWCKF re-weights them at the next fix)."""
 
     def predict_measurement(self, state: GaussianState, model, meas) -> MeasurementPrediction:
         S = _factor(state.P, state.t, self.name, self)
