@@ -185,6 +185,14 @@ class Filter:
     #: options under which the filter is the plain Kalman filter (adaptation off): the oracle
     #: tests run every registered filter with these against the closed-form update
     oracle_options: ClassVar[dict[str, Any]] = {}
+    #: what the last :meth:`predict` saw, for RTS smoothing (:mod:`navpp.filters.smoother`):
+    #: ``last_cross`` (n, n), the cross-covariance ``E[dx_start dx_end^T]`` of the errors at the
+    #: interval's start (the input state) and end (the prior); ``last_x_ref``, the nominal the
+    #: model propagated (the path it recorded).  ``last_prior``: the prior the last
+    #: :meth:`correct` corrected (an adaptive filter may have changed it after the time update).
+    last_cross: np.ndarray | None = None
+    last_x_ref: np.ndarray | None = None
+    last_prior: GaussianState | None = None
 
     def __init__(self, options: Any = None, *, gate_probability: float = 0.0,
                  reanchor_after_s: float = 10.0, rng: np.random.Generator | None = None) -> None:
@@ -301,6 +309,7 @@ class Filter:
     def correct(self, state: GaussianState, model: Any, pred: MeasurementPrediction,
                 K: np.ndarray, S: np.ndarray, R: np.ndarray) -> GaussianState:
         """Shared correction: ``x ⊞ K nu``; Joseph form when linearised, else ``P - K S K^T``."""
+        self.last_prior = state
         x = model.plus(state.x, K @ pred.nu)
         if pred.H is not None:
             P = _joseph(state.P, K, pred.H, R)

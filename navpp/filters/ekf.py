@@ -19,7 +19,9 @@ class EKF(Filter):
 
     def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> GaussianState:
         x, Phi, Qd = model.transition(state.x, interval)
-        P = Phi @ state.P @ Phi.T + Qd        # P- = Phi P Phi^T + Qd
+        PPhit = state.P @ Phi.T
+        P = Phi @ PPhit + Qd                  # P- = Phi P Phi^T + Qd
+        self.last_cross, self.last_x_ref = PPhit, x     # E[dx_k dx_k+1^T] = P Phi^T (smoother)
         return GaussianState(interval[1], x, symmetrise(P))
 
     def predict_measurement(self, state: GaussianState, model, meas) -> MeasurementPrediction:

@@ -145,13 +145,17 @@ class SIF(SigmaPointFilter):
         xis, ws = self._rule.draws(self.rng, n, self.options.max_iter)
         for xi, w in zip(xis, ws):
             # the centre point is the reference: its image f(x ⊞ 0) ⊟ f(x) is 0, not propagated
-            x_ref, dY = model.propagate_points(state.x, xi[1:] @ S.T, interval)
+            dX = xi[1:] @ S.T
+            x_ref, dY = model.propagate_points(state.x, dX, interval)
             wp = w[1:]
-            acc.add((wp @ dY, (dY * wp[:, None]).T @ dY))     # SR_j: moments about f(x_hat)
+            Yw = dY * wp[:, None]
+            # SR_j: moments about f(x_hat); the cross moment (last two) only for the smoother
+            acc.add((wp @ dY, Yw.T @ dY, wp @ dX, (dX * wp[:, None]).T @ dY))
             if self._done(acc, scales):
                 break
-        mean, second = acc.mean
+        mean, second, x_mean, cross = acc.mean
         self.iterations[0] = acc.count
+        self.last_cross, self.last_x_ref = cross - np.outer(x_mean, mean), x_ref
         P = second - np.outer(mean, mean) + self.process_noise(model, state.x, interval)
         return GaussianState(interval[1], model.plus(x_ref, mean), symmetrise(P))
 

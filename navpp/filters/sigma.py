@@ -67,6 +67,9 @@ class SigmaPointFilter(Filter):
         x_ref, dY = model.propagate_points(state.x, dX, interval)    # f(x ⊞ dX_i) ⊟ f(x)
         Q = self.process_noise(model, state.x, interval)
         out = combine_points(model, interval[1], x_ref, dY, wm, wc, Q)
+        # for the smoother: E[dx_k dx_k+1^T] from the centred deviations of the points and images
+        self.last_cross = _weighted_cov(wc, dX - wm @ dX, dY - wm @ dY)
+        self.last_x_ref = x_ref
         self.after_predict(out, x_ref, dY, Q, wc)
         return out
 
