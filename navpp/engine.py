@@ -25,7 +25,8 @@ from .filters.base import Filter, GaussianState
 from .ins.alignment import Alignment, AlignmentSettings, align
 from numba import njit
 
-from .ins.model import BA, BG, LONG_GAP_PERIODS, POS, GnssPosition, InsModel, NoiseModel
+from .filters.smoother import ForwardStore, smooth_arrays
+from .ins.model import BA, BG, LONG_GAP_PERIODS, POS, GnssPosition, InsModel, NoiseModel, apply_node_corrections
 from .ins.strapdown import NOMINAL_BA, NOMINAL_BG
 from .recording import Recording, Solution
 
@@ -64,6 +65,27 @@ class BiasHistory:
 
 
 @dataclass(frozen=True)
+class SmoothedRun:
+    """The forward run smoothed backwards (Rauch-Tung-Striebel, :mod:`navpp.filters.smoother`).
+
+    solution : IMU-rate smoothed solution with smoothed position 1-sigma.
+    biases : smoothed sensor biases at the GNSS epochs (same epochs as the forward history).
+    runtime_s : wall time of the backward pass and the IMU-rate corrections, s.
+    nodes : forward nodes stored (GNSS epochs plus coast knots plus the start and end).
+    breaks : forced (re-anchored) fixes the smoother did not carry information back across,
+        plus steps whose prior covariance was not positive definite.
+    store_mb : memory the stored forward run took, MB.
+    """
+
+    solution: Solution
+    biases: BiasHistory
+    runtime_s: float
+    nodes: int
+    breaks: int
+    store_mb: float
+
+
+@dataclass(frozen=True)
 class RunResult:
     solution: Solution
     biases: BiasHistory
@@ -71,9 +93,10 @@ class RunResult:
     diagnostics: Diagnostics
     gnss_epochs: int
     gnss_rejected: int
-    runtime_s: float                  # processing wall time, s, without kernel compilation
+    runtime_s: float                  # processing wall time, s, without kernel compilation (smoothing included)
     compile_s: float = 0.0            # one-off numba compilation on a cold cache, s
     warnings: tuple[str, ...] = ()    # what the run noticed about the data (units, tilt, gating)
+    smoothed: SmoothedRun | None = None   # with smooth=True: the RTS-smoothed run
 
 
 def mounting_matrix(rpy_deg: tuple[float, float, float]) -> np.ndarray:
@@ -105,9 +128,11 @@ def noise_model(config: Config) -> NoiseModel:
 
 
 def run(recording: Recording, config: Config, filt: Filter, *, progress: ProgressFn | None = None,
-        cov_step_s: float = 0.05) -> RunResult:
+        cov_step_s: float = 0.05, smooth: bool = False) -> RunResult:
     """Process one recording with one filter; returns the IMU-rate solution and diagnostics.
 
+    With ``smooth``, the forward run is also smoothed backwards (Rauch-Tung-Striebel over the
+    stored forward run): ``RunResult.smoothed``; ``solution`` stays the forward solution.
     ``runtime_s`` excludes the one-off compilation of navpp's kernels on a cold cache, which
     is reported as ``compile_s``.
     """
@@ -115,7 +140,7 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
 
     t_wall = time.perf_counter()
     with numba_event.install_recorder("numba:compile") as rec:
-        result = _run(recording, config, filt, progress, cov_step_s)
+        result = _run(recording, config, filt, progress, cov_step_s, smooth)
     compile_s = _top_level_duration(rec.buffer)
     return replace(result, runtime_s=time.perf_counter() - t_wall - compile_s, compile_s=compile_s)
 
@@ -325,7 +350,7 @@ def _consistency_checks(source: str, name: str, config: Config, tg: np.ndarray, 
 
 
 def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
-         cov_step_s: float) -> RunResult:
+         cov_step_s: float, smooth: bool = False) -> RunResult:
     t_wall = time.perf_counter()
     warnings = check_imu_plausible(recording)
     warnings += check_data(recording, config)
@@ -374,10 +399,21 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
         knots.extend(v if prior is None else prior)
         knots.extend(v)
 
-    def coast_to(t_end: float) -> None:
+    store = None
+    epoch_node = np.zeros(m_ep, np.int64)       # the smoother's node of each GNSS epoch
+    if smooth:
+        store = ForwardStore(state.P.shape[0], state.x.shape[0])
+        store.start(state)
+
+    def predicted(interval: tuple[float, float]) -> None:
         nonlocal state
+        state = filt.predict(state, model, interval)
+        if store is not None:
+            store.predicted(state, filt.last_cross, filt.last_x_ref)
+
+    def coast_to(t_end: float) -> None:
         while t_end - state.t > 1.5 * KNOT_S:
-            state = filt.predict(state, model, (state.t, state.t + KNOT_S))
+            predicted((state.t, state.t + KNOT_S))
             knot()
 
     knot()
@@ -389,12 +425,16 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
         nonlocal state, last_good
         for k in range(m_ep):
             coast_to(float(tg[k]))
-            state = filt.predict(state, model, (state.t, float(tg[k])))
+            predicted((state.t, float(tg[k])))
             prior = state.P.diagonal()[POS].copy()
             meas = GnssPosition(float(tg[k]), float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever)
             checked(float(tg[k]))                   # the prediction
+            filt.last_prior = None
             state, inn = filt.update(state, model, meas)
             checked(float(tg[k]))                   # the update
+            if store is not None:
+                store.updated(filt.last_prior if inn.accepted else None, state, inn.forced)
+                epoch_node[k] = store.n - 1
             if inn.accepted:
                 last_good = float(tg[k])
             if inn.accepted and k_sample[k] >= 0:
@@ -418,7 +458,7 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
         # after the last fix the uncertainty keeps growing to the end of the log
         coast_to(float(imu.t[-1]))
         if state.t < imu.t[-1]:
-            state = filt.predict(state, model, (state.t, float(imu.t[-1])))
+            predicted((state.t, float(imu.t[-1])))
             knot()
         checked(state.t)
 
@@ -447,6 +487,14 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     path = model.path[al.index:]
     model.path = None
     t_out = imu.t[al.index:]
+    smoothed = None
+    if store is not None:
+        from numba.core import event as numba_event
+
+        with numba_event.install_recorder("numba:compile") as compiling:
+            smoothed = _smoothed_run(store, model, t_out, path, epoch_node, tg, recording.t0_ns)
+        smoothed = replace(smoothed, runtime_s=smoothed.runtime_s - _top_level_duration(compiling.buffer))
+        del store
     kn = np.frombuffer(knots, dtype=float).reshape(-1, 7)
     kt, k_prior, k_post = kn[:, 0].copy(), kn[:, 1:4].copy(), kn[:, 4:7].copy()
     std_out = _interpolated_std(t_out, kt[0], k_post[0], kt[1:], k_prior[1:], k_post[1:])
@@ -465,8 +513,44 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     rejected = int((~accepted).sum())
     warnings += list(al.warnings)
     warnings += _consistency_checks(recording.source, filt.name, config, tg, nis, accepted, list(warnings))
+    if smoothed is not None and smoothed.breaks:
+        n = smoothed.breaks
+        warnings.append(f"{recording.source}: smoothing: {n} step{'s' if n > 1 else ''} the smoother carries no "
+                        "information back across (a fix forced through the gate with the covariance re-anchored, "
+                        "or a prior covariance that was not positive definite): the smoothed trajectory keeps "
+                        "the forward filter's jump there")
     return RunResult(solution, biases, al, diag, m_ep, rejected, time.perf_counter() - t_wall, 0.0,
-                     tuple(warnings))
+                     tuple(warnings), smoothed)
+
+
+def _smoothed_run(store: ForwardStore, model: InsModel, t_out: np.ndarray, path: np.ndarray,
+                  epoch_node: np.ndarray, tg: np.ndarray, t0_ns: int) -> SmoothedRun:
+    """Smooth the stored forward run and bring it to the IMU rate.
+
+    Between two nodes the forward path is the strapdown from the earlier node's posterior; the
+    smoothed correction relative to it runs linearly from ``x_k^s ⊟ x_k^+`` at the start to
+    ``x_k+1^s ⊟ x_ref,k+1`` at the end (nodes are at most ``1.5 KNOT_S`` apart, over which the
+    error dynamics are linear to well below the errors themselves); a sample exactly at a node
+    takes the node's smoothed state.  The smoothed position 1-sigma interpolates the smoothed
+    variance between nodes.
+    """
+    t_start = time.perf_counter()
+    nodes = store.arrays()
+    mb = sum(a.nbytes for a in nodes.values()) / 1e6
+    x_post, x_ref = nodes["x_post"], nodes["x_ref"]
+    sm = smooth_arrays(nodes, model)
+    spath = path.copy()
+    apply_node_corrections(spath, t_out, sm.t, sm.x, x_post, x_ref)
+    var = np.ascontiguousarray(np.diagonal(sm.P, axis1=1, axis2=2))
+    vpos = np.ascontiguousarray(var[:, POS])
+    std = _interpolated_std(t_out, sm.t[0], vpos[0], sm.t[1:], vpos[1:], vpos[1:])
+    solution = solution_from_path(t_out, spath, std, t0_ns)
+    xs = sm.x[epoch_node]
+    bstd = np.sqrt(np.maximum(var[epoch_node], 0.0))
+    biases = BiasHistory(tg, xs[:, NOMINAL_BG].copy(), xs[:, NOMINAL_BA].copy(), bstd[:, BG].copy(),
+                         bstd[:, BA].copy())
+    return SmoothedRun(solution, biases, time.perf_counter() - t_start, int(sm.t.shape[0]),
+                       int(sm.breaks + sm.repaired), mb)
 
 
 @njit(cache=True)
@@ -525,4 +609,4 @@ def solution_from_path(t: np.ndarray, path: np.ndarray, std_enu: np.ndarray, t0_
                     vel_enu=path[:, 4:7], rph_deg=path[:, 0:3], std_enu=std_enu, t0_ns=t0_ns)
 
 
-__all__ = ["Diagnostics", "RunResult", "run", "solution_from_path", "mounting_matrix"]
+__all__ = ["Diagnostics", "RunResult", "SmoothedRun", "run", "solution_from_path", "mounting_matrix"]

@@ -321,6 +321,90 @@ def _propagate_points(x, dX, t, gyro, accel, t_start, t_end, out, record):
 
 
 
+@njit(cache=True, inline="always")
+def _plus_row(row, c):
+    """``row ⊞ c`` in place for a recorded path row (q_nb, vel_enu, lat, lon, h): the same
+    arithmetic as :func:`plus`, without temporaries (it runs once per IMU sample)."""
+    a = np.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+    if a < 1e-8:
+        s = 0.5 - a * a / 48.0
+        w = 1.0 - a * a / 8.0
+    else:
+        s = np.sin(0.5 * a) / a
+        w = np.cos(0.5 * a)
+    p0, p1, p2, p3 = w, s * c[0], s * c[1], s * c[2]
+    q0, q1, q2, q3 = row[0], row[1], row[2], row[3]
+    row[0] = p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3
+    row[1] = p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2
+    row[2] = p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1
+    row[3] = p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0
+    row[4] += c[3]
+    row[5] += c[4]
+    row[6] += c[5]
+    lat, h = row[7], row[9]
+    rm, rn = radii(lat)
+    row[7] = lat + c[7] / (rm + h)
+    row[8] = _wrap_pi(row[8] + c[6] / ((rn + h) * np.cos(lat)))
+    row[9] = h + c[8]
+
+
+@njit(cache=True)
+def apply_node_corrections(path, t, node_t, xs, x_post, x_ref):
+    """Move a recorded forward path (N, PATH_SIZE) onto a smoothed one, in place.
+
+    ``t`` (N,) sample times (s, increasing); ``node_t`` (M,) the forward run's node times;
+    ``xs`` (M, 16) smoothed nominal states at the nodes; ``x_post`` (M, 16) the forward
+    posterior at each node (where the path between that node and the next starts); ``x_ref``
+    (M, 16) the nominal the time update ending at each node reached (where that path ends).
+    A sample strictly between nodes k and k+1 moves by the error correction interpolated
+    linearly in time from ``xs[k] ⊟ x_post[k]`` to ``xs[k+1] ⊟ x_ref[k+1]``; a sample at a
+    node's time takes that node's smoothed state.  Samples outside the node span are left.
+    """
+    n = t.shape[0]
+    m = node_t.shape[0]
+    width = path.shape[1]
+    j = 0
+    cl = np.zeros(15)
+    cr = np.zeros(15)
+    c = np.zeros(15)
+    have = -1                                # the interval whose corrections are in cl, cr
+    for i in range(n):
+        ti = t[i]
+        while j < m - 1 and node_t[j + 1] < ti:
+            j += 1
+        if ti < node_t[0] or ti > node_t[m - 1]:
+            continue
+        if ti == node_t[j] or (j + 1 < m and ti == node_t[j + 1]):
+            k = j if ti == node_t[j] else j + 1
+            path[i, :] = xs[k, :width]
+            continue
+        if have != j:
+            cl = minus(xs[j], x_post[j])
+            cr = minus(xs[j + 1], x_ref[j + 1])
+            have = j
+        span = node_t[j + 1] - node_t[j]
+        w = (ti - node_t[j]) / span if span > 0.0 else 1.0
+        for e in range(15):
+            c[e] = (1.0 - w) * cl[e] + w * cr[e]
+        _plus_row(path[i], c)
+
+
+@njit(cache=True)
+def rts_means(x_post, x_prior, gains, reset):
+    """The smoother's mean recursion on the INS nominal (:func:`navpp.filters.smoother.smooth_arrays`):
+    ``xs[k] = x_post[k] ⊞ gains[k+1] (xs[k+1] ⊟ x_prior[k+1])`` backwards from the last node,
+    ``xs[k] = x_post[k]`` where ``reset[k+1]``.  (M, 16) arrays, gains (M, 15, 15)."""
+    m = x_post.shape[0]
+    xs = np.empty_like(x_post)
+    xs[m - 1] = x_post[m - 1]
+    for k in range(m - 2, -1, -1):
+        if reset[k + 1]:
+            xs[k] = x_post[k]
+        else:
+            xs[k] = plus(x_post[k], gains[k + 1] @ minus(xs[k + 1], x_prior[k + 1]))
+    return xs
+
+
 @dataclass
 class InsModel:
     """Strapdown INS over one recording's IMU data, in 15-element error space.
@@ -391,6 +475,9 @@ class InsModel:
                 Q[3 + i, 6 + i] += sf * sf * T * sp
                 Q[6 + i, 3 + i] += sf * sf * T * sp
         return Q
+
+    #: the smoother's mean recursion, compiled (:func:`rts_means`)
+    rts_means = staticmethod(rts_means)
 
     # ⊞ / ⊟ -----------------------------------------------------------------------------------
     @staticmethod
