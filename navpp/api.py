@@ -27,8 +27,8 @@ CONFIG_IN_LOG_DIR = "navpp.toml"
 #: run did not write (e.g. metrics from an earlier run with a reference, or a trajectory.kml
 #: from a run with ``--format kml``) are removed, so the directory never mixes results of
 #: different runs.  Only these exact names are touched.
-OUTPUT_FILES = ("trajectory.csv", "diagnostics.csv", "metrics.json", "metrics.md", "trajectory.mcap",
-                "trajectory.tum", "trajectory.geojson", "trajectory.kml")
+OUTPUT_FILES = ("trajectory.csv", "trajectory_forward.csv", "diagnostics.csv", "metrics.json", "metrics.md",
+                "trajectory.mcap", "trajectory.tum", "trajectory.geojson", "trajectory.kml")
 #: The file each ``--format`` / ``[output] formats`` name writes.
 FORMAT_FILES = {"csv": "trajectory.csv", "mcap": "trajectory.mcap", "tum": "trajectory.tum",
                 "geojson": "trajectory.geojson", "kml": "trajectory.kml"}
@@ -43,9 +43,14 @@ class ProcessResult:
     filter_name : the filter's registry name.
     recording : the log as read (:class:`~navpp.recording.Recording`).
     solution : the solution as written (at the output rate), ``t`` in s relative to
-        ``solution.t0_ns``.
-    run : the engine's ``RunResult`` (full-rate solution, biases, alignment, diagnostics).
-    metrics : the content of ``metrics.json`` (dict), None without a reference.
+        ``solution.t0_ns``: the smoothed one when ``smoothed``, else the forward filter's.
+    run : the engine's ``RunResult`` (full-rate forward solution, biases, alignment,
+        diagnostics; ``run.smoothed`` the full-rate smoothed run).
+    metrics : the content of ``metrics.json`` (dict), None without a reference.  For a smoothed
+        run its figures are the smoothed solution's and ``metrics["forward"]`` holds the
+        forward filter's (:func:`smoothing_metrics`).
+    forward : the forward filter's solution at the output rate when ``smoothed`` (what
+        ``trajectory_forward.csv`` holds), else None (``solution`` is the forward one).
     out_dir, files : the output directory and the files written (empty with ``write=False``).
     config : the configuration used.
     notes, warnings : lines for the user.
@@ -66,6 +71,22 @@ class ProcessResult:
     notes: tuple[str, ...] = field(default_factory=tuple)      # what was chosen (config, alignment)
     warnings: tuple[str, ...] = field(default_factory=tuple)   # what the data made us do
     outages: tuple[dict, ...] = field(default_factory=tuple)   # simulated GNSS outage windows
+    forward: Solution | None = None                            # with smoothing: the forward solution
+
+    @property
+    def smoothed(self) -> bool:
+        """True when ``solution`` is the RTS-smoothed trajectory."""
+        return self.forward is not None
+
+    @cached_property
+    def forward_trajectory(self):
+        """The forward filter's solution as a DataFrame (``trajectory.csv``'s columns): that of
+        ``trajectory_forward.csv`` for a smoothed run, else the same as :attr:`trajectory`."""
+        if self.forward is None:
+            return self.trajectory
+        from .io.exports import trajectory_frame
+
+        return trajectory_frame(self.forward)
 
     @cached_property
     def trajectory(self):
@@ -390,7 +411,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
             write: bool = True, imu_topic: str | None = None, gnss_topic: str | None = None,
             reference_topic: str | None = None, gnss_file: str | Path | None = None,
             formats: str | Sequence[str] | None = None, embed_input: bool = False,
-            gnss_outages: Sequence[tuple[float, float]] | None = None) -> ProcessResult:
+            gnss_outages: Sequence[tuple[float, float]] | None = None,
+            smooth: bool | None = None) -> ProcessResult:
     """Read a log, run one filter, write trajectory (and metrics with a reference).
 
     ``navpp.process`` is this function.  Example::
@@ -430,6 +452,11 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         the log (:class:`InputError` otherwise).  The fixes with ``start <= t <= start +
         duration`` are removed before filtering (the INS coasts through), and the metrics
         report each window (``metrics["outages"]``).  Overrides ``[gnss] outages``; None uses it.
+    smooth : smooth the forward run backwards (Rauch-Tung-Striebel, :mod:`navpp.filters.smoother`):
+        ``trajectory.csv`` and the other trajectory formats hold the smoothed solution (with
+        smoothed 1-sigma), ``trajectory_forward.csv`` (with ``csv``) and the MCAP's
+        ``/navpp/forward/*`` topics the forward one, and the metrics show both.  Overrides
+        ``[output] smooth``; None uses it (default off).
 
     Returns
     -------
@@ -458,6 +485,7 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         _mcap_writer()                # before the run: not available is a ConfigError now, not after it
     windows = (check_outages(gnss_outages, "gnss_outages") if gnss_outages is not None
                else cfg.gnss.outages)
+    smooth = cfg.output.smooth if smooth is None else bool(smooth)
     filt = make_filter(filter_name, cfg)
     out = Path(out_dir) if out_dir is not None else default_out_dir(log, filter_name)
     created = prepare_out_dir(out, "--out" if out_dir is not None else "output directory") if write else []
@@ -476,28 +504,39 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
             raise ConfigError(f"{rate_what} {rate:g} Hz is above the IMU rate of {log} ({imu_rate:.1f} Hz); "
                               "the trajectory cannot be finer than the IMU")
         try:
-            result = engine.run(rec, cfg, filt, progress=(lambda f: progress("filtering", f)) if progress else None)
+            result = engine.run(rec, cfg, filt, progress=(lambda f: progress("filtering", f)) if progress else None,
+                                smooth=smooth)
         except NavppError as exc:
             cut = [w for w in rec.warnings if "the recording is cut off" in w]
             if cut:       # the likely reason: say it in the one line
                 raise type(exc)(f"{exc} ({cut[0]})") from None
             raise
         runtime = result.runtime_s        # without the one-off kernel compilation of a first run
-        sol = result.solution
+        sol = result.smoothed.solution if smooth else result.solution
         sol_out = resample_solution(sol, rate) if rate is not None else sol
+        fwd_out = None
+        if smooth:
+            fwd_out = resample_solution(result.solution, rate) if rate is not None else result.solution
 
         metrics = None
         if rec.reference is not None:
-            metrics = compute_metrics(
-                sol, rec.reference, filter_name=filter_name, log=str(log), reference=rec.reference.source or "",
-                runtime_s=runtime, imu_samples=len(rec.imu), gnss_epochs=result.gnss_epochs,
-                gnss_rejected=result.gnss_rejected, gnss=rec.gnss, lever_arm_m=cfg.gnss.lever_arm_m,
-                outages=windows, outages_removed=[o["gnss_removed"] for o in outages])
+            def metrics_of(solution: Solution, runtime_s: float) -> dict:
+                return compute_metrics(
+                    solution, rec.reference, filter_name=filter_name, log=str(log),
+                    reference=rec.reference.source or "", runtime_s=runtime_s, imu_samples=len(rec.imu),
+                    gnss_epochs=result.gnss_epochs, gnss_rejected=result.gnss_rejected, gnss=rec.gnss,
+                    lever_arm_m=cfg.gnss.lever_arm_m, outages=windows,
+                    outages_removed=[o["gnss_removed"] for o in outages])
+
+            metrics = metrics_of(sol, runtime)
+            if smooth:
+                metrics = smoothing_metrics(metrics, metrics_of(result.solution, runtime - result.smoothed.runtime_s),
+                                            result.smoothed)
 
         files: list[Path] = []
         if write:
             outputs = _outputs(chosen_formats, log=log, rec=rec, sol_out=sol_out, result=result, metrics=metrics,
-                               filter_name=filter_name, embed_input=embed_input)
+                               filter_name=filter_name, embed_input=embed_input, forward_out=fwd_out)
             files = write_outputs(out, outputs)
     except BaseException:
         remove_created_dirs(created)
@@ -507,8 +546,28 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         f"{o['gnss_removed']} fixes removed, the INS coasts" for o in outages)
     warnings = (tuple(rec.warnings) + tuple(result.warnings) + tuple(forced_fix_warnings(rec, cfg, result))
                 + tuple(reference_checks(rec, cfg, metrics)))
+    if smooth:
+        notes += (f"smoothed backwards (Rauch-Tung-Striebel) over {result.smoothed.nodes} forward nodes in "
+                  f"{result.smoothed.runtime_s:.2f} s; trajectory_forward.csv holds the forward solution",)
     return ProcessResult(filter_name, rec, sol_out, result, metrics, out, tuple(files), cfg, notes, warnings,
-                         tuple(outages))
+                         tuple(outages), fwd_out)
+
+
+#: The figures of the forward filter kept in ``metrics["forward"]`` of a smoothed run.
+FORWARD_METRIC_KEYS = ("position_m", "velocity_mps", "attitude_deg", "outages", "runtime_s")
+
+
+def smoothing_metrics(smoothed: dict, forward: dict, run: Any) -> dict:
+    """``metrics.json`` of a smoothed run: the smoothed solution's figures at the top level (as
+    for any run), ``"solution": "smoothed"``, ``"smoothing_s"`` (the backward pass, s, part of
+    ``runtime_s``), ``"smoother_nodes"``, and ``"forward"``: the forward filter's
+    :data:`FORWARD_METRIC_KEYS` (its ``runtime_s`` without the smoothing)."""
+    out = dict(smoothed)
+    out["solution"] = "smoothed"
+    out["smoothing_s"] = float(run.runtime_s)
+    out["smoother_nodes"] = int(run.nodes)
+    out["forward"] = {k: forward[k] for k in FORWARD_METRIC_KEYS if k in forward}
+    return out
 
 
 def apply_outages(rec: Recording, windows: Sequence[tuple[float, float]],
@@ -583,14 +642,20 @@ def forced_fix_warnings(rec: Recording, cfg: Config, result: Any) -> list[str]:
 
 
 def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solution, result: Any,
-             metrics: dict | None, filter_name: str, embed_input: bool) -> list[tuple[str, Callable[[Path], None]]]:
-    """``(file name, writer(path))`` for every file of a run, in the order they are listed."""
+             metrics: dict | None, filter_name: str, embed_input: bool,
+             forward_out: Solution | None = None) -> list[tuple[str, Callable[[Path], None]]]:
+    """``(file name, writer(path))`` for every file of a run, in the order they are listed.
+    ``forward_out``: the forward solution of a smoothed run (``sol_out`` is then the smoothed one)."""
     from .io import exports, writers
 
     t0_s = rec.t0_ns * 1e-9
+    biases = result.smoothed.biases if forward_out is not None else result.biases
     outputs: list[tuple[str, Callable[[Path], None]]] = []
     if "csv" in formats:
         outputs.append(("trajectory.csv", lambda p: writers.write_trajectory_csv(p, sol_out, t0_s=t0_s)))
+        if forward_out is not None:
+            outputs.append(("trajectory_forward.csv",
+                            lambda p: writers.write_trajectory_csv(p, forward_out, t0_s=t0_s)))
     outputs.append(("diagnostics.csv", lambda p: writers.write_diagnostics_csv(p, result.diagnostics, t0_s=t0_s)))
     if metrics is not None:
         outputs.append(("metrics.json", lambda p: writers.write_metrics_json(p, metrics)))
@@ -607,8 +672,9 @@ def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solu
                                                                           **named)))
         elif fmt == "mcap":
             outputs.append((FORMAT_FILES[fmt], lambda p: _mcap_writer()(
-                p, solution=sol_out, recording=rec, diagnostics=result.diagnostics, biases=result.biases,
-                embed_input=embed_input, input_log=log, filter_name=filter_name)))
+                p, solution=sol_out, recording=rec, diagnostics=result.diagnostics, biases=biases,
+                embed_input=embed_input, input_log=log, filter_name=filter_name,
+                **({"forward": forward_out} if forward_out is not None else {}))))
     return outputs
 
 

@@ -161,6 +161,10 @@ def process(
         "--gnss-outage", metavar="START:DUR", callback=_gnss_outages,
         help="Simulate a GNSS outage: drop the fixes from START for DUR seconds (s from the log start, the "
              "first IMU sample); repeatable.  The metrics report each window.  [default: [gnss] outages]")] = None,
+    smooth: Annotated[Optional[bool], typer.Option(
+        "--smooth/--no-smooth", help="Smooth the forward run backwards (Rauch-Tung-Striebel): trajectory.csv is the "
+        "smoothed trajectory, trajectory_forward.csv the forward one, the metrics show both.  "
+        "[default: [output] smooth, else off]", show_default=False)] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars, notes or summary (warnings about "
                                         "the data are still printed).")] = False,
 ) -> None:
@@ -178,7 +182,7 @@ def process(
             res = api.process(log, filter_name=filter, config=config, reference=reference, out_dir=out,
                               output_rate_hz=output_rate, progress=prog, imu_topic=imu_topic,
                               gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss,
-                              formats=formats, embed_input=embed_input, gnss_outages=gnss_outage)
+                              formats=formats, embed_input=embed_input, gnss_outages=gnss_outage, smooth=smooth)
     except NavppError as exc:
         _fail(str(exc))
         return
@@ -218,6 +222,11 @@ def _print_summary(res, quiet: bool) -> None:
         for name, s in rows:
             tab.add_row(name, *(f"{s[k]:.3f}" if k in s else "" for k in ("mae", "rmse", "max", "p95")))
         con.print(tab)
+        if "forward" in m:
+            f = m["forward"]["position_m"]
+            p = m["position_m"]
+            con.print(f"smoothed vs forward filter: horizontal RMSE {p['horizontal']['rmse']:.3f} m vs "
+                      f"{f['horizontal']['rmse']:.3f} m, up RMSE {p['up']['rmse']:.3f} m vs {f['up']['rmse']:.3f} m")
     for line in outage_lines(res):
         con.print(escape(line))
     con.print(escape("wrote " + ", ".join(str(p) for p in res.files)))
@@ -228,14 +237,19 @@ def outage_lines(res) -> list[str]:
     the position error at its end and inside it (m)."""
     windows = (res.metrics or {}).get("outages") or list(getattr(res, "outages", ()))
     lines = []
-    for w in windows:
+    forward = ((res.metrics or {}).get("forward") or {}).get("outages") or [None] * len(windows)
+    for w, fw in zip(windows, forward):
         head = (f"GNSS outage {w['start_s']:g}-{w['end_s']:g} s ({w['duration_s']:g} s, "
                 f"{w.get('gnss_removed', 0)} fixes removed)")
         if "horizontal_m" in w:
             h, v = w["horizontal_m"], w["vertical_m"]
-            lines.append(f"{head}: at its end horizontal {h['end']:.2f} m, vertical {v['end']:.2f} m; inside: "
-                         f"horizontal max {h['max']:.2f} m, RMSE {h['rmse']:.2f} m, vertical max {v['max']:.2f} m, "
-                         f"RMSE {v['rmse']:.2f} m ({w['epochs']} reference epochs)")
+            line = (f"{head}: at its end horizontal {h['end']:.2f} m, vertical {v['end']:.2f} m; inside: "
+                    f"horizontal max {h['max']:.2f} m, RMSE {h['rmse']:.2f} m, vertical max {v['max']:.2f} m, "
+                    f"RMSE {v['rmse']:.2f} m ({w['epochs']} reference epochs)")
+            if fw is not None and "horizontal_m" in fw:
+                line += (f"; forward filter: end {fw['horizontal_m']['end']:.2f} m, "
+                         f"RMSE {fw['horizontal_m']['rmse']:.2f} m horizontal")
+            lines.append(line)
         elif res.metrics is not None:
             lines.append(f"{head}: no reference epoch inside")
         else:
@@ -274,6 +288,9 @@ def compare(
     ] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the summary rows, the gate verdict and the exit "
                                            "code as JSON on stdout instead of the table.")] = False,
+    smooth: Annotated[bool, typer.Option(
+        "--smooth", help="Also smooth every run backwards (Rauch-Tung-Striebel): a second row per filter, "
+                         "<filter>+rts, beside the forward one.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars.")] = False,
 ) -> None:
     """Run several filters on each log; print the MAE/RMSE table; write summary.csv and the report.
@@ -306,7 +323,7 @@ def compare(
             with _Progress(quiet or json_out) as prog:
                 result = cmp.compare(logs, names, config=config, reference=reference, imu_topic=imu_topic,
                                      gnss_topic=gnss_topic, reference_topic=reference_topic, jobs=jobs,
-                                     out_dir=out, progress=prog)
+                                     out_dir=out, progress=prog, smooth=smooth)
         except BaseException:
             api.remove_created_dirs(created)
             raise

@@ -205,6 +205,7 @@ class _Task:
     reference_topic: str | None
     series: bool                # collect the plot series
     log_series: bool            # also the log's own series (the first filter of each log)
+    smooth: bool = False        # also smooth the run: a second row, "<filter>+rts"
 
 
 @dataclass(frozen=True)
@@ -213,6 +214,20 @@ class _Outcome:
     row: CompareRow
     series: RunSeries | None = None
     log_series: LogSeries | None = None
+    smoothed: tuple[CompareRow, RunSeries | None] | None = None    # the "<filter>+rts" row of a smoothed run
+
+    def rows(self) -> list[tuple[CompareRow, RunSeries | None]]:
+        """The forward row and, for a smoothed run, the smoothed one after it, with their series."""
+        return [(self.row, self.series)] + ([self.smoothed] if self.smoothed is not None else [])
+
+
+#: Suffix of the filter name in the row of a smoothed run (``ekf+rts``).
+SMOOTHED_SUFFIX = "+rts"
+
+
+def smoothed_name(filter_name: str) -> str:
+    """The row label of ``filter_name``'s smoothed run: ``"ekf"`` -> ``"ekf+rts"``."""
+    return filter_name + SMOOTHED_SUFFIX
 
 
 class _RecordingCache:
@@ -260,8 +275,9 @@ def _internal(exc: BaseException) -> str:
 
 
 def _failed(task: _Task, status: str, log_series: LogSeries | None = None) -> _Outcome:
-    return _Outcome(task.index, CompareRow(task.log, task.filter, " ".join(status.split()), None),
-                    None, log_series)
+    row = CompareRow(task.log, task.filter, " ".join(status.split()), None)
+    smoothed = (replace(row, filter=smoothed_name(task.filter)), None) if task.smooth else None
+    return _Outcome(task.index, row, None, log_series, smoothed)
 
 
 def _execute(task: _Task, cache: _RecordingCache, progress: ProgressFn | None) -> _Outcome:
@@ -278,24 +294,45 @@ def _execute(task: _Task, cache: _RecordingCache, progress: ProgressFn | None) -
         log_series = _log_series(rec) if task.log_series else None
         label = f"{Path(task.log).name} {task.filter}"
         filt = api.make_filter(task.filter, cfg)
-        res = engine.run(rec, cfg, filt, progress=(lambda f: progress(label, f)) if progress else None)
-        metrics = None
-        if rec.reference is not None:
-            metrics = compute_metrics(res.solution, rec.reference, filter_name=task.filter, log=task.log,
-                                      reference=rec.reference.source or "", runtime_s=res.runtime_s,
-                                      imu_samples=len(rec.imu), gnss_epochs=res.gnss_epochs,
-                                      gnss_rejected=res.gnss_rejected, gnss=rec.gnss,
-                                      lever_arm_m=cfg.gnss.lever_arm_m, outages=cfg.gnss.outages,
-                                      outages_removed=removed)
-        series = _run_series(rec, res, filt) if task.series else None
+        res = engine.run(rec, cfg, filt, progress=(lambda f: progress(label, f)) if progress else None,
+                         smooth=task.smooth)
+        # the forward row's time is the forward filter's; the smoothed row's includes the smoothing
+        forward_s = res.runtime_s - (res.smoothed.runtime_s if res.smoothed is not None else 0.0)
+
+        def metrics_of(sol, name: str, runtime_s: float) -> dict | None:
+            if rec.reference is None:
+                return None
+            return compute_metrics(sol, rec.reference, filter_name=name, log=task.log,
+                                   reference=rec.reference.source or "", runtime_s=runtime_s,
+                                   imu_samples=len(rec.imu), gnss_epochs=res.gnss_epochs,
+                                   gnss_rejected=res.gnss_rejected, gnss=rec.gnss,
+                                   lever_arm_m=cfg.gnss.lever_arm_m, outages=cfg.gnss.outages,
+                                   outages_removed=removed)
+
+        metrics = metrics_of(res.solution, task.filter, forward_s)
+        series = _run_series(rec, res.solution, res.diagnostics, filt) if task.series else None
+        smoothed = None
+        if res.smoothed is not None:
+            name = smoothed_name(task.filter)
+            sm_metrics = metrics_of(res.smoothed.solution, name, res.runtime_s)
+            sm_series = None
+            if task.series:      # the diagnostics are the forward filter's: plotted once, with its row
+                sm_series = replace(_run_series(rec, res.smoothed.solution, res.diagnostics, filt), adaptive=False,
+                                    diag_t_s=None, r_std_m=None, factors={})
+            smoothed = (sm_metrics, sm_series)
     except NavppError as exc:
         return _failed(task, str(exc), log_series)
     except Exception as exc:  # noqa: BLE001  (a bug in one filter must not lose the other runs)
         return _failed(task, _internal(exc), log_series)
     ref_source = (rec.reference.source or "reference") if rec.reference is not None else ""
-    row = CompareRow(task.log, task.filter, "ok", metrics, res.gnss_epochs, res.gnss_rejected, res.runtime_s,
-                     len(rec.imu), ref_source, tuple(rec.warnings) + tuple(res.warnings))
-    return _Outcome(task.index, row, series, log_series)
+    warnings = tuple(rec.warnings) + tuple(res.warnings)
+    row = CompareRow(task.log, task.filter, "ok", metrics, res.gnss_epochs, res.gnss_rejected, forward_s,
+                     len(rec.imu), ref_source, warnings)
+    sm_row = None
+    if smoothed is not None:
+        sm_row = (replace(row, filter=smoothed_name(task.filter), metrics=smoothed[0], runtime_s=res.runtime_s),
+                  smoothed[1])
+    return _Outcome(task.index, row, series, log_series, sm_row)
 
 
 # worker-process state (spawned processes only)
@@ -419,12 +456,12 @@ def _log_series(rec) -> LogSeries | None:
 FACTOR_PREFIXES = ("q_factor", "r_factor", "fading")
 
 
-def _run_series(rec, res, filt) -> RunSeries:
+def _run_series(rec, sol, diag, filt) -> RunSeries:
+    """The plot series of one solution (forward or smoothed) with the run's diagnostics."""
     import numpy as np
 
     from .metrics import associate, interpolate_solution, position_errors_enu
 
-    sol = res.solution
     anchor = _anchor(rec)
     si = _stride(len(sol.t), _TRACK_POINTS)
     if anchor is not None:
@@ -445,7 +482,6 @@ def _run_series(rec, res, filt) -> RunSeries:
             h = np.hypot(err[:, 0], err[:, 1])
             err_t, err_h = minmax_decimate(assoc.t, h, _ERROR_BINS)
             cdf = np.quantile(h, np.linspace(0.0, 1.0, CDF_POINTS))
-    diag = res.diagnostics
     factors = {k: np.asarray(v, dtype=float).reshape(len(diag.t), -1)[:, 0]
                for k, v in diag.adaptive.items()
                if k.startswith(FACTOR_PREFIXES) and np.asarray(v).reshape(len(diag.t), -1).shape[1] == 1}
@@ -534,7 +570,7 @@ class CompareResult:
 def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str | Path | None = None,
             reference: str | Path | None = None, jobs: int = 1, out_dir: str | Path | None = None,
             imu_topic: str | None = None, gnss_topic: str | None = None, reference_topic: str | None = None,
-            report: bool = True, progress: ProgressFn | None = None) -> CompareResult:
+            report: bool = True, progress: ProgressFn | None = None, smooth: bool = False) -> CompareResult:
     """Run every filter on every log; rows in (log, filter) order.
 
     Parameters
@@ -553,6 +589,10 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
     report : collect the plot series and, with ``out_dir``, write the report.
     progress : ``progress(stage, fraction)``: stages ``"reading <log>"``, ``"<log> <filter>"`` and
         ``"all runs"`` (fraction of runs finished).
+    smooth : also smooth every run backwards (Rauch-Tung-Striebel): each (log, filter) gives two
+        rows, the forward filter's (``runtime_s`` its own time) and ``"<filter>+rts"`` (the
+        smoothed solution; ``runtime_s`` forward plus smoothing), side by side in the summary,
+        the report and its plots.
 
     Returns
     -------
@@ -593,13 +633,14 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
             api.make_filter(n, cfg)
     tasks = [_Task(i * len(names) + j, log, name, None if config is None else str(config),
                    None if reference is None else str(reference), imu_topic, gnss_topic, reference_topic,
-                   report, report and j == 0)
+                   report, report and j == 0, bool(smooth))
              for i, log in enumerate(logs) for j, name in enumerate(names)]
     workers = min(jobs, len(tasks))
     out = Path(out_dir) if out_dir is not None else None
     # created (and proved writable) before any run; removed again if the comparison fails
     created = api.prepare_out_dir(out, "out_dir") if out is not None else []
-    draw = _FigurePlan(logs, names) if report and out is not None else None
+    labels = [x for n in names for x in ((n, smoothed_name(n)) if smooth else (n,))]
+    draw = _FigurePlan(logs, labels) if report and out is not None else None
     try:
         if workers == 1:
             outcomes, plots = _run_serial(tasks, progress, draw)
@@ -608,9 +649,9 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
     except BaseException:
         api.remove_created_dirs(created)
         raise
-    rows = tuple(o.row for o in outcomes)
+    rows = tuple(row for o in outcomes for row, _ in o.rows())
     log_series = {o.row.log: o.log_series for o in outcomes if tasks[o.index].log_series}
-    run_series = {(o.row.log, o.row.filter): o.series for o in outcomes if o.series is not None}
+    run_series = {(row.log, row.filter): series for o in outcomes for row, series in o.rows() if series is not None}
     files: list[Path] = []
     if out is not None:
         files.append(write_summary(out / "summary.csv", rows))
@@ -634,7 +675,7 @@ class _FigurePlan:
         from .report import FigureJob
 
         log_series = next((o.log_series for o in outcomes if o.log_series is not None), None)
-        runs = {o.row.filter: o.series for o in outcomes if o.row.ok and o.series is not None}
+        runs = {row.filter: series for o in outcomes for row, series in o.rows() if row.ok and series is not None}
         return FigureJob(log, self.slugs[log], log_series, runs, self.colors)
 
 

@@ -7,7 +7,7 @@ One TOML file, every field optional (see INTERFACES.md, "Configuration (TOML)"):
     [time]     base, source
     [init]     method, roll_deg, pitch_deg, heading_deg, ...
     [vehicle]  type
-    [output]   rate_hz, formats
+    [output]   rate_hz, formats, smooth
     [filter.<name>]  each filter's own options, kept raw and validated by that filter
 
 This module is the only place where datasheet units (deg/sqrt(h), deg/h, m/s/sqrt(h), mg)
@@ -533,14 +533,20 @@ class OutputConfig:
         trajectory.kml; diagnostics.csv (and metrics with a reference) are always written.
         TOML may give a list or one comma-separated string (``"csv,mcap"``); ``navpp
         process --format`` overrides it.
+    smooth : bool, default false.  Smooth the forward run backwards (Rauch-Tung-Striebel):
+        the written trajectory is the smoothed one, the forward one is kept beside it
+        (``trajectory_forward.csv``) and the metrics show both; ``--smooth`` turns it on.
     """
 
     rate_hz: float | None = None
     formats: tuple[str, ...] = ("csv",)
+    smooth: bool = False
 
     def __post_init__(self) -> None:
         _fix_optional_float(self, "output", "rate_hz", minimum=0.0, strict_min=True)
         _set(self, "formats", parse_formats(self.formats, "[output] formats"))
+        if not isinstance(self.smooth, bool):
+            raise ConfigError(f"[output] smooth must be true or false, got {self.smooth!r}")
 
 
 def parse_formats(value: object, what: str) -> tuple[str, ...]:

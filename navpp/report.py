@@ -140,9 +140,21 @@ def _png(fig) -> bytes:
 
 
 def _colors(filters: Sequence[str]) -> dict[str, str]:
+    """A colour per filter; a smoothed run (``<filter>+rts``) shares its forward filter's colour
+    (:func:`_line` tells them apart by the line style)."""
+    from .comparison import SMOOTHED_SUFFIX
+
     palette = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink",
                "tab:olive", "tab:cyan"]
-    return {f: palette[i % len(palette)] for i, f in enumerate(filters)}
+    bases = list(dict.fromkeys(f.removesuffix(SMOOTHED_SUFFIX) for f in filters))
+    return {f: palette[bases.index(f.removesuffix(SMOOTHED_SUFFIX)) % len(palette)] for f in filters}
+
+
+def _line(name: str, runs: Mapping[str, RunSeries]) -> str:
+    """Line style: dashed for a forward run whose smoothed run is plotted too, else solid."""
+    from .comparison import smoothed_name
+
+    return "--" if smoothed_name(name) in runs else "-"
 
 
 def _trajectory_figure(label: str, slug: str, log_series: LogSeries | None, runs: Mapping[str, RunSeries],
@@ -161,7 +173,7 @@ def _trajectory_figure(label: str, slug: str, log_series: LogSeries | None, runs
         ax.set_title(f"{label}: trajectories, local ENU about the first GNSS fix\n"
                      f"({lat:.6f}°, {lon:.6f}°, {alt:.1f} m)", fontsize=10)
     for name, s in runs.items():
-        ax.plot(s.east_m, s.north_m, "-", lw=1.0, color=colors[name], label=name)
+        ax.plot(s.east_m, s.north_m, _line(name, runs), lw=1.0, color=colors[name], label=name)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("east, m")
     ax.set_ylabel("north, m")
@@ -180,7 +192,7 @@ def _error_time_figure(label: str, slug: str, runs: Mapping[str, RunSeries], col
     fig = Figure(figsize=(8.5, 4.2), layout="constrained")
     ax = fig.add_subplot()
     for name, s in with_err.items():
-        ax.plot(s.err_t_s, s.err_h_m, "-", lw=0.8, color=colors[name], label=name)
+        ax.plot(s.err_t_s, s.err_h_m, _line(name, runs), lw=0.8, color=colors[name], label=name)
     ax.set_xlabel("time since log start, s")
     ax.set_ylabel("horizontal position error, m")
     ax.set_title(f"{label}: horizontal error against the reference", fontsize=10)
@@ -201,7 +213,8 @@ def _error_cdf_figure(label: str, slug: str, runs: Mapping[str, RunSeries], colo
     fig = Figure(figsize=(6.5, 4.5), layout="constrained")
     ax = fig.add_subplot()
     for name, s in with_err.items():
-        ax.plot(s.cdf_m, np.linspace(0.0, 1.0, len(s.cdf_m)), "-", lw=1.2, color=colors[name], label=name)
+        ax.plot(s.cdf_m, np.linspace(0.0, 1.0, len(s.cdf_m)), _line(name, runs), lw=1.2, color=colors[name],
+                label=name)
     ax.axhline(0.95, color="0.5", lw=0.6, ls="--", label="95 %")
     ax.set_xlabel("horizontal position error, m")
     ax.set_ylabel("fraction of reference epochs, -")

@@ -39,6 +39,10 @@ FLU (x forward, y left, z up).
   ``base_link``, one per GNSS epoch the filter processed
   (:class:`~navpp.engine.BiasHistory`): the estimated gyro (rad/s) and accelerometer (m/s²)
   biases, body FLU.
+- ``/navpp/forward/fix`` and ``/navpp/forward/odometry`` (only for a smoothed run, ``forward``
+  given): the forward filter's solution as ``/navpp/fix`` and ``/navpp/odometry`` carry it,
+  same frames and anchor, so the forward and smoothed tracks overlay in Foxglove; the main
+  topics and the biases then carry the smoothed solution.
 - ``/navpp/diagnostics`` ``navpp_msgs/msg/FilterDiagnostics``
   (:data:`~navpp.io.roswrite.FILTER_DIAGNOSTICS_MSGDEF`), frame ``map``, one per GNSS epoch
   (:class:`~navpp.engine.Diagnostics`): ``innovation_enu`` (m), ``nis``, ``accepted``,
@@ -125,6 +129,8 @@ TOPIC_TF = "/tf"
 TOPIC_BIAS_GYRO = "/navpp/bias/gyro"
 TOPIC_BIAS_ACCEL = "/navpp/bias/accel"
 TOPIC_DIAGNOSTICS = "/navpp/diagnostics"
+TOPIC_FORWARD_FIX = "/navpp/forward/fix"
+TOPIC_FORWARD_ODOMETRY = "/navpp/forward/odometry"
 #: Topics of the solution -> ROS 2 message type.
 TOPICS = {
     TOPIC_FIX: "sensor_msgs/msg/NavSatFix",
@@ -134,6 +140,12 @@ TOPICS = {
     TOPIC_BIAS_ACCEL: "geometry_msgs/msg/Vector3Stamped",
     TOPIC_DIAGNOSTICS: roswrite.FILTER_DIAGNOSTICS_TYPE,
 }
+#: Topics a smoothed run adds (the forward filter's solution) -> ROS 2 message type.
+FORWARD_TOPICS = {
+    TOPIC_FORWARD_FIX: "sensor_msgs/msg/NavSatFix",
+    TOPIC_FORWARD_ODOMETRY: "nav_msgs/msg/Odometry",
+}
+_ALL_TOPICS = {**TOPICS, **FORWARD_TOPICS}
 #: Topics of the input when it is encoded from the Recording (those of ``write_mcap_ros2``).
 EMBED_IMU_TOPIC = "/imu/data"
 EMBED_GNSS_TOPIC = "/gnss/fix"
@@ -224,14 +236,37 @@ def _ros2_stream(topic: str, msgtype: str, stamps: np.ndarray,
 
 
 def _solution_streams(solution: Solution, recording: Recording, diagnostics: Any,
-                      biases: Any) -> tuple[list[_Stream], frames.Anchor]:
+                      biases: Any, forward: Solution | None = None) -> tuple[list[_Stream], frames.Anchor]:
+    if len(solution) == 0:
+        raise ValueError("the solution is empty: nothing to write")
+    anchor = frames.anchor_for(solution, recording)
+    streams = _pose_streams(solution, recording, anchor, TOPIC_FIX, TOPIC_ODOMETRY, tf=True)
+    if forward is not None:
+        streams += _pose_streams(forward, recording, anchor, TOPIC_FORWARD_FIX, TOPIC_FORWARD_ODOMETRY, tf=False)
+    if biases is not None:
+        b_stamps = roswrite.stamps_ns(recording, biases.t)
+        gyro = np.asarray(biases.gyro, dtype=np.float64)
+        accel = np.asarray(biases.accel, dtype=np.float64)
+        streams.append(_ros2_stream(TOPIC_BIAS_GYRO, TOPICS[TOPIC_BIAS_GYRO], b_stamps,
+                                    lambda st, r: roswrite.pack_vector3_stamped(
+                                        st, gyro[r], encoding="cdr", frame_id=BODY_FRAME)))
+        streams.append(_ros2_stream(TOPIC_BIAS_ACCEL, TOPICS[TOPIC_BIAS_ACCEL], b_stamps,
+                                    lambda st, r: roswrite.pack_vector3_stamped(
+                                        st, accel[r], encoding="cdr", frame_id=BODY_FRAME)))
+    if diagnostics is not None:
+        streams.append(_diagnostics_stream(recording, diagnostics))
+    return streams, anchor
+
+
+def _pose_streams(solution: Solution, recording: Recording, anchor: frames.Anchor, fix_topic: str,
+                  odom_topic: str, tf: bool) -> list[_Stream]:
+    """NavSatFix, Odometry (and with ``tf`` the map -> base_link transform) of every row."""
     n = len(solution)
     if n == 0:
         raise ValueError("the solution is empty: nothing to write")
     if solution.t0_ns not in (0, recording.t0_ns):
         raise ValueError(f"solution.t0_ns {solution.t0_ns} differs from recording.t0_ns {recording.t0_ns}")
     stamps = roswrite.stamps_ns(recording, solution.t)
-    anchor = frames.anchor_for(solution, recording)
     pos_map = anchor.enu(solution.lat_deg, solution.lon_deg, solution.alt)
     quat = frames.quat_xyzw(frames.body_to_map(solution, anchor))
     vel_b = frames.velocity_body(solution)
@@ -246,27 +281,16 @@ def _solution_streams(solution: Solution, recording: Recording, diagnostics: Any
     zeros3 = np.zeros((1, 3))
 
     streams = [
-        _ros2_stream(TOPIC_FIX, TOPICS[TOPIC_FIX], stamps, lambda st, r: roswrite.pack_navsatfix(
+        _ros2_stream(fix_topic, _ALL_TOPICS[fix_topic], stamps, lambda st, r: roswrite.pack_navsatfix(
             st, lat[r], lon[r], alt[r], encoding="cdr", frame_id=BODY_FRAME, cov_diag=var[r])),
-        _ros2_stream(TOPIC_ODOMETRY, TOPICS[TOPIC_ODOMETRY], stamps, lambda st, r: roswrite.pack_odometry(
+        _ros2_stream(odom_topic, _ALL_TOPICS[odom_topic], stamps, lambda st, r: roswrite.pack_odometry(
             st, pos_map[r], quat[r], vel_b[r], np.broadcast_to(zeros3, (st.size, 3)), encoding="cdr",
             frame_id=MAP_FRAME, child_frame_id=BODY_FRAME, pose_var=pose_var[r], twist_var=twist_var)),
-        _ros2_stream(TOPIC_TF, TOPICS[TOPIC_TF], stamps, lambda st, r: roswrite.pack_tf_message(
-            st, pos_map[r], quat[r], encoding="cdr", frame_id=MAP_FRAME, child_frame_id=BODY_FRAME)),
     ]
-    if biases is not None:
-        b_stamps = roswrite.stamps_ns(recording, biases.t)
-        gyro = np.asarray(biases.gyro, dtype=np.float64)
-        accel = np.asarray(biases.accel, dtype=np.float64)
-        streams.append(_ros2_stream(TOPIC_BIAS_GYRO, TOPICS[TOPIC_BIAS_GYRO], b_stamps,
-                                    lambda st, r: roswrite.pack_vector3_stamped(
-                                        st, gyro[r], encoding="cdr", frame_id=BODY_FRAME)))
-        streams.append(_ros2_stream(TOPIC_BIAS_ACCEL, TOPICS[TOPIC_BIAS_ACCEL], b_stamps,
-                                    lambda st, r: roswrite.pack_vector3_stamped(
-                                        st, accel[r], encoding="cdr", frame_id=BODY_FRAME)))
-    if diagnostics is not None:
-        streams.append(_diagnostics_stream(recording, diagnostics))
-    return streams, anchor
+    if tf:
+        streams.append(_ros2_stream(TOPIC_TF, TOPICS[TOPIC_TF], stamps, lambda st, r: roswrite.pack_tf_message(
+            st, pos_map[r], quat[r], encoding="cdr", frame_id=MAP_FRAME, child_frame_id=BODY_FRAME)))
+    return streams
 
 
 def _diagnostics_stream(recording: Recording, diagnostics: Any) -> _Stream:
@@ -809,7 +833,8 @@ def _write(path: str | os.PathLike[str], streams: Sequence[_Stream], metadata: d
 
 def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, recording: Recording,
                           diagnostics: Any = None, biases: Any = None, embed_input: bool = False,
-                          input_log: str | os.PathLike[str] | None = None, filter_name: str = "") -> None:
+                          input_log: str | os.PathLike[str] | None = None, filter_name: str = "",
+                          forward: Solution | None = None) -> None:
     """Write ``trajectory.mcap``: the solution, biases and filter diagnostics as ROS 2 messages.
 
     See the module docstring for the topics, frames, units and covariances.
@@ -828,6 +853,9 @@ def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, r
         ``input_log``, else encoded from ``recording``).
     input_log : the input log's path (used with ``embed_input``).
     filter_name : recorded in the file's ``navpp`` metadata.
+    forward : for a smoothed ``solution``, the forward filter's solution (same rows' time base):
+        written to ``/navpp/forward/fix`` and ``/navpp/forward/odometry``; the metadata's
+        ``solution`` says ``smoothed`` (else ``forward``).
 
     Raises
     ------
@@ -837,11 +865,12 @@ def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, r
     navpp.errors.InputError
         ``input_log`` cannot be read.
     """
-    streams, anchor = _solution_streams(solution, recording, diagnostics, biases)
+    streams, anchor = _solution_streams(solution, recording, diagnostics, biases, forward)
     if embed_input:
         streams = _input_streams(recording, input_log) + streams
     metadata = {
         "filter": filter_name,
+        "solution": "smoothed (Rauch-Tung-Striebel)" if forward is not None else "forward",
         "source": str(recording.source),
         "time_base": recording.time_base,
         "t0_ns": str(int(recording.t0_ns)),

@@ -455,7 +455,11 @@ def metrics_markdown(metrics: Mapping[str, Any]) -> str:
         f"- IMU samples: {m.get('imu_samples', 0)}; GNSS epochs: {m.get('gnss_epochs', 0)}; "
         f"GNSS rejected: {m.get('gnss_rejected', 0)}",
         "",
-        "## Position error (m)",
+    ]
+    if m.get("forward"):
+        out += _forward_smoothed_table(m)
+    out += [
+        "## Position error (m)" + (" of the smoothed solution" if m.get("forward") else ""),
         "",
         "Estimate minus reference in the local ENU frame of each reference point: "
         "east = longitude error, north = latitude error, up = height error, in metres; "
@@ -485,6 +489,37 @@ def metrics_markdown(metrics: Mapping[str, Any]) -> str:
         out += _outage_table(m["outages"])
     out += ["", f"GNSS epochs rejected by the filter: {m.get('gnss_rejected', 0)}", ""]
     return "\n".join(out)
+
+
+def _forward_smoothed_table(m: Mapping[str, Any]) -> list[str]:
+    """The "Forward and smoothed" section of a smoothed run's ``metrics.md``: the key RMSEs of
+    both solutions side by side, with the ratio smoothed / forward."""
+    f = m["forward"]
+    rows: list[tuple[str, Any, Any]] = []
+    for group, unit, axes in (("position_m", "m", ("east", "north", "up", "horizontal", "3d")),
+                              ("velocity_mps", "m/s", ("east", "north", "up", "horizontal")),
+                              ("attitude_deg", "deg", ("roll", "pitch", "heading"))):
+        for axis in axes:
+            a, b = (f.get(group) or {}).get(axis), (m.get(group) or {}).get(axis)
+            if a is not None and b is not None:
+                what = {"position_m": "position", "velocity_mps": "velocity", "attitude_deg": "attitude"}[group]
+                rows.append((f"{what} {axis} RMSE ({unit})", a.get("rmse"), b.get("rmse")))
+    for wf, ws in zip(f.get("outages") or [], m.get("outages") or []):
+        if "horizontal_m" in wf and "horizontal_m" in ws:
+            span = f"{float(wf['start_s']):g}-{float(wf['end_s']):g} s"
+            rows.append((f"outage {span}: horizontal RMSE (m)", wf["horizontal_m"]["rmse"],
+                         ws["horizontal_m"]["rmse"]))
+            rows.append((f"outage {span}: horizontal error at end (m)", wf["horizontal_m"]["end"],
+                         ws["horizontal_m"]["end"]))
+    out = ["## Forward and smoothed", "",
+           (f"The trajectory written is the forward filter's run smoothed backwards (Rauch-Tung-Striebel, "
+            f"{m.get('smoother_nodes', '?')} nodes, {_num(m.get('smoothing_s'), 3)} s); the forward solution is in "
+            "trajectory_forward.csv.  Errors against the reference; ratio = smoothed / forward."), "",
+           "| | forward | smoothed | ratio |", "|---|---:|---:|---:|"]
+    for name, a, b in rows:
+        ratio = float(b) / float(a) if a is not None and b is not None and float(a) > 0 else None
+        out.append(f"| {name} | {_num(a)} | {_num(b)} | {_num(ratio, 2)} |")
+    return out + [""]
 
 
 def _outage_table(windows: Any) -> list[str]:
