@@ -1,6 +1,10 @@
 """End-to-end speed of `navpp process` on a simulated 1-hour, 125 Hz IMU + 5 Hz GNSS CSV log.
 
-Usage:  python benchmarks/bench_process.py [--duration 3600] [--filter ekf] [--workdir DIR]
+Usage:  python benchmarks/bench_process.py [--duration 3600] [--filter ekf] [--smooth] [--workdir DIR]
+
+With ``--smooth`` the runs also smooth backwards (RTS, issue 7): the processing figure then
+includes the smoothing, which is printed on its own line with its share of the forward filter's
+time and the memory its stored forward run took.
 
 Simulates the log once (cached in the work directory), warms the numba compile cache in a
 first run, then measures in a fresh process: reading + validation, processing (alignment +
@@ -83,7 +87,7 @@ def reset_peak_memory() -> float | None:
     return _vm_rss_mb()
 
 
-def measure(log: Path, filter_name: str, out: Path) -> dict:
+def measure(log: Path, filter_name: str, out: Path, smooth: bool = False) -> dict:
     import gc
 
     t_import = time.perf_counter()
@@ -96,21 +100,24 @@ def measure(log: Path, filter_name: str, out: Path) -> dict:
     t0 = time.perf_counter()
     rec = api.read_log(log, cfg)
     t1 = time.perf_counter()
-    res = engine.run(rec, cfg, filt)
+    res = engine.run(rec, cfg, filt, smooth=smooth)
     t2 = time.perf_counter()
+    smoothing = ({"smoothing_s": res.smoothed.runtime_s, "store_mb": res.smoothed.store_mb,
+                  "nodes": res.smoothed.nodes} if smooth else {})
     out.mkdir(parents=True, exist_ok=True)
-    writers.write_trajectory_csv(out / "trajectory.csv", res.solution, t0_s=rec.t0_ns * 1e-9)
+    sol = res.smoothed.solution if smooth else res.solution
+    writers.write_trajectory_csv(out / "trajectory.csv", sol, t0_s=rec.t0_ns * 1e-9)
     t3 = time.perf_counter()
     peak_rpw, source = peak_memory_mb()
     n, gnss_epochs = len(rec.imu), res.gnss_epochs
 
     # the whole `navpp process` (read, filter, metrics against reference.csv, write all files)
-    del rec, res, filt
+    del rec, res, filt, sol
     gc.collect()
     reset_to = reset_peak_memory()
     with tempfile.TemporaryDirectory(prefix="navpp-bench-") as tmp:
         t4 = time.perf_counter()
-        full = api.process(log, filter_name=filter_name, out_dir=Path(tmp) / "out", write=True)
+        full = api.process(log, filter_name=filter_name, out_dir=Path(tmp) / "out", write=True, smooth=smooth)
         t5 = time.perf_counter()
         has_metrics = full.metrics is not None
         del full
@@ -119,18 +126,19 @@ def measure(log: Path, filter_name: str, out: Path) -> dict:
             "process_s": t2 - t1, "write_s": t3 - t2, "us_per_sample": (t2 - t1) / n * 1e6,
             "full_s": t5 - t4, "full_has_metrics": has_metrics,
             "peak_read_process_write_mb": peak_rpw, "peak_full_mb": peak_full, "peak_source": source,
-            "peak_reset": reset_to}
+            "peak_reset": reset_to, **smoothing}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=3600.0)
     ap.add_argument("--filter", default="ekf")
+    ap.add_argument("--smooth", action="store_true", help="also smooth backwards (RTS)")
     ap.add_argument("--workdir", type=Path, default=Path(tempfile.gettempdir()) / "navpp-bench")
     ap.add_argument("--measure", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.measure:
-        print(json.dumps(measure(args.measure, args.filter, args.workdir / f"out-{args.filter}")))
+        print(json.dumps(measure(args.measure, args.filter, args.workdir / f"out-{args.filter}", args.smooth)))
         return
 
     log = args.workdir / f"sim-{int(args.duration)}s"
@@ -140,6 +148,7 @@ def main() -> None:
         api.simulate_log(log, duration_s=args.duration, imu_rate_hz=125.0, gnss_rate_hz=5.0, seed=7)
         print(f"simulated {args.duration:.0f} s log in {time.perf_counter() - t:.1f} s -> {log}")
     cmd = [sys.executable, __file__, "--measure", str(log), "--filter", args.filter, "--workdir", str(args.workdir)]
+    cmd += ["--smooth"] if args.smooth else []
     for attempt in ("warm-up", "measure"):                         # the first run warms the numba cache
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0:
@@ -156,6 +165,10 @@ def main() -> None:
     print(f"import navpp      {r['import_s']:7.3f} s")
     print(f"read + validate   {r['read_s']:7.3f} s")
     print(f"process           {r['process_s']:7.3f} s   ({r['us_per_sample']:.2f} us per IMU sample)")
+    if "smoothing_s" in r:
+        fwd = r["process_s"] - r["smoothing_s"]
+        print(f"  of which RTS    {r['smoothing_s']:7.3f} s   ({100.0 * r['smoothing_s'] / fwd:.0f}% of the forward "
+              f"run's {fwd:.3f} s; {r['nodes']} nodes, stored forward run {r['store_mb']:.0f} MB)")
     print(f"read + process    {r['read_s'] + r['process_s']:7.3f} s")
     print(f"write trajectory  {r['write_s']:7.3f} s   ({r['imu_samples']} rows)")
     print(f"full navpp process{r['full_s']:7.3f} s   (read, filter, "
