@@ -3,6 +3,7 @@ model; gating; options validation."""
 
 import numpy as np
 import pytest
+from scenarios import linear_problem
 
 from navpp.errors import ConfigError
 from navpp.filters import FILTERS, GaussianState, get_filter
@@ -21,18 +22,7 @@ def _kalman_reference(x, P, Phi, Q, z, H, R):
 
 
 def _problem(seed=1, n=4, m=2):
-    rng = np.random.default_rng(seed)
-    dt = 0.5
-    Phi = np.eye(n) + np.diag(np.full(n - 1, dt), 1)
-    A = rng.normal(size=(n, n))
-    Q = 0.01 * A @ A.T + 1e-3 * np.eye(n)
-    H = rng.normal(size=(m, n))
-    R = np.diag(rng.uniform(0.5, 2.0, m))
-    x0 = rng.normal(size=n)
-    B = rng.normal(size=(n, n))
-    P0 = B @ B.T + np.eye(n)
-    zs = [rng.normal(size=m) * 3 for _ in range(8)]
-    return Phi, Q, H, R, x0, P0, zs
+    return linear_problem(seed, n, m, steps=8)
 
 
 @pytest.mark.parametrize("name", sorted(FILTERS))

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scenarios import gnss_jump_recording
 from typer.testing import CliRunner
 
 from navpp import api, engine
@@ -221,13 +222,7 @@ def test_adaptive_r_is_not_polluted_by_outliers(outlier_drive, name):
 def jump_drive():
     """A 240 s drive whose GNSS jumps 20 m east for good at t = 150 s: fixes are rejected for
     ``reanchor_after_s`` and then forced through the gate."""
-    sim = simulate(SimulationSpec(duration_s=240.0, still_s=30.0, seed=8))
-    rec = sim.recording()
-    g = rec.gnss
-    lon = np.array(g.lon_deg, dtype=float)
-    step = g.t >= 150.0
-    lon[step] += np.degrees(20.0 / (6.39e6 * np.cos(np.radians(g.lat_deg[step]))))
-    return replace(rec, gnss=replace(g, lon_deg=lon))
+    return gnss_jump_recording()
 
 
 def test_forced_admission_is_reported(jump_drive):

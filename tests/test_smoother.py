@@ -3,6 +3,7 @@ on a linear model (the oracle); rejected fixes, re-anchored fixes; the IMU-rate 
 
 import numpy as np
 import pytest
+from scenarios import linear_problem
 
 from navpp.filters import FILTERS, GaussianState
 from navpp.filters.linear import LinearMeasurement, LinearModel
@@ -10,18 +11,7 @@ from navpp.filters.smoother import ForwardStore, rts_smooth, smooth_arrays
 
 
 def _problem(seed=3, n=4, m=2, steps=12):
-    rng = np.random.default_rng(seed)
-    dt = 0.5
-    Phi = np.eye(n) + np.diag(np.full(n - 1, dt), 1)
-    A = rng.normal(size=(n, n))
-    Q = 0.01 * A @ A.T + 1e-3 * np.eye(n)
-    H = rng.normal(size=(m, n))
-    R = np.diag(rng.uniform(0.5, 2.0, m))
-    x0 = rng.normal(size=n)
-    B = rng.normal(size=(n, n))
-    P0 = B @ B.T + np.eye(n)
-    zs = [rng.normal(size=m) * 3 for _ in range(steps)]
-    return Phi, Q, H, R, x0, P0, zs
+    return linear_problem(seed, n, m, steps)
 
 
 def _textbook_rts(x0, P0, Phi, Q, H, R, zs, skip=()):

@@ -5,11 +5,11 @@ own contract (trajectory_forward.csv, metrics["forward"], MCAP forward topics, c
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 
 import numpy as np
 import pandas as pd
 import pytest
+from scenarios import gnss_jump_recording
 from typer.testing import CliRunner
 
 from navpp import api, engine
@@ -68,7 +68,7 @@ def test_smoothing_bridges_the_outage(drive300):
     _, e_s, _ = _errors(sm, sm.solution)
     h_f, h_s = np.hypot(e_f[:, 0], e_f[:, 1]), np.hypot(e_s[:, 0], e_s[:, 1])
     w = (t >= 150.0) & (t <= 180.0)
-    rms = lambda a: float(np.sqrt(np.mean(a * a)))  # noqa: E731
+    rms = lambda a: float(np.sqrt(np.mean(a * a)))
     assert rms(h_s[w]) <= 0.3 * rms(h_f[w]), (rms(h_s[w]), rms(h_f[w]))
     assert rms(h_s) < 0.8 * rms(h_f)
     assert rms(e_s[:, 2]) < rms(e_f[:, 2])
@@ -113,13 +113,7 @@ def test_every_filter_smooths(sim_log_dir, name):
 def test_no_information_is_carried_back_across_a_forced_fix():
     """GNSS jumps 20 m east for good at t = 150 s; after 10 s of rejections the fix is forced.
     Carrying that jump back would drag the trajectory before 150 s east; it must not."""
-    sim = simulate(SimulationSpec(duration_s=240.0, still_s=30.0, seed=8))
-    rec = sim.recording()
-    g = rec.gnss
-    lon = np.array(g.lon_deg, dtype=float)
-    step = g.t >= 150.0
-    lon[step] += np.degrees(20.0 / (6.39e6 * np.cos(np.radians(g.lat_deg[step]))))
-    rec = replace(rec, gnss=replace(g, lon_deg=lon))
+    rec = gnss_jump_recording(20.0, at_s=150.0)
     cfg = config_from_dict({"imu": {"preset": "automotive"}}, "test")
     res = engine.run(rec, cfg, api.make_filter("ekf", cfg), smooth=True)
     assert res.diagnostics.forced.any() and res.smoothed.breaks >= 1

@@ -41,17 +41,20 @@ def quat_conj(q):
     return np.array([q[0], -q[1], -q[2], -q[3]])
 
 
+@njit(cache=True, inline="always")
+def rotvec_quat_coeffs(x, y, z):
+    """``(c, s)`` of the quaternion ``[c, s x, s y, s z]`` of the rotation vector (x, y, z) rad."""
+    a = np.sqrt(x * x + y * y + z * z)
+    if a < 1e-8:
+        # series to 4th order keeps full double precision for tiny angles
+        return 1.0 - a * a / 8.0, 0.5 - a * a / 48.0
+    return np.cos(0.5 * a), np.sin(0.5 * a) / a
+
+
 @njit(cache=True)
 def rotvec_to_quat(phi):
     """Exact quaternion of the rotation vector ``phi`` (rad)."""
-    a = np.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])
-    if a < 1e-8:
-        # series to 4th order keeps full double precision for tiny angles
-        s = 0.5 - a * a / 48.0
-        c = 1.0 - a * a / 8.0
-    else:
-        s = np.sin(0.5 * a) / a
-        c = np.cos(0.5 * a)
+    c, s = rotvec_quat_coeffs(phi[0], phi[1], phi[2])
     return np.array([c, s * phi[0], s * phi[1], s * phi[2]])
 
 

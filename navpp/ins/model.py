@@ -35,7 +35,14 @@ import numpy as np
 from numba import njit
 
 from .. import geodesy
-from .attitude import quat_conj, quat_mul, quat_to_dcm, quat_to_rotvec, rotvec_to_quat
+from .attitude import (
+    quat_conj,
+    quat_mul,
+    quat_to_dcm,
+    quat_to_rotvec,
+    rotvec_quat_coeffs,
+    rotvec_to_quat,
+)
 from .strapdown import PATH_SIZE, _nav_rates, radii
 from .strapdown import integrate as _integrate_nominal
 
@@ -106,7 +113,7 @@ class NoiseModel:
     @classmethod
     def from_datasheet(cls, gyro_arw: float, accel_vrw: float, gyro_bias_sigma: float,
                        gyro_bias_instability: float, gyro_bias_tau: float, accel_bias_sigma: float,
-                       accel_bias_instability: float, accel_bias_tau: float) -> "NoiseModel":
+                       accel_bias_instability: float, accel_bias_tau: float) -> NoiseModel:
         """From SI datasheet figures (:class:`navpp.config.ImuNoise` fields)."""
         qg, tg = cls.bias_process(gyro_bias_sigma, gyro_bias_instability, gyro_bias_tau)
         qa, ta = cls.bias_process(accel_bias_sigma, accel_bias_instability, accel_bias_tau)
@@ -325,13 +332,7 @@ def _propagate_points(x, dX, t, gyro, accel, t_start, t_end, out, record):
 def _plus_row(row, c):
     """``row ⊞ c`` in place for a recorded path row (q_nb, vel_enu, lat, lon, h): the same
     arithmetic as :func:`plus`, without temporaries (it runs once per IMU sample)."""
-    a = np.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
-    if a < 1e-8:
-        s = 0.5 - a * a / 48.0
-        w = 1.0 - a * a / 8.0
-    else:
-        s = np.sin(0.5 * a) / a
-        w = np.cos(0.5 * a)
+    w, s = rotvec_quat_coeffs(c[0], c[1], c[2])
     p0, p1, p2, p3 = w, s * c[0], s * c[1], s * c[2]
     q0, q1, q2, q3 = row[0], row[1], row[2], row[3]
     row[0] = p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3
