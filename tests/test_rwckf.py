@@ -52,7 +52,9 @@ def _filter(**options):
 @pytest.mark.parametrize("covariance", ["random", "uniform"])
 def test_epoch_weights_give_the_papers_moments(covariance, monkeypatch):
     """With a fixed weight vector beta, the prior and the measurement moments are eqs 24-28,
-    written here directly from the cubature points (centred on the beta means)."""
+    written here directly from the cubature points: the means beta-weighted; the covariances
+    beta-weighted about the beta means ("random", the paper's literal reading) or uniform about
+    the uniform means ("uniform": the CKF's covariances)."""
     model, H, R, x0, P0, _ = _linear_problem()
     n, m = 4, 8
     beta = DirichletWeights().draw(np.random.default_rng(9), m)
@@ -64,20 +66,19 @@ def test_epoch_weights_give_the_papers_moments(covariance, monkeypatch):
     post, inn = filt.update(prior, model, LinearMeasurement(1.0, z, H, R))
 
     uni = np.full(m, 1 / m)
-    wc = beta if covariance == "random" else uni
+    wc = beta if covariance == "random" else uni         # the covariance weights and their centre
     S0 = np.linalg.cholesky(P0)
     X = np.vstack([x0 + np.sqrt(n) * S0[:, i] for i in range(n)] + [x0 - np.sqrt(n) * S0[:, i] for i in range(n)])
     Xs = X @ model.Phi.T
     x_pred = beta @ Xs                                                  # eq 24
-    P_pred = (Xs - x_pred).T @ np.diag(wc) @ (Xs - x_pred) + model.Q    # eq 25 (centred)
+    P_pred = (Xs - wc @ Xs).T @ np.diag(wc) @ (Xs - wc @ Xs) + model.Q  # eq 25 (centred)
     S1 = np.linalg.cholesky(P_pred)
     X1 = np.vstack([x_pred + np.sqrt(n) * S1[:, i] for i in range(n)]
                    + [x_pred - np.sqrt(n) * S1[:, i] for i in range(n)])
     Z = X1 @ H.T
     z_hat = beta @ Z                                                    # eq 26
-    x_bar = beta @ X1
-    Pzz = (Z - z_hat).T @ np.diag(wc) @ (Z - z_hat) + R                 # eq 27
-    Pxz = (X1 - x_bar).T @ np.diag(wc) @ (Z - z_hat)                    # eq 28
+    Pzz = (Z - wc @ Z).T @ np.diag(wc) @ (Z - wc @ Z) + R               # eq 27
+    Pxz = (X1 - wc @ X1).T @ np.diag(wc) @ (Z - wc @ Z)                 # eq 28
     K = Pxz @ np.linalg.inv(Pzz)                                        # eq 29
     np.testing.assert_allclose(inn.nu, z - z_hat, atol=1e-12)
     np.testing.assert_allclose(inn.S, Pzz, atol=1e-12)

@@ -8,8 +8,8 @@ cross-covariance (eqs 26-28); gain, update and covariance are eqs 29-32.
 Readings (ALGORITHMS.md, "Randomly weighted CKF"):
 
 - The measurement update redraws points from ``P*-`` around ``x*-`` (eq 10) and every statistic
-  is centred on its own beta-weighted mean, so with uniform weights RWCKF is exactly the CKF
-  (``weights = "uniform"``, the oracle option).
+  is centred on a weighted mean (see ``covariance``), so with uniform weights RWCKF is exactly
+  the CKF (``weights = "uniform"``, the oracle option).
 - Time updates that do not end at a measurement (outages, the engine's coasting steps) use
   uniform weights; the last time update before a measurement keeps its propagated points so
   that the epoch's weight vector can be applied to it.
@@ -24,8 +24,13 @@ Readings (ALGORITHMS.md, "Randomly weighted CKF"):
   but mean logarithm ``psi(2) - log 2 = -0.27``, so directions that the measurements do not
   refill (the biases) shrink geometrically until the filter rejects every fix.  ``"uniform"``
   (navpp's default) lets the weights move the means (eqs 24, 26: the residual reduction of
-  eqs 33-37 is about the means) and keeps the covariances at their cubature values, centred
-  on the beta-weighted means.
+  eqs 33-37 is about the means) and keeps the covariances at their cubature values: uniform
+  weights, centred on the uniform (CKF) means, so the joint covariance of state and measurement
+  is the CKF's and the update can never make P indefinite.  (Centring them on the
+  beta-weighted means, as navpp did first, adds the outer product of the mean shift to Pzz and
+  Pxz but not to P; against a near-perfect measurement such as a ZUPT that made
+  ``P - K S K^T`` indefinite: a -6e-3 m^2/s^2 velocity variance at the first stop of the
+  sample drive.)
 
 Because selection looks at the measurement, RWCKF's NIS/NEES are optimistic by construction.
 Randomness comes from one seeded generator (``seed``), so runs repeat exactly.
@@ -96,6 +101,9 @@ class RWCKF(SigmaPointFilter):
             return wm, wc
         return self._beta, (self._beta if self.options.covariance == "random" else wc)
 
+    def covariance_centre(self, wm: np.ndarray, wc: np.ndarray) -> np.ndarray:
+        return wm if self.options.covariance == "random" else wc
+
     # time update: the template's (uniform weights); its points are kept for the epoch's weights
     def after_predict(self, prior: GaussianState, x_ref: np.ndarray, dY: np.ndarray, Q: np.ndarray,
                       wc: np.ndarray) -> None:
@@ -115,8 +123,9 @@ class RWCKF(SigmaPointFilter):
         if beta is None or pending is None or pending[0] is not state:
             return state
         _, x_ref, dY, Q, wc = pending
-        return combine_points(model, state.t, x_ref, dY, beta,
-                              beta if self.options.covariance == "random" else wc, Q)
+        if self.options.covariance == "random":
+            return combine_points(model, state.t, x_ref, dY, beta, beta, Q)
+        return combine_points(model, state.t, x_ref, dY, beta, wc, Q, centre=wc)
 
     def _score(self, pred: MeasurementPrediction, R: np.ndarray) -> float:
         if self.options.select == "residual":
@@ -145,9 +154,8 @@ class RWCKF(SigmaPointFilter):
             if random_cov:
                 dev = dY[None, :, :] - M[:, None, :]
                 P = np.einsum("ci,cij,cik->cjk", betas, dev, dev) + Q
-            else:
-                D = M - wc @ dY
-                P = state.P[None] + D[:, :, None] * D[:, None, :]
+            else:                                                     # the CKF covariance, whatever the mean
+                P = np.broadcast_to(state.P, (C, n, n))
         else:                                                         # no kept time update: weights on the measurement only
             x_ref, M = state.x, np.zeros((C, n))
             P = np.broadcast_to(state.P, (C, n, n))
@@ -162,7 +170,7 @@ class RWCKF(SigmaPointFilter):
         if self.options.select == "residual":
             return np.einsum("cp,cp->c", nu, nu)
         wz = betas if random_cov else np.full((C, m), 1.0 / m)
-        dz = Z - z_hat[:, None, :]
+        dz = Z - (z_hat if random_cov else np.einsum("ci,cip->cp", wz, Z))[:, None, :]
         Pzz = np.einsum("ci,cip,ciq->cpq", wz, dz, dz) + self.measurement_noise(meas, None)
         L = np.linalg.cholesky(0.5 * (Pzz + np.swapaxes(Pzz, 1, 2)))
         w = np.linalg.solve(L, nu[:, :, None])[:, :, 0]

@@ -40,11 +40,13 @@ def _weighted_cov(wc: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
 
 
 def combine_points(model, t: float, x_ref: np.ndarray, dY: np.ndarray, wm: np.ndarray, wc: np.ndarray,
-                   Q: np.ndarray) -> GaussianState:
+                   Q: np.ndarray, centre: np.ndarray | None = None) -> GaussianState:
     """The Gaussian at ``t`` of propagated error points ``dY`` about ``x_ref``: mean ``x_ref ⊞
-    wm dY``, covariance of the deviations from that mean weighted by ``wc``, plus ``Q``."""
+    wm dY``, covariance of the deviations weighted by ``wc``, plus ``Q``.  The deviations are
+    taken from that mean, or from ``centre @ dY`` when weights ``centre`` are given (a filter
+    whose mean weights differ from its covariance weights, RWCKF)."""
     mean = wm @ dY
-    dev = dY - mean
+    dev = dY - (mean if centre is None else centre @ dY)
     return GaussianState(t, model.plus(x_ref, mean), symmetrise(_weighted_cov(wc, dev, dev) + Q))
 
 
@@ -59,6 +61,11 @@ class SigmaPointFilter(Filter):
     def weights_for(self, wm: np.ndarray, wc: np.ndarray, *, measurement: bool) -> tuple[np.ndarray, np.ndarray]:
         """Hook: the weights actually used (random-weighting filters override)."""
         return wm, wc
+
+    def covariance_centre(self, wm: np.ndarray, wc: np.ndarray) -> np.ndarray:
+        """Hook: the weights of the mean the measurement covariances are centred on: the mean
+        weights (every rule here); RWCKF with CKF covariances centres them on the CKF mean."""
+        return wm
 
     def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> GaussianState:
         S = _factor(state.P, state.t, self.name, self)
@@ -83,8 +90,8 @@ class SigmaPointFilter(Filter):
         wm, wc = self.weights_for(wm, wc, measurement=True)
         Z = meas.predict_points(state.x, dX)                          # h(x ⊞ dX_i) ⊟ h(x)
         z_mean = wm @ Z
-        x_mean = wm @ dX
-        dz = Z - z_mean
+        cw = self.covariance_centre(wm, wc)
+        dz = Z - (z_mean if cw is wm else cw @ Z)
         nu = meas.innovation_at(state.x) - z_mean
         return MeasurementPrediction(nu, symmetrise(_weighted_cov(wc, dz, dz)),
-                                     _weighted_cov(wc, dX - x_mean, dz), None)
+                                     _weighted_cov(wc, dX - cw @ dX, dz), None)
