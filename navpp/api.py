@@ -526,7 +526,7 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
                     reference=rec.reference.source or "", runtime_s=runtime_s, imu_samples=len(rec.imu),
                     gnss_epochs=result.gnss_epochs, gnss_rejected=result.gnss_rejected, gnss=rec.gnss,
                     lever_arm_m=cfg.gnss.lever_arm_m, outages=windows,
-                    outages_removed=[o["gnss_removed"] for o in outages])
+                    outages_removed=[o["gnss_removed"] for o in outages], updates=result.updates)
 
             metrics = metrics_of(sol, runtime)
             if smooth:

@@ -209,6 +209,10 @@ def _print_summary(res, quiet: bool) -> None:
     con.print(f"{escape(res.recording.source)}: {len(res.recording.imu)} IMU samples at {res.recording.imu.rate_hz:.1f} Hz, "
               f"{run.gnss_epochs} GNSS epochs used ({run.gnss_rejected} rejected by the gate), "
               f"filter [bold]{res.filter_name}[/] ran in {run.runtime_s:.2f} s")
+    aids = {k: v for k, v in (getattr(run, "updates", None) or {}).items() if k != "gnss_position"}
+    if aids:
+        con.print("aiding updates applied (rejected): " + ", ".join(
+            f"{k} {v['applied']} ({v['rejected']})" for k, v in aids.items()))
     if res.metrics is not None:
         m = res.metrics
         tab = Table(title=f"position error vs reference ({m['epochs']} epochs), metres")

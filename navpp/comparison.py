@@ -307,7 +307,7 @@ def _execute(task: _Task, cache: _RecordingCache, progress: ProgressFn | None) -
                                    imu_samples=len(rec.imu), gnss_epochs=res.gnss_epochs,
                                    gnss_rejected=res.gnss_rejected, gnss=rec.gnss,
                                    lever_arm_m=cfg.gnss.lever_arm_m, outages=cfg.gnss.outages,
-                                   outages_removed=removed)
+                                   outages_removed=removed, updates=res.updates)
 
         metrics = metrics_of(res.solution, task.filter, forward_s)
         series = _run_series(rec, res.solution, res.diagnostics, filt) if task.series else None

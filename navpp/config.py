@@ -6,7 +6,7 @@ One TOML file, every field optional (see INTERFACES.md, "Configuration (TOML)"):
     [gnss]     lever_arm_m, default_std_m, default_vel_std_mps, gate_probability, ...
     [time]     base, source
     [init]     method, roll_deg, pitch_deg, heading_deg, ...
-    [vehicle]  type
+    [vehicle]  type, nhc, zupt, zaru and their noise, rate and standstill-detector keys
     [output]   rate_hz, formats, smooth
     [filter.<name>]  each filter's own options, kept raw and validated by that filter
 
@@ -199,6 +199,12 @@ def _as_choice(section: str, key: str, value: object, choices: Sequence[str]) ->
     if isinstance(value, str) and (near := _nearest(value, choices)) is not None:
         msg += f" (did you mean {near!r}?)"
     raise ConfigError(msg)
+
+
+def _as_bool(section: str, key: str, value: object) -> bool:
+    if not isinstance(value, bool):
+        raise ConfigError(f"[{section}] {key} must be true or false, got {value!r}")
+    return value
 
 
 def _as_int(section: str, key: str, value: object, *, minimum: int) -> int:
@@ -426,6 +432,8 @@ class GnssConfig:
     max_rejected_fraction : float in (0, 1]. A run in which a larger share of the fixes fails
         the gate has diverged (the IMU and GNSS disagree): it stops with an error instead of
         writing a trajectory.  1 never stops.
+    use_velocity : bool, default true. Use the log's GNSS velocity (CSV ``ve, vn, vu``, a Twist
+        topic, RTKLIB velocity columns) as a measurement when it has one.
     outages : ((start_s, duration_s), ...). Simulated GNSS outages: the fixes inside each
         window (s from the log start, the first IMU sample) are removed before filtering and
         the metrics report each window separately; ``navpp process --gnss-outage`` replaces them.
@@ -440,8 +448,10 @@ class GnssConfig:
     time_offset_s: float = 0.0
     max_rejected_fraction: float = 0.25
     outages: tuple[tuple[float, float], ...] = ()
+    use_velocity: bool = True
 
     def __post_init__(self) -> None:
+        _as_bool("gnss", "use_velocity", self.use_velocity)
         _set(self, "outages", check_outages(self.outages))
         _set(self, "lever_arm_m", _as_vector("gnss", "lever_arm_m", self.lever_arm_m, 3))
         if math.hypot(*self.lever_arm_m) > MAX_LEVER_ARM_M:
@@ -512,12 +522,63 @@ class InitConfig:
 
 @dataclass(frozen=True)
 class VehicleConfig:
-    """``[vehicle]``: motion constraints. ``type`` is ``"car"`` (non-holonomic) or ``"none"``."""
+    """``[vehicle]``: what the vehicle's own motion says (:mod:`navpp.ins.aids`).
+
+    Attributes
+    ----------
+    type : ``"car"`` (a wheeled vehicle: the non-holonomic constraint applies) or ``"none"``.
+    nhc : bool, default true. Apply the non-holonomic constraint (with ``type = "car"`` only).
+    nhc_std_mps : (lateral, vertical) m/s, > 0. 1-sigma of the body's lateral and vertical
+        velocity in the vehicle frame (side slip, suspension); a scalar sets both.
+    mounting_rpy_deg : (3,) deg. The vehicle frame's roll, pitch, yaw relative to the IMU body
+        frame (after ``[imu] mounting_rpy_deg``), about x, y, z.
+    nhc_point_m : (3,) m. The point whose velocity has no lateral and vertical part (the rear
+        axle's centre), body FLU, from the IMU.
+    zupt, zaru : bool, default true. Zero-velocity and zero-rate updates while still.
+    zupt_std_mps : float, m/s, > 0. 1-sigma of the zero velocity.
+    zaru_std_dps : float, deg/s, >= 0. Floor on the 1-sigma of the zero rate (vibration); the
+        gyro's white noise averaged over the still interval is added.
+    rate_hz : float, Hz, > 0. Rate of the NHC, ZUPT and ZARU pseudo-measurements; those that fall
+        within half a period of a GNSS fix ride on it.
+    still_window_s : float, s, > 0. Block length of the standstill detector.
+    still_accel_std_mps2, still_gyro_std_dps : floors of the detector's standard-deviation
+        thresholds (m/s^2, deg/s); above them the thresholds are 4 x the configured IMU's
+        white noise per sample.
+    still_max_speed_mps : float, m/s, > 0. The filter's speed (and the GNSS speed, when the log
+        has velocity) must be below ``max(this, 3 sigma)`` for a ZUPT or ZARU.
+    """
 
     type: str = "none"
+    nhc: bool = True
+    nhc_std_mps: tuple[float, float] = (0.1, 0.1)
+    mounting_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    nhc_point_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    zupt: bool = True
+    zaru: bool = True
+    zupt_std_mps: float = 0.02
+    zaru_std_dps: float = 0.005
+    rate_hz: float = 5.0
+    still_window_s: float = 0.5
+    still_accel_std_mps2: float = 0.05
+    still_gyro_std_dps: float = 0.5
+    still_max_speed_mps: float = 0.2
 
     def __post_init__(self) -> None:
         _as_choice("vehicle", "type", self.type, VEHICLE_TYPES)
+        for key in ("nhc", "zupt", "zaru"):
+            _as_bool("vehicle", key, getattr(self, key))
+        std = self.nhc_std_mps
+        if _is_number(std):
+            std = (std, std)
+        _set(self, "nhc_std_mps", _as_vector("vehicle", "nhc_std_mps", std, 2))
+        if min(self.nhc_std_mps) <= 0.0:
+            raise ConfigError(f"[vehicle] nhc_std_mps must be > 0, got {list(self.nhc_std_mps)!r}")
+        _set(self, "mounting_rpy_deg", _as_vector("vehicle", "mounting_rpy_deg", self.mounting_rpy_deg, 3))
+        _set(self, "nhc_point_m", _as_vector("vehicle", "nhc_point_m", self.nhc_point_m, 3))
+        for key in ("zupt_std_mps", "rate_hz", "still_window_s", "still_max_speed_mps"):
+            _fix_float(self, "vehicle", key, minimum=0.0, strict_min=True)
+        for key in ("zaru_std_dps", "still_accel_std_mps2", "still_gyro_std_dps"):
+            _fix_float(self, "vehicle", key, minimum=0.0)
 
 
 @dataclass(frozen=True)

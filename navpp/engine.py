@@ -19,6 +19,7 @@ from typing import Callable
 
 import numpy as np
 
+from .aiding import Aiding
 from .config import Config
 from .errors import FilterDivergedError, InputError
 from .filters.base import Filter, GaussianState
@@ -27,6 +28,7 @@ from numba import njit
 
 from .filters.smoother import ForwardStore, smooth_arrays
 from .ins.model import BA, BG, LONG_GAP_PERIODS, POS, GnssPosition, InsModel, NoiseModel, apply_node_corrections
+from .ins.attitude import rpy_matrix
 from .ins.strapdown import NOMINAL_BA, NOMINAL_BG
 from .recording import Recording, Solution
 
@@ -50,6 +52,9 @@ class Diagnostics:
     forced: np.ndarray
     r_std: np.ndarray
     adaptive: dict[str, np.ndarray] = field(default_factory=dict)
+    vel_nu: np.ndarray | None = None          # (M, 3) GNSS velocity innovation, ENU m/s (NaN: none)
+    vel_nis: np.ndarray | None = None         # (M,) its NIS
+    vel_accepted: np.ndarray | None = None    # (M,) 1 applied, 0 rejected, NaN no velocity
 
 
 @dataclass(frozen=True)
@@ -97,16 +102,13 @@ class RunResult:
     compile_s: float = 0.0            # one-off numba compilation on a cold cache, s
     warnings: tuple[str, ...] = ()    # what the run noticed about the data (units, tilt, gating)
     smoothed: SmoothedRun | None = None   # with smooth=True: the RTS-smoothed run
+    #: updates applied / rejected by the gate per kind: gnss_position, gnss_velocity, zupt, zaru, nhc
+    updates: dict[str, dict[str, int]] = field(default_factory=dict)
 
 
 def mounting_matrix(rpy_deg: tuple[float, float, float]) -> np.ndarray:
     """Sensor -> body rotation from the mounting roll/pitch/yaw (deg, about x, y, z; ROS rpy)."""
-    r, p, y = (math.radians(a) for a in rpy_deg)
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
-    return rz @ ry @ rx
+    return rpy_matrix(rpy_deg)
 
 
 def alignment_settings(config: Config) -> AlignmentSettings:
@@ -417,44 +419,82 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
             knot()
 
     knot()
-    tick = max(1, m_ep // 200)
+    n_noise = noise_model(config)
+    aiding = Aiding(config, model.t, model.gyro, model.accel, n_noise.gyro_arw, n_noise.accel_vrw, gnss, sel,
+                    model.gaps)
+    ev_t, ev_fix, ev_cons = aiding.schedule(al.t, float(imu.t[-1]), tg)
+    n_ev = ev_t.shape[0]
+    vel_nu = np.full((m_ep, 3), np.nan) if aiding.has_velocity else None
+    vel_nis = np.full(m_ep, np.nan) if aiding.has_velocity else None
+    vel_accepted = np.full(m_ep, np.nan) if aiding.has_velocity else None
+    tick = max(1, n_ev // 200)
     n_path = model.path.shape[1]
-    idx = np.minimum(np.searchsorted(imu.t, tg), len(imu) - 1)
-    k_sample = np.where(imu.t[idx] == tg, idx, -1)
+    idx = np.minimum(np.searchsorted(imu.t, ev_t), len(imu) - 1)
+    ev_sample = np.where(imu.t[idx] == ev_t, idx, -1)
+
     def _epochs() -> None:
         nonlocal state, last_good
-        for k in range(m_ep):
-            coast_to(float(tg[k]))
-            predicted((state.t, float(tg[k])))
+        for e in range(n_ev):
+            t_e = float(ev_t[e])
+            k = int(ev_fix[e])
+            coast_to(t_e)
+            predicted((state.t, t_e))
             prior = state.P.diagonal()[POS].copy()
-            meas = GnssPosition(float(tg[k]), float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever)
-            checked(float(tg[k]))                   # the prediction
-            filt.last_prior = None
-            state, inn = filt.update(state, model, meas)
-            checked(float(tg[k]))                   # the update
+            checked(t_e)                            # the prediction
+            used_prior = None                       # the prior the first applied update corrected
+            reset = applied = False
+
+            def apply(meas):
+                nonlocal state, used_prior, reset, applied
+                filt.last_prior = None
+                state, inn = filt.update(state, model, meas)
+                checked(t_e)                        # the update
+                aiding.counts.add(meas.kind, inn.accepted)
+                if inn.accepted:
+                    if not applied:
+                        used_prior = filt.last_prior
+                    applied = True
+                    reset |= inn.forced
+                return inn
+
+            if k >= 0:
+                meas = GnssPosition(t_e, float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever)
+                inn = apply(meas)
+                if inn.accepted:
+                    last_good = t_e
+                nu[k] = inn.nu
+                nis[k] = inn.nis
+                accepted[k] = inn.accepted
+                forced[k] = inn.forced
+                r_std[k] = np.sqrt(np.diagonal(inn.R))
+                for name, value in filt.noise_report().items():
+                    if name not in adaptive:
+                        adaptive[name] = np.full((m_ep, np.size(value)), np.nan)
+                    adaptive[name][k] = value
+                vmeas = aiding.velocity(k, t_e)
+                if vmeas is not None:
+                    vinn = apply(vmeas)
+                    vel_nu[k], vel_nis[k], vel_accepted[k] = vinn.nu, vinn.nis, float(vinn.accepted)
+            if ev_cons[e]:
+                for cmeas in aiding.constraint_measurements(t_e, state.x, state.P):
+                    apply(cmeas)
             if store is not None:
-                store.updated(filt.last_prior if inn.accepted else None, state, inn.forced)
-                epoch_node[k] = store.n - 1
-            if inn.accepted:
-                last_good = float(tg[k])
-            if inn.accepted and k_sample[k] >= 0:
-                model.path[k_sample[k]] = state.x[:n_path]     # the epoch's own sample shows the posterior
+                store.updated(used_prior, state, reset)
+            if applied and ev_sample[e] >= 0:
+                model.path[ev_sample[e]] = state.x[:n_path]     # the epoch's own sample shows the posterior
             knot(prior)
+            if k < 0:
+                if progress is not None and e % tick == 0:
+                    progress(e / n_ev)
+                continue
+            if store is not None:
+                epoch_node[k] = store.n - 1
             bias[k, :3] = state.x[NOMINAL_BG]
             bias[k, 3:] = state.x[NOMINAL_BA]
             bias_var[k, :3] = state.P.diagonal()[BG]
             bias_var[k, 3:] = state.P.diagonal()[BA]
-            nu[k] = inn.nu
-            nis[k] = inn.nis
-            accepted[k] = inn.accepted
-            forced[k] = inn.forced
-            r_std[k] = np.sqrt(np.diagonal(inn.R))
-            for name, value in filt.noise_report().items():
-                if name not in adaptive:
-                    adaptive[name] = np.full((m_ep, np.size(value)), np.nan)
-                adaptive[name][k] = value
-            if progress is not None and k % tick == 0:
-                progress(k / m_ep)
+            if progress is not None and e % tick == 0:
+                progress(e / n_ev)
         # after the last fix the uncertainty keeps growing to the end of the log
         coast_to(float(imu.t[-1]))
         if state.t < imu.t[-1]:
@@ -507,7 +547,7 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
             named.update({f"{key}_{name}": values[:, [i]] for i, name in enumerate(lab)})
         else:
             named[key] = values
-    diag = Diagnostics(tg, nu, nis, accepted, forced, r_std, named)
+    diag = Diagnostics(tg, nu, nis, accepted, forced, r_std, named, vel_nu, vel_nis, vel_accepted)
     bias_std = np.sqrt(np.maximum(bias_var, 0.0))     # a diverged run is reported by the checks below
     biases = BiasHistory(tg, bias[:, :3], bias[:, 3:], bias_std[:, :3], bias_std[:, 3:])
     rejected = int((~accepted).sum())
@@ -520,7 +560,7 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
                         "or a prior covariance that was not positive definite): the smoothed trajectory keeps "
                         "the forward filter's jump there")
     return RunResult(solution, biases, al, diag, m_ep, rejected, time.perf_counter() - t_wall, 0.0,
-                     tuple(warnings), smoothed)
+                     tuple(warnings), smoothed, aiding.counts.as_dict())
 
 
 def _smoothed_run(store: ForwardStore, model: InsModel, t_out: np.ndarray, path: np.ndarray,

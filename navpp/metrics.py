@@ -371,7 +371,8 @@ def compute_metrics(sol: Solution, ref: ReferenceData, *, filter_name: str, log:
                     gnss_rejected: int, gnss: GnssData | None = None,
                     lever_arm_m: Sequence[float] = (0.0, 0.0, 0.0),
                     outages: Sequence[tuple[float, float]] = (),
-                    outages_removed: Sequence[int] | None = None) -> dict[str, Any]:
+                    outages_removed: Sequence[int] | None = None,
+                    updates: dict[str, dict[str, int]] | None = None) -> dict[str, Any]:
     """The ``metrics.json`` structure (INTERFACES.md) of a solution against a reference.
 
     Keys: ``filter``, ``log``, ``reference``, ``epochs`` (reference epochs inside the solution
@@ -392,6 +393,10 @@ def compute_metrics(sol: Solution, ref: ReferenceData, *, filter_name: str, log:
     also ``outages``: :func:`outage_metrics` of the position errors, one dict per window (the
     other figures stay over the whole run); ``outages_removed`` gives the fixes removed per
     window.
+
+    With ``updates`` (the engine's ``RunResult.updates``), also ``updates``: per measurement kind
+    (``gnss_position``, ``gnss_velocity``, ``zupt``, ``zaru``, ``nhc``) the updates applied and
+    rejected by the innovation gate.
 
     Parameters
     ----------
@@ -451,4 +456,7 @@ def compute_metrics(sol: Solution, ref: ReferenceData, *, filter_name: str, log:
         metrics["gnss_position_m"] = _gnss_position_metrics(gnss, ref, lever_arm_m)
     if len(outages):
         metrics["outages"] = outage_metrics(assoc.t, pos_err, outages, outages_removed)
+    if updates:
+        metrics["updates"] = {k: {"applied": int(v["applied"]), "rejected": int(v["rejected"])}
+                              for k, v in updates.items()}
     return metrics

@@ -136,7 +136,7 @@ class AUKF(UKF):
     def predict_measurement(self, state: GaussianState, model: Any, meas: Any) -> MeasurementPrediction:
         pred = super().predict_measurement(state, model, meas)
         self.fading, self._faded_P = 1.0, None
-        if not self.options.adapt:
+        if not self.options.adapt or not getattr(meas, "adaptive", True):
             return pred
         R = self.measurement_noise(meas, pred)
         S = symmetrise(pred.Pzz + R)

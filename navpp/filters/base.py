@@ -201,7 +201,7 @@ class Filter:
         self.reanchor_after_s = float(reanchor_after_s)
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self._gate_cache: dict[int, float] = {}
-        self._rejecting_since: float | None = None
+        self._rejecting_since: dict[str, float] = {}     # measurement kind -> first rejection of the run
         self.rejected = 0
 
     @classmethod
@@ -264,28 +264,43 @@ class Filter:
         return thr
 
     def update(self, state: GaussianState, model: Any, meas: Any) -> tuple[GaussianState, Innovation]:
-        pred = self.adjust_prediction(self.predict_measurement(state, model, meas))
-        R = self.measurement_noise(meas, pred)
+        """Gate and apply one measurement.
+
+        Measurement attributes the template honours (defaults for the GNSS position):
+        ``adaptive`` (True): adaptive filters may adapt R to it and learn from it (False for
+        the aids of :mod:`navpp.ins.aids`, whose R is used as given); ``forceable`` (True): after
+        ``reanchor_after_s`` of rejections the next one is forced in; ``kind``: rejection runs
+        are tracked per kind, so a rejected ZUPT does not count towards a GNSS re-anchoring.
+        """
+        adaptive = getattr(meas, "adaptive", True)
+        kind = getattr(meas, "kind", "")
+        pred = self.predict_measurement(state, model, meas)
+        if adaptive:
+            pred = self.adjust_prediction(pred)
+        R = self.measurement_noise(meas, pred) if adaptive else meas.R
         S, K, nis = self._moments(state, pred, R)
         accepted = nis <= self.gate_threshold(pred.nu.shape[0])
         forced = False
-        if (not accepted and self._rejecting_since is not None
-                and state.t - self._rejecting_since >= self.reanchor_after_s):
+        since = self._rejecting_since.get(kind)
+        if (not accepted and since is not None and getattr(meas, "forceable", True)
+                and state.t - since >= self.reanchor_after_s):
             # Rejections for that long mean the prior, not the measurements, is wrong: never
             # lock the GNSS out. Re-anchor the covariance on this measurement, then apply it.
             forced = accepted = True
             state = GaussianState(state.t, state.x, self._reanchored(state, meas, pred, R, nis))
-            pred = self.adjust_prediction(self.predict_measurement(state, model, meas))
+            pred = self.predict_measurement(state, model, meas)
+            if adaptive:
+                pred = self.adjust_prediction(pred)
             S, K, _ = self._moments(state, pred, R)
         innovation = Innovation(state.t, pred.nu, S, pred.Pxz, R, nis, accepted, forced)
         if not accepted:
-            if self._rejecting_since is None:
-                self._rejecting_since = state.t
+            self._rejecting_since.setdefault(kind, state.t)
             self.rejected += 1
             return state, innovation
-        self._rejecting_since = None
+        self._rejecting_since.pop(kind, None)
         new = self.correct(state, model, pred, K, S, R)
-        self.after_update(innovation, pred)
+        if adaptive:
+            self.after_update(innovation, pred)
         return new, innovation
 
     def _moments(self, state: GaussianState, pred: MeasurementPrediction, R: np.ndarray):

@@ -161,3 +161,16 @@ def quat_to_dcm_batch(q):
     m[..., 2, 1] = 2 * (y * z + w * x)
     m[..., 2, 2] = 1 - 2 * (x * x + y * y)
     return m
+
+
+def rpy_matrix(rpy_deg) -> np.ndarray:
+    """``Rz(yaw) Ry(pitch) Rx(roll)`` for roll/pitch/yaw in degrees about x, y, z (ROS rpy):
+    the rotation taking vectors of a frame so rotated into the frame it is rotated from."""
+    import math
+
+    r, p, y = (math.radians(float(a)) for a in rpy_deg)
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    return rz @ ry @ rx

@@ -575,6 +575,7 @@ class GnssPosition:
     R: np.ndarray
     lever_arm_b: np.ndarray
     axes: ClassVar[tuple[str, ...]] = ("e", "n", "u")     # names of the measurement's elements
+    kind: ClassVar[str] = "gnss_position"
 
     def innovation_at(self, x: np.ndarray) -> np.ndarray:
         return _gnss_innovation(x, self.lat, self.lon, self.h, self.lever_arm_b)

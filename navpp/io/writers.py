@@ -354,8 +354,10 @@ def diagnostics_columns(diag: Any) -> tuple[list[str], list[np.ndarray], list[in
     """Column names, (M,) value arrays and decimals of ``diagnostics.csv`` (after ``t``).
 
     ``nu_e, nu_n, nu_u`` GNSS innovation (ENU m), ``nis``, ``accepted``, ``forced`` (0/1),
-    ``r_std_e, r_std_n, r_std_u`` the measurement 1-sigma the filter used (m), then each entry
-    of the filter's noise report (``name`` when it has one value, ``name_<i>`` otherwise).
+    ``r_std_e, r_std_n, r_std_u`` the measurement 1-sigma the filter used (m); when the run used
+    GNSS velocity, ``nu_ve, nu_vn, nu_vu`` (m/s), ``nis_vel`` and ``vel_accepted`` (nan where a
+    fix had no velocity); then each entry of the filter's noise report (``name`` when it has
+    one value, ``name_<i>`` otherwise).
     """
     nu = np.asarray(diag.nu, dtype=np.float64)
     r = np.asarray(diag.r_std, dtype=np.float64)
@@ -364,6 +366,13 @@ def diagnostics_columns(diag: Any) -> tuple[list[str], list[np.ndarray], list[in
             np.asarray(diag.accepted, dtype=np.float64), np.asarray(diag.forced, dtype=np.float64),
             r[:, 0], r[:, 1], r[:, 2]]
     decimals = [4, 4, 4, 4, 0, 0, 4, 4, 4]
+    vel_nu = getattr(diag, "vel_nu", None)
+    if vel_nu is not None:       # the GNSS velocity update of the same epoch (nan: the fix had none)
+        v = np.asarray(vel_nu, dtype=np.float64)
+        names += ["nu_ve", "nu_vn", "nu_vu", "nis_vel", "vel_accepted"]
+        cols += [v[:, 0], v[:, 1], v[:, 2], np.asarray(diag.vel_nis, dtype=np.float64),
+                 np.asarray(diag.vel_accepted, dtype=np.float64)]
+        decimals += [4, 4, 4, 4, 0]
     adaptive_names, values = adaptive_columns(diag)
     names += adaptive_names
     cols += list(values.T)
@@ -487,6 +496,12 @@ def metrics_markdown(metrics: Mapping[str, Any]) -> str:
             out += _stats_table(g, _POSITION_ROWS, "m")
     if m.get("outages"):
         out += _outage_table(m["outages"])
+    if m.get("updates"):
+        out += ["", "## Measurement updates", "",
+                "Updates the filter applied and the innovation gate rejected, per kind (gnss_position, "
+                "gnss_velocity, zupt = zero velocity, zaru = zero angular rate, nhc = non-holonomic constraint).",
+                "", "| kind | applied | rejected |", "|---|---:|---:|"]
+        out += [f"| {k} | {v.get('applied', 0)} | {v.get('rejected', 0)} |" for k, v in m["updates"].items()]
     out += ["", f"GNSS epochs rejected by the filter: {m.get('gnss_rejected', 0)}", ""]
     return "\n".join(out)
 

@@ -1,0 +1,195 @@
+"""When the engine applies which aid (part of the engine: the only code that knows time).
+
+The measurement models live in :mod:`navpp.ins.aids`, one per file; this module decides, from
+the configuration and the data, at which times they apply:
+
+- **GNSS velocity** at every GNSS epoch whose fix carries a velocity (``[gnss] use_velocity``),
+  with the log's velocity sigma or ``[gnss] default_vel_std_mps``, after the position update.
+- **Constraints** (NHC for ``[vehicle] type = "car"``; ZUPT and ZARU while still) on a grid at
+  ``[vehicle] rate_hz``: a grid time within half a period of a GNSS epoch rides on that epoch;
+  the others are epochs of their own, so the constraints keep working through GNSS outages.
+- **Standstill**: :func:`navpp.ins.aids.standstill.still_mask` on the IMU, and the speed gate on
+  the filter's speed (and the GNSS speed when the log has velocity) at the epoch.  ZARU measures
+  the mean gyro output since the previous constraint epoch, when every sample in between is
+  still.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import Config
+from .ins.aids import GnssVelocity, NonHolonomic, ZeroRate, ZeroVelocity
+from .ins.attitude import rpy_matrix
+from .ins.aids.standstill import StandstillSettings, speed_allows, still_mask
+from .ins.model import VEL
+
+#: Aid kinds in the order they are reported (the GNSS position first).
+KINDS = ("gnss_position", "gnss_velocity", "zupt", "zaru", "nhc")
+
+
+def vehicle_matrix(rpy_deg: tuple[float, float, float]) -> np.ndarray:
+    """Body -> vehicle rotation ``C_vb`` for the vehicle frame's roll, pitch, yaw (deg) relative to
+    the body: the vehicle axes are the body axes rotated by ``R = Rz Ry Rx``, so a body vector has
+    vehicle coordinates ``R^T v``."""
+    return rpy_matrix(rpy_deg).T
+
+
+@dataclass
+class AidCounts:
+    """Updates applied and rejected by the innovation gate, per kind (:data:`KINDS`)."""
+
+    applied: dict[str, int]
+    rejected: dict[str, int]
+
+    @classmethod
+    def empty(cls) -> "AidCounts":
+        return cls({k: 0 for k in KINDS}, {k: 0 for k in KINDS})
+
+    def add(self, kind: str, accepted: bool) -> None:
+        (self.applied if accepted else self.rejected)[kind] += 1
+
+    def as_dict(self) -> dict[str, dict[str, int]]:
+        """``{kind: {"applied": n, "rejected": n}}`` for the kinds that were tried."""
+        return {k: {"applied": self.applied[k], "rejected": self.rejected[k]} for k in KINDS
+                if self.applied[k] or self.rejected[k]}
+
+
+class Aiding:
+    """The aids of one run (see the module docstring).
+
+    Parameters
+    ----------
+    config : the run's configuration.
+    t, gyro, accel : the IMU as the model sees it (s; rad/s and m/s^2, body FLU, mounting applied).
+    gyro_arw, accel_vrw : white noise of the configured IMU (rad/sqrt(s), m/s/sqrt(s)).
+    gnss : the recording's GNSS; ``sel`` the indices of the fixes the engine uses, in order.
+    gaps : (K, 2) s, the long IMU gaps (:attr:`navpp.ins.model.InsModel.gaps`): no constraint
+        epoch is placed inside one (there is no IMU to say whether the vehicle is still, and the
+        model's unseen-motion noise of a gap must not be cut into pieces).
+    """
+
+    def __init__(self, config: Config, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gyro_arw: float,
+                 accel_vrw: float, gnss, sel: np.ndarray, gaps: np.ndarray | None = None) -> None:
+        veh = config.vehicle
+        self.t, self.gyro = t, gyro
+        self.gaps = np.zeros((0, 2)) if gaps is None else np.asarray(gaps, dtype=float).reshape(-1, 2)
+        self.gyro_arw = gyro_arw
+        self.nhc = veh.type == "car" and veh.nhc
+        self.zupt, self.zaru = veh.zupt, veh.zaru
+        self.settings = StandstillSettings(window_s=veh.still_window_s, accel_floor=veh.still_accel_std_mps2,
+                                           gyro_floor=math.radians(veh.still_gyro_std_dps),
+                                           max_speed=veh.still_max_speed_mps)
+        self.still = (still_mask(t, gyro, accel, gyro_arw, accel_vrw, self.settings)
+                      if (self.zupt or self.zaru) else np.zeros(t.shape[0], bool))
+        self.rate_hz = veh.rate_hz
+        self.nhc_std = veh.nhc_std_mps
+        self.c_vb = vehicle_matrix(veh.mounting_rpy_deg)
+        self.nhc_point = np.asarray(veh.nhc_point_m, dtype=float)
+        self.zupt_std = veh.zupt_std_mps
+        self.zaru_floor = math.radians(veh.zaru_std_dps)
+        self.lever = np.asarray(config.gnss.lever_arm_m, dtype=float)
+        self.vel = self.vel_var = None
+        if config.gnss.use_velocity and gnss.vel_enu is not None:
+            v = np.asarray(gnss.vel_enu, dtype=float)[sel]
+            if gnss.std_vel_enu is not None:
+                var = np.square(np.asarray(gnss.std_vel_enu, dtype=float)[sel])
+            else:
+                var = np.full(v.shape, config.gnss.default_vel_std_mps ** 2)
+            ok = np.all(np.isfinite(v), axis=1) & np.all(np.isfinite(var) & (var > 0.0), axis=1)
+            self.vel, self.vel_var, self.vel_ok = v, var, ok
+            self.vel_t = np.asarray(gnss.t, dtype=float)[sel]
+        self.counts = AidCounts.empty()
+        self._last_constraint_t: float | None = None
+
+    @property
+    def constraints(self) -> bool:
+        return self.nhc or self.zupt or self.zaru
+
+    @property
+    def has_velocity(self) -> bool:
+        return self.vel is not None
+
+    def schedule(self, t_start: float, t_end: float, tg: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Epochs in ``(t_start, t_end]``: times (s), the GNSS fix index at each (-1: none) and
+        whether the constraints apply there.  ``tg`` are the GNSS epochs (increasing)."""
+        m = tg.shape[0]
+        if not self.constraints:
+            return tg.copy(), np.arange(m), np.zeros(m, bool)
+        period = 1.0 / self.rate_hz
+        grid = np.arange(math.floor(t_start / period) + 1, math.floor(t_end / period) + 1) * period
+        grid = grid[(grid > t_start) & (grid <= t_end)]
+        for a, b in self.gaps:
+            grid = grid[(grid <= a) | (grid >= b)]
+        # each grid time rides on the nearest GNSS epoch when that is within half a period
+        j = np.clip(np.searchsorted(tg, grid), 1, max(m - 1, 1)) if m else np.zeros(grid.shape, int)
+        on_fix = np.zeros(m, bool)
+        alone = np.ones(grid.shape, bool)
+        if m:
+            near = np.where(np.abs(tg[j - 1] - grid) <= np.abs(tg[np.minimum(j, m - 1)] - grid), j - 1,
+                            np.minimum(j, m - 1))
+            close = np.abs(tg[near] - grid) <= 0.5 * period
+            on_fix[near[close]] = True
+            alone = ~close
+        times = np.concatenate([tg, grid[alone]])
+        fix = np.concatenate([np.arange(m), np.full(int(alone.sum()), -1)])
+        cons = np.concatenate([on_fix, np.ones(int(alone.sum()), bool)])
+        order = np.argsort(times, kind="stable")
+        return times[order], fix[order], cons[order]
+
+    def _gyro_at(self, t: float) -> np.ndarray:
+        i = int(np.searchsorted(self.t, t))
+        if i <= 0:
+            return self.gyro[0].copy()
+        if i >= self.t.shape[0]:
+            return self.gyro[-1].copy()
+        w = (t - self.t[i - 1]) / (self.t[i] - self.t[i - 1])
+        return (1.0 - w) * self.gyro[i - 1] + w * self.gyro[i]
+
+    def velocity(self, k: int, t: float) -> GnssVelocity | None:
+        """The GNSS velocity measurement of fix ``k`` (None without one)."""
+        if self.vel is None or not self.vel_ok[k]:
+            return None
+        return GnssVelocity.at(t, self.vel[k], self.vel_var[k], self._gyro_at(t), self.lever)
+
+    def _gnss_still(self, t: float) -> bool:
+        """The GNSS speed nearest ``t`` (within 1 s) allows standing still; True without velocity."""
+        if self.vel is None:
+            return True
+        i = int(np.clip(np.searchsorted(self.vel_t, t), 0, self.vel_t.shape[0] - 1))
+        for j in (i - 1, i):
+            if 0 <= j < self.vel_t.shape[0] and abs(self.vel_t[j] - t) <= 1.0 and self.vel_ok[j]:
+                speed = float(np.linalg.norm(self.vel[j]))
+                return speed_allows(speed, float(np.sqrt(self.vel_var[j].sum())), self.settings)
+        return True
+
+    def constraint_measurements(self, t: float, x: np.ndarray, P: np.ndarray) -> list:
+        """The constraints that apply at epoch ``t`` given the prior (nominal ``x``, covariance
+        ``P``): NHC for a car; ZUPT and ZARU when the IMU around ``t`` is still and the speeds
+        allow it."""
+        out: list = []
+        t_prev, self._last_constraint_t = self._last_constraint_t, t
+        if self.nhc:
+            out.append(NonHolonomic.at(t, self.nhc_std, self.c_vb, self._gyro_at(t), self.nhc_point))
+        if not (self.zupt or self.zaru):
+            return out
+        i = int(np.clip(np.searchsorted(self.t, t), 0, self.t.shape[0] - 1))
+        if not self.still[i]:
+            return out
+        speed = float(np.linalg.norm(x[4:7]))
+        speed_std = float(np.sqrt(max(np.trace(P[VEL, VEL]), 0.0)))
+        if not (speed_allows(speed, speed_std, self.settings) and self._gnss_still(t)):
+            return out
+        if self.zupt:
+            out.append(ZeroVelocity.at(t, self.zupt_std))
+        if self.zaru and t_prev is not None:
+            lo, hi = np.searchsorted(self.t, t_prev, side="right"), np.searchsorted(self.t, t, side="right")
+            if hi - lo >= 2 and self.still[lo:hi].all():
+                out.append(ZeroRate.at(t, self.gyro[lo:hi].mean(axis=0), t - t_prev, self.gyro_arw, self.zaru_floor))
+        return out
+
+
+__all__ = ["KINDS", "AidCounts", "Aiding", "vehicle_matrix"]

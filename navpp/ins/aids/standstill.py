@@ -1,0 +1,76 @@
+"""Standstill detection from the IMU, for ZUPT and ZARU.
+
+The IMU is cut into blocks of ``window_s``; a block is still when, on every axis, the standard
+deviation of the specific force is at most ``max(accel_floor, k * sigma_a)`` and that of the
+rate at most ``max(gyro_floor, k * sigma_g)``, and the mean rate is below ``max_rate``.
+``sigma_a = VRW / sqrt(dt)`` and ``sigma_g = ARW / sqrt(dt)`` are the per-sample white noise of
+the configured IMU grade, so the thresholds scale with it; the floors stand for the engine's
+vibration, which the datasheet does not give.  A sample is still when its block and both
+neighbours are (a stop is confirmed from both sides, so braking into it and pulling away do not
+count).
+
+Smooth motion at constant speed is as quiet as a stop for an IMU; the engine therefore also
+requires the filter's own speed, and the GNSS speed when the log has velocity, to be near zero
+before it applies a ZUPT or ZARU (:func:`speed_allows`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class StandstillSettings:
+    """Detector thresholds (SI): ``window_s`` s; ``k`` multiples of the per-sample white-noise
+    sigma; ``accel_floor`` m/s^2 and ``gyro_floor`` rad/s (standard-deviation floors);
+    ``max_rate`` rad/s (mean rate); ``max_speed`` m/s (filter / GNSS speed gate)."""
+
+    window_s: float = 0.5
+    k: float = 4.0
+    accel_floor: float = 0.05
+    gyro_floor: float = math.radians(0.5)
+    max_rate: float = math.radians(1.0)
+    max_speed: float = 0.2
+
+
+def still_mask(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gyro_arw: float, accel_vrw: float,
+               settings: StandstillSettings) -> np.ndarray:
+    """(N,) bool: which IMU samples are still (see the module docstring).
+
+    ``t`` (N,) s; ``gyro`` (N, 3) rad/s; ``accel`` (N, 3) m/s^2, body FLU; ``gyro_arw``
+    rad/sqrt(s); ``accel_vrw`` m/s/sqrt(s).
+    """
+    n = t.shape[0]
+    out = np.zeros(n, bool)
+    if n < 3:
+        return out
+    dt = float(np.median(np.diff(t)))
+    w = max(2, int(round(settings.window_s / dt)))
+    nb = n // w
+    if nb < 3:
+        return out
+    thr_a = max(settings.accel_floor, settings.k * accel_vrw / math.sqrt(dt))
+    thr_g = max(settings.gyro_floor, settings.k * gyro_arw / math.sqrt(dt))
+    still = np.empty(nb, bool)
+    chunk = max(1, 20000 // w)               # blocks per pass: bounded temporaries on long logs
+    for b0 in range(0, nb, chunk):
+        b1 = min(nb, b0 + chunk)
+        a = accel[b0 * w: b1 * w].reshape(b1 - b0, w, 3)
+        g = gyro[b0 * w: b1 * w].reshape(b1 - b0, w, 3)
+        still[b0:b1] = ((a.std(axis=1).max(axis=1) <= thr_a) & (g.std(axis=1).max(axis=1) <= thr_g)
+                        & (np.abs(g.mean(axis=1)).max(axis=1) < settings.max_rate))
+    confirmed = still.copy()
+    confirmed[1:] &= still[:-1]
+    confirmed[:-1] &= still[1:]
+    confirmed[0] = confirmed[-1] = False
+    out[:nb * w] = np.repeat(confirmed, w)
+    return out
+
+
+def speed_allows(speed: float, speed_std: float, settings: StandstillSettings) -> bool:
+    """The speed gate: a speed estimate (m/s, with its 1-sigma) compatible with standing still,
+    ``speed <= max(max_speed, 3 sigma)``."""
+    return speed <= max(settings.max_speed, 3.0 * speed_std)

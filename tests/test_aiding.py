@@ -1,0 +1,274 @@
+"""Land-vehicle aiding (issue 8): GNSS velocity, ZUPT, ZARU, NHC and the standstill detector.
+
+Oracles: finite differences through the model's ⊞ for every Jacobian; the simulator's truth
+(its speed says when the car stands, its errors and trajectory score every run); the same run
+with the aid turned off.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from navpp import api, engine
+from navpp.aiding import Aiding, vehicle_matrix
+from navpp.cli import app
+from navpp.config import config_from_dict
+from navpp.errors import ConfigError
+from navpp.filters import FILTERS
+from navpp.ins.aids import GnssVelocity, NonHolonomic, ZeroRate, ZeroVelocity
+from navpp.ins.aids.standstill import StandstillSettings, still_mask
+from navpp.ins.model import plus
+from navpp.metrics import compute_metrics
+from navpp.simulate import SimulationSpec, simulate
+
+
+def _nominal(seed=0):
+    rng = np.random.default_rng(seed)
+    x = np.zeros(16)
+    q = rng.normal(size=4)
+    x[0:4] = q / np.linalg.norm(q)
+    x[4:7] = [8.0, -5.0, 0.3]
+    x[7], x[8], x[9] = 0.7, 0.1, 300.0
+    x[10:13] = [1e-3, -2e-3, 5e-4]
+    x[13:16] = 0.01
+    return x
+
+
+AIDS = [
+    GnssVelocity.at(0.0, np.zeros(3), np.ones(3), np.array([0.1, -0.2, 0.3]), np.array([0.5, 0.3, 1.2])),
+    NonHolonomic.at(0.0, (0.1, 0.1), vehicle_matrix((1.0, 2.0, 3.0)), np.array([0.1, -0.2, 0.3]),
+                    np.array([-1.0, 0.2, -0.3])),
+    ZeroRate.at(0.0, np.zeros(3), 0.2, 1e-3, 0.0),
+    ZeroVelocity.at(0.0, 0.1),
+]
+
+
+@pytest.mark.parametrize("meas", AIDS, ids=lambda m: m.kind)
+def test_jacobian_is_the_derivative_through_plus(meas):
+    x = _nominal()
+    H = meas.jacobian(x)
+    Hn = np.zeros_like(H)
+    eps = 1e-6
+    for i in range(15):
+        d = np.zeros(15)
+        d[i] = eps
+        Hn[:, i] = (meas.model(plus(x, d), meas.p) - meas.model(plus(x, -d), meas.p)) / (2 * eps)
+    np.testing.assert_allclose(H, Hn, rtol=0, atol=1e-8 * max(1.0, np.abs(H).max()))
+    assert H.shape == (len(meas.axes), 15) and meas.R.shape == (len(meas.axes),) * 2
+    # sigma points: small points map through the Jacobian
+    dX = 1e-4 * np.random.default_rng(1).normal(size=(30, 15))
+    np.testing.assert_allclose(meas.predict_points(x, dX), dX @ H.T, rtol=0, atol=1e-6)
+
+
+def test_models_by_hand():
+    """Closed-form values: a level car heading north at 10 m/s."""
+    x = np.zeros(16)
+    x[0] = 1.0                                   # body = ENU: x forward = east
+    x[4:7] = [10.0, 0.0, 0.0]                    # moving along body x
+    x[7] = np.radians(45.0)
+    nhc = NonHolonomic.at(0.0, (0.1, 0.1), np.eye(3), np.zeros(3), np.zeros(3))
+    np.testing.assert_allclose(nhc.innovation_at(x), [0.0, 0.0], atol=1e-12)
+    x[4:7] = [10.0, 1.0, -0.5]                   # sliding left 1 m/s, sinking 0.5 m/s
+    np.testing.assert_allclose(nhc.innovation_at(x), [-1.0, 0.5], atol=1e-12)
+    # a turn at 0.5 rad/s with the antenna 2 m ahead: 1 m/s to the left (north) at the antenna
+    vel = GnssVelocity.at(0.0, np.array([10.0, 1.0, -0.5]), np.ones(3), np.array([0.0, 0.0, 0.5]),
+                          np.array([2.0, 0.0, 0.0]))
+    np.testing.assert_allclose(vel.model(x, vel.p), [10.0, 2.0, -0.5], atol=1e-12)
+    # at rest the gyro measures its bias plus the Earth rate, [0, W cos 45, W sin 45] in ENU
+    x[10:13] = [1e-4, 0.0, -1e-4]
+    zaru = ZeroRate.at(0.0, np.zeros(3), 1.0, 0.0, 0.0)
+    w = 7.2921151467e-5 * np.sqrt(0.5)
+    np.testing.assert_allclose(zaru.model(x, zaru.p), [1e-4, w, w - 1e-4], atol=1e-15)
+
+
+@pytest.fixture(scope="module")
+def drive():
+    """A 300 s automotive drive (still 30 s) with GNSS velocity (0.02 m/s): stops at 220-230 s."""
+    return simulate(SimulationSpec(duration_s=300.0, still_s=30.0, seed=2, gnss_velocity=True,
+                                   gnss_std_vel_mps=0.02))
+
+
+def _run(rec, name="ekf", **sections):
+    cfg = config_from_dict({"imu": {"preset": "automotive"}, **sections}, "test")
+    res = engine.run(rec, cfg, api.make_filter(name, cfg))
+    m = compute_metrics(res.solution, rec.reference, filter_name=name, log="sim", reference="truth",
+                        runtime_s=res.runtime_s, imu_samples=len(rec.imu), gnss_epochs=res.gnss_epochs,
+                        gnss_rejected=res.gnss_rejected, updates=res.updates)
+    return res, m
+
+
+def test_standstill_detector_finds_the_stops(drive):
+    rec = drive.recording()
+    speed = np.linalg.norm(drive.trajectory.state(rec.imu.t)["vel_enu"], axis=1)
+    mask = still_mask(rec.imu.t, rec.imu.gyro, rec.imu.accel, np.radians(1.0) / 60.0, 0.05 / 60.0,
+                      StandstillSettings())
+    stopped = speed < 1e-6
+    inner = stopped & np.roll(stopped, 125) & np.roll(stopped, -125)      # 1 s inside a stop
+    assert mask[inner].mean() > 0.9
+    # never while turning; smooth straight motion can be as quiet as a stop for a simulated IMU
+    # (no engine vibration): the engine's speed gate handles that (next test)
+    turning = np.abs(rec.imu.gyro[:, 2]) > np.radians(2.0)
+    assert turning.any() and not mask[turning].any()
+
+
+def test_zupt_only_where_the_car_stands(drive):
+    """The engine's speed gate keeps constant-speed cruising (as quiet as a stop for a simulated
+    IMU) out: the ZUPTs applied match the constraint epochs the truth says are at rest."""
+    rec = drive.recording()
+    res, _ = _run(rec)
+    al_t = res.alignment.t
+    grid = np.arange(np.floor(al_t / 0.2) + 1, 300.0 / 0.2 + 1) * 0.2
+    speed = np.linalg.norm(drive.trajectory.state(grid)["vel_enu"], axis=1)
+    at_rest = int(np.count_nonzero(speed < 1e-6))
+    applied = res.updates["zupt"]["applied"]
+    assert 0.8 * at_rest <= applied <= at_rest, (applied, at_rest)
+    assert res.updates["zaru"]["applied"] >= 0.8 * at_rest - 5
+
+
+def test_gnss_velocity_is_used_when_present_and_improves_the_solution(drive):
+    rec = drive.recording()
+    with_v, m_v = _run(rec)
+    without, m_p = _run(rec, gnss={"use_velocity": False})
+    assert m_v["updates"]["gnss_velocity"]["applied"] == with_v.gnss_epochs
+    assert "gnss_velocity" not in m_p["updates"]
+    h = lambda m: m["position_m"]["horizontal"]["rmse"]  # noqa: E731
+    assert h(m_v) < 0.5 * h(m_p), (h(m_v), h(m_p))
+    assert m_v["velocity_mps"]["horizontal"]["rmse"] < 0.3 * m_p["velocity_mps"]["horizontal"]["rmse"]
+    d = with_v.diagnostics
+    assert np.all(d.vel_accepted == 1.0) and np.all(np.isfinite(d.vel_nu))
+    # the velocity innovations are consistent: NIS near its 3 dof mean
+    assert 1.5 < np.mean(d.vel_nis) < 4.5
+
+
+def test_nhc_and_zupt_bridge_outages():
+    """A 15-minute drive, outages at 200, 450 and 700 s (a turn and a dip; a stop; a hill):
+    the error at each outage's end with NHC + ZUPT against the same run without them."""
+    rec = simulate(SimulationSpec(duration_s=760.0, seed=2)).recording()
+    rec, _ = api.apply_outages(rec, [(200.0, 30.0), (450.0, 30.0), (700.0, 30.0)], "sim")
+    outs = [(200.0, 30.0), (450.0, 30.0), (700.0, 30.0)]
+    ends = []
+    for veh in ({"type": "none", "zupt": False, "zaru": False}, {"type": "car"}):
+        cfg = config_from_dict({"imu": {"preset": "automotive"}, "vehicle": veh}, "test")
+        res = engine.run(rec, cfg, api.make_filter("ekf", cfg))
+        m = compute_metrics(res.solution, rec.reference, filter_name="ekf", log="", reference="", runtime_s=0,
+                            imu_samples=0, gnss_epochs=0, gnss_rejected=0, outages=outs)
+        ends.append([w["horizontal_m"]["end"] for w in m["outages"]])
+    ratio = np.median(ends[1]) / np.median(ends[0])
+    assert ratio <= 0.4, ends
+
+
+@pytest.mark.parametrize("name", sorted(FILTERS))
+def test_every_filter_applies_every_aid(drive, name):
+    rec = drive.recording()
+    res, m = _run(rec, name, vehicle={"type": "car"})
+    for kind in ("gnss_position", "gnss_velocity", "zupt", "zaru", "nhc"):
+        assert res.updates[kind]["applied"] > 0, (name, kind, res.updates)
+    # the RWCKF's random weights cost it accuracy (README, Filters); it must still run and converge
+    assert m["position_m"]["horizontal"]["rmse"] < (1.5 if name == "rwckf" else 0.5), name
+
+
+def test_adaptive_filters_learn_r_from_gnss_position_only(drive):
+    """The AEKF's learnt GNSS R is the same whether or not NHC updates run in between (they
+    are applied with their own R and never learnt from)."""
+    rec = drive.recording()
+    a, _ = _run(rec, "aekf", vehicle={"type": "car", "zupt": False, "zaru": False}, gnss={"use_velocity": False})
+    b, _ = _run(rec, "aekf", vehicle={"type": "none", "zupt": False, "zaru": False}, gnss={"use_velocity": False})
+    ra, rb = a.diagnostics.r_std, b.diagnostics.r_std
+    assert ra.shape == rb.shape
+    assert np.median(np.abs(ra - rb) / rb) < 0.05
+
+
+def test_zaru_makes_the_vertical_gyro_bias_observable_at_a_stop():
+    """Consumer IMU, GNSS removed over the stop at 220-230 s (a car park): at the stop's end the
+    vertical gyro bias's 1-sigma with ZARU is a fraction of that without (the heading is then
+    unobservable from anything else)."""
+    sim = simulate(SimulationSpec(duration_s=240.0, still_s=30.0, seed=5, preset="consumer"))
+    rec, _ = api.apply_outages(sim.recording(), [(212.0, 20.0)], "sim")
+    out = {}
+    for zaru in (False, True):
+        cfg = config_from_dict({"imu": {"preset": "consumer"}, "vehicle": {"zaru": zaru}}, "test")
+        res = engine.run(rec, cfg, api.make_filter("ekf", cfg))
+        k = int(np.searchsorted(res.biases.t, 232.0))
+        out[zaru] = (res.biases.gyro_std[k, 2], res.biases.gyro[k, 2], res.updates.get("zaru", {}).get("applied", 0))
+    assert out[False][2] == 0 and out[True][2] > 30
+    # measured 0.59: a 10 s stop with a consumer gyro (ARW 0.5 deg/sqrt(h)) averages the rate to ~10 deg/h
+    assert out[True][0] < 0.7 * out[False][0], out
+    truth = sim.sensor_errors["gyro_bias"][2] + sim.sensor_errors["gyro_gauss_markov"][
+        np.searchsorted(sim.imu.t, 230.0), 2]
+    assert abs(out[True][1] - truth) < 3.0 * out[True][0] + 1e-5
+
+
+def test_each_aid_can_be_turned_off(drive):
+    rec = drive.recording()
+    res, _ = _run(rec, vehicle={"type": "car", "nhc": False, "zupt": False, "zaru": False},
+                  gnss={"use_velocity": False})
+    assert set(res.updates) == {"gnss_position"}
+    assert res.diagnostics.vel_nu is None
+
+
+def test_constraints_ride_on_gnss_epochs_and_fill_outages():
+    cfg = config_from_dict({"vehicle": {"type": "car", "rate_hz": 5.0}}, "test")
+    t = np.arange(0.0, 20.0, 0.01)
+    z = np.zeros((t.size, 3))
+    a = Aiding(cfg, t, z, z + [0, 0, 9.8], 0.0, 0.0, type("G", (), {"vel_enu": None})(), np.arange(0))
+    tg = np.concatenate([np.arange(1.0, 5.0, 0.2), np.arange(10.0, 12.0, 1.0)])
+    times, fix, cons = a.schedule(0.5, 12.0, tg)
+    assert np.all(np.diff(times) > 0)
+    assert set(fix[fix >= 0]) == set(range(tg.size))
+    own = times[fix < 0]
+    # no extra epoch where 5 Hz GNSS carries the constraints; 5 Hz epochs in the gaps
+    assert not np.any((own > 1.0) & (own < 4.8 - 1e-9))
+    assert np.allclose(np.diff(own[(own > 5.0) & (own < 9.9)]), 0.2)
+    assert cons[fix >= 0].sum() >= 20
+
+
+def test_config_validation():
+    with pytest.raises(ConfigError, match=r"\[vehicle\] nhc_std_mps must be > 0"):
+        config_from_dict({"vehicle": {"nhc_std_mps": [0.1, 0.0]}}, "x")
+    with pytest.raises(ConfigError, match=r"\[vehicle\] zaru must be true or false"):
+        config_from_dict({"vehicle": {"zaru": 1}}, "x")
+    with pytest.raises(ConfigError, match=r"\[gnss\] use_velocity must be true or false"):
+        config_from_dict({"gnss": {"use_velocity": "no"}}, "x")
+    with pytest.raises(ConfigError, match="rate_hz"):
+        config_from_dict({"vehicle": {"rate_hz": 0}}, "x")
+
+
+def test_counts_in_metrics_diagnostics_and_cli(tmp_path, drive):
+    from navpp.simulate import write_csv_log
+
+    log = tmp_path / "log"
+    write_csv_log(drive, log)
+    (log / "navpp.toml").write_text('[imu]\npreset = "automotive"\n[vehicle]\ntype = "car"\n')
+    r = CliRunner().invoke(app, ["process", str(log), "--out", str(tmp_path / "o")])
+    assert r.exit_code == 0, r.output
+    assert "aiding updates applied (rejected): gnss_velocity" in r.output and "nhc" in r.output
+    m = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    assert set(m["updates"]) == {"gnss_position", "gnss_velocity", "zupt", "zaru", "nhc"}
+    assert "## Measurement updates" in (tmp_path / "o" / "metrics.md").read_text()
+    head = (tmp_path / "o" / "diagnostics.csv").read_text().splitlines()[0].split(",")
+    assert head[10:15] == ["nu_ve", "nu_vn", "nu_vu", "nis_vel", "vel_accepted"]
+
+
+def _bench():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_aiding.py"
+    spec = importlib.util.spec_from_file_location("bench_aiding", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.slow
+def test_issue_targets_velocity_and_outages():
+    """The issue's measured targets (benchmarks/bench_aiding.py, three 15-minute drives): GNSS
+    velocity at 0.02 m/s brings the horizontal RMSE to <= 0.25 x positions only (0.244); NHC +
+    ZUPT bring the median outage-end error to <= 0.4 x (0.09 over a turn, a stop and a hill)."""
+    bench = _bench()
+    assert bench.velocity(3, "ekf") <= 0.25
+    assert bench.outages(3, "ekf")["turn-stop-hill"] <= 0.4
