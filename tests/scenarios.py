@@ -36,3 +36,16 @@ def gnss_jump_recording(jump_east_m=20.0, at_s=150.0, duration_s=240.0, seed=8):
     step = g.t >= at_s
     lon[step] += np.degrees(jump_east_m / (6.39e6 * np.cos(np.radians(g.lat_deg[step]))))
     return replace(rec, gnss=replace(g, lon_deg=lon))
+
+
+def load_benchmark(name: str):
+    """The module ``benchmarks/<name>.py`` (benchmarks are scripts, not a package), so a test
+    can run the very code whose figures the README quotes."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod

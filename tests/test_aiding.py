@@ -11,6 +11,7 @@ import json
 
 import numpy as np
 import pytest
+from scenarios import load_benchmark
 from typer.testing import CliRunner
 
 from navpp import api, engine
@@ -132,10 +133,10 @@ def test_zupt_only_where_the_car_stands(drive):
 def test_gnss_velocity_is_used_when_present_and_improves_the_solution(drive):
     rec = drive.recording()
     with_v, m_v = _run(rec)
-    without, m_p = _run(rec, gnss={"use_velocity": False})
+    _, m_p = _run(rec, gnss={"use_velocity": False})
     assert m_v["updates"]["gnss_velocity"]["applied"] == with_v.gnss_epochs
     assert "gnss_velocity" not in m_p["updates"]
-    h = lambda m: m["position_m"]["horizontal"]["rmse"]  # noqa: E731
+    h = lambda m: m["position_m"]["horizontal"]["rmse"]
     assert h(m_v) < 0.5 * h(m_p), (h(m_v), h(m_p))
     assert m_v["velocity_mps"]["horizontal"]["rmse"] < 0.3 * m_p["velocity_mps"]["horizontal"]["rmse"]
     d = with_v.diagnostics
@@ -253,22 +254,11 @@ def test_counts_in_metrics_diagnostics_and_cli(tmp_path, drive):
     assert head[10:15] == ["nu_ve", "nu_vn", "nu_vu", "nis_vel", "vel_accepted"]
 
 
-def _bench():
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_aiding.py"
-    spec = importlib.util.spec_from_file_location("bench_aiding", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 @pytest.mark.slow
 def test_issue_targets_velocity_and_outages():
     """The issue's measured targets (benchmarks/bench_aiding.py, three 15-minute drives): GNSS
     velocity at 0.02 m/s brings the horizontal RMSE to <= 0.25 x positions only (0.244); NHC +
     ZUPT bring the median outage-end error to <= 0.4 x (0.09 over a turn, a stop and a hill)."""
-    bench = _bench()
+    bench = load_benchmark("bench_aiding")
     assert bench.velocity(3, "ekf") <= 0.25
     assert bench.outages(3, "ekf")["turn-stop-hill"] <= 0.4

@@ -8,14 +8,12 @@ computation independent of navpp's exact ECEF one (errors of a few metres: agree
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
-from scenarios import gnss_jump_recording
+from scenarios import gnss_jump_recording, load_benchmark
 from typer.testing import CliRunner
 
 from navpp import api, engine
@@ -28,15 +26,7 @@ from navpp.simulate import SimulationSpec, simulate
 WINDOWS = [(60.0, 10.0), (90.0, 5.0)]          # inside the session log (120 s, still until 30 s)
 
 
-def _bench():
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_faults.py"
-    spec = importlib.util.spec_from_file_location("bench_faults", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-bench = _bench()
+bench = load_benchmark("bench_faults")
 
 
 @pytest.fixture(scope="module")

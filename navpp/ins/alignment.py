@@ -24,6 +24,7 @@ import numpy as np
 from .. import geodesy
 from ..errors import InputError
 from .attitude import dcm_to_quat, rph_to_dcm
+from .aids.standstill import quiet_blocks
 from .model import ATT, BA, BG, N_ERR, POS, VEL
 from .strapdown import NOMINAL_SIZE
 
@@ -71,23 +72,15 @@ def still_runs(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_durati
     """
     n = t.shape[0]
     dt = float(np.median(np.diff(t))) if n > 1 else 1.0
-    w = max(2, int(round(window_s / dt)))
-    nw = n // w
-    if nw == 0:
-        return []
     sig_a = accel_vrw / math.sqrt(dt)
     sig_g = gyro_arw / math.sqrt(dt)
     # generous: an idling engine shakes the IMU; align() confirms every run with gravity and GNSS
     thr_a = max(0.4, 4.0 * sig_a)
     thr_g = max(math.radians(2.0), 4.0 * sig_g)
-    still = np.empty(nw, bool)
-    block = max(1, 20000 // w)                # windows per pass: bounded temporaries on long logs
-    for k0 in range(0, nw, block):
-        k1 = min(nw, k0 + block)
-        a = accel[k0 * w: k1 * w].reshape(k1 - k0, w, 3)
-        g = gyro[k0 * w: k1 * w].reshape(k1 - k0, w, 3)
-        still[k0:k1] = ((a.std(axis=1).max(axis=1) < thr_a) & (g.std(axis=1).max(axis=1) < thr_g)
-                        & (np.abs(g.mean(axis=1)).max(axis=1) < math.radians(1.0)))
+    w, still = quiet_blocks(t, gyro, accel, window_s, thr_a, thr_g, math.radians(1.0))
+    nw = still.shape[0]
+    if nw == 0:
+        return []
     need = max(1, int(math.ceil(min_duration / (w * dt))))
     runs = []
     k = 0

@@ -36,6 +36,27 @@ class StandstillSettings:
     max_speed: float = 0.2
 
 
+def quiet_blocks(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, window_s: float, thr_a: float,
+                 thr_g: float, max_rate: float) -> tuple[int, np.ndarray]:
+    """The IMU cut into blocks of ``window_s``: ``(w, quiet)``, ``w`` samples per block and, per
+    block, whether every specific-force axis has a standard deviation <= ``thr_a`` (m/s^2), every
+    rate axis <= ``thr_g`` (rad/s) and the mean rate magnitude per axis < ``max_rate`` (rad/s).
+    Shared by the alignment's still-period search and :func:`still_mask`."""
+    n = t.shape[0]
+    dt = float(np.median(np.diff(t))) if n > 1 else 1.0
+    w = max(2, int(round(window_s / dt)))
+    nb = n // w
+    quiet = np.empty(nb, bool)
+    chunk = max(1, 20000 // w)               # blocks per pass: bounded temporaries on long logs
+    for b0 in range(0, nb, chunk):
+        b1 = min(nb, b0 + chunk)
+        a = accel[b0 * w: b1 * w].reshape(b1 - b0, w, 3)
+        g = gyro[b0 * w: b1 * w].reshape(b1 - b0, w, 3)
+        quiet[b0:b1] = ((a.std(axis=1).max(axis=1) <= thr_a) & (g.std(axis=1).max(axis=1) <= thr_g)
+                        & (np.abs(g.mean(axis=1)).max(axis=1) < max_rate))
+    return w, quiet
+
+
 def still_mask(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gyro_arw: float, accel_vrw: float,
                settings: StandstillSettings) -> np.ndarray:
     """(N,) bool: which IMU samples are still (see the module docstring).
@@ -48,20 +69,12 @@ def still_mask(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gyro_arw: flo
     if n < 3:
         return out
     dt = float(np.median(np.diff(t)))
-    w = max(2, int(round(settings.window_s / dt)))
-    nb = n // w
-    if nb < 3:
-        return out
     thr_a = max(settings.accel_floor, settings.k * accel_vrw / math.sqrt(dt))
     thr_g = max(settings.gyro_floor, settings.k * gyro_arw / math.sqrt(dt))
-    still = np.empty(nb, bool)
-    chunk = max(1, 20000 // w)               # blocks per pass: bounded temporaries on long logs
-    for b0 in range(0, nb, chunk):
-        b1 = min(nb, b0 + chunk)
-        a = accel[b0 * w: b1 * w].reshape(b1 - b0, w, 3)
-        g = gyro[b0 * w: b1 * w].reshape(b1 - b0, w, 3)
-        still[b0:b1] = ((a.std(axis=1).max(axis=1) <= thr_a) & (g.std(axis=1).max(axis=1) <= thr_g)
-                        & (np.abs(g.mean(axis=1)).max(axis=1) < settings.max_rate))
+    w, still = quiet_blocks(t, gyro, accel, settings.window_s, thr_a, thr_g, settings.max_rate)
+    nb = still.shape[0]
+    if nb < 3:
+        return out
     confirmed = still.copy()
     confirmed[1:] &= still[:-1]
     confirmed[:-1] &= still[1:]
