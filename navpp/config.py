@@ -545,7 +545,7 @@ class VehicleConfig:
         thresholds (m/s^2, deg/s); above them the thresholds are 4 x the configured IMU's
         white noise per sample.
     still_max_speed_mps : float, m/s, > 0. The filter's speed (and the GNSS speed, when the log
-        has velocity) must be below ``max(this, 3 sigma)`` for a ZUPT or ZARU.
+        has velocity) must be below this, with a 1-sigma below twice this, for a ZUPT or ZARU.
     """
 
     type: str = "none"

@@ -21,7 +21,7 @@ from navpp.config import config_from_dict
 from navpp.errors import ConfigError
 from navpp.filters import FILTERS
 from navpp.ins.aids import GnssVelocity, NonHolonomic, ZeroRate, ZeroVelocity
-from navpp.ins.aids.standstill import StandstillSettings, still_mask
+from navpp.ins.aids.standstill import StandstillSettings, speed_allows, still_mask
 from navpp.ins.model import plus
 from navpp.metrics import compute_metrics
 from navpp.simulate import SimulationSpec, simulate
@@ -262,3 +262,21 @@ def test_issue_targets_velocity_and_outages():
     bench = load_benchmark("bench_aiding")
     assert bench.velocity(3, "ekf") <= 0.25
     assert bench.outages(3, "ekf")["turn-stop-hill"] <= 0.4
+
+
+def test_an_uncertain_speed_allows_no_zupt():
+    s = StandstillSettings(max_speed=0.2)
+    assert speed_allows(0.05, 0.05, s)
+    assert not speed_allows(0.3, 0.05, s)          # moving
+    assert not speed_allows(0.05, 0.5, s)          # not known to be still: an inflated covariance
+
+
+@pytest.mark.slow
+def test_a_fading_filter_with_zupt_stays_sane():
+    """The AUKF inflates its covariance when it fades; with a lenient speed gate (speed below
+    3 sigma) that let ZUPTs in while cruising and the filter broke down (726 m horizontal RMSE on
+    this 15-minute drive); the gate now needs a small sigma too (2.3 m with the outages)."""
+    rec = simulate(SimulationSpec(duration_s=900.0, seed=2)).recording()
+    rec, _ = api.apply_outages(rec, [(200.0, 30.0), (450.0, 30.0), (700.0, 30.0)], "sim")
+    res, m = _run(rec, "aukf")
+    assert res.gnss_rejected < 10 and m["position_m"]["horizontal"]["rmse"] < 3.0, m["position_m"]["horizontal"]

@@ -65,7 +65,7 @@ from typing import Any, ClassVar
 import numpy as np
 from scipy.special import chdtri
 
-from .base import GaussianState, Innovation, MeasurementPrediction, register, symmetrise
+from .base import GaussianState, MeasurementPrediction, register, symmetrise
 from .ukf import UKF, UKFOptions
 
 
@@ -157,7 +157,8 @@ class AUKF(UKF):
                 K: np.ndarray, S: np.ndarray, R: np.ndarray) -> GaussianState:
         if self._faded_P is not None:
             state = replace(state, P=self._faded_P)              # the prior the gain was made for
+            self._faded_P = None
+        # the next prior's "propagated part" starts here, after any applied update (an aid such
+        # as a ZUPT too: the noise added before it is no longer inside what it left of P)
+        self._Q_since_update = None
         return super().correct(state, model, pred, K, S, R)
-
-    def after_update(self, innovation: Innovation, pred: MeasurementPrediction) -> None:
-        self._Q_since_update = None                               # the next prior starts here

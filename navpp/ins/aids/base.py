@@ -1,5 +1,6 @@
 """What every aiding measurement shares: the protocol methods on top of a compiled model
-``h(x, p)`` and its Jacobian ``H(x, p)``, with the measurement's parameters packed in ``p``."""
+``h(x, p)``, its Jacobian ``H(x, p)`` and its sigma-point images, with the measurement's
+parameters packed in ``p``."""
 
 from __future__ import annotations
 
@@ -8,18 +9,6 @@ from typing import ClassVar
 
 import numpy as np
 from numba import njit
-
-from ..model import plus
-
-
-@njit(cache=True)
-def points_through(h, x, dX, p):
-    """``h(x ⊞ dX_i, p) - h(x, p)`` for error points ``dX`` (m, 15): (m, k)."""
-    z0 = h(x, p)
-    Z = np.empty((dX.shape[0], z0.shape[0]))
-    for i in range(dX.shape[0]):
-        Z[i] = h(plus(x, dX[i]), p) - z0
-    return Z
 
 
 @njit(cache=True, inline="always")
@@ -54,6 +43,12 @@ class Aid:
         raise NotImplementedError
 
     @staticmethod
+    def model_points(x: np.ndarray, dX: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Compiled ``h(x ⊞ dX_i, p) - h(x, p)`` for error points ``dX`` (m, 15): (m, k).  Each aid
+        compiles its own (a kernel taking ``h`` as an argument cannot go into numba's cache)."""
+        raise NotImplementedError
+
+    @staticmethod
     def model_jacobian(x: np.ndarray, p: np.ndarray) -> np.ndarray:   # compiled dh/d(error)
         raise NotImplementedError
 
@@ -64,4 +59,4 @@ class Aid:
         return self.model_jacobian(x, self.p)
 
     def predict_points(self, x: np.ndarray, dX: np.ndarray) -> np.ndarray:
-        return points_through(self.model, x, np.ascontiguousarray(dX, dtype=float), self.p)
+        return self.model_points(x, np.ascontiguousarray(dX, dtype=float), self.p)

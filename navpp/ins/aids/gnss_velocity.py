@@ -16,6 +16,7 @@ import numpy as np
 from numba import njit
 
 from ..attitude import quat_to_dcm
+from ..model import plus
 from .base import Aid, skew
 
 
@@ -36,6 +37,16 @@ def _H(x, p):
     return H
 
 
+@njit(cache=True)
+def _points(x, dX, p):
+    """``h(x ⊞ dX_i) - h(x)``, (m, k)."""
+    z0 = _h(x, p)
+    Z = np.empty((dX.shape[0], z0.shape[0]))
+    for i in range(dX.shape[0]):
+        Z[i] = _h(plus(x, dX[i]), p) - z0
+    return Z
+
+
 class GnssVelocity(Aid):
     """GNSS velocity fix at ``t``; build with :meth:`at`."""
 
@@ -43,10 +54,11 @@ class GnssVelocity(Aid):
     axes: ClassVar[tuple[str, ...]] = ("ve", "vn", "vu")
     model = staticmethod(_h)
     model_jacobian = staticmethod(_H)
+    model_points = staticmethod(_points)
 
     @classmethod
     def at(cls, t: float, vel_enu: np.ndarray, var_enu: np.ndarray, gyro: np.ndarray,
-           lever_arm_b: np.ndarray) -> "GnssVelocity":
+           lever_arm_b: np.ndarray) -> GnssVelocity:
         """``vel_enu`` (3,) m/s, ``var_enu`` (3,) m^2/s^2, ``gyro`` (3,) rad/s at ``t``,
         ``lever_arm_b`` (3,) m."""
         p = np.concatenate([np.asarray(gyro, dtype=float), np.asarray(lever_arm_b, dtype=float)])

@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit
 
 from ..attitude import quat_to_dcm
+from ..model import plus
 from .base import Aid, skew
 
 
@@ -39,6 +40,16 @@ def _H(x, p):
     return (cvb @ H)[1:3].copy()
 
 
+@njit(cache=True)
+def _points(x, dX, p):
+    """``h(x ⊞ dX_i) - h(x)``, (m, k)."""
+    z0 = _h(x, p)
+    Z = np.empty((dX.shape[0], z0.shape[0]))
+    for i in range(dX.shape[0]):
+        Z[i] = _h(plus(x, dX[i]), p) - z0
+    return Z
+
+
 class NonHolonomic(Aid):
     """NHC at ``t``; build with :meth:`at`."""
 
@@ -46,10 +57,11 @@ class NonHolonomic(Aid):
     axes: ClassVar[tuple[str, ...]] = ("lateral", "vertical")
     model = staticmethod(_h)
     model_jacobian = staticmethod(_H)
+    model_points = staticmethod(_points)
 
     @classmethod
     def at(cls, t: float, std_mps: tuple[float, float], c_vb: np.ndarray, gyro: np.ndarray,
-           point_b: np.ndarray) -> "NonHolonomic":
+           point_b: np.ndarray) -> NonHolonomic:
         """``std_mps`` (lateral, vertical) 1-sigma m/s; ``c_vb`` (3, 3) body -> vehicle;
         ``gyro`` (3,) rad/s at ``t``; ``point_b`` (3,) m, the constraint point in the body frame."""
         p = np.concatenate([np.asarray(c_vb, dtype=float).ravel(), np.asarray(gyro, dtype=float),

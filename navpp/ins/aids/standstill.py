@@ -11,7 +11,7 @@ count).
 
 Smooth motion at constant speed is as quiet as a stop for an IMU; the engine therefore also
 requires the filter's own speed, and the GNSS speed when the log has velocity, to be near zero
-before it applies a ZUPT or ZARU (:func:`speed_allows`).
+and known to be so before it applies a ZUPT or ZARU (:func:`speed_allows`).
 """
 
 from __future__ import annotations
@@ -84,6 +84,8 @@ def still_mask(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gyro_arw: flo
 
 
 def speed_allows(speed: float, speed_std: float, settings: StandstillSettings) -> bool:
-    """The speed gate: a speed estimate (m/s, with its 1-sigma) compatible with standing still,
-    ``speed <= max(max_speed, 3 sigma)``."""
-    return speed <= max(settings.max_speed, 3.0 * speed_std)
+    """The speed gate: a speed estimate (m/s, with its 1-sigma) that says the vehicle is (nearly)
+    still, ``speed <= max_speed`` with ``sigma <= 2 max_speed``.  An uncertain speed allows
+    nothing: a filter whose covariance has grown (a long outage, a fading filter) would otherwise
+    accept a ZUPT while cruising, and a wrong ZUPT feeds its own error."""
+    return speed <= settings.max_speed and speed_std <= 2.0 * settings.max_speed

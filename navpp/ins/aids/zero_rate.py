@@ -17,6 +17,7 @@ from numba import njit
 
 from ...geodesy import OMEGA_E
 from ..attitude import quat_to_dcm
+from ..model import plus
 from .base import Aid, skew
 
 
@@ -38,6 +39,16 @@ def _H(x, p):
     return H
 
 
+@njit(cache=True)
+def _points(x, dX, p):
+    """``h(x ⊞ dX_i) - h(x)``, (m, k)."""
+    z0 = _h(x, p)
+    Z = np.empty((dX.shape[0], z0.shape[0]))
+    for i in range(dX.shape[0]):
+        Z[i] = _h(plus(x, dX[i]), p) - z0
+    return Z
+
+
 class ZeroRate(Aid):
     """ZARU at ``t``; build with :meth:`at`."""
 
@@ -45,10 +56,11 @@ class ZeroRate(Aid):
     axes: ClassVar[tuple[str, ...]] = ("wx", "wy", "wz")
     model = staticmethod(_h)
     model_jacobian = staticmethod(_H)
+    model_points = staticmethod(_points)
 
     @classmethod
     def at(cls, t: float, mean_gyro: np.ndarray, duration_s: float, gyro_arw: float,
-           floor_rps: float) -> "ZeroRate":
+           floor_rps: float) -> ZeroRate:
         """``mean_gyro`` (3,) rad/s averaged over ``duration_s``; ``gyro_arw`` rad/sqrt(s)."""
         var = gyro_arw ** 2 / max(duration_s, 1e-9) + floor_rps ** 2
         return cls(t, np.asarray(mean_gyro, dtype=float), np.eye(3) * var, np.zeros(0))

@@ -11,6 +11,7 @@ from typing import ClassVar
 import numpy as np
 from numba import njit
 
+from ..model import plus
 from .base import Aid
 
 
@@ -26,6 +27,16 @@ def _H(x, p):
     return H
 
 
+@njit(cache=True)
+def _points(x, dX, p):
+    """``h(x ⊞ dX_i) - h(x)``, (m, k)."""
+    z0 = _h(x, p)
+    Z = np.empty((dX.shape[0], z0.shape[0]))
+    for i in range(dX.shape[0]):
+        Z[i] = _h(plus(x, dX[i]), p) - z0
+    return Z
+
+
 class ZeroVelocity(Aid):
     """ZUPT at ``t``; build with :meth:`at`."""
 
@@ -33,7 +44,8 @@ class ZeroVelocity(Aid):
     axes: ClassVar[tuple[str, ...]] = ("ve", "vn", "vu")
     model = staticmethod(_h)
     model_jacobian = staticmethod(_H)
+    model_points = staticmethod(_points)
 
     @classmethod
-    def at(cls, t: float, std_mps: float) -> "ZeroVelocity":
+    def at(cls, t: float, std_mps: float) -> ZeroVelocity:
         return cls(t, np.zeros(3), np.eye(3) * std_mps ** 2, np.zeros(0))
