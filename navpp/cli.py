@@ -295,6 +295,13 @@ def compare(
     smooth: Annotated[bool, typer.Option(
         "--smooth", help="Also smooth every run backwards (Rauch-Tung-Striebel): a second row per filter, "
                          "<filter>+rts, beside the forward one.")] = False,
+    executor: Annotated[str, typer.Option(
+        "--executor", help="Where the runs go: local (this machine, --jobs processes) or dask (a Dask cluster: "
+                           "--scheduler, else a LocalCluster of --jobs workers; pip install 'navpp[dask]').",
+        metavar="local|dask", callback=_require(lambda v: v in ("local", "dask"), "local or dask"))] = "local",
+    scheduler: Annotated[str | None, typer.Option(
+        "--scheduler", metavar="ADDR", help="Dask scheduler address (tcp://HOST:8786) for --executor dask; the "
+                                            "workers must see the logs at the same paths.")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars.")] = False,
 ) -> None:
     """Run several filters on each log; print the MAE/RMSE table; write summary.csv and the report.
@@ -316,6 +323,8 @@ def compare(
             limits = cmp.parse_limits(max_rmse)
         if baseline is not None:
             base_rows = cmp.read_baseline(baseline)
+        if scheduler is not None and executor != "dask":
+            raise ConfigError("--scheduler names a Dask scheduler: add --executor dask")
     except ConfigError as exc:
         raise typer.BadParameter(str(exc)) from None
     try:
@@ -327,7 +336,8 @@ def compare(
             with _Progress(quiet or json_out) as prog:
                 result = cmp.compare(logs, names, config=config, reference=reference, imu_topic=imu_topic,
                                      gnss_topic=gnss_topic, reference_topic=reference_topic, jobs=jobs,
-                                     out_dir=out, progress=prog, smooth=smooth)
+                                     out_dir=out, progress=prog, smooth=smooth, executor=executor,
+                                     scheduler=scheduler)
         except BaseException:
             api.remove_created_dirs(created)
             raise

@@ -206,6 +206,7 @@ class _Task:
     series: bool                # collect the plot series
     log_series: bool            # also the log's own series (the first filter of each log)
     smooth: bool = False        # also smooth the run: a second row, "<filter>+rts"
+    path: str | None = None     # where to read the log (absolute for remote workers); None: ``log``
 
 
 @dataclass(frozen=True)
@@ -220,6 +221,9 @@ class _Outcome:
         """The forward row and, for a smoothed run, the smoothed one after it, with their series."""
         return [(self.row, self.series)] + ([self.smoothed] if self.smoothed is not None else [])
 
+
+#: Where ``compare`` runs the tasks (:func:`compare`'s ``executor``).
+EXECUTORS = ("local", "dask")
 
 #: Suffix of the filter name in the row of a smoothed run (``ekf+rts``).
 SMOOTHED_SUFFIX = "+rts"
@@ -244,8 +248,8 @@ class _RecordingCache:
         key = (task.log, task.config, task.reference, task.imu_topic, task.gnss_topic, task.reference_topic)
         if key != self.key:
             self.key, self.value = None, None          # free the previous recording first
-            log = Path(task.log)
-            label = f"reading {log.name}"
+            log = Path(task.path or task.log)
+            label = f"reading {Path(task.log).name}"
             try:
                 cfg = api.resolve_config(log, task.config)
                 rec = api.read_log(log, cfg, reference=task.reference, imu_topic=task.imu_topic,
@@ -521,7 +525,7 @@ class CompareResult:
     files : files written (``summary.csv``, ``report.md``, ``report.html``, the PNG figures);
         empty without ``out_dir``.
     out_dir : where they are, or None.
-    jobs : worker processes used (1: in this process).
+    jobs : worker processes used (1: in this process; with Dask: the cluster's workers).
     wall_s : wall time of the whole comparison, s (reading, filtering, report).
     log_series, run_series : the decimated plot data (by log; by (log, filter)).
     """
@@ -570,7 +574,8 @@ class CompareResult:
 def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str | Path | None = None,
             reference: str | Path | None = None, jobs: int = 1, out_dir: str | Path | None = None,
             imu_topic: str | None = None, gnss_topic: str | None = None, reference_topic: str | None = None,
-            report: bool = True, progress: ProgressFn | None = None, smooth: bool = False) -> CompareResult:
+            report: bool = True, progress: ProgressFn | None = None, smooth: bool = False,
+            executor: str = "local", scheduler: str | None = None) -> CompareResult:
     """Run every filter on every log; rows in (log, filter) order.
 
     Parameters
@@ -582,13 +587,19 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
         :class:`~navpp.errors.ConfigError` before anything runs; problems with a log's own
         ``navpp.toml`` are that log's rows.
     reference : a reference CSV; only with a single log (else each log's ``reference.csv``).
-    jobs : worker processes, >= 1; 1 runs everything in this process.
+    jobs : worker processes, >= 1; 1 runs everything in this process (Dask: the LocalCluster size).
     out_dir : write ``summary.csv`` and (with ``report``) ``report.md``, ``report.html`` and the
         PNG figures there (the directory must exist); None writes nothing.
     imu_topic, gnss_topic, reference_topic : topic choices for ROS logs.
     report : collect the plot series and, with ``out_dir``, write the report.
     progress : ``progress(stage, fraction)``: stages ``"reading <log>"``, ``"<log> <filter>"`` and
         ``"all runs"`` (fraction of runs finished).
+    executor : ``"local"`` (this process, or a pool of ``jobs`` processes) or ``"dask"``
+        (:mod:`navpp.dask_executor`: the runs as tasks on a Dask cluster; needs
+        ``pip install 'navpp[dask]'``).  The rows are the same, bit for bit, either way.
+    scheduler : with ``executor="dask"``, the address of a running scheduler
+        (``tcp://host:8786``); None starts a ``LocalCluster`` of ``jobs`` worker processes
+        (one per CPU when ``jobs`` is 1).  The workers must see the logs at the same paths.
     smooth : also smooth every run backwards (Rauch-Tung-Striebel): each (log, filter) gives two
         rows, the forward filter's (``runtime_s`` its own time) and ``"<filter>+rts"`` (the
         smoothed solution; ``runtime_s`` forward plus smoothing), side by side in the summary,
@@ -621,6 +632,10 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
         get_filter(n)
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ConfigError(f"--jobs must be an integer >= 1, got {jobs!r}")
+    if executor not in EXECUTORS:
+        raise ConfigError(f"--executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
+    if scheduler is not None and executor != "dask":
+        raise ConfigError("--scheduler names a Dask scheduler: use it with --executor dask")
     dup = sorted({p for p in logs if logs.count(p) > 1})
     if dup:
         raise ConfigError(f"compare: {', '.join(dup)} given more than once")
@@ -642,7 +657,11 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
     labels = [x for n in names for x in ((n, smoothed_name(n)) if smooth else (n,))]
     draw = _FigurePlan(logs, labels) if report and out is not None else None
     try:
-        if workers == 1:
+        if executor == "dask":
+            from .dask_executor import run_dask
+
+            outcomes, plots, workers = run_dask(tasks, jobs if jobs > 1 else None, scheduler, progress, draw)
+        elif workers == 1:
             outcomes, plots = _run_serial(tasks, progress, draw)
         else:
             outcomes, plots = _run_parallel(tasks, workers, progress, draw)

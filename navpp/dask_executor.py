@@ -1,0 +1,127 @@
+"""``navpp compare --executor dask``: the comparison's runs on a Dask cluster.
+
+Each (log, filter) run is one task.  The task carries only names (the log's path, the filter,
+the config file, topics); the worker reads the log itself, runs the filter and returns what
+the local executor returns: the summary row (metrics, counts, run time) and the decimated plot
+series (at most a few thousand numbers).  The trajectories never leave the worker, so the
+scheduler only ever sees small messages.  A worker keeps the last recording it read (one per
+worker thread), so the filters of a log that land on the same worker read it once.
+
+A run that fails is a row with the reason, as with the local executor; so is a task whose worker
+died (``KilledWorker``) or whose result could not come back.  Each log's figures are drawn by
+the cluster as soon as that log's runs are in, while the other runs go on.
+
+Paths are made absolute before they are sent: the workers must see the same file system (a
+shared or network file system for a remote cluster).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections import Counter
+from dataclasses import replace
+from pathlib import Path
+from typing import Any, Sequence
+
+from .errors import ConfigError, InputError
+
+_local = threading.local()
+
+
+def _cache():
+    from .comparison import _RecordingCache
+
+    cache = getattr(_local, "cache", None)
+    if cache is None:
+        cache = _local.cache = _RecordingCache()
+    return cache
+
+
+def execute_task(task) -> Any:
+    """Run one comparison task on a worker (its thread's recording cache, no progress)."""
+    from .comparison import _execute
+
+    return _execute(task, _cache(), None)
+
+
+def _absolute(task):
+    def ab(p: str | None) -> str | None:
+        return None if p is None else str(Path(p).expanduser().resolve())
+
+    return replace(task, path=ab(task.path or task.log), config=ab(task.config), reference=ab(task.reference))
+
+
+def _connect(scheduler: str | None, workers: int):
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise ConfigError("--executor dask needs dask.distributed: pip install 'navpp[dask]'") from None
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0")
+        return Client(cluster), cluster
+    try:
+        return Client(scheduler, timeout="20s"), None
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise InputError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler there "
+                         f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+
+
+def run_dask(tasks: Sequence, workers: int | None, scheduler: str | None, progress, draw
+             ) -> tuple[list, dict[str, list], int]:
+    """Run ``tasks`` (comparison ``_Task``) on Dask; returns (outcomes in task order, plots per
+    log, number of workers).  ``workers``: LocalCluster size when ``scheduler`` is None (None:
+    one per CPU)."""
+    from distributed import as_completed
+
+    from .comparison import _failed, _internal, _schedule
+    from .report import FIGURE_KINDS, render_figures
+
+    client, cluster = _connect(scheduler, workers or os.cpu_count() or 2)
+    try:
+        n_workers = len(client.scheduler_info().get("workers", {})) or (workers or 1)
+        order = _schedule(tasks)
+        futures: dict[Any, Any] = {}
+        for rank, task in enumerate(order):       # costly filters of each log first, logs in order
+            fut = client.submit(execute_task, _absolute(task), key=f"navpp-run-{task.index}-{os.getpid()}",
+                                pure=False, priority=len(order) - rank)
+            futures[fut] = task
+        results: dict[int, Any] = {}
+        drawn: dict[tuple[str, str], list] = {}
+        left = Counter(t.log for t in tasks)
+        pending = as_completed(list(futures))
+        for fut in pending:
+            item = futures.pop(fut)
+            if not hasattr(item, "index"):            # a figure job
+                try:
+                    drawn[item.log, item.kinds[0]] = fut.result()
+                except Exception:  # noqa: BLE001  (draw it here instead)
+                    drawn[item.log, item.kinds[0]] = render_figures(item)
+                continue
+            try:
+                results[item.index] = fut.result()
+            except Exception as exc:  # noqa: BLE001  (KilledWorker, a result that does not travel: a row)
+                results[item.index] = _failed(item, f"the Dask worker failed: {_internal(exc)}")
+            fut.release()
+            if progress:
+                progress("all runs", len(results) / len(tasks))
+            left[item.log] -= 1
+            if left[item.log] == 0 and draw is not None:
+                whole = draw.job(item.log, [results[t.index] for t in tasks if t.log == item.log])
+                for kind in FIGURE_KINDS:
+                    job = replace(whole, kinds=(kind,))
+                    f = client.submit(render_figures, job, pure=False, priority=len(order) + 1)
+                    futures[f] = job
+                    pending.add(f)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    plots: dict[str, list] = {}
+    if draw is not None:
+        for log in dict.fromkeys(t.log for t in tasks):
+            plots[log] = [p for kind in FIGURE_KINDS for p in drawn.get((log, kind), [])]
+    return [results[t.index] for t in tasks], plots, n_workers
+
+
+__all__ = ["execute_task", "run_dask"]
