@@ -77,8 +77,10 @@ def start_cluster(workdir: Path, workers: int) -> tuple[str, list[subprocess.Pop
     sched_file = workdir / "scheduler.json"
     sched_file.unlink(missing_ok=True)
     bindir = Path(sys.executable).parent
-    dask = [str(bindir / "dask")] if (bindir / "dask").exists() else [sys.executable, "-m", "distributed.cli.dask_spec"]
-    log = open(workdir / "cluster.log", "w")
+    if not (bindir / "dask").exists():
+        sys.exit("bench_dask: the `dask` command is not installed: pip install 'navpp[dask]'")
+    dask = [str(bindir / "dask")]
+    log = open(workdir / "cluster.log", "w")     # noqa: SIM115  (open for the cluster's lifetime)
     procs = [subprocess.Popen([*dask, "scheduler", "--scheduler-file", str(sched_file), "--no-dashboard",
                                "--port", "0"], stdout=log, stderr=log)]
     for _ in range(200):
