@@ -138,7 +138,13 @@ class Aiding:
         fix = np.concatenate([np.arange(m), np.full(int(alone.sum()), -1)])
         cons = np.concatenate([on_fix, np.ones(int(alone.sum()), bool)])
         order = np.argsort(times, kind="stable")
-        return times[order], fix[order], cons[order]
+        times, fix, cons = times[order], fix[order], cons[order]
+        if not self.nhc:               # ZUPT / ZARU only: no constraint epoch where the IMU is not still
+            i = np.clip(np.searchsorted(self.t, times), 0, self.t.shape[0] - 1)
+            cons &= self.still[i]
+            keep = (fix >= 0) | cons
+            times, fix, cons = times[keep], fix[keep], cons[keep]
+        return times, fix, cons
 
     def _gyro_at(self, t: float) -> np.ndarray:
         i = int(np.searchsorted(self.t, t))
