@@ -46,6 +46,15 @@ def execute_task(task) -> Any:
     return _execute(task, _cache(), None)
 
 
+def render_log_figures(plan, log: str, kind: str, *outcomes) -> list:
+    """Draw one kind of figure of ``log`` from its runs' outcomes.  Runs on a worker, with the
+    outcomes passed as the run tasks' futures: dask hands them over worker to worker, so the
+    plot series never travel through the scheduler (nor back to the client first)."""
+    from .report import render_figures
+
+    return render_figures(replace(plan.job(log, list(outcomes)), kinds=(kind,)))
+
+
 def _absolute(task):
     def ab(p: str | None) -> str | None:
         return None if p is None else str(Path(p).expanduser().resolve())
@@ -58,11 +67,12 @@ def _connect(scheduler: str | None, workers: int):
         from distributed import Client, LocalCluster
     except ImportError:
         raise ConfigError("--executor dask needs dask.distributed: pip install 'navpp[dask]'") from None
+    # results come straight from the workers, never through the scheduler
     if scheduler is None:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0")
-        return Client(cluster), cluster
+        return Client(cluster, direct_to_workers=True), cluster
     try:
-        return Client(scheduler, timeout="20s"), None
+        return Client(scheduler, timeout="20s", direct_to_workers=True), None
     except (OSError, TimeoutError, ValueError) as exc:
         raise InputError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler there "
                          f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
@@ -88,32 +98,43 @@ def run_dask(tasks: Sequence, workers: int | None, scheduler: str | None, progre
                                 pure=False, priority=len(order) - rank)
             futures[fut] = task
         results: dict[int, Any] = {}
+        run_futures: dict[int, Any] = {t.index: f for f, t in futures.items()}
         drawn: dict[tuple[str, str], list] = {}
         left = Counter(t.log for t in tasks)
         pending = as_completed(list(futures))
         for fut in pending:
             item = futures.pop(fut)
-            if not hasattr(item, "index"):            # a figure job
+            if isinstance(item, tuple):               # (log, kind) of a figure task
                 try:
-                    drawn[item.log, item.kinds[0]] = fut.result()
+                    drawn[item] = fut.result()
                 except Exception:  # noqa: BLE001  (draw it here instead)
-                    drawn[item.log, item.kinds[0]] = render_figures(item)
+                    whole = draw.job(item[0], [results[t.index] for t in tasks if t.log == item[0]])
+                    drawn[item] = render_figures(replace(whole, kinds=(item[1],)))
+                fut.release()
                 continue
             try:
                 results[item.index] = fut.result()
             except Exception as exc:  # noqa: BLE001  (KilledWorker, a result that does not travel: a row)
                 results[item.index] = _failed(item, f"the Dask worker failed: {_internal(exc)}")
-            fut.release()
             if progress:
                 progress("all runs", len(results) / len(tasks))
             left[item.log] -= 1
-            if left[item.log] == 0 and draw is not None:
-                whole = draw.job(item.log, [results[t.index] for t in tasks if t.log == item.log])
-                for kind in FIGURE_KINDS:
-                    job = replace(whole, kinds=(kind,))
-                    f = client.submit(render_figures, job, pure=False, priority=len(order) + 1)
-                    futures[f] = job
-                    pending.add(f)
+            if left[item.log] == 0:
+                mine = [t for t in tasks if t.log == item.log]
+                ok = all(run_futures[t.index].status == "finished" for t in mine)
+                if draw is not None and ok:
+                    deps = [run_futures[t.index] for t in mine]
+                    for kind in FIGURE_KINDS:
+                        f = client.submit(render_log_figures, draw, item.log, kind, *deps, pure=False,
+                                          priority=len(order) + 1)
+                        futures[f] = (item.log, kind)
+                        pending.add(f)
+                elif draw is not None:                # a run's worker died: draw from what came back, here
+                    whole = draw.job(item.log, [results[t.index] for t in mine])
+                    for kind in FIGURE_KINDS:
+                        drawn[item.log, kind] = render_figures(replace(whole, kinds=(kind,)))
+                for t in mine:
+                    run_futures.pop(t.index).release()
     finally:
         client.close()
         if cluster is not None:
