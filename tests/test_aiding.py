@@ -280,3 +280,18 @@ def test_a_fading_filter_with_zupt_stays_sane():
     rec, _ = api.apply_outages(rec, [(200.0, 30.0), (450.0, 30.0), (700.0, 30.0)], "sim")
     res, m = _run(rec, "aukf")
     assert res.gnss_rejected < 10 and m["position_m"]["horizontal"]["rmse"] < 3.0, m["position_m"]["horizontal"]
+
+
+def test_smoothing_with_every_aid(drive):
+    """Several updates at one node (GNSS position and velocity, NHC, ZUPT, ZARU): the smoother
+    takes the node's first prior and last posterior, and still improves on the forward run."""
+    rec = drive.recording()
+    cfg = config_from_dict({"imu": {"preset": "automotive"}, "vehicle": {"type": "car"}}, "test")
+    res = engine.run(rec, cfg, api.make_filter("ekf", cfg), smooth=True)
+    assert res.smoothed.breaks == 0
+    out = []
+    for sol in (res.solution, res.smoothed.solution):
+        m = compute_metrics(sol, rec.reference, filter_name="ekf", log="", reference="", runtime_s=0, imu_samples=0,
+                            gnss_epochs=0, gnss_rejected=0)
+        out.append((m["position_m"]["horizontal"]["rmse"], m["velocity_mps"]["horizontal"]["rmse"]))
+    assert out[1][0] < 0.8 * out[0][0] and out[1][1] < out[0][1], out
