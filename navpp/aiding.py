@@ -67,13 +67,16 @@ class Aiding:
     t, gyro, accel : the IMU as the model sees it (s; rad/s and m/s^2, body FLU, mounting applied).
     gyro_arw, accel_vrw : white noise of the configured IMU (rad/sqrt(s), m/s/sqrt(s)).
     gnss : the recording's GNSS; ``sel`` the indices of the fixes the engine uses, in order.
+    mounting_rpy_deg : the vehicle frame's roll, pitch, yaw relative to the body (deg), overriding
+        ``[vehicle] mounting_rpy_deg`` (the engine's estimate when that is ``"auto"``).
     gaps : (K, 2) s, the long IMU gaps (:attr:`navpp.ins.model.InsModel.gaps`): no constraint
         epoch is placed inside one (there is no IMU to say whether the vehicle is still, and the
         model's unseen-motion noise of a gap must not be cut into pieces).
     """
 
     def __init__(self, config: Config, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gyro_arw: float,
-                 accel_vrw: float, gnss, sel: np.ndarray, gaps: np.ndarray | None = None) -> None:
+                 accel_vrw: float, gnss, sel: np.ndarray, gaps: np.ndarray | None = None,
+                 mounting_rpy_deg: tuple[float, float, float] | None = None) -> None:
         veh = config.vehicle
         self.t, self.gyro = t, gyro
         self.gaps = np.zeros((0, 2)) if gaps is None else np.asarray(gaps, dtype=float).reshape(-1, 2)
@@ -87,7 +90,8 @@ class Aiding:
                       if (self.zupt or self.zaru) else np.zeros(t.shape[0], bool))
         self.rate_hz = veh.rate_hz
         self.nhc_std = veh.nhc_std_mps
-        self.c_vb = vehicle_matrix(veh.mounting_rpy_deg)
+        mounting = mounting_rpy_deg if mounting_rpy_deg is not None else veh.mounting_rpy_deg
+        self.c_vb = vehicle_matrix(mounting if mounting != "auto" else (0.0, 0.0, 0.0))
         self.nhc_point = np.asarray(veh.nhc_point_m, dtype=float)
         self.zupt_std = veh.zupt_std_mps
         self.zaru_floor = math.radians(veh.zaru_std_dps)

@@ -530,8 +530,10 @@ class VehicleConfig:
     nhc : bool, default true. Apply the non-holonomic constraint (with ``type = "car"`` only).
     nhc_std_mps : (lateral, vertical) m/s, > 0. 1-sigma of the body's lateral and vertical
         velocity in the vehicle frame (side slip, suspension); a scalar sets both.
-    mounting_rpy_deg : (3,) deg. The vehicle frame's roll, pitch, yaw relative to the IMU body
-        frame (after ``[imu] mounting_rpy_deg``), about x, y, z.
+    mounting_rpy_deg : (3,) deg, or ``"auto"``. The vehicle frame's roll, pitch, yaw relative to
+        the IMU body frame (after ``[imu] mounting_rpy_deg``), about x, y, z.  ``"auto"``:
+        estimated (pitch and yaw; roll 0) from a first forward pass without the constraint
+        (:mod:`navpp.ins.aids.mounting`), and the run says what it found.
     nhc_point_m : (3,) m. The point whose velocity has no lateral and vertical part (the rear
         axle's centre), body FLU, from the IMU.
     zupt, zaru : bool, default true. Zero-velocity and zero-rate updates while still.
@@ -551,7 +553,7 @@ class VehicleConfig:
     type: str = "none"
     nhc: bool = True
     nhc_std_mps: tuple[float, float] = (0.1, 0.1)
-    mounting_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mounting_rpy_deg: tuple[float, float, float] | str = (0.0, 0.0, 0.0)
     nhc_point_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     zupt: bool = True
     zaru: bool = True
@@ -573,7 +575,8 @@ class VehicleConfig:
         _set(self, "nhc_std_mps", _as_vector("vehicle", "nhc_std_mps", std, 2))
         if min(self.nhc_std_mps) <= 0.0:
             raise ConfigError(f"[vehicle] nhc_std_mps must be > 0, got {list(self.nhc_std_mps)!r}")
-        _set(self, "mounting_rpy_deg", _as_vector("vehicle", "mounting_rpy_deg", self.mounting_rpy_deg, 3))
+        if self.mounting_rpy_deg != "auto":
+            _set(self, "mounting_rpy_deg", _as_vector("vehicle", "mounting_rpy_deg", self.mounting_rpy_deg, 3))
         _set(self, "nhc_point_m", _as_vector("vehicle", "nhc_point_m", self.nhc_point_m, 3))
         for key in ("zupt_std_mps", "rate_hz", "still_window_s", "still_max_speed_mps"):
             _fix_float(self, "vehicle", key, minimum=0.0, strict_min=True)

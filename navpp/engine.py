@@ -102,6 +102,7 @@ class RunResult:
     compile_s: float = 0.0            # one-off numba compilation on a cold cache, s
     warnings: tuple[str, ...] = ()    # what the run noticed about the data (units, tilt, gating)
     smoothed: SmoothedRun | None = None   # with smooth=True: the RTS-smoothed run
+    notes: tuple[str, ...] = ()       # what the run decided (e.g. the estimated vehicle mounting)
     #: updates applied / rejected by the gate per kind: gnss_position, gnss_velocity, zupt, zaru, nhc
     updates: dict[str, dict[str, int]] = field(default_factory=dict)
 
@@ -351,9 +352,39 @@ def _consistency_checks(source: str, name: str, config: Config, tg: np.ndarray, 
     return warnings
 
 
+def _vehicle_mounting(recording: Recording, config: Config, cov_step_s: float
+                      ) -> tuple[tuple[float, float, float] | None, list[str], list[str]]:
+    """``[vehicle] mounting_rpy_deg = "auto"`` with the NHC on: a first EKF pass without the
+    constraint, and the vehicle frame's pitch and yaw estimated from its solution
+    (:func:`navpp.ins.aids.mounting.estimate_mounting`).  Returns the angles (None: as
+    configured), and a note or a warning for the user."""
+    veh = config.vehicle
+    if not (veh.type == "car" and veh.nhc and veh.mounting_rpy_deg == "auto"):
+        return None, [], []
+    from dataclasses import replace as dc_replace
+
+    from .filters.ekf import EKF
+    from .ins.aids.mounting import estimate_mounting
+
+    first = dc_replace(config, vehicle=dc_replace(veh, nhc=False))
+    pre = _run(recording, first, EKF(gate_probability=config.gnss.gate_probability,
+                                     reanchor_after_s=config.gnss.reanchor_after_s), None, cov_step_s)
+    sol = pre.solution
+    est = estimate_mounting(sol.t, sol.vel_enu, sol.rph_deg)
+    if est is None:
+        why = (f"{recording.source}: [vehicle] mounting_rpy_deg = \"auto\": less than 10 s of fast straight "
+               "driving to estimate it from; the constraint assumes the IMU aligned with the vehicle")
+        return (0.0, 0.0, 0.0), [], [why]
+    note = (f"vehicle mounting estimated (first pass without the constraint, {est.seconds:.0f} s of straight "
+            f"driving): pitch {est.pitch_deg:+.2f} deg, yaw {est.yaw_deg:+.2f} deg (spread "
+            f"{est.spread_deg[0]:.2f} / {est.spread_deg[1]:.2f} deg)")
+    return (0.0, est.pitch_deg, est.yaw_deg), [note], []
+
+
 def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
          cov_step_s: float, smooth: bool = False) -> RunResult:
     t_wall = time.perf_counter()
+    notes: list[str] = []
     warnings = check_imu_plausible(recording)
     warnings += check_data(recording, config)
     imu, gnss = recording.imu, recording.gnss
@@ -420,8 +451,11 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
 
     knot()
     n_noise = noise_model(config)
+    mounting, mounting_note, mounting_warning = _vehicle_mounting(recording, config, cov_step_s)
+    notes += mounting_note
+    warnings += mounting_warning
     aiding = Aiding(config, model.t, model.gyro, model.accel, n_noise.gyro_arw, n_noise.accel_vrw, gnss, sel,
-                    model.gaps)
+                    model.gaps, mounting)
     ev_t, ev_fix, ev_cons = aiding.schedule(al.t, float(imu.t[-1]), tg)
     n_ev = ev_t.shape[0]
     vel_nu = np.full((m_ep, 3), np.nan) if aiding.has_velocity else None
@@ -444,7 +478,7 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
             used_prior = None                       # the prior the first applied update corrected
             reset = applied = False
 
-            def apply(meas):
+            def apply(meas, t_e=t_e):
                 nonlocal state, used_prior, reset, applied
                 filt.last_prior = None
                 state, inn = filt.update(state, model, meas)
@@ -553,6 +587,7 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     rejected = int((~accepted).sum())
     warnings += list(al.warnings)
     warnings += _consistency_checks(recording.source, filt.name, config, tg, nis, accepted, list(warnings))
+    warnings += _aid_checks(recording.source, aiding.counts.as_dict())
     if smoothed is not None and smoothed.breaks:
         n = smoothed.breaks
         warnings.append(f"{recording.source}: smoothing: {n} step{'s' if n > 1 else ''} the smoother carries no "
@@ -560,7 +595,35 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
                         "or a prior covariance that was not positive definite): the smoothed trajectory keeps "
                         "the forward filter's jump there")
     return RunResult(solution, biases, al, diag, m_ep, rejected, time.perf_counter() - t_wall, 0.0,
-                     tuple(warnings), smoothed, aiding.counts.as_dict())
+                     tuple(warnings), smoothed, tuple(notes), aiding.counts.as_dict())
+
+
+#: Share of an aid's updates the gate may reject before the run says the aid disagrees with the data.
+AID_REJECTED_WARN = 0.05
+_AID_HINTS = {
+    "nhc": "the vehicle's motion is not along its x axis: check [vehicle] mounting_rpy_deg (or set it to \"auto\") "
+           "and nhc_point_m, or raise nhc_std_mps (side slip)",
+    "zupt": "standstill was detected while the vehicle moved: raise [vehicle] still_accel_std_mps2 / "
+            "still_gyro_std_dps or turn zupt off",
+    "zaru": "standstill was detected while the vehicle turned: raise [vehicle] still_gyro_std_dps or turn zaru off",
+    "gnss_velocity": "the GNSS velocity disagrees with the IMU: check the lever arm, [gnss] time_offset_s and the "
+                     "velocity's standard deviations (default_vel_std_mps), or set use_velocity = false",
+}
+
+
+def _aid_checks(source: str, updates: dict[str, dict[str, int]]) -> list[str]:
+    """A warning per aid the innovation gate rejected often (more than
+    :data:`AID_REJECTED_WARN` of its updates): the aid and the data disagree."""
+    out = []
+    for kind, hint in _AID_HINTS.items():
+        c = updates.get(kind)
+        if not c:
+            continue
+        n = c["applied"] + c["rejected"]
+        if n >= 20 and c["rejected"] > AID_REJECTED_WARN * n:
+            out.append(f"{source}: {c['rejected']} of {n} {kind} updates ({100.0 * c['rejected'] / n:.0f}%) failed "
+                       f"the innovation gate: {hint}")
+    return out
 
 
 def _smoothed_run(store: ForwardStore, model: InsModel, t_out: np.ndarray, path: np.ndarray,

@@ -295,3 +295,61 @@ def test_smoothing_with_every_aid(drive):
                             gnss_epochs=0, gnss_rejected=0)
         out.append((m["position_m"]["horizontal"]["rmse"], m["velocity_mps"]["horizontal"]["rmse"]))
     assert out[1][0] < 0.8 * out[0][0] and out[1][1] < out[0][1], out
+
+
+@pytest.fixture(scope="module")
+def misaligned():
+    """A 600 s drive whose IMU is turned against the vehicle: its axes are the vehicle's rotated
+    by pitch -1.5 deg and yaw +2 deg, so the vehicle frame is, relative to the IMU body frame,
+    pitch +1.5 and yaw -2 deg (to first order); two 30 s outages."""
+    from dataclasses import replace
+
+    from navpp.ins.attitude import rpy_matrix
+    from navpp.recording import ImuData
+
+    rec = simulate(SimulationSpec(duration_s=600.0, seed=3)).recording()
+    R = rpy_matrix((0.0, -1.5, 2.0))
+    rec = replace(rec, imu=ImuData(rec.imu.t, rec.imu.gyro @ R, rec.imu.accel @ R))
+    return rec
+
+
+def _outage_run(rec, mounting):
+    outs = [(200.0, 30.0), (450.0, 30.0)]
+    cut, _ = api.apply_outages(rec, outs, "sim")
+    cfg = config_from_dict({"imu": {"preset": "automotive"}, "vehicle": {"type": "car", "mounting_rpy_deg": mounting}},
+                           "test")
+    res = engine.run(cut, cfg, api.make_filter("ekf", cfg))
+    m = compute_metrics(res.solution, rec.reference, filter_name="ekf", log="", reference="", runtime_s=0,
+                        imu_samples=0, gnss_epochs=0, gnss_rejected=0, outages=outs)
+    return res, m
+
+
+def test_mounting_is_estimated_and_a_wrong_one_is_warned(misaligned):
+    from navpp.ins.aids.mounting import estimate_mounting
+
+    auto, m_auto = _outage_run(misaligned, "auto")
+    (note,) = [n for n in auto.notes if "vehicle mounting estimated" in n]
+    assert "pitch +1.5" in note and "yaw -2.0" in note, note
+    known, m_known = _outage_run(misaligned, (0.0, 1.5, -2.0))
+    wrong, m_wrong = _outage_run(misaligned, (0.0, 0.0, 0.0))
+    h = lambda m: m["position_m"]["horizontal"]["rmse"]  # noqa: E731
+    assert h(m_auto) < 1.2 * h(m_known) and h(m_wrong) > 5.0 * h(m_known), (h(m_auto), h(m_known), h(m_wrong))
+    assert any("nhc updates" in w and "mounting_rpy_deg" in w for w in wrong.warnings)
+    assert not any("nhc updates" in w for w in auto.warnings)
+    # the estimator itself, on the forward solution of the known-mounting run
+    est = estimate_mounting(known.solution.t, known.solution.vel_enu, known.solution.rph_deg)
+    assert abs(est.pitch_deg - 1.5) < 0.2 and abs(est.yaw_deg + 2.0) < 0.2 and est.seconds > 100.0
+
+
+def test_mounting_auto_without_enough_motion_is_warned(sim_log_dir, monkeypatch):
+    from navpp.ins.aids import mounting
+
+    t = np.arange(0.0, 30.0, 0.1)                     # 30 s, but only 8 s faster than 5 m/s
+    vel = np.zeros((t.size, 3))
+    vel[:, 1] = np.where(t > 22.0, 8.0, 2.0)
+    assert mounting.estimate_mounting(t, vel, np.zeros((t.size, 3))) is None
+    monkeypatch.setattr(mounting, "estimate_mounting", lambda *a, **k: None)
+    cfg = config_from_dict({"vehicle": {"type": "car", "mounting_rpy_deg": "auto"}}, "test")
+    res = engine.run(api.read_log(sim_log_dir, cfg), cfg, api.make_filter("ekf", cfg))
+    assert not any("estimated" in n for n in res.notes)
+    assert any('mounting_rpy_deg = "auto": less than 10 s of fast straight driving' in w for w in res.warnings)
