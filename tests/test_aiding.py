@@ -244,7 +244,7 @@ def test_counts_in_metrics_diagnostics_and_cli(tmp_path, drive):
     log = tmp_path / "log"
     write_csv_log(drive, log)
     (log / "navpp.toml").write_text('[imu]\npreset = "automotive"\n[vehicle]\ntype = "car"\n')
-    r = CliRunner().invoke(app, ["process", str(log), "--out", str(tmp_path / "o")])
+    r = CliRunner().invoke(app, ["process", str(log), "--out", str(tmp_path / "o"), "--format", "csv,mcap"])
     assert r.exit_code == 0, r.output
     assert "aiding updates applied (rejected): gnss_velocity" in r.output and "nhc" in r.output
     m = json.loads((tmp_path / "o" / "metrics.json").read_text())
@@ -252,6 +252,14 @@ def test_counts_in_metrics_diagnostics_and_cli(tmp_path, drive):
     assert "## Measurement updates" in (tmp_path / "o" / "metrics.md").read_text()
     head = (tmp_path / "o" / "diagnostics.csv").read_text().splitlines()[0].split(",")
     assert head[10:15] == ["nu_ve", "nu_vn", "nu_vu", "nis_vel", "vel_accepted"]
+    # the MCAP diagnostics carry them too, by name, for Foxglove
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    with open(tmp_path / "o" / "trajectory.mcap", "rb") as f:
+        msg = next(m for _, ch, _, m in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages()
+                   if ch.topic == "/navpp/diagnostics")
+    assert list(msg.names[:5]) == ["nu_ve", "nu_vn", "nu_vu", "nis_vel", "vel_accepted"]
 
 
 @pytest.mark.slow

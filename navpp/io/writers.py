@@ -335,14 +335,23 @@ def write_trajectory_csv(path: str | os.PathLike[str], sol: Solution, *, t0_s: f
 
 
 def adaptive_columns(diagnostics: Any) -> tuple[list[str], np.ndarray]:
-    """Names and (M, K) values of every adaptive quantity in ``diagnostics.adaptive``.
+    """Names and (M, K) values of every per-epoch quantity beyond the fixed GNSS-position fields:
+    the GNSS velocity update of the epoch when the run had one (``nu_ve, nu_vn, nu_vu`` m/s,
+    ``nis_vel``, ``vel_accepted``; nan where a fix had no velocity), then every adaptive quantity
+    in ``diagnostics.adaptive``.
 
-    An entry ``name -> (M, k)`` gives ``name`` when k is 1, else ``name_0 .. name_<k-1>``: the
-    column names of ``diagnostics.csv`` (and of the MCAP diagnostics' ``names``).
+    An adaptive entry ``name -> (M, k)`` gives ``name`` when k is 1, else ``name_0 ..
+    name_<k-1>``: the column names of ``diagnostics.csv`` (and of the MCAP diagnostics' ``names``).
     """
     m = len(diagnostics.t)
     names: list[str] = []
     cols: list[np.ndarray] = []
+    vel_nu = getattr(diagnostics, "vel_nu", None)
+    if vel_nu is not None:
+        names += ["nu_ve", "nu_vn", "nu_vu", "nis_vel", "vel_accepted"]
+        cols.append(np.column_stack([np.asarray(vel_nu, dtype=np.float64).reshape(m, 3),
+                                     np.asarray(diagnostics.vel_nis, dtype=np.float64).reshape(m),
+                                     np.asarray(diagnostics.vel_accepted, dtype=np.float64).reshape(m)]))
     for key, values in getattr(diagnostics, "adaptive", {}).items():
         v = np.asarray(values, dtype=np.float64).reshape(m, -1)
         names += [key] if v.shape[1] == 1 else [f"{key}_{i}" for i in range(v.shape[1])]
@@ -366,17 +375,11 @@ def diagnostics_columns(diag: Any) -> tuple[list[str], list[np.ndarray], list[in
             np.asarray(diag.accepted, dtype=np.float64), np.asarray(diag.forced, dtype=np.float64),
             r[:, 0], r[:, 1], r[:, 2]]
     decimals = [4, 4, 4, 4, 0, 0, 4, 4, 4]
-    vel_nu = getattr(diag, "vel_nu", None)
-    if vel_nu is not None:       # the GNSS velocity update of the same epoch (nan: the fix had none)
-        v = np.asarray(vel_nu, dtype=np.float64)
-        names += ["nu_ve", "nu_vn", "nu_vu", "nis_vel", "vel_accepted"]
-        cols += [v[:, 0], v[:, 1], v[:, 2], np.asarray(diag.vel_nis, dtype=np.float64),
-                 np.asarray(diag.vel_accepted, dtype=np.float64)]
-        decimals += [4, 4, 4, 4, 0]
-    adaptive_names, values = adaptive_columns(diag)
-    names += adaptive_names
+    extra_names, values = adaptive_columns(diag)
+    names += extra_names
     cols += list(values.T)
-    decimals += [6] * len(adaptive_names)
+    n_vel = 5 if getattr(diag, "vel_nu", None) is not None else 0
+    decimals += [4, 4, 4, 4, 0][:n_vel] + [6] * (len(extra_names) - n_vel)
     return names, cols, decimals
 
 
