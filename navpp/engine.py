@@ -18,17 +18,25 @@ from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
+from numba import njit
 
 from .aiding import Aiding
 from .config import Config
 from .errors import FilterDivergedError, InputError
 from .filters.base import Filter, GaussianState
-from .ins.alignment import Alignment, AlignmentSettings, align
-from numba import njit
-
 from .filters.smoother import ForwardStore, smooth_arrays
-from .ins.model import BA, BG, LONG_GAP_PERIODS, POS, GnssPosition, InsModel, NoiseModel, apply_node_corrections
+from .ins.alignment import Alignment, AlignmentSettings, align
 from .ins.attitude import rpy_matrix
+from .ins.model import (
+    BA,
+    BG,
+    LONG_GAP_PERIODS,
+    POS,
+    GnssPosition,
+    InsModel,
+    NoiseModel,
+    apply_node_corrections,
+)
 from .ins.strapdown import NOMINAL_BA, NOMINAL_BG
 from .recording import Recording, Solution
 
@@ -105,6 +113,11 @@ class RunResult:
     notes: tuple[str, ...] = ()       # what the run decided (e.g. the estimated vehicle mounting)
     #: updates applied / rejected by the gate per kind: gnss_position, gnss_velocity, zupt, zaru, nhc
     updates: dict[str, dict[str, int]] = field(default_factory=dict)
+
+    @property
+    def forward_runtime_s(self) -> float:
+        """Processing time of the forward filter alone, s (``runtime_s`` without the smoothing)."""
+        return self.runtime_s - (self.smoothed.runtime_s if self.smoothed is not None else 0.0)
 
 
 def mounting_matrix(rpy_deg: tuple[float, float, float]) -> np.ndarray:
@@ -450,12 +463,11 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
             knot()
 
     knot()
-    n_noise = noise_model(config)
     mounting, mounting_note, mounting_warning = _vehicle_mounting(recording, config, cov_step_s)
     notes += mounting_note
     warnings += mounting_warning
-    aiding = Aiding(config, model.t, model.gyro, model.accel, n_noise.gyro_arw, n_noise.accel_vrw, gnss, sel,
-                    model.gaps, mounting)
+    aiding = Aiding(config, model.t, model.gyro, model.accel, model.noise.gyro_arw, model.noise.accel_vrw, gnss,
+                    sel, model.gaps, mounting)
     ev_t, ev_fix, ev_cons = aiding.schedule(al.t, float(imu.t[-1]), tg)
     n_ev = ev_t.shape[0]
     vel_nu = np.full((m_ep, 3), np.nan) if aiding.has_velocity else None
@@ -468,6 +480,22 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
 
     def _epochs() -> None:
         nonlocal state, last_good
+        used_prior = None           # per epoch: the prior the first applied update corrected,
+        reset = applied = False     # whether an update re-anchored the covariance, whether any applied
+
+        def apply(meas, t_e: float):
+            nonlocal state, used_prior, reset, applied
+            filt.last_prior = None
+            state, inn = filt.update(state, model, meas)
+            checked(t_e)                            # the update
+            aiding.counts.add(meas.kind, inn.accepted)
+            if inn.accepted:
+                if not applied:
+                    used_prior = filt.last_prior
+                applied = True
+                reset |= inn.forced
+            return inn
+
         for e in range(n_ev):
             t_e = float(ev_t[e])
             k = int(ev_fix[e])
@@ -475,25 +503,10 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
             predicted((state.t, t_e))
             prior = state.P.diagonal()[POS].copy()
             checked(t_e)                            # the prediction
-            used_prior = None                       # the prior the first applied update corrected
-            reset = applied = False
-
-            def apply(meas, t_e=t_e):
-                nonlocal state, used_prior, reset, applied
-                filt.last_prior = None
-                state, inn = filt.update(state, model, meas)
-                checked(t_e)                        # the update
-                aiding.counts.add(meas.kind, inn.accepted)
-                if inn.accepted:
-                    if not applied:
-                        used_prior = filt.last_prior
-                    applied = True
-                    reset |= inn.forced
-                return inn
-
+            used_prior, reset, applied = None, False, False
             if k >= 0:
                 meas = GnssPosition(t_e, float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever)
-                inn = apply(meas)
+                inn = apply(meas, t_e)
                 if inn.accepted:
                     last_good = t_e
                 nu[k] = inn.nu
@@ -507,26 +520,23 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
                     adaptive[name][k] = value
                 vmeas = aiding.velocity(k, t_e)
                 if vmeas is not None:
-                    vinn = apply(vmeas)
+                    vinn = apply(vmeas, t_e)
                     vel_nu[k], vel_nis[k], vel_accepted[k] = vinn.nu, vinn.nis, float(vinn.accepted)
             if ev_cons[e]:
                 for cmeas in aiding.constraint_measurements(t_e, state.x, state.P):
-                    apply(cmeas)
+                    apply(cmeas, t_e)
             if store is not None:
                 store.updated(used_prior, state, reset)
             if applied and ev_sample[e] >= 0:
                 model.path[ev_sample[e]] = state.x[:n_path]     # the epoch's own sample shows the posterior
             knot(prior)
-            if k < 0:
-                if progress is not None and e % tick == 0:
-                    progress(e / n_ev)
-                continue
-            if store is not None:
-                epoch_node[k] = store.n - 1
-            bias[k, :3] = state.x[NOMINAL_BG]
-            bias[k, 3:] = state.x[NOMINAL_BA]
-            bias_var[k, :3] = state.P.diagonal()[BG]
-            bias_var[k, 3:] = state.P.diagonal()[BA]
+            if k >= 0:
+                if store is not None:
+                    epoch_node[k] = store.n - 1
+                bias[k, :3] = state.x[NOMINAL_BG]
+                bias[k, 3:] = state.x[NOMINAL_BA]
+                bias_var[k, :3] = state.P.diagonal()[BG]
+                bias_var[k, 3:] = state.P.diagonal()[BA]
             if progress is not None and e % tick == 0:
                 progress(e / n_ev)
         # after the last fix the uncertainty keeps growing to the end of the log
