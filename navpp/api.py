@@ -470,7 +470,6 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         FilterDivergedError when the filter diverges; each with a one-line message.
     """
     from . import engine
-    from .metrics import compute_metrics
 
     log = Path(log)
     cfg = config if isinstance(config, Config) else resolve_config(log, config)
@@ -518,20 +517,13 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         if smooth:
             fwd_out = resample_solution(result.solution, rate) if rate is not None else result.solution
 
-        metrics = None
-        if rec.reference is not None:
-            def metrics_of(solution: Solution, runtime_s: float) -> dict:
-                return compute_metrics(
-                    solution, rec.reference, filter_name=filter_name, log=str(log),
-                    reference=rec.reference.source or "", runtime_s=runtime_s, imu_samples=len(rec.imu),
-                    gnss_epochs=result.gnss_epochs, gnss_rejected=result.gnss_rejected, gnss=rec.gnss,
-                    lever_arm_m=cfg.gnss.lever_arm_m, outages=windows,
-                    outages_removed=[o["gnss_removed"] for o in outages], updates=result.updates)
-
-            metrics = metrics_of(sol, runtime)
-            if smooth:
-                metrics = smoothing_metrics(metrics, metrics_of(result.solution, runtime - result.smoothed.runtime_s),
-                                            result.smoothed)
+        removed = [o["gnss_removed"] for o in outages]
+        metrics = run_metrics(rec, cfg, result, sol, filter_name=filter_name, log=str(log), runtime_s=runtime,
+                              windows=windows, removed=removed)
+        if metrics is not None and smooth:
+            forward = run_metrics(rec, cfg, result, result.solution, filter_name=filter_name, log=str(log),
+                                  runtime_s=result.forward_runtime_s, windows=windows, removed=removed)
+            metrics = smoothing_metrics(metrics, forward, result.smoothed)
 
         files: list[Path] = []
         if write:
@@ -551,6 +543,22 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
                   f"{result.smoothed.runtime_s:.2f} s; trajectory_forward.csv holds the forward solution",)
     return ProcessResult(filter_name, rec, sol_out, result, metrics, out, tuple(files), cfg, notes, warnings,
                          tuple(outages), fwd_out)
+
+
+def run_metrics(rec: Recording, cfg: Config, result: Any, solution: Solution, *, filter_name: str, log: str,
+                runtime_s: float, windows: Sequence[tuple[float, float]], removed: Sequence[int]) -> dict | None:
+    """:func:`navpp.metrics.compute_metrics` of one solution of an engine run (``result``, the
+    forward or the smoothed solution) against the recording's reference; None without one.
+    ``windows`` are the simulated outages and ``removed`` the fixes each removed."""
+    from .metrics import compute_metrics
+
+    if rec.reference is None:
+        return None
+    return compute_metrics(solution, rec.reference, filter_name=filter_name, log=log,
+                           reference=rec.reference.source or "", runtime_s=runtime_s, imu_samples=len(rec.imu),
+                           gnss_epochs=result.gnss_epochs, gnss_rejected=result.gnss_rejected, gnss=rec.gnss,
+                           lever_arm_m=cfg.gnss.lever_arm_m, outages=windows, outages_removed=removed,
+                           updates=result.updates)
 
 
 #: The figures of the forward filter kept in ``metrics["forward"]`` of a smoothed run.

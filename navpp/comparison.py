@@ -287,7 +287,6 @@ def _failed(task: _Task, status: str, log_series: LogSeries | None = None) -> _O
 def _execute(task: _Task, cache: _RecordingCache, progress: ProgressFn | None) -> _Outcome:
     """Run one filter on one log; every failure becomes the row's status."""
     from . import api, engine
-    from .metrics import compute_metrics
 
     try:
         cfg, rec, removed = cache.get(task, progress)
@@ -301,17 +300,11 @@ def _execute(task: _Task, cache: _RecordingCache, progress: ProgressFn | None) -
         res = engine.run(rec, cfg, filt, progress=(lambda f: progress(label, f)) if progress else None,
                          smooth=task.smooth)
         # the forward row's time is the forward filter's; the smoothed row's includes the smoothing
-        forward_s = res.runtime_s - (res.smoothed.runtime_s if res.smoothed is not None else 0.0)
+        forward_s = res.forward_runtime_s
 
         def metrics_of(sol, name: str, runtime_s: float) -> dict | None:
-            if rec.reference is None:
-                return None
-            return compute_metrics(sol, rec.reference, filter_name=name, log=task.log,
-                                   reference=rec.reference.source or "", runtime_s=runtime_s,
-                                   imu_samples=len(rec.imu), gnss_epochs=res.gnss_epochs,
-                                   gnss_rejected=res.gnss_rejected, gnss=rec.gnss,
-                                   lever_arm_m=cfg.gnss.lever_arm_m, outages=cfg.gnss.outages,
-                                   outages_removed=removed, updates=res.updates)
+            return api.run_metrics(rec, cfg, res, sol, filter_name=name, log=task.log, runtime_s=runtime_s,
+                                   windows=cfg.gnss.outages, removed=removed)
 
         metrics = metrics_of(res.solution, task.filter, forward_s)
         series = _run_series(rec, res.solution, res.diagnostics, filt) if task.series else None
