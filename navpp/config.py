@@ -609,8 +609,7 @@ class OutputConfig:
     def __post_init__(self) -> None:
         _fix_optional_float(self, "output", "rate_hz", minimum=0.0, strict_min=True)
         _set(self, "formats", parse_formats(self.formats, "[output] formats"))
-        if not isinstance(self.smooth, bool):
-            raise ConfigError(f"[output] smooth must be true or false, got {self.smooth!r}")
+        _as_bool("output", "smooth", self.smooth)
 
 
 def parse_formats(value: object, what: str) -> tuple[str, ...]:
