@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import ConfigError, FilterDivergedError
 from .base import GaussianState
 from .benchmarks import BenchResult, Row, make_bench_filter, register_benchmark
-from .linear import LinearMeasurement, LinearModel
+from .linear import LinearMeasurement, LinearModel, VectorSpace
 
 
 def wrap_angle(a: np.ndarray | float) -> np.ndarray:
@@ -509,7 +509,7 @@ def _ct_coeffs(w: np.ndarray, T: float):
 
 
 @dataclass(frozen=True)
-class CoordinatedTurnModel:
+class CoordinatedTurnModel(VectorSpace):
     """Paper 003's 5-state coordinated turn (eq 42; Arasaratnam & Haykin 2009), state
     ``[x, x_dot, y, y_dot, Omega]`` (m, m/s, m, m/s, rad/s).
 
@@ -520,14 +520,6 @@ class CoordinatedTurnModel:
 
     q1: float
     q2: float
-
-    @staticmethod
-    def plus(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
-        return x + dx
-
-    @staticmethod
-    def minus(x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
-        return x1 - x0
 
     @staticmethod
     def f(X: np.ndarray, T: float) -> np.ndarray:

@@ -12,8 +12,20 @@ from dataclasses import dataclass
 import numpy as np
 
 
+class VectorSpace:
+    """⊞ / ⊟ of a model whose states are plain vectors: addition and subtraction."""
+
+    @staticmethod
+    def plus(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
+        return x + dx
+
+    @staticmethod
+    def minus(x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
+        return x1 - x0
+
+
 @dataclass(frozen=True)
-class LinearModel:
+class LinearModel(VectorSpace):
     """``x_k = Phi x_{k-1} + w``, ``w ~ N(0, Q)``, for any interval (``Phi``, ``Q`` per step).
 
     Phi : (n, n); Q : (n, n).
@@ -29,14 +41,6 @@ class LinearModel:
     @property
     def dim(self) -> int:
         return int(self.Phi.shape[0])
-
-    @staticmethod
-    def plus(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
-        return x + dx
-
-    @staticmethod
-    def minus(x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
-        return x1 - x0
 
     def transition(self, x: np.ndarray, interval) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self.Phi @ x, self.Phi, self.Q
