@@ -129,12 +129,12 @@ class Aiding:
         for a, b in self.gaps:
             grid = grid[(grid <= a) | (grid >= b)]
         # each grid time rides on the nearest GNSS epoch when that is within half a period
-        j = np.clip(np.searchsorted(tg, grid), 1, max(m - 1, 1)) if m else np.zeros(grid.shape, int)
         on_fix = np.zeros(m, bool)
         alone = np.ones(grid.shape, bool)
         if m:
-            near = np.where(np.abs(tg[j - 1] - grid) <= np.abs(tg[np.minimum(j, m - 1)] - grid), j - 1,
-                            np.minimum(j, m - 1))
+            after = np.searchsorted(tg, grid)
+            lo, hi = np.clip(after - 1, 0, m - 1), np.clip(after, 0, m - 1)     # the epochs either side
+            near = np.where(np.abs(tg[lo] - grid) <= np.abs(tg[hi] - grid), lo, hi)
             close = np.abs(tg[near] - grid) <= 0.5 * period
             on_fix[near[close]] = True
             alone = ~close
