@@ -820,11 +820,15 @@ def _run_parallel(tasks: Sequence[_Task], workers: int, progress: ProgressFn | N
     ex.shutdown(wait=True)
     if q is not None:
         q.close()
-    plots = {}
-    if draw is not None:
-        for log in dict.fromkeys(t.log for t in tasks):
-            plots[log] = [p for kind in FIGURE_KINDS for p in drawn.get((log, kind), [])]
-    return [results[t.index] for t in tasks], plots
+    return [results[t.index] for t in tasks], plots_by_log(tasks, drawn) if draw is not None else {}
+
+
+def plots_by_log(tasks: Sequence[_Task], drawn: Mapping[tuple[str, str], list]) -> dict[str, list]:
+    """The figures drawn per (log, figure kind) as each log's list, in report order."""
+    from .report import FIGURE_KINDS
+
+    return {log: [p for kind in FIGURE_KINDS for p in drawn.get((log, kind), [])]
+            for log in dict.fromkeys(t.log for t in tasks)}
 
 
 # --------------------------------------------------------------------------- summary.csv

@@ -90,9 +90,16 @@ def run_dask(tasks: Sequence, workers: int | None, scheduler: str | None, progre
     one per CPU)."""
     from distributed import as_completed
 
-    from .comparison import _failed, _internal, _schedule
+    from .comparison import _failed, _internal, _schedule, plots_by_log
     from .report import FIGURE_KINDS, render_figures
 
+    def draw_here(log: str, kinds) -> None:          # from the outcomes that came back, in this process
+        whole = draw.job(log, [results[t.index] for t in tasks if t.log == log])
+        for kind in kinds:
+            drawn[log, kind] = render_figures(replace(whole, kinds=(kind,)))
+
+    results: dict[int, Any] = {}
+    drawn: dict[tuple[str, str], list] = {}
     client, cluster = _connect(scheduler, workers or os.cpu_count() or 2)
     try:
         n_workers = len(client.scheduler_info().get("workers", {})) or (workers or 1)
@@ -102,9 +109,7 @@ def run_dask(tasks: Sequence, workers: int | None, scheduler: str | None, progre
             fut = client.submit(execute_task, _absolute(task), key=f"navpp-run-{task.index}-{os.getpid()}",
                                 pure=False, priority=len(order) - rank)
             futures[fut] = task
-        results: dict[int, Any] = {}
         run_futures: dict[int, Any] = {t.index: f for f, t in futures.items()}
-        drawn: dict[tuple[str, str], list] = {}
         left = Counter(t.log for t in tasks)
         pending = as_completed(list(futures))
         for fut in pending:
@@ -113,8 +118,7 @@ def run_dask(tasks: Sequence, workers: int | None, scheduler: str | None, progre
                 try:
                     drawn[item] = fut.result()
                 except Exception:  # noqa: BLE001  (draw it here instead)
-                    whole = draw.job(item[0], [results[t.index] for t in tasks if t.log == item[0]])
-                    drawn[item] = render_figures(replace(whole, kinds=(item[1],)))
+                    draw_here(item[0], (item[1],))
                 fut.release()
                 continue
             try:
@@ -135,20 +139,14 @@ def run_dask(tasks: Sequence, workers: int | None, scheduler: str | None, progre
                         futures[f] = (item.log, kind)
                         pending.add(f)
                 elif draw is not None:                # a run's worker died: draw from what came back, here
-                    whole = draw.job(item.log, [results[t.index] for t in mine])
-                    for kind in FIGURE_KINDS:
-                        drawn[item.log, kind] = render_figures(replace(whole, kinds=(kind,)))
+                    draw_here(item.log, FIGURE_KINDS)
                 for t in mine:
                     run_futures.pop(t.index).release()
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
-    plots: dict[str, list] = {}
-    if draw is not None:
-        for log in dict.fromkeys(t.log for t in tasks):
-            plots[log] = [p for kind in FIGURE_KINDS for p in drawn.get((log, kind), [])]
-    return [results[t.index] for t in tasks], plots, n_workers
+    return [results[t.index] for t in tasks], plots_by_log(tasks, drawn) if draw is not None else {}, n_workers
 
 
 __all__ = ["execute_task", "run_dask"]
