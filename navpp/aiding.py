@@ -69,6 +69,9 @@ class Aiding:
     gnss : the recording's GNSS; ``sel`` the indices of the fixes the engine uses, in order.
     mounting_rpy_deg : the vehicle frame's roll, pitch, yaw relative to the body (deg), overriding
         ``[vehicle] mounting_rpy_deg`` (the engine's estimate when that is ``"auto"``).
+    still : (N,) bool, the still samples as calibration found them
+        (:func:`navpp.ins.calibrate.standstill`); None: the fixed-threshold detector of
+        :func:`navpp.ins.aids.standstill.still_mask` with the ``[vehicle]`` thresholds.
     gaps : (K, 2) s, the long IMU gaps (:attr:`navpp.ins.model.InsModel.gaps`): no constraint
         epoch is placed inside one (there is no IMU to say whether the vehicle is still, and the
         model's unseen-motion noise of a gap must not be cut into pieces).
@@ -76,7 +79,7 @@ class Aiding:
 
     def __init__(self, config: Config, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gyro_arw: float,
                  accel_vrw: float, gnss, sel: np.ndarray, gaps: np.ndarray | None = None,
-                 mounting_rpy_deg: tuple[float, float, float] | None = None) -> None:
+                 mounting_rpy_deg: tuple[float, float, float] | None = None, still: np.ndarray | None = None) -> None:
         veh = config.vehicle
         self.t, self.gyro = t, gyro
         self.gaps = np.zeros((0, 2)) if gaps is None else np.asarray(gaps, dtype=float).reshape(-1, 2)
@@ -86,8 +89,12 @@ class Aiding:
         self.settings = StandstillSettings(window_s=veh.still_window_s, accel_floor=veh.still_accel_std_mps2,
                                            gyro_floor=math.radians(veh.still_gyro_std_dps),
                                            max_speed=veh.still_max_speed_mps)
-        self.still = (still_mask(t, gyro, accel, gyro_arw, accel_vrw, self.settings)
-                      if (self.zupt or self.zaru) else np.zeros(t.shape[0], bool))
+        if not (self.zupt or self.zaru):
+            self.still = np.zeros(t.shape[0], bool)
+        elif still is not None:
+            self.still = still
+        else:
+            self.still = still_mask(t, gyro, accel, gyro_arw, accel_vrw, self.settings)
         self.rate_hz = veh.rate_hz
         self.nhc_std = veh.nhc_std_mps
         mounting = mounting_rpy_deg if mounting_rpy_deg is not None else veh.mounting_rpy_deg

@@ -8,6 +8,7 @@ One TOML file, every field optional (see INTERFACES.md, "Configuration (TOML)"):
     [init]     method, roll_deg, pitch_deg, heading_deg, ...
     [vehicle]  type, nhc, zupt, zaru and their noise, rate and standstill-detector keys
     [output]   rate_hz, formats, smooth
+    [auto]     which self-calibration steps run (standstill, noise, biases, mounting, ...)
     [filter.<name>]  each filter's own options, kept raw and validated by that filter
 
 This module is the only place where datasheet units (deg/sqrt(h), deg/h, m/s/sqrt(h), mg)
@@ -585,6 +586,45 @@ class VehicleConfig:
 
 
 @dataclass(frozen=True)
+class AutoConfig:
+    """``[auto]``: what navpp measures from the log itself (:mod:`navpp.ins.calibrate`).
+    Every step is on by default; turning one off restores the configured value (a preset, a
+    ``[vehicle]`` threshold) so its effect can be measured.
+
+    Attributes
+    ----------
+    standstill : bool. Standstill from the log's own quietest stretches, confirmed by the GNSS
+        speed, for the alignment and for ZUPT/ZARU (off: fixed thresholds from ``[vehicle]``).
+    noise : bool. Q's white noise is the larger of the preset and what the data show, second by
+        second (vibration grows with speed).
+    biases : bool. Turn-on biases from still stretches (or from motion without one) start the
+        filter; a preset whose turn-on 1-sigma the data contradict is widened.
+    mounting : bool. An IMU whose gravity axis is not +z (y up, upside down) is rotated so it
+        is, and the run names the ``[imu] mounting_rpy_deg`` to write.
+    heading : bool. Initial heading from the first motion only (no GNSS gap, no large turn,
+        gyro bias removed), with a 1-sigma that includes the bias; off: the 150 m track.
+    recovery : bool. A fix forced through the gate after a run of rejections re-aligns velocity
+        and heading from the GNSS and re-opens attitude and gyro-bias uncertainty.
+    stale_rows : bool. IMU rows that repeat the previous row's six values are dropped.
+    clock_offset : bool. The IMU-GNSS clock offset is estimated from the gyro's yaw rate and the
+        GNSS course rate and applied when the estimate is confident.
+    """
+
+    standstill: bool = True
+    noise: bool = True
+    biases: bool = True
+    mounting: bool = True
+    heading: bool = True
+    recovery: bool = True
+    stale_rows: bool = True
+    clock_offset: bool = True
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            _as_bool("auto", f.name, getattr(self, f.name))
+
+
+@dataclass(frozen=True)
 class OutputConfig:
     """``[output]``: what to write.
 
@@ -652,6 +692,7 @@ _SECTIONS: Final[dict[str, type]] = {
     "init": InitConfig,
     "vehicle": VehicleConfig,
     "output": OutputConfig,
+    "auto": AutoConfig,
 }
 _FILTER_SECTION: Final[str] = "filter"
 _ALL_SECTIONS: Final[tuple[str, ...]] = (*_SECTIONS, _FILTER_SECTION)
@@ -663,7 +704,7 @@ class Config:
 
     Attributes
     ----------
-    imu, gnss, time, init, vehicle, output : the section dataclasses.
+    imu, gnss, time, init, vehicle, output, auto : the section dataclasses.
     filters : read-only mapping ``name -> options`` holding the raw ``[filter.<name>]``
         tables (nested tables read-only, lists as tuples); each filter validates its own.
     source : str. Where the configuration came from: a file path or ``"built-in defaults"``.
@@ -676,6 +717,7 @@ class Config:
     init: InitConfig = field(default_factory=InitConfig)
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     output: OutputConfig = field(default_factory=OutputConfig)
+    auto: AutoConfig = field(default_factory=AutoConfig)
     filters: Mapping[str, Mapping[str, Any]] = field(
         default_factory=lambda: MappingProxyType({})
     )

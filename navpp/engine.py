@@ -125,22 +125,92 @@ def mounting_matrix(rpy_deg: tuple[float, float, float]) -> np.ndarray:
     return rpy_matrix(rpy_deg)
 
 
-def alignment_settings(config: Config) -> AlignmentSettings:
-    noise = config.imu.noise()
+def alignment_settings(config: Config, noise=None, cal=None) -> AlignmentSettings:
+    """The alignment's settings from the config, the noise in use (``noise``, an
+    :class:`~navpp.config.ImuNoise`; default the config's) and what calibration measured."""
+    noise = config.imu.noise() if noise is None else noise
     ini = config.init
     rad = lambda v: None if v is None else math.radians(v)  # noqa: E731
+    extra = {}
+    if cal is not None:
+        auto = config.auto
+        if auto.standstill:
+            extra["still_mask"] = cal.still
+        if auto.biases:
+            extra.update(gyro_bias=cal.gyro_bias, gyro_bias_std=cal.gyro_bias_std, accel_bias=cal.accel_bias,
+                         accel_bias_std=cal.accel_bias_std, up_b=cal.up_b)
     return AlignmentSettings(
         method=ini.method, roll=rad(ini.roll_deg), pitch=rad(ini.pitch_deg), heading=rad(ini.heading_deg),
         still_min_s=ini.still_min_s, gyrocompass_max_heading_std=math.radians(ini.gyrocompass_max_heading_std_deg),
         min_speed_mps=ini.min_speed_mps, gyro_bias_sigma=math.hypot(noise.gyro_bias_sigma, noise.gyro_bias_instability),
         gyro_arw=noise.gyro_arw, accel_bias_sigma=math.hypot(noise.accel_bias_sigma, noise.accel_bias_instability),
-        accel_vrw=noise.accel_vrw, lever_arm_b=config.gnss.lever_arm_m)
+        accel_vrw=noise.accel_vrw, lever_arm_b=config.gnss.lever_arm_m,
+        first_motion=config.auto.heading,
+        heading_floor=math.radians(HEADING_FLOOR_DEG["car" if config.vehicle.type == "car" else "none"]),
+        **extra)
 
 
-def noise_model(config: Config) -> NoiseModel:
-    n = config.imu.noise()
+#: Floor of the initial heading's 1-sigma from the GNSS track, deg: the body's x axis may not point
+#: along the motion (side slip; a hand-held or robot-mounted IMU turned on its mount).
+HEADING_FLOOR_DEG = {"car": 1.0, "none": 5.0}
+
+
+def noise_model(config: Config, noise=None) -> NoiseModel:
+    n = config.imu.noise() if noise is None else noise
     return NoiseModel.from_datasheet(n.gyro_arw, n.accel_vrw, n.gyro_bias_sigma, n.gyro_bias_instability,
                                      n.gyro_bias_tau, n.accel_bias_sigma, n.accel_bias_instability, n.accel_bias_tau)
+
+
+def _calibrated(recording: Recording, config: Config, gyro: np.ndarray, accel: np.ndarray):
+    """Measure the log (:func:`navpp.ins.calibrate.calibrate`) and apply what ``[auto]`` allows:
+    a gross mounting (gravity not on +z) rotates the IMU; a turn-on bias prior the data
+    contradict is widened (its instability with it).  Returns (gyro, accel, noise, calibration
+    or None, notes, warnings)."""
+    from dataclasses import replace as dc_replace
+
+    from .ins.calibrate import calibrate, gross_mounting, matrix_to_rpy_deg
+
+    auto = config.auto
+    noise = config.imu.noise()
+    if not (auto.standstill or auto.noise or auto.biases or auto.mounting):
+        return gyro, accel, noise, None, [], []
+    imu, gnss = recording.imu, recording.gnss
+
+    def measure(g, a):
+        return calibrate(imu.t, g, a, gnss, gyro_arw=noise.gyro_arw, accel_vrw=noise.accel_vrw,
+                         gyro_bias_sigma=math.hypot(noise.gyro_bias_sigma, noise.gyro_bias_instability),
+                         accel_bias_sigma=math.hypot(noise.accel_bias_sigma, noise.accel_bias_instability),
+                         min_still_s=config.init.still_min_s)
+
+    notes: list[str] = []
+    warnings: list[str] = []
+    cal = measure(gyro, accel)
+    rot = gross_mounting(cal.up_b) if auto.mounting else None
+    if rot is not None:
+        gyro, accel = gyro @ rot.T, accel @ rot.T
+        total = rot @ mounting_matrix(config.imu.mounting_rpy_deg)
+        up = cal.up_b
+        axis = "xyz"[int(np.argmax(np.abs(up)))]
+        sign = "+" if up[int(np.argmax(np.abs(up)))] > 0 else "-"
+        warnings.append(f"{recording.source}: gravity is on the IMU's {sign}{axis} axis ({cal.up_from}), not +z: "
+                        f"the IMU is rotated so that it is; write [imu] mounting_rpy_deg = "
+                        f"{list(matrix_to_rpy_deg(total))} to say so (yaw is not known from gravity: check it)")
+        cal = measure(gyro, accel)
+    notes += list(cal.notes)
+    if auto.biases:
+        wide_g = float(np.max(np.abs(cal.gyro_bias)))
+        prior_g = math.hypot(noise.gyro_bias_sigma, noise.gyro_bias_instability)
+        if cal.bias_from != "none" and wide_g > 3.0 * max(prior_g, float(np.max(cal.gyro_bias_std))):
+            f = wide_g / max(prior_g, 1e-12)
+            noise = dc_replace(noise, gyro_bias_sigma=max(noise.gyro_bias_sigma, wide_g),
+                               gyro_bias_instability=noise.gyro_bias_instability * f)
+        wide_a = float(np.max(np.abs(cal.accel_bias)))
+        prior_a = math.hypot(noise.accel_bias_sigma, noise.accel_bias_instability)
+        if cal.bias_from == "still" and wide_a > 3.0 * max(prior_a, float(np.min(cal.accel_bias_std))):
+            f = wide_a / max(prior_a, 1e-12)
+            noise = dc_replace(noise, accel_bias_sigma=max(noise.accel_bias_sigma, wide_a),
+                               accel_bias_instability=noise.accel_bias_instability * f)
+    return gyro, accel, noise, cal, notes, warnings
 
 
 def run(recording: Recording, config: Config, filt: Filter, *, progress: ProgressFn | None = None,
@@ -405,9 +475,13 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     if any(a != 0.0 for a in config.imu.mounting_rpy_deg):
         m = mounting_matrix(config.imu.mounting_rpy_deg)
         gyro, accel = gyro @ m.T, accel @ m.T
-    model = InsModel(imu.t, gyro, accel, noise_model(config), cov_step_s=cov_step_s)
+    gyro, accel, noise, cal, cal_notes, cal_warnings = _calibrated(recording, config, gyro, accel)
+    notes += cal_notes
+    warnings += cal_warnings
+    profile = cal.profile if (cal is not None and config.auto.noise) else None
+    model = InsModel(imu.t, gyro, accel, noise_model(config, noise), cov_step_s=cov_step_s, profile=profile)
     try:
-        al = align(model.t, model.gyro, model.accel, gnss, alignment_settings(config))
+        al = align(model.t, model.gyro, model.accel, gnss, alignment_settings(config, noise, cal))
     except InputError as exc:  # alignment knows the data, not where it came from
         raise InputError(f"{recording.source}: {exc}") from None
     model.path[al.index] = al.x[:model.path.shape[1]]
@@ -467,7 +541,8 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     notes += mounting_note
     warnings += mounting_warning
     aiding = Aiding(config, model.t, model.gyro, model.accel, model.noise.gyro_arw, model.noise.accel_vrw, gnss,
-                    sel, model.gaps, mounting)
+                    sel, model.gaps, mounting,
+                    still=cal.still if (cal is not None and config.auto.standstill) else None)
     ev_t, ev_fix, ev_cons = aiding.schedule(al.t, float(imu.t[-1]), tg)
     n_ev = ev_t.shape[0]
     vel_nu = np.full((m_ep, 3), np.nan) if aiding.has_velocity else None

@@ -26,7 +26,7 @@ from ..errors import InputError
 from .attitude import dcm_to_quat, rph_to_dcm
 from .aids.standstill import quiet_blocks
 from .model import ATT, BA, BG, N_ERR, POS, VEL
-from .strapdown import NOMINAL_SIZE
+from .strapdown import NOMINAL_BA, NOMINAL_BG, NOMINAL_SIZE
 
 
 @dataclass(frozen=True)
@@ -45,6 +45,15 @@ class AlignmentSettings:
     accel_bias_sigma: float = 0.0            # m/s^2
     accel_vrw: float = 0.0                   # m/s/sqrt(s)
     lever_arm_b: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # what calibration measured (navpp.ins.calibrate); None: not measured
+    still_mask: np.ndarray | None = None     # (N,) bool still samples: replaces the own detector
+    gyro_bias: np.ndarray | None = None      # (3,) rad/s, with its 1-sigma (3,)
+    gyro_bias_std: np.ndarray | None = None
+    accel_bias: np.ndarray | None = None     # (3,) m/s^2, with its 1-sigma (3,)
+    accel_bias_std: np.ndarray | None = None
+    up_b: np.ndarray | None = None           # (3,) the body's up from gravity: levelling in motion
+    first_motion: bool = False               # heading from the first motion only (no gap, no big turn)
+    heading_floor: float = 0.0               # rad, floor of the GNSS-track heading's 1-sigma
 
 
 @dataclass(frozen=True)
@@ -95,6 +104,24 @@ def still_runs(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_durati
         else:
             k += 1
     return runs
+
+
+def mask_runs(t: np.ndarray, mask: np.ndarray, min_duration: float) -> list[tuple[int, int]]:
+    """Runs of True in ``mask`` lasting at least ``min_duration`` s: index ranges [i0, i1)."""
+    d = np.diff(np.concatenate([[0], np.asarray(mask, dtype=np.int8), [0]]))
+    starts, ends = np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]
+    return [(int(a), int(b)) for a, b in zip(starts, ends) if b - a >= 2 and t[b - 1] - t[a] >= min_duration]
+
+
+def _first_gnss_motion(gnss, speed: float = 0.5) -> float:
+    """Time (s) of the first GNSS epoch whose speed (velocity, or a fit of the fixes within
+    +-1 s) exceeds ``speed`` m/s and by more than 3 sigma; inf when the GNSS never moves."""
+    from .calibrate import gnss_speed_at
+
+    tg = np.asarray(gnss.t, dtype=float)
+    v, sv = gnss_speed_at(gnss, tg)
+    moving = np.nonzero(np.isfinite(v) & (v > speed) & (v > 3.0 * np.nan_to_num(sv, nan=np.inf)))[0]
+    return float(tg[moving[0]]) if moving.size else math.inf
 
 
 def detect_still(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_duration: float,
@@ -194,13 +221,19 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
         raise InputError("no GNSS fixes: cannot initialise the position")
     first_fix = float(gnss.t[0])
     still = None
-    for i0, i1 in still_runs(t, gyro, accel, min_duration=settings.still_min_s,
-                             gyro_arw=settings.gyro_arw, accel_vrw=settings.accel_vrw):
+    if settings.still_mask is not None:
+        runs = mask_runs(t, settings.still_mask, settings.still_min_s)
+        first_motion = _first_gnss_motion(gnss)
+    else:
+        runs = still_runs(t, gyro, accel, min_duration=settings.still_min_s, gyro_arw=settings.gyro_arw,
+                          accel_vrw=settings.accel_vrw)
+        first_motion = max(float(t[0]), first_fix) + 5.0
+    for i0, i1 in runs:
         t_s0, t_s1 = float(t[i0]), float(t[i1 - 1])
         if t_s1 < first_fix:
             lines.append(f"still period t = {t_s0:.2f} .. {t_s1:.2f} s not used: no GNSS fix yet")
             continue
-        if t_s0 > max(float(t[0]), first_fix) + 5.0:
+        if t_s0 > first_motion:
             break      # the log starts in motion: a later stop would throw away all that came before
         # the IMU test is generous (vibration): a quiet run may end in a smooth pull-away.
         # Keep the longest prefix that gravity and the GNSS track confirm as still.
@@ -246,11 +279,18 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
                             "deg at rest: if its axes are not forward-left-up (e.g. FRD), set [imu] mounting_rpy_deg")
     else:
         start = min(int(np.searchsorted(t, first_fix)), len(t) - 1)
-        lines.append(f"no still period of {settings.still_min_s:.1f} s with GNSS found: starting in motion at "
-                     f"t = {float(t[start]):.2f} s with roll = pitch = 0 (+-3 deg)")
-        roll = pitch = 0.0
+        if settings.up_b is not None:
+            roll, pitch = level(np.asarray(settings.up_b, dtype=float))
+            level_how = "mean gravity direction of the log"
+            lines.append(f"no still period of {settings.still_min_s:.1f} s with GNSS before the first motion: "
+                         f"starting in motion at t = {float(t[start]):.2f} s, levelled on the log's mean "
+                         f"gravity direction (+-3 deg)")
+        else:
+            lines.append(f"no still period of {settings.still_min_s:.1f} s with GNSS found: starting in motion at "
+                         f"t = {float(t[start]):.2f} s with roll = pitch = 0 (+-3 deg)")
+            roll = pitch = 0.0
+            level_how = "assumed level"
         att_std = math.radians(3.0)
-        level_how = "assumed level"
         i0 = i1 = start
         moving = True
         t_s0 = t_s1 = float(t[start])
@@ -275,7 +315,15 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
     method = settings.method
     g_sigma = math.sqrt(settings.gyro_bias_sigma ** 2 + (settings.gyro_arw ** 2 / max(t_s1 - t_s0, 1e-3)))
     gc_std = g_sigma / (geodesy.OMEGA_E * max(math.cos(lat_a), 1e-3))
+    bias_g = np.zeros(3) if settings.gyro_bias is None else np.asarray(settings.gyro_bias, dtype=float)
+    bias_g_std = (settings.gyro_bias_sigma if settings.gyro_bias_std is None
+                  else float(np.max(settings.gyro_bias_std)))
+
     def track_heading(use_velocity: bool):
+        if settings.first_motion:
+            return _heading_first_motion(t, gyro - bias_g, gnss, t_start, t_s1, roll, pitch, lat_a, lon_a, h_a,
+                                         fix_std, settings.min_speed_mps, bias_g_std, settings.heading_floor,
+                                         use_velocity=use_velocity)
         return _heading_from_gnss(t, gyro, gnss, t_start, t_s1, roll, pitch, lat_a, lon_a, h_a, fix_std,
                                   settings.min_speed_mps, use_velocity=use_velocity)
 
@@ -304,7 +352,8 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
             lines.append(f"gyrocompassing not possible with this gyro (predicted 1-sigma "
                          f"{math.degrees(gc_std):.1f} deg): heading from the GNSS track")
         heading, head_std, t_course = track_heading(use_velocity=gnss.vel_enu is not None)
-        head_how = f"GNSS track up to t = {t_course:.2f} s, turns taken out with the gyro"
+        head_how = (f"GNSS track of the first motion up to t = {t_course:.2f} s, gyro bias removed"
+                    if settings.first_motion else f"GNSS track up to t = {t_course:.2f} s, turns taken out with the gyro")
         if gnss.vel_enu is not None:
             # the velocity columns are easy to get wrong (NED, swapped, sign): check them against
             # the positions, which cannot be
@@ -339,8 +388,16 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
     vel_std = 0.05 if not moving else 1.0
     P[VEL, VEL] = np.eye(3) * vel_std ** 2
     P[POS, POS] = np.diag(fix_std ** 2)
-    P[BG, BG] = np.eye(3) * max(settings.gyro_bias_sigma, 1e-9) ** 2
-    P[BA, BA] = np.eye(3) * max(settings.accel_bias_sigma, 1e-9) ** 2
+    if settings.gyro_bias is not None:
+        x[NOMINAL_BG] = settings.gyro_bias
+        P[BG, BG] = np.diag(np.maximum(np.asarray(settings.gyro_bias_std, dtype=float), 1e-9) ** 2)
+    else:
+        P[BG, BG] = np.eye(3) * max(settings.gyro_bias_sigma, 1e-9) ** 2
+    if settings.accel_bias is not None:
+        x[NOMINAL_BA] = settings.accel_bias
+        P[BA, BA] = np.diag(np.maximum(np.asarray(settings.accel_bias_std, dtype=float), 1e-9) ** 2)
+    else:
+        P[BA, BA] = np.eye(3) * max(settings.accel_bias_sigma, 1e-9) ** 2
 
     lines.append(f"attitude: roll {math.degrees(roll):+.2f} deg, pitch {math.degrees(pitch):+.2f} deg "
                  f"({level_how}), heading {math.degrees(heading) % 360:.1f} deg +- "
@@ -423,4 +480,90 @@ def _heading_from_gnss(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lo
     else:
         noise = 1.1 * float(np.mean(fix_std[:2]))      # across-track error of the end point
     std = noise / abs(total) + math.radians(0.3)
+    return heading, std, float(tg[k])
+
+
+def _heading_first_motion(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, fix_std, min_speed,
+                          bias_std, floor, use_velocity=True, path_length=60.0, min_length=5.0,
+                          max_turn=math.radians(90.0), max_window=60.0):
+    """Heading at ``t_start`` from the GNSS track of the first motion only.
+
+    As :func:`_heading_from_gnss` (displacements rotated back by the turn the gyro measured,
+    ``gyro`` already free of its estimated bias), but the track ends at the first GNSS gap
+    (more than 3 nominal intervals), once the vehicle has turned by more than ``max_turn``
+    since the start, or after ``path_length`` m.  The 1-sigma adds the bias's share, ``bias_std``
+    (rad/s) times the time from the start to the middle of the track, and the floor ``floor``
+    (rad: the body's x axis may not point along the motion).
+    Returns (heading rad, 1-sigma rad, time the summed track ends).
+    """
+    C = rph_to_dcm(roll, pitch, 0.0)
+    i0 = int(np.searchsorted(t, t_start))
+    w_up = gyro[i0:] @ C[2] - geodesy.OMEGA_E * math.sin(lat)
+    ts = t[i0:]
+    turned = np.concatenate([[0.0], np.cumsum(0.5 * (w_up[1:] + w_up[:-1]) * np.diff(ts))])
+    after = gnss.t > t_still_end
+    tg = gnss.t[after]
+    if tg.size == 0:
+        raise InputError("no GNSS fix after the still period: cannot find the heading; give [init] heading_deg "
+                         "in the config")
+    nominal = float(np.median(np.diff(gnss.t))) if len(gnss) > 1 else 1.0
+    prev = np.concatenate([[t_still_end], tg[:-1]])
+    dt = tg - prev
+    if use_velocity and gnss.vel_enu is not None:
+        v = gnss.vel_enu[after]
+        moving = np.hypot(v[:, 0], v[:, 1]) > min_speed
+        d = v[:, :2] * dt[:, None]
+        d[~moving] = 0.0
+        t_mid = tg - 0.5 * dt
+        std_v = float(np.mean(gnss.std_vel_enu[after][:, :2])) if gnss.std_vel_enu is not None else 0.1
+        step_noise = std_v * dt
+    else:
+        enu = _gnss_enu(gnss, lat, lon, h)[after][:, :2]
+        pts = np.vstack([np.zeros((1, 2)), enu])
+        d = np.diff(pts, axis=0)
+        t_mid = 0.5 * (prev + tg)
+        step_noise = None
+        moving = np.hypot(d[:, 0], d[:, 1]) > min_speed * dt
+    first = np.nonzero(moving)[0]
+    if first.size == 0 or float(tg[first[0]]) - t_still_end > max_window:
+        # a slow platform (a walker, a robot): moving is relative to the log's own pace
+        from .calibrate import gnss_speed_at
+
+        v_all, _ = gnss_speed_at(gnss, tg)
+        fast = float(np.nanpercentile(v_all, 90)) if np.isfinite(v_all).any() else 0.0
+        slow = max(0.3, 0.5 * fast)
+        if slow < min_speed:
+            return _heading_first_motion(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, fix_std,
+                                         slow, bias_std, floor, use_velocity, path_length, min_length, max_turn,
+                                         max_window)
+    if first.size == 0:
+        raise InputError(f"the vehicle never moves faster than {min_speed:.1f} m/s in the GNSS log: cannot find "
+                         "the heading; give [init] heading_deg in the config")
+    rot = np.interp(t_mid, ts, turned)
+    rot0 = rot[first[0]]
+    # the track: from the start, up to a gap, a large turn (relative to the first motion), or its length
+    stop = (dt > max(3.0 * nominal, 1.0)) | (np.abs(rot - rot0) > max_turn) | (tg - t_still_end > max_window)
+    stop[: first[0] + 1] &= dt[: first[0] + 1] > max(3.0 * nominal, 1.0)    # a gap before the first motion counts
+    z = (d[:, 1] + 1j * d[:, 0]) * np.exp(1j * rot)
+    csum = np.cumsum(z)
+    end = np.nonzero(stop | (np.abs(csum) >= path_length))[0]
+    k = int(end[0]) if end.size else len(z) - 1
+    if stop[k] and k > 0:
+        k -= 1          # the displacement across the gap or past the turn is not used
+    total = csum[k]
+    if abs(total) < min_length:
+        # too short before a gap or a turn: the whole rotated track (bias removed), whose 1-sigma
+        # carries the bias over its whole length
+        heading, std, t_end = _heading_from_gnss(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h,
+                                                 fix_std, min_speed, use_velocity=use_velocity)
+        std = math.sqrt(std ** 2 + (bias_std * 0.5 * (t_end - t_start)) ** 2 + floor ** 2)
+        return heading, std, t_end
+    heading = float(np.mod(np.angle(total), 2 * math.pi))
+    if step_noise is not None:
+        noise = float(np.sqrt(np.sum(step_noise[: k + 1] ** 2)))
+    else:
+        noise = 1.1 * float(np.mean(fix_std[:2]))
+    t_mid_track = 0.5 * (float(t_mid[first[0]]) + float(tg[k])) - t_start
+    std = math.sqrt((noise / abs(total)) ** 2 + (bias_std * max(t_mid_track, 0.0)) ** 2 + floor ** 2
+                    + math.radians(0.3) ** 2)
     return heading, std, float(tg[k])

@@ -415,6 +415,7 @@ class InsModel:
     t : (N,) s; gyro : (N, 3) rad/s; accel : (N, 3) m/s^2 (body FLU, mounting applied).
     noise : continuous noise model (SI).
     cov_step_s : longest covariance-propagation step, s.
+    profile : optional measured white-noise profile (vibration): raises Q where the log shakes.
 
     ``path`` (N, PATH_SIZE) receives the attitude, velocity and position of the nominal state
     at every IMU sample a transition passes (biases change only at updates: the engine keeps
@@ -428,6 +429,9 @@ class InsModel:
     cov_step_s: float = 0.05
     path: np.ndarray | None = None
     dim: int = N_ERR
+    #: white noise the data show (:class:`navpp.ins.calibrate.NoiseProfile`): over an interval,
+    #: Q's gyro and accel white noise is the larger of ``noise`` and the profile's
+    profile: object | None = None
 
     def __post_init__(self) -> None:
         self.t = np.ascontiguousarray(self.t, dtype=float)
@@ -441,6 +445,20 @@ class InsModel:
         dt = np.diff(self.t)
         k = np.nonzero(dt > LONG_GAP_PERIODS * np.median(dt))[0] if dt.size > 1 else np.zeros(0, int)
         self.gaps = np.column_stack([self.t[k], self.t[k + 1]]) if k.size else np.zeros((0, 2))
+
+    def psd_over(self, interval: tuple[float, float]) -> np.ndarray:
+        """Diagonal of G Qc G^T (15,) over ``interval``: the configured noise, with the white noise
+        raised to the measured profile where the data shake more (vibration, steps)."""
+        if self.profile is None:
+            return self._psd
+        g, a = self.profile.over(interval[0], interval[1])
+        psd = self._psd
+        if g * g <= psd[0] and a * a <= psd[3]:
+            return psd
+        psd = psd.copy()
+        psd[0:3] = max(psd[0], g * g)
+        psd[3:6] = max(psd[3], a * a)
+        return psd
 
     def gap_noise(self, interval: tuple[float, float]) -> np.ndarray | None:
         """Covariance (15, 15) of the motion the IMU did not see in the long gaps inside
@@ -494,7 +512,7 @@ class InsModel:
         """Nominal propagation over ``interval = (t_start, t_end)`` with its Phi (15, 15) and Qd."""
         xn = x.copy()
         Phi, Qd = integrate_with_jacobian(xn, self.t, self.gyro, self.accel, interval[0], interval[1],
-                                          self.path, True, self._psd, self._inv_tau[0], self._inv_tau[1],
+                                          self.path, True, self.psd_over(interval), self._inv_tau[0], self._inv_tau[1],
                                           self.cov_step_s)
         Qg = self.gap_noise(interval)
         return xn, Phi, (Qd if Qg is None else Qd + Qg)
@@ -503,7 +521,7 @@ class InsModel:
         """Qd over the interval (additive noise for sigma-point filters)."""
         xn = x.copy()
         _, Qd = integrate_with_jacobian(xn, self.t, self.gyro, self.accel, interval[0], interval[1],
-                                        self.path, False, self._psd, self._inv_tau[0], self._inv_tau[1],
+                                        self.path, False, self.psd_over(interval), self._inv_tau[0], self._inv_tau[1],
                                         self.cov_step_s)
         Qg = self.gap_noise(interval)
         return Qd if Qg is None else Qd + Qg
@@ -528,10 +546,11 @@ class InsModel:
         if table is None:
             raise ValueError(f"noise_groups: per must be 'triad' or 'axis', got {per!r}")
         names, rows = [], []
+        base = self.psd_over(interval)
         for name, idx in table:
             mask = np.zeros(N_ERR)
             mask[list(idx)] = 1.0
-            psd = self._psd * mask
+            psd = base * mask
             if np.any(psd > 0.0):
                 names.append(name)
                 rows.append(psd)

@@ -1,0 +1,487 @@
+"""What the data can tell before filtering: standstill, biases, noise levels, gravity axis.
+
+A preset (``[imu] preset``) is a prior; this module measures the log itself and says how the
+two compare.  Everything here is plain numpy over blocks of the IMU stream, in one pass:
+
+- **Blocks.**  The IMU is cut into blocks of ``BLOCK_S`` (0.5 s); each block into sub-blocks
+  of about ``SUB_S`` (0.05 s).  Per block: the mean, the per-sample spread (white noise plus
+  vibration) and the *low-passed spread*, the standard deviation of the sub-block means, which
+  an engine's or a hand's high-frequency shaking barely moves but real motion does.
+- **Standstill** (one detector for the alignment and for ZUPT/ZARU).  A block is quiet when
+  its low-passed spreads are within ``K_QUIET`` times the log's own quietest level (the
+  ``QUIET_PERCENTILE`` percentile of all blocks) or within the configured IMU's white noise
+  floor.  Where GNSS covers the block its speed must be small; a block whose GNSS speed says
+  still may be as shaky as halfway (geometrically) between the quietest and the median block
+  (a hand-held rest with tremor, an idling engine).  Inside a run of quiet blocks the block
+  means must agree (a slow turn or a crawl is smooth, but its mean rate or force changes).  A block is still when it and both neighbours are quiet (stops are confirmed
+  from both sides).  No time rule: a still stretch may be anywhere in the log.
+- **Noise for Q.**  Per second of log, the white-noise density of the sample-to-sample
+  scatter (each sample against the mean of the ``NOISE_SPAN`` samples around it, so motion
+  slower than a few samples does not count), ``sigma x sqrt(dt)`` in rad/sqrt(s) and
+  m/s/sqrt(s).  Engine vibration that grows with speed raises it; the engine takes the larger
+  of it and the preset, interval by interval.
+- **Biases.**  Gyro: the mean rate of the first still stretch, less the vertical Earth rate
+  (its horizontal part, unknown without a heading, is in the 1-sigma).  Without any still
+  stretch, the mean rate over the log across the vertical (a land vehicle or a walker does
+  not keep rolling or pitching) and the vertical bias from the GNSS course.  Accelerometer:
+  along the gravity axis only, ``|f| - g``.  Each estimate with its 1-sigma; an estimate far
+  outside the preset's turn-on 1-sigma (more than 3 sigma) says the preset is wrong for this
+  IMU, and the bias prior is widened to what the data show.
+- **Gravity axis.**  The mean specific force of the still stretches (else of the whole log):
+  the sensor's "up".  More than ``GROSS_TILT_DEG`` from +z is a mounting, not a slope: the
+  engine rotates the IMU so that gravity is on +z and says which setting to write.
+
+References: Groves (2013) section 14.2 (noise), 5.6 (levelling); Allan variance (IEEE Std
+952-1997) for the noise reading of averaged data; Skog et al. (2010) for standstill detection
+with thresholds relative to the sensor.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import geodesy
+
+BLOCK_S = 0.5            #: standstill block, s
+SUB_S = 0.05             #: sub-block for the low-passed spread, s
+NOISE_BLOCK_S = 1.0      #: block of the noise profile, s
+NOISE_SPAN = 5           #: samples of the local mean the noise is read against
+QUIET_PERCENTILE = 5.0   #: the log's quietest level: this percentile of the block spreads
+K_QUIET = 3.0            #: quiet = within this factor of the quietest level (no GNSS to confirm)
+K_WHITE = 4.0            #: or within this many white-noise sigmas of the configured IMU
+GNSS_STILL_SPEED = 0.2   #: m/s: below this (or 3 sigma of it) the GNSS says still ...
+GNSS_STILL_SPEED_MAX = 0.5  #: ... but never above this, m/s
+GROSS_TILT_DEG = 45.0    #: gravity further than this from body +z: a mounting, not a slope
+PRIOR_CONFLICT = 3.0     #: an estimate beyond this many sigmas of the prior rejects the prior
+
+
+@dataclass(frozen=True)
+class NoiseProfile:
+    """White-noise densities the data show, per ``NOISE_BLOCK_S`` of log.
+
+    t : (K + 1,) s, block edges; gyro_arw (K,) rad/sqrt(s); accel_vrw (K,) m/s/sqrt(s).
+    """
+
+    t: np.ndarray
+    gyro_arw: np.ndarray
+    accel_vrw: np.ndarray
+
+    def over(self, t0: float, t1: float) -> tuple[float, float]:
+        """The largest densities of the blocks that ``[t0, t1]`` touches (gyro, accel)."""
+        k0 = int(np.clip(np.searchsorted(self.t, t0, side="right") - 1, 0, self.gyro_arw.shape[0] - 1))
+        k1 = int(np.clip(np.searchsorted(self.t, t1, side="left"), k0 + 1, self.gyro_arw.shape[0]))
+        return float(self.gyro_arw[k0:k1].max()), float(self.accel_vrw[k0:k1].max())
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """What :func:`calibrate` found (SI units, body FLU of the IMU as given).
+
+    still : (N,) bool, still samples (the one standstill detector).
+    still_spans : ((t0, t1), ...) s, the still stretches of at least ``min_still_s``.
+    up_b : (3,) unit vector, the sensor's up (mean specific force direction); up_from: where from.
+    gyro_bias, gyro_bias_std : (3,) rad/s; accel_bias, accel_bias_std : (3,) m/s^2 (along up only).
+    bias_from : "still" | "motion" | "none".
+    still_arw, still_vrw : white-noise densities in the still stretches (None without one).
+    profile : the noise profile for Q.
+    notes : lines for the user.
+    """
+
+    still: np.ndarray
+    still_spans: tuple[tuple[float, float], ...]
+    up_b: np.ndarray
+    up_from: str
+    gyro_bias: np.ndarray
+    gyro_bias_std: np.ndarray
+    accel_bias: np.ndarray
+    accel_bias_std: np.ndarray
+    bias_from: str
+    still_arw: float | None
+    still_vrw: float | None
+    profile: NoiseProfile
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    def report(self) -> dict:
+        """The estimates as plain numbers (datasheet units) for metrics.json."""
+        rad2deg = 180.0 / math.pi
+        out = {
+            "still_spans_s": [[round(a, 3), round(b, 3)] for a, b in self.still_spans],
+            "still_fraction": round(float(self.still.mean()) if self.still.size else 0.0, 4),
+            "gravity_up_body": [round(float(v), 5) for v in self.up_b],
+            "gravity_from": self.up_from,
+            "bias_from": self.bias_from,
+            "gyro_bias_dps": [round(float(v) * rad2deg, 5) for v in self.gyro_bias],
+            "gyro_bias_std_dps": [round(float(v) * rad2deg, 5) for v in self.gyro_bias_std],
+            "accel_bias_mg": [round(float(v) / 9.80665e-3, 3) for v in self.accel_bias],
+            "accel_bias_std_mg": [round(float(v) / 9.80665e-3, 3) for v in self.accel_bias_std],
+            "gyro_arw_dph_motion_median": round(float(np.median(self.profile.gyro_arw)) * rad2deg * 60.0, 3),
+            "gyro_arw_dph_motion_p90": round(float(np.percentile(self.profile.gyro_arw, 90)) * rad2deg * 60.0, 3),
+            "accel_vrw_mpsh_motion_median": round(float(np.median(self.profile.accel_vrw)) * 60.0, 4),
+            "accel_vrw_mpsh_motion_p90": round(float(np.percentile(self.profile.accel_vrw, 90)) * 60.0, 4),
+        }
+        if self.still_arw is not None:
+            out["gyro_arw_dph_still"] = round(self.still_arw * rad2deg * 60.0, 4)
+            out["accel_vrw_mpsh_still"] = round(float(self.still_vrw) * 60.0, 5)
+        return out
+
+
+def _blocks(x: np.ndarray, w: int, nb: int) -> np.ndarray:
+    return x[: nb * w].reshape(nb, w, x.shape[1])
+
+
+def block_statistics(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: float = BLOCK_S,
+                     sub_s: float = SUB_S) -> dict[str, np.ndarray | int]:
+    """Per block of ``block_s``: means (nb, 3), per-sample spread (nb, 3) and low-passed spread
+    (nb, 3) of the rate (rad/s) and the specific force (m/s^2); ``w`` samples per block, ``m``
+    per sub-block."""
+    n = t.shape[0]
+    dt = float(np.median(np.diff(t))) if n > 1 else 1.0
+    m = max(1, int(round(sub_s / dt)))
+    w = max(2 * m, int(round(block_s / dt / m)) * m)
+    nb = n // w
+    out: dict[str, np.ndarray | int] = {"w": w, "m": m, "nb": nb, "dt": dt}
+    for name, x in (("gyro", gyro), ("accel", accel)):
+        b = _blocks(x, w, nb)
+        out[f"{name}_mean"] = b.mean(axis=1)
+        out[f"{name}_std"] = b.std(axis=1)
+        sub = b.reshape(nb, w // m, m, 3).mean(axis=2)
+        out[f"{name}_lp"] = sub.std(axis=1)
+    return out
+
+
+def gnss_speed_at(gnss, times: np.ndarray, half_window: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Horizontal GNSS speed (m/s) and its 1-sigma near each of ``times`` (NaN: no GNSS there).
+
+    From the log's velocity where it has one (the nearest within ``half_window``), else a
+    straight-line fit of the fixes within ``+-half_window`` (at least 3)."""
+    k = times.shape[0]
+    speed = np.full(k, np.nan)
+    sigma = np.full(k, np.nan)
+    if len(gnss) == 0:
+        return speed, sigma
+    tg = np.asarray(gnss.t, dtype=float)
+    lo = np.searchsorted(tg, times - half_window)
+    hi = np.searchsorted(tg, times + half_window, side="right")
+    if gnss.vel_enu is not None:
+        v = np.hypot(gnss.vel_enu[:, 0], gnss.vel_enu[:, 1])
+        sv = (np.hypot(gnss.std_vel_enu[:, 0], gnss.std_vel_enu[:, 1]) if gnss.std_vel_enu is not None
+              else np.full(v.shape, 0.1))
+        for i in np.nonzero(hi > lo)[0]:
+            j = lo[i] + int(np.argmin(np.abs(tg[lo[i]:hi[i]] - times[i])))
+            if np.isfinite(v[j]):
+                speed[i], sigma[i] = v[j], sv[j] if np.isfinite(sv[j]) else 0.1
+        return speed, sigma
+    lat0, lon0, h0 = math.radians(float(gnss.lat_deg[0])), math.radians(float(gnss.lon_deg[0])), float(gnss.alt[0])
+    enu = geodesy.geodetic_to_enu(np.radians(gnss.lat_deg), np.radians(gnss.lon_deg), gnss.alt, lat0, lon0, h0)
+    std_h = (np.mean(gnss.std_enu[:, :2], axis=1) if gnss.std_enu is not None else np.full(tg.shape, 2.0))
+    for i in np.nonzero(hi - lo >= 3)[0]:
+        s = slice(lo[i], hi[i])
+        tt = tg[s] - tg[s].mean()
+        stt = float(tt @ tt)
+        if stt <= 0.0:
+            continue
+        ve = float(tt @ (enu[s, 0] - enu[s, 0].mean())) / stt
+        vn = float(tt @ (enu[s, 1] - enu[s, 1].mean())) / stt
+        speed[i] = math.hypot(ve, vn)
+        sigma[i] = float(np.mean(std_h[s])) / math.sqrt(stt)
+    return speed, sigma
+
+
+def noise_profile(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: float = NOISE_BLOCK_S,
+                  span: int = NOISE_SPAN) -> NoiseProfile:
+    """White-noise densities per block of ``block_s`` (see the module docstring).
+
+    Each sample's departure from the mean of the ``span`` samples centred on it is what the
+    sensor adds to the motion at the sample rate (white noise, vibration, quantisation): motion
+    slower than a few samples cancels in it.  Per block, the rms departure over the three axes,
+    corrected for the mean it is taken from (``span / (span - 1)`` for white noise), times
+    ``sqrt(dt)``.  The profile is widened by one block either way, so an interval's Q also covers
+    the shaking just before and after it."""
+    n = t.shape[0]
+    dt = float(np.median(np.diff(t))) if n > 1 else 1.0
+    w = max(span + 1, int(round(block_s / dt)))
+    nb = n // w
+    if nb < 1:
+        zero = np.zeros(1)
+        return NoiseProfile(np.array([float(t[0]), float(t[-1])]), zero, zero)
+    kernel = np.ones(span) / span
+    dens = []
+    for x in (gyro, accel):
+        res = np.empty((nb * w, 3))
+        for j in range(3):
+            res[:, j] = x[: nb * w, j] - np.convolve(x[: nb * w, j], kernel, mode="same")
+        var = (res ** 2).reshape(nb, w, 3).mean(axis=1).mean(axis=1) * span / (span - 1.0)
+        d = np.sqrt(var * dt)
+        wide = d.copy()
+        wide[1:] = np.maximum(wide[1:], d[:-1])
+        wide[:-1] = np.maximum(wide[:-1], d[1:])
+        dens.append(wide)
+    edges = np.concatenate([t[0: nb * w: w], [t[min(nb * w, n - 1)]]])
+    edges[-1] = max(edges[-1], float(t[-1]))
+    return NoiseProfile(edges.astype(float), dens[0], dens[1])
+
+
+def standstill(t: np.ndarray, stats: dict, gnss, gyro_arw: float, accel_vrw: float
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) bool still samples and (nb,) bool still blocks (see the module docstring)."""
+    n = t.shape[0]
+    nb, w, m, dt = int(stats["nb"]), int(stats["w"]), int(stats["m"]), float(stats["dt"])
+    mask = np.zeros(n, bool)
+    if nb < 3:
+        return mask, np.zeros(nb, bool)
+    lp_g = stats["gyro_lp"].max(axis=1)
+    lp_a = stats["accel_lp"].max(axis=1)
+    q_g = float(np.percentile(lp_g, QUIET_PERCENTILE))
+    q_a = float(np.percentile(lp_a, QUIET_PERCENTILE))
+    # with the GNSS speed to confirm, quiet reaches halfway (geometrically) from the quietest
+    # blocks to the typical one: a hand's tremor or an idling engine, not a walk or a drive
+    mid_g = math.sqrt(q_g * float(np.median(lp_g)))
+    mid_a = math.sqrt(q_a * float(np.median(lp_a)))
+    floor_g = max(K_WHITE * gyro_arw / math.sqrt(m * dt), math.radians(0.02))
+    floor_a = max(K_WHITE * accel_vrw / math.sqrt(m * dt), 0.005)
+    centres = t[np.minimum(np.arange(nb) * w + w // 2, n - 1)]
+    speed, speed_std = gnss_speed_at(gnss, centres)
+    has = np.isfinite(speed)
+    limit = np.maximum(GNSS_STILL_SPEED, np.minimum(3.0 * np.nan_to_num(speed_std, nan=0.0), GNSS_STILL_SPEED_MAX))
+    gnss_still = has & (speed <= limit)
+    gnss_moving = has & ~gnss_still
+    thr_g = np.where(gnss_still, max(K_QUIET * q_g, mid_g), K_QUIET * q_g)
+    thr_a = np.where(gnss_still, max(K_QUIET * q_a, mid_a), K_QUIET * q_a)
+    quiet = (lp_g <= np.maximum(thr_g, floor_g)) & (lp_a <= np.maximum(thr_a, floor_a)) & ~gnss_moving
+    # a slow turn or a crawl is as smooth as a rest: inside a run of quiet blocks, the block means
+    # must agree with the run's median within what the shaking allows
+    sub_n = math.sqrt(w / m)
+    for i0, i1 in _spans(np.arange(nb, dtype=float), quiet, 1.0):
+        for name, lp, fl in (("gyro", stats["gyro_lp"], floor_g), ("accel", stats["accel_lp"], floor_a)):
+            means = stats[f"{name}_mean"][i0:i1]
+            dev = np.abs(means - np.median(means, axis=0))
+            allowed = np.maximum(3.0 * lp[i0:i1] / sub_n + 2.0 * np.median(lp[i0:i1], axis=0), fl)
+            quiet[i0:i1] &= np.all(dev <= allowed, axis=1)
+    confirmed = quiet.copy()
+    confirmed[1:] &= quiet[:-1]
+    confirmed[:-1] &= quiet[1:]
+    confirmed[0] &= quiet[0]
+    mask[: nb * w] = np.repeat(confirmed, w)
+    return mask, confirmed
+
+
+def _spans(t: np.ndarray, mask: np.ndarray, min_s: float) -> list[tuple[int, int]]:
+    """Index ranges [i0, i1) of runs of ``mask`` lasting at least ``min_s``."""
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    starts, ends = np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]
+    return [(int(a), int(b)) for a, b in zip(starts, ends) if b - a >= 2 and t[b - 1] - t[a] >= min_s]
+
+
+def _vertical_bias_from_course(t, gyro_up, gnss, min_speed: float = 3.0) -> tuple[float, float, float] | None:
+    """Vertical gyro bias (rad/s) from the GNSS course: over every stretch driven faster than
+    ``min_speed`` without a gap, the integrated vertical rate minus the course change.
+    Returns (bias, 1-sigma, seconds used) or None."""
+    if len(gnss) < 10:
+        return None
+    tg = np.asarray(gnss.t, dtype=float)
+    if gnss.vel_enu is not None:
+        ve, vn = gnss.vel_enu[:, 0], gnss.vel_enu[:, 1]
+        tc = tg
+    else:
+        lat0, lon0 = math.radians(float(gnss.lat_deg[0])), math.radians(float(gnss.lon_deg[0]))
+        enu = geodesy.geodetic_to_enu(np.radians(gnss.lat_deg), np.radians(gnss.lon_deg), gnss.alt, lat0, lon0,
+                                      float(gnss.alt[0]))
+        step = max(1, int(round(0.5 / max(float(np.median(np.diff(tg))), 1e-3))))    # ~0.5 s chords
+        d = enu[step:] - enu[:-step]
+        dtc = tg[step:] - tg[:-step]
+        ve, vn = d[:, 0] / dtc, d[:, 1] / dtc
+        tc = 0.5 * (tg[step:] + tg[:-step])
+    ok = np.hypot(ve, vn) > min_speed
+    ok &= (tc >= t[0]) & (tc <= t[-1])
+    if np.count_nonzero(ok) < 10:
+        return None
+    yaw = np.unwrap(-np.arctan2(ve, vn))        # counter-clockwise from north... as a rate only
+    nominal = float(np.median(np.diff(tc)))
+    # stretches: consecutive ok epochs without a gap over 3 nominal intervals
+    idx = np.nonzero(ok)[0]
+    breaks = np.nonzero((np.diff(idx) > 1) | (np.diff(tc[idx]) > 3.0 * nominal))[0]
+    starts = np.concatenate([[0], breaks + 1])
+    ends = np.concatenate([breaks, [idx.size - 1]])
+    turned = np.concatenate([[0.0], np.cumsum(0.5 * (gyro_up[1:] + gyro_up[:-1]) * np.diff(t))])
+    num = tot = 0.0
+    nseg = 0
+    for a, b in zip(starts, ends):
+        i, j = idx[a], idx[b]
+        T = float(tc[j] - tc[i])
+        if T < 5.0:
+            continue
+        gyro_turn = float(np.interp(tc[j], t, turned) - np.interp(tc[i], t, turned))
+        num += gyro_turn - float(yaw[j] - yaw[i])
+        tot += T
+        nseg += 1
+    if tot < 20.0:
+        return None
+    # course noise of a chord at the ends of each stretch: a few degrees each
+    sigma = math.radians(3.0) * math.sqrt(2.0 * nseg) / tot
+    return num / tot, sigma, tot
+
+
+def calibrate(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, *, gyro_arw: float, accel_vrw: float,
+              gyro_bias_sigma: float, accel_bias_sigma: float, min_still_s: float = 2.0) -> Calibration:
+    """Measure the log (see the module docstring).
+
+    Parameters
+    ----------
+    t : (N,) s; gyro (N, 3) rad/s; accel (N, 3) m/s^2: body FLU (the configured mounting applied).
+    gnss : the recording's GNSS (:class:`navpp.recording.GnssData`).
+    gyro_arw, accel_vrw : the configured white noise (rad/sqrt(s), m/s/sqrt(s)): the detector's floor.
+    gyro_bias_sigma, accel_bias_sigma : the configured turn-on bias 1-sigma (rad/s, m/s^2): the prior.
+    min_still_s : shortest still stretch used for the biases and the gravity axis, s.
+    """
+    notes: list[str] = []
+    stats = block_statistics(t, gyro, accel)
+    still, _ = standstill(t, stats, gnss, gyro_arw, accel_vrw)
+    spans = _spans(t, still, min_still_s)
+    profile = noise_profile(t, gyro, accel)
+    lat = math.radians(float(np.median(gnss.lat_deg))) if len(gnss) else 0.0
+    h = float(np.median(gnss.alt)) if len(gnss) else 0.0
+    g_local = float(geodesy.gravity(lat, h))
+    w_e = geodesy.OMEGA_E
+    gyro_bias = np.zeros(3)
+    gyro_bias_std = np.full(3, gyro_bias_sigma)
+    accel_bias = np.zeros(3)
+    accel_bias_std = np.full(3, accel_bias_sigma)
+    still_arw = still_vrw = None
+    dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 1.0
+    if spans:
+        sel = np.concatenate([np.arange(a, b) for a, b in spans])
+        f_all = accel[sel].mean(axis=0)
+        up = f_all / np.linalg.norm(f_all)
+        up_from = f"{len(spans)} still stretch{'es' if len(spans) > 1 else ''}, {sel.size * dt:.0f} s"
+        a, b = spans[0]
+        n = b - a
+        w_mean = gyro[a:b].mean(axis=0)
+        f_mean = accel[a:b].mean(axis=0)
+        # the 1-sigma of a mean: from the scatter of 0.5-s means (vibration is not white)
+        wb = max(2, int(round(0.5 / dt)))
+        nblk = max(1, n // wb)
+        gm = gyro[a:a + nblk * wb].reshape(nblk, wb, 3).mean(axis=1) if nblk >= 2 else gyro[a:b]
+        fm = accel[a:a + nblk * wb].reshape(nblk, wb, 3).mean(axis=1) if nblk >= 2 else accel[a:b]
+        g_sd = gm.std(axis=0, ddof=1) / math.sqrt(gm.shape[0]) if gm.shape[0] > 1 else np.full(3, gyro_bias_sigma)
+        f_sd = fm.std(axis=0, ddof=1) / math.sqrt(fm.shape[0]) if fm.shape[0] > 1 else np.full(3, accel_bias_sigma)
+        up1 = f_mean / np.linalg.norm(f_mean)
+        est_g = w_mean - w_e * math.sin(lat) * up1
+        # the horizontal Earth rate (unknown heading) is part of the error on the axes across up
+        sd_g = np.sqrt(g_sd ** 2 + (w_e * math.cos(lat)) ** 2 * np.clip(1.0 - up1 ** 2, 0.0, 1.0))
+        est_a = (float(np.linalg.norm(f_mean)) - g_local) * up1
+        sd_a = np.sqrt(f_sd ** 2 + (3e-4 * g_local) ** 2) * np.abs(up1) + 1e-9   # gravity model, 30 ug
+        gyro_bias, gyro_bias_std = _with_prior(est_g, sd_g, gyro_bias_sigma)
+        # only the component along up is observed; across it the prior stays
+        accel_bias, accel_bias_std = _with_prior(est_a, np.where(np.abs(up1) > 0.5, sd_a, np.inf), accel_bias_sigma)
+        bias_from = "still"
+        res = gyro[sel] - gyro[sel].mean(axis=0)
+        still_arw = float(np.sqrt(np.mean(res ** 2))) * math.sqrt(dt)
+        resf = accel[sel] - accel[sel].mean(axis=0)
+        still_vrw = float(np.sqrt(np.mean(resf ** 2))) * math.sqrt(dt)
+        notes.append(
+            f"still: {len(spans)} stretch{'es' if len(spans) > 1 else ''} of {sel.size * dt:.1f} s in all "
+            f"(first t = {t[a]:.2f} .. {t[b - 1]:.2f} s), found relative to the log's quietest blocks"
+            + (" and confirmed by the GNSS speed" if len(gnss) else ""))
+        notes.append(
+            f"IMU noise in the still stretches (vibration included): gyro {math.degrees(still_arw) * 60.0:.3g} "
+            f"deg/sqrt(h) ({math.degrees(still_arw / math.sqrt(dt)):.3g} deg/s per sample), accel "
+            f"{still_vrw * 60.0:.3g} m/s/sqrt(h) ({still_vrw / math.sqrt(dt):.3g} m/s^2 per sample)")
+    else:
+        f_all = accel.mean(axis=0)
+        up = f_all / np.linalg.norm(f_all)
+        up_from = "the whole log (no still stretch)"
+        bias_from = "none"
+        w_all = gyro.mean(axis=0)
+        T = float(t[-1] - t[0])
+        if T > 30.0:
+            # across up: a land vehicle or a walker does not keep rolling or pitching
+            across = w_all - float(w_all @ up) * up
+            sd_across = math.radians(5.0) / T              # a few degrees of net roll/pitch change
+            est = across.copy()
+            sd = np.full(3, sd_across)
+            vert = _vertical_bias_from_course(t, gyro @ up, gnss)
+            if vert is not None:
+                est = est + vert[0] * up
+                sd = np.sqrt(sd ** 2 + (vert[1] * up) ** 2)
+            else:
+                sd = np.sqrt(sd ** 2 + (gyro_bias_sigma * up) ** 2)
+            gyro_bias, gyro_bias_std = _with_prior(est, sd, gyro_bias_sigma)
+            bias_from = "motion"
+            notes.append(f"no still stretch: gyro biases from the mean rate over the {T:.0f} s log (across the "
+                         "vertical)" + (f" and from the GNSS course over {vert[2]:.0f} s of driving (vertical)"
+                                        if vert is not None else "; the vertical bias stays unknown"))
+    tilt = math.degrees(math.acos(float(np.clip(up[2], -1.0, 1.0))))
+    deg = np.degrees(gyro_bias)
+    notes.append(f"gyro bias ({'from ' + bias_from if bias_from != 'none' else 'prior only'}): "
+                 f"{deg[0]:+.3f} {deg[1]:+.3f} {deg[2]:+.3f} deg/s +- "
+                 f"{' '.join(f'{v:.3f}' for v in np.degrees(gyro_bias_std))}; accel bias along up "
+                 f"{float(accel_bias @ up) / 9.80665e-3:+.1f} mg")
+    if np.any(np.abs(gyro_bias) > PRIOR_CONFLICT * np.hypot(gyro_bias_sigma, gyro_bias_std)) and bias_from != "none":
+        notes.append(f"the gyro biases are beyond the configured turn-on 1-sigma ({math.degrees(gyro_bias_sigma) * 3600:.3g} "
+                     "deg/h): the IMU is of a lower grade than the preset says; the bias prior is widened")
+    mp = profile
+    notes.append(f"IMU noise for Q from the data (sample scatter, per second of log): gyro median "
+                 f"{math.degrees(float(np.median(mp.gyro_arw))) * 60:.3g}, 90 % "
+                 f"{math.degrees(float(np.percentile(mp.gyro_arw, 90))) * 60:.3g} deg/sqrt(h); accel median "
+                 f"{float(np.median(mp.accel_vrw)) * 60:.3g}, 90 % {float(np.percentile(mp.accel_vrw, 90)) * 60:.3g} "
+                 f"m/s/sqrt(h) (configured {math.degrees(gyro_arw) * 60:.3g} and {accel_vrw * 60:.3g}: the larger is used)")
+    if tilt > 1.0:
+        notes.append(f"gravity in body axes ({up_from}): ({up[0]:+.3f}, {up[1]:+.3f}, {up[2]:+.3f}), "
+                     f"{tilt:.1f} deg from +z")
+    return Calibration(still, tuple((float(t[a]), float(t[b - 1])) for a, b in spans), up, up_from, gyro_bias,
+                       gyro_bias_std, accel_bias, accel_bias_std, bias_from, still_arw, still_vrw, profile,
+                       tuple(notes))
+
+
+def _with_prior(est: np.ndarray, sd: np.ndarray, prior_sd: float) -> tuple[np.ndarray, np.ndarray]:
+    """Combine per-axis estimates (``sd`` may be inf: not observed) with a zero-mean prior of
+    ``prior_sd``.  When any axis is more than :data:`PRIOR_CONFLICT` sigmas from the prior, the
+    prior is wrong for this sensor: the estimates stand alone, and the unobserved axes get a
+    prior as wide as the largest bias seen."""
+    est = np.asarray(est, dtype=float)
+    sd = np.asarray(sd, dtype=float)
+    obs = np.isfinite(sd)
+    conflict = obs & (np.abs(est) > PRIOR_CONFLICT * np.hypot(prior_sd, np.where(obs, sd, 0.0)))
+    if conflict.any():
+        wide = max(prior_sd, float(np.abs(est[obs]).max()))
+        return np.where(obs, est, 0.0), np.where(obs, np.maximum(sd, 1e-12), wide)
+    if prior_sd <= 0.0:
+        return np.zeros(3), np.zeros(3)
+    w_p = 1.0 / prior_sd ** 2
+    w_e = np.where(obs, 1.0 / np.maximum(sd, 1e-15) ** 2, 0.0)
+    mean = w_e * np.where(obs, est, 0.0) / (w_p + w_e)
+    return mean, 1.0 / np.sqrt(w_p + w_e)
+
+
+def gross_mounting(up_b: np.ndarray) -> np.ndarray | None:
+    """Sensor -> body rotation (3, 3) that puts the sensor's up on +z by the smallest rotation,
+    when up is more than :data:`GROSS_TILT_DEG` from +z (None otherwise).  An axis that reads
+    gravity (y up, FRD written as FLU) becomes the body's z; the forward axis is kept as far as
+    the rotation allows (yaw is not observable from gravity)."""
+    up = np.asarray(up_b, dtype=float) / np.linalg.norm(up_b)
+    if math.degrees(math.acos(float(np.clip(up[2], -1.0, 1.0)))) <= GROSS_TILT_DEG:
+        return None
+    z = np.array([0.0, 0.0, 1.0])
+    axis = np.cross(up, z)
+    s = float(np.linalg.norm(axis))
+    c = float(up @ z)
+    if s < 1e-9:                       # upside down: half a turn about x (FRD written as FLU)
+        return np.diag([1.0, -1.0, -1.0])
+    k = axis / s
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
+
+
+def matrix_to_rpy_deg(mat: np.ndarray) -> tuple[float, float, float]:
+    """Roll, pitch, yaw (deg) with ``mat = Rz(yaw) Ry(pitch) Rx(roll)`` (``[imu] mounting_rpy_deg``)."""
+    pitch = -math.asin(float(np.clip(mat[2, 0], -1.0, 1.0)))
+    roll = math.atan2(float(mat[2, 1]), float(mat[2, 2]))
+    yaw = math.atan2(float(mat[1, 0]), float(mat[0, 0]))
+    return tuple(round(math.degrees(a), 2) + 0.0 for a in (roll, pitch, yaw))  # type: ignore[return-value]
+
+
+__all__ = ["Calibration", "NoiseProfile", "block_statistics", "calibrate", "gnss_speed_at", "gross_mounting",
+           "matrix_to_rpy_deg", "noise_profile", "standstill"]
