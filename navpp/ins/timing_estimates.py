@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import interpolate, optimize, stats
 
 __all__ = [
     "StaleRows",
@@ -269,8 +269,8 @@ class ClockOffset:
     Attributes
     ----------
     offset_s : float, s, the estimate (NaN when nothing could be estimated).
-    sigma_s : float, s, its 1-sigma from a block jackknife over contiguous segments (holds
-        for time-correlated residuals as long as a segment is longer than their correlation).
+    sigma_s : float, s, its 1-sigma: linearised least squares with an
+        autocorrelation-consistent residual term, see :func:`estimate_clock_offset`.
     correlation : float, correlation coefficient between the GNSS yaw rate and the shifted,
         interval-averaged gyro rate at ``offset_s``.
     n_samples : int, number of GNSS course-rate samples used.
@@ -278,8 +278,7 @@ class ClockOffset:
         samples used: how much turning the estimate rests on.
     scale : float, fitted ratio GNSS yaw rate / gyro rate (1 for a vertical gyro axis;
         cos(tilt) for a tilted one).
-    bias_rad_s : float, rad/s, fitted gyro bias (gyro - GNSS yaw rate / scale... as
-        ``rate_gnss = scale * (gyro - bias)``).
+    bias_rad_s : float, rad/s, fitted gyro bias, as in ``rate_gnss = scale * (gyro - bias)``.
     at_edge : bool, whether the best lag lies at the edge of the search window.
     confident : bool, see :func:`estimate_clock_offset`.
     reason : str, one line saying why.
@@ -335,9 +334,9 @@ def estimate_clock_offset(
     *,
     max_lag_s: float = 1.0,
     min_speed: float = 2.0,
-    baseline_s: float = 0.5,
+    baseline_s: float = 1.0,
     lag_step_s: float = 0.01,
-    n_blocks: int = 20,
+    hac_lag_s: float = 0.0,
     min_turn_deg: float = 90.0,
     min_correlation: float = 0.7,
     max_sigma_s: float = 0.02,
@@ -350,7 +349,8 @@ def estimate_clock_offset(
     consecutive baselines overlapping), ``r_k = -(course(b) - course(a)) / (b - a)`` with the
     course unwrapped.  The gyro is averaged over the same span shifted by the candidate lag,
     exactly, through its integral: ``g_k(dt) = (Θ(b + dt) - Θ(a + dt)) / (b - a)``, ``Θ`` the
-    trapezoidal integral of ``gyro_z_up``.  The model is ``r_k = scale * g_k(dt) + c`` (scale
+    trapezoidal integral of ``gyro_z_up`` at the IMU stamps, interpolated by a cubic spline
+    (a cost smooth in ``dt``).  The model is ``r_k = scale * g_k(dt) + c`` (scale
     and constant ``c`` absorb a tilted axis and the gyro bias); ``offset_s`` maximises the
     correlation of ``r`` and ``g(dt)`` (equivalently minimises the residual of that linear
     fit) over a grid of ``lag_step_s`` within ``+-max_lag_s``, refined continuously
@@ -362,13 +362,15 @@ def estimate_clock_offset(
     Sign: ``offset_s > 0`` means the IMU stamps are late: ``t_gnss = t_imu - offset_s`` for
     the same physical instant (see :class:`ClockOffset`).
 
-    ``sigma_s`` is a block jackknife: the used samples are cut into ``n_blocks`` contiguous
-    blocks, the lag is re-estimated leaving each block out, and
-    ``sigma^2 = (B - 1) / B * sum (dt_(i) - mean)^2``.
+    ``sigma_s`` is the linearised least-squares sigma of the lag in the joint fit of
+    (lag, scale, constant), with a heteroscedasticity- and autocorrelation-consistent
+    middle term (flat window, Bartlett as a fallback): overlapping baselines, differentiated
+    positions and a smooth receiver all make the residuals correlated (over one baseline +
+    3 GNSS intervals, or ``hac_lag_s`` if longer), which a white-noise formula would ignore.
 
     ``confident`` is True when all of: ``turn_deg >= min_turn_deg``, ``correlation >=
     min_correlation``, ``sigma_s <= max_sigma_s``, the peak is not at the edge of the search
-    window, and at least ``2 * n_blocks`` samples were used.
+    window (and at least 40 samples were used, else nothing is estimated).
 
     Parameters
     ----------
@@ -388,7 +390,11 @@ def estimate_clock_offset(
     baseline_s : s, span of a course-rate sample (low-pass; longer suppresses position
         noise, shorter keeps faster turns).
     lag_step_s : s, grid step of the coarse search.
-    n_blocks : number of jackknife blocks.
+    hac_lag_s : s, residual correlation span allowed for in ``sigma_s`` beyond the one the
+        differencing itself makes (baseline + 3 GNSS intervals, always included).  In
+        simulations (white position noise) the default gives a sigma ~2x the actual error
+        spread (conservative); a longer span shrinks it, because at the fitted optimum the
+        scores sum to zero and a window covering all samples would give sigma -> 0.
     min_turn_deg, min_correlation, max_sigma_s : the confidence rule above.
 
     Returns
@@ -410,6 +416,9 @@ def estimate_clock_offset(
     if t_g.shape[0] < 3 or t_imu.shape[0] < 3:
         return fail("too few samples")
     theta = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t_imu))])
+    # a C2 interpolant of the integral: with linear interpolation the cost has kinks at every
+    # lag that aligns the GNSS stamps with IMU stamps, and the minimum sticks to them
+    theta_at = interpolate.CubicSpline(t_imu, theta, extrapolate=False)
 
     # GNSS yaw-rate samples over baselines of m epochs
     dt_med = float(np.median(np.diff(t_g)))
@@ -432,13 +441,13 @@ def estimate_clock_offset(
     r = -(course[m:] - course[:-m]) / (b - a)
     a, b, r = a[ok], b[ok], r[ok]
     n = int(r.shape[0])
-    if n < 2 * n_blocks:
+    if n < _MIN_SAMPLES:
         return fail(f"only {n} course-rate samples at speed > {min_speed:g} m/s "
-                    f"(need {2 * n_blocks})", n)
+                    f"(need {_MIN_SAMPLES})", n)
 
     def gyro_mean(dt: float, sel: slice | np.ndarray = slice(None)) -> np.ndarray:
         aa, bb = a[sel], b[sel]
-        return (np.interp(bb + dt, t_imu, theta) - np.interp(aa + dt, t_imu, theta)) / (bb - aa)
+        return (theta_at(bb + dt) - theta_at(aa + dt)) / (bb - aa)
 
     def neg_corr(dt: float, sel: slice | np.ndarray = slice(None)) -> float:
         g = gyro_mean(dt, sel)
@@ -467,13 +476,8 @@ def estimate_clock_offset(
     # by its share of time (overlapping baselines count once: divide by m)
     turn_deg = float(np.degrees(np.sum(np.abs(g - bias) * (b - a)) / m))
 
-    edges = np.linspace(0, n, n_blocks + 1).astype(int)
-    jk = np.empty(n_blocks)
-    for i in range(n_blocks):
-        keep = np.ones(n, dtype=bool)
-        keep[edges[i]:edges[i + 1]] = False
-        jk[i] = best_lag(keep)[0]
-    sigma = float(np.sqrt((n_blocks - 1) / n_blocks * np.sum((jk - jk.mean()) ** 2)))
+    sigma = _hac_sigma(r, g, (theta_at(b + offset, 1) - theta_at(a + offset, 1)) / (b - a),
+                       float(scale), float(c0), max(m + 3, int(round(hac_lag_s / dt_med))))
 
     checks = []
     if turn_deg < min_turn_deg:
@@ -491,3 +495,31 @@ def estimate_clock_offset(
     return ClockOffset(offset_s=offset, sigma_s=sigma, correlation=corr, n_samples=n,
                        turn_deg=turn_deg, scale=float(scale), bias_rad_s=float(bias),
                        at_edge=bool(at_edge), confident=bool(confident), reason=reason)
+
+
+_MIN_SAMPLES = 40
+
+
+def _hac_sigma(r: np.ndarray, g: np.ndarray, dg: np.ndarray, scale: float, c0: float,
+               n_lag: int) -> float:
+    """1-sigma of the lag in ``r = scale * g(dt) + c0``: Gauss-Newton, autocorrelation-consistent.
+
+    ``dg`` (n,) is ``d g / d dt`` at the solution.  Returns NaN for a singular fit.
+    """
+    e = r - scale * g - c0
+    jac = np.stack([scale * dg, g, np.ones_like(g)], axis=1)           # (n, 3)
+    try:
+        bread = np.linalg.inv(jac.T @ jac)
+    except np.linalg.LinAlgError:
+        return float("nan")
+    u = jac * e[:, None]                                                # scores (n, 3)
+    # truncated (flat) kernel: overlapping differences of course make the residuals strongly
+    # negatively correlated at the baseline's lag, which a tapered (Bartlett) kernel would
+    # under-count (variance over-estimated 2-4 x); flat is exact for correlation spans <= n_lag.
+    # Should it come out not positive (rare, short data), fall back to Bartlett.
+    gams = [u[lag:].T @ u[:-lag] for lag in range(1, min(n_lag, u.shape[0] - 1) + 1)]
+    meat = u.T @ u + sum(g + g.T for g in gams)
+    if np.linalg.eigvalsh(meat)[0] <= 0:
+        meat = u.T @ u + sum((1.0 - (i + 1) / (n_lag + 1.0)) * (g + g.T) for i, g in enumerate(gams))
+    cov = bread @ meat @ bread
+    return float(np.sqrt(cov[0, 0])) if cov[0, 0] > 0 else float("nan")
