@@ -1,0 +1,525 @@
+"""Timing diagnostics of a log: stale IMU rows and the IMU-to-GNSS clock offset.
+
+Pure numpy/scipy functions, no I/O and no configuration: the caller passes arrays (as held
+by :class:`navpp.recording.ImuData` / :class:`navpp.recording.GnssData`) and decides what to
+do with the answers.
+
+Conventions: times are float seconds (any common origin, e.g. relative to the log's first
+IMU stamp); body frame FLU, navigation frame ENU; gyro in rad/s, specific force in m/s^2.
+
+- :func:`find_stale_rows` finds IMU rows that repeat the previous row's six values bitwise
+  under a new stamp (a logger polling faster than the sensor updates).
+- :func:`estimate_clock_offset` finds the delay of the IMU stamps against the GNSS stamps by
+  matching the vertical angular rate from the gyro with the course rate of the GNSS
+  velocity; :func:`velocity_from_positions` turns GNSS positions into that velocity.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import interpolate, optimize, stats
+
+__all__ = [
+    "StaleRows",
+    "find_stale_rows",
+    "ClockOffset",
+    "estimate_clock_offset",
+    "velocity_from_positions",
+]
+
+
+# --------------------------------------------------------------------------------------------
+# Stale rows
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class StaleRows:
+    """Result of :func:`find_stale_rows`.
+
+    Attributes
+    ----------
+    mask : (N,) bool, True = stale row, drop it.  All False when the repeats are not judged
+        stale.  The first row is never stale.
+    count : int, number of True entries in ``mask``.
+    fraction : float, ``count / N``.
+    fresh_rate_hz : float, Hz, rate of the kept (fresh) samples: ``(n_kept - 1) / (time span
+        of the kept samples)``.  Robust to a jittery polling clock, where the fresh intervals
+        scatter over a few poll periods.
+    fresh_median_rate_hz : float, Hz, ``1 / median(interval between kept samples)``.  Equals
+        ``fresh_rate_hz`` for a regular stream; on a polled stream it is biased by the poll
+        jitter (it picks one of the poll-period multiples), so prefer ``fresh_rate_hz``.
+    n_repeats : int, rows whose six values bitwise equal the previous row's (stale or not).
+    expected_by_chance : float, number of such all-six repeats expected if every channel
+        repeated independently at its own rate (estimated in windows, from the rows that are
+        not all-six repeats).
+    dispersion : float, variance of the number of non-repeated rows per 1-s window divided by
+        the binomial variance expected if the repeats fell at random (NaN when not testable).
+        A sensor sampled at a fixed rate and polled faster gives ~0 (the fresh count per
+        second is fixed); random coincident repeats give ~1.
+    confident : bool, whether the evidence is clear-cut (see :func:`find_stale_rows`).
+    reason : str, one line saying why.
+    """
+
+    mask: np.ndarray
+    count: int
+    fraction: float
+    fresh_rate_hz: float
+    fresh_median_rate_hz: float
+    n_repeats: int
+    expected_by_chance: float
+    dispersion: float
+    confident: bool
+    reason: str
+
+
+def _chance_all_repeat(q: np.ndarray) -> float:
+    """Probability that all channels repeat at once under independence.
+
+    ``q`` (C,) are the per-channel repeat rates measured on the rows that are *not* all-C
+    repeats.  Those rows are the independent model truncated to exclude the joint event, so
+    the unconditional channel rates are ``p_c = q_c (1 - P) + P`` with ``P = prod(p_c)``: the
+    smallest fixed point of ``P = prod(q_c + P (1 - q_c))`` in [0, 1) (the map is convex and
+    increasing, so iterating from ``prod(q_c)`` climbs monotonically onto it).
+    """
+    p = float(np.prod(q))
+    for _ in range(500):
+        new = float(np.prod(q + p * (1.0 - q)))
+        if new >= 0.999:
+            return 0.999                    # no fixed point below 1: every row may repeat
+        if abs(new - p) < 1e-12:
+            return new
+        p = new
+    return p
+
+
+def find_stale_rows(
+    t: np.ndarray,
+    gyro: np.ndarray,
+    accel: np.ndarray,
+    *,
+    window_rows: int = 500,
+    excess_factor: float = 3.0,
+    alpha: float = 1e-6,
+    min_fraction: float = 0.05,
+    regular_dispersion: float = 0.3,
+) -> StaleRows:
+    """Find IMU rows that are stale copies of the previous sample.
+
+    A row whose six values (gyro and accel) bitwise equal the previous row's while its stamp
+    is new is either a *stale* sample (the logger polled faster than the sensor updated) or a
+    legitimate coincidence (a coarsely quantised, quiet sensor repeating its reading).  The
+    repeats are judged stale as a whole, from two independent signatures:
+
+    1. **Excess over chance.**  In windows of ``window_rows`` rows, each channel's repeat
+       rate is measured on the rows that are not all-six repeats, and the chance of all six
+       repeating together is derived from them assuming independent channels (see
+       ``expected_by_chance``).  The repeats are in *excess* when the observed count is more
+       than ``excess_factor`` times the expected one and its Poisson upper-tail probability
+       is below ``alpha``.
+    2. **Polling signature.**  After removing the repeats, the number of fresh samples per
+       1-s window is far steadier than random removals would leave it: ``dispersion <
+       regular_dispersion`` (testable when the repeats are frequent enough that a binomial
+       count would scatter by more than ~1.4 samples per window, over >= 5 windows).
+
+    The repeats are declared stale if they are in excess, or if they make up at least
+    ``min_fraction`` of the rows *and* show the polling signature.  ``confident`` is True
+    when both signatures agree (both present: stale; excess absent and either no repeat at
+    all or a count consistent with chance and no polling signature: not stale), False
+    otherwise (e.g. an excess without a testable polling signature).  Every all-six repeat
+    is flagged when the repeats are declared stale: a chance repeat among stale ones cannot
+    be told apart, and dropping it only merges two equal readings.
+
+    The kept rows keep their stamps: an integrator then uses the true interval between fresh
+    samples.  (If the sensor's own sampling instant matters, note a stale-prone logger
+    stamps each fresh sample at the poll that first saw it: up to one poll period late.)
+
+    Parameters
+    ----------
+    t : (N,) float, s, strictly increasing sample stamps.
+    gyro : (N, 3) float, rad/s, body FLU angular rate.
+    accel : (N, 3) float, m/s^2, body FLU specific force.
+    window_rows : rows per window for the chance estimate (handles a sensor that is quiet at
+        times only).
+    excess_factor, alpha : thresholds of signature 1 (ratio observed / expected, Poisson
+        upper-tail probability).
+    min_fraction : minimal fraction of repeated rows for signature 2 alone to decide.
+    regular_dispersion : signature 2 threshold on ``dispersion``.
+
+    Returns
+    -------
+    StaleRows
+    """
+    t = np.asarray(t, dtype=float)
+    vals = np.concatenate([np.asarray(gyro, dtype=float).reshape(-1, 3),
+                           np.asarray(accel, dtype=float).reshape(-1, 3)], axis=1)
+    n = t.shape[0]
+    if vals.shape[0] != n:
+        raise ValueError(f"find_stale_rows: t has {n} rows, gyro/accel {vals.shape[0]}")
+    nan = float("nan")
+    if n < 3:
+        mask = np.zeros(n, dtype=bool)
+        return StaleRows(mask, 0, 0.0, _rate(t), _median_rate(t), 0, 0.0, nan, False,
+                         f"only {n} rows: nothing to judge")
+
+    # bitwise comparison: -0.0 vs +0.0 and NaN payloads count as different / equal by bits
+    bits = vals.view(np.int64) if vals.flags.c_contiguous else np.ascontiguousarray(vals).view(np.int64)
+    same_ch = bits[1:] == bits[:-1]                     # (N-1, 6)
+    rep = same_ch.all(axis=1)                           # (N-1,)
+    repeats = np.concatenate([[False], rep])            # (N,) row k repeats row k-1
+    k_obs = int(rep.sum())
+
+    # 1. excess over chance, window by window
+    expected = 0.0
+    global_q = _channel_rates(same_ch[~rep])
+    for s in range(0, n - 1, window_rows):
+        w_same, w_rep = same_ch[s:s + window_rows], rep[s:s + window_rows]
+        if w_rep.size < window_rows // 2 and s > 0:      # a short tail joins the global rates
+            q = global_q
+        else:
+            q = _channel_rates(w_same[~w_rep]) if (~w_rep).sum() >= 20 else global_q
+        expected += w_rep.size * _chance_all_repeat(q)
+    p_tail = float(stats.poisson.sf(k_obs - 1, expected)) if k_obs > 0 else 1.0
+    excess = k_obs > 0 and k_obs > excess_factor * expected and p_tail < alpha
+
+    # 2. polling signature: the fresh count per 1-s window
+    dispersion = _dispersion(t, repeats, k_obs / n)
+    regular = bool(np.isfinite(dispersion) and dispersion < regular_dispersion)
+    fraction_rep = k_obs / n
+
+    stale = excess or (regular and fraction_rep >= min_fraction)
+    msg = (f"{k_obs} all-six repeats ({100 * fraction_rep:.2f} %), {expected:.3g} expected by chance"
+           f" (Poisson tail {p_tail:.2g}), fresh-count dispersion "
+           + ("untestable" if not np.isfinite(dispersion) else f"{dispersion:.2f}"))
+    if k_obs == 0:
+        confident, reason = True, "no row repeats the previous row's six values"
+    elif stale and excess and regular:
+        confident, reason = True, "stale: " + msg + ": excess over chance and a regular fresh stream"
+    elif stale:
+        confident = False
+        reason = ("stale (excess over chance, but no polling signature): " if excess else
+                  "stale (polling signature, but no excess over chance): ") + msg
+    elif k_obs <= expected + 3.0 * np.sqrt(expected) + 1.0 and not regular:
+        confident, reason = True, "not stale: " + msg + ": consistent with chance"
+    else:
+        confident, reason = False, "not stale, ambiguous: " + msg
+
+    mask = repeats if stale else np.zeros(n, dtype=bool)
+    kept = t[~mask]
+    count = int(mask.sum())
+    return StaleRows(mask=mask, count=count, fraction=count / n, fresh_rate_hz=_rate(kept),
+                     fresh_median_rate_hz=_median_rate(kept), n_repeats=k_obs,
+                     expected_by_chance=float(expected), dispersion=float(dispersion),
+                     confident=bool(confident), reason=reason)
+
+
+def _channel_rates(same: np.ndarray) -> np.ndarray:
+    """Per-channel repeat rate of the rows ``same`` (R, C) bool; 0 for R = 0."""
+    if same.shape[0] == 0:
+        return np.zeros(same.shape[1])
+    return same.mean(axis=0)
+
+
+def _rate(t: np.ndarray) -> float:
+    if t.shape[0] < 2 or t[-1] <= t[0]:
+        return float("nan")
+    return float((t.shape[0] - 1) / (t[-1] - t[0]))
+
+
+def _median_rate(t: np.ndarray) -> float:
+    if t.shape[0] < 2:
+        return float("nan")
+    return float(1.0 / np.median(np.diff(t)))
+
+
+def _dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_s: float = 1.0) -> float:
+    """Var(fresh rows per window) / binomial variance if the repeats fell at random."""
+    edges = np.arange(t[0], t[-1], window_s)
+    if edges.shape[0] < 7:                      # >= 5 complete windows once the ends are cut
+        return float("nan")
+    idx = np.searchsorted(edges, t, side="right") - 1
+    rows = np.bincount(idx, minlength=edges.shape[0])[1:-1]     # drop the partial ends
+    fresh = np.bincount(idx, weights=(~repeats).astype(float), minlength=edges.shape[0])[1:-1]
+    binom = float(np.mean(rows * f * (1.0 - f)))
+    if binom < 2.0:
+        return float("nan")
+    # remove what the changing row count explains: compare with the expected fresh count
+    # random removals scatter both the fresh count and its difference to the expected count
+    # by at least the binomial variance; a fixed-rate sensor keeps the fresh count steady
+    resid = fresh - rows * (1.0 - f)
+    return float(min(np.var(fresh), np.var(resid)) / binom)
+
+
+# --------------------------------------------------------------------------------------------
+# Clock offset IMU vs GNSS
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ClockOffset:
+    """Result of :func:`estimate_clock_offset`.
+
+    Sign: ``offset_s > 0`` means the IMU stamps are LATE by ``offset_s``: an event stamped
+    ``t`` by the IMU is stamped ``t - offset_s`` by the GNSS, i.e.
+    ``t_gnss = t_imu - offset_s``.  To put the IMU on the GNSS time base subtract
+    ``offset_s`` from the IMU stamps (or add it to the GNSS stamps to put the GNSS on the
+    IMU's).  GNSS fixes that come out late against the IMU (receiver latency) give a
+    negative ``offset_s``.
+
+    Attributes
+    ----------
+    offset_s : float, s, the estimate (NaN when nothing could be estimated).
+    sigma_s : float, s, its 1-sigma: linearised least squares with an
+        autocorrelation-consistent residual term, see :func:`estimate_clock_offset`.
+    correlation : float, correlation coefficient between the GNSS yaw rate and the shifted,
+        interval-averaged gyro rate at ``offset_s``.
+    n_samples : int, number of GNSS course-rate samples used.
+    turn_deg : float, deg, integrated |yaw rate| (from the gyro, bias removed) over the
+        samples used: how much turning the estimate rests on.
+    scale : float, fitted ratio GNSS yaw rate / gyro rate (1 for a vertical gyro axis;
+        cos(tilt) for a tilted one).
+    bias_rad_s : float, rad/s, fitted gyro bias, as in ``rate_gnss = scale * (gyro - bias)``.
+    at_edge : bool, whether the best lag lies at the edge of the search window.
+    confident : bool, see :func:`estimate_clock_offset`.
+    reason : str, one line saying why.
+    """
+
+    offset_s: float
+    sigma_s: float
+    correlation: float
+    n_samples: int
+    turn_deg: float
+    scale: float
+    bias_rad_s: float
+    at_edge: bool
+    confident: bool
+    reason: str
+
+
+def velocity_from_positions(t: np.ndarray, east_m: np.ndarray,
+                            north_m: np.ndarray) -> np.ndarray:
+    """Horizontal velocity from positions by central differences.
+
+    ``v_k = (p_{k+1} - p_{k-1}) / (t_{k+1} - t_{k-1})``, one-sided differences at the two
+    ends.  Exact (and centred on ``t_k``) for uniformly spaced stamps and a locally
+    quadratic track.
+
+    Parameters
+    ----------
+    t : (M,) float, s, strictly increasing, M >= 2.
+    east_m, north_m : (M,) float, m, local east / north (e.g. from
+        :func:`navpp.geodesy.geodetic_to_enu` about a fixed origin).
+
+    Returns
+    -------
+    (M, 2) float, m/s, (v_east, v_north) at ``t``.
+    """
+    t = np.asarray(t, dtype=float)
+    p = np.stack([np.asarray(east_m, dtype=float), np.asarray(north_m, dtype=float)], axis=1)
+    if t.shape[0] < 2 or p.shape[0] != t.shape[0]:
+        raise ValueError(f"velocity_from_positions: need >= 2 epochs of equal length, got t {t.shape}, "
+                         f"positions {p.shape}")
+    v = np.empty_like(p)
+    v[1:-1] = (p[2:] - p[:-2]) / (t[2:] - t[:-2])[:, None]
+    v[0] = (p[1] - p[0]) / (t[1] - t[0])
+    v[-1] = (p[-1] - p[-2]) / (t[-1] - t[-2])
+    return v
+
+
+def estimate_clock_offset(
+    t_imu: np.ndarray,
+    gyro_z_up: np.ndarray,
+    t_gnss: np.ndarray,
+    vel_en: np.ndarray,
+    *,
+    max_lag_s: float = 1.0,
+    min_speed: float = 2.0,
+    baseline_s: float = 1.0,
+    lag_step_s: float = 0.01,
+    hac_lag_s: float = 0.0,
+    min_turn_deg: float = 90.0,
+    min_correlation: float = 0.7,
+    max_sigma_s: float = 0.02,
+) -> ClockOffset:
+    """Delay of the IMU stamps against the GNSS stamps, from turns.
+
+    The GNSS yaw rate is the rate of the course ``atan2(v_E, v_N)`` (clockwise from north),
+    sign-flipped to counter-clockwise (about up, like the gyro): over each GNSS baseline
+    ``[a, b]`` (consecutive epochs ``baseline_s`` apart, rounded to whole GNSS intervals,
+    consecutive baselines overlapping), ``r_k = -(course(b) - course(a)) / (b - a)`` with the
+    course unwrapped.  The gyro is averaged over the same span shifted by the candidate lag,
+    exactly, through its integral: ``g_k(dt) = (Θ(b + dt) - Θ(a + dt)) / (b - a)``, ``Θ`` the
+    trapezoidal integral of ``gyro_z_up`` at the IMU stamps, interpolated by a cubic spline
+    (a cost smooth in ``dt``).  The model is ``r_k = scale * g_k(dt) + c`` (scale
+    and constant ``c`` absorb a tilted axis and the gyro bias); ``offset_s`` maximises the
+    correlation of ``r`` and ``g(dt)`` (equivalently minimises the residual of that linear
+    fit) over a grid of ``lag_step_s`` within ``+-max_lag_s``, refined continuously
+    (bounded scalar minimisation between the grid neighbours).  Only baselines whose every
+    epoch moves faster than ``min_speed`` (m/s, so that the course is defined) and whose
+    shifted span stays inside the IMU data for every lag searched are used; the same
+    samples serve every lag.
+
+    Sign: ``offset_s > 0`` means the IMU stamps are late: ``t_gnss = t_imu - offset_s`` for
+    the same physical instant (see :class:`ClockOffset`).
+
+    ``sigma_s`` is the linearised least-squares sigma of the lag in the joint fit of
+    (lag, scale, constant), with a heteroscedasticity- and autocorrelation-consistent
+    middle term (flat window, Bartlett as a fallback): overlapping baselines, differentiated
+    positions and a smooth receiver all make the residuals correlated (over one baseline +
+    3 GNSS intervals, or ``hac_lag_s`` if longer), which a white-noise formula would ignore.
+
+    ``confident`` is True when all of: ``turn_deg >= min_turn_deg``, ``correlation >=
+    min_correlation``, ``sigma_s <= max_sigma_s``, the peak is not at the edge of the search
+    window (and at least 40 samples were used, else nothing is estimated).
+
+    Parameters
+    ----------
+    t_imu : (N,) float, s, strictly increasing IMU stamps.
+    gyro_z_up : (N,) float, rad/s, body angular rate projected on the local vertical (up
+        positive, i.e. counter-clockwise seen from above).  For a roughly level vehicle the
+        body-z (FLU) gyro is adequate: a tilt ``theta`` of that axis scales the yaw rate by
+        ``cos(theta)`` (absorbed by ``scale``) and leaks roll/pitch rates and their biases
+        (a constant bias is absorbed by ``c``).  For a strongly tilted mount, project with
+        the attitude (``(mat_nb @ gyro)[2]``) first.
+    t_gnss : (M,) float, s, strictly increasing GNSS stamps on the same nominal time base.
+    vel_en : (M, 2) float, m/s, horizontal velocity (east, north) at ``t_gnss`` (an (M, 3)
+        ENU array is accepted: the third column is ignored).  From positions, see
+        :func:`velocity_from_positions`.
+    max_lag_s : s, half-width of the lag search.
+    min_speed : m/s, minimal horizontal speed for a course sample.
+    baseline_s : s, span of a course-rate sample (low-pass; longer suppresses position
+        noise, shorter keeps faster turns).
+    lag_step_s : s, grid step of the coarse search.
+    hac_lag_s : s, residual correlation span allowed for in ``sigma_s`` beyond the one the
+        differencing itself makes (baseline + 3 GNSS intervals, always included).  In
+        simulations (white position noise) the default gives a sigma ~2x the actual error
+        spread (conservative); a longer span shrinks it, because at the fitted optimum the
+        scores sum to zero and a window covering all samples would give sigma -> 0.
+    min_turn_deg, min_correlation, max_sigma_s : the confidence rule above.
+
+    Returns
+    -------
+    ClockOffset
+    """
+    t_imu = np.asarray(t_imu, dtype=float)
+    w = np.asarray(gyro_z_up, dtype=float)
+    t_g = np.asarray(t_gnss, dtype=float)
+    v = np.asarray(vel_en, dtype=float)
+    if v.ndim != 2 or v.shape[0] != t_g.shape[0] or v.shape[1] < 2 or w.shape != t_imu.shape:
+        raise ValueError(f"estimate_clock_offset: shapes t_imu {t_imu.shape}, gyro_z_up {w.shape}, "
+                         f"t_gnss {t_g.shape}, vel_en {v.shape}; expected (N,), (N,), (M,), (M, 2)")
+    nan = float("nan")
+
+    def fail(reason: str, n_used: int = 0) -> ClockOffset:
+        return ClockOffset(nan, nan, nan, n_used, nan, nan, nan, False, False, reason)
+
+    if t_g.shape[0] < 3 or t_imu.shape[0] < 3:
+        return fail("too few samples")
+    theta = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t_imu))])
+    # a C2 interpolant of the integral: with linear interpolation the cost has kinks at every
+    # lag that aligns the GNSS stamps with IMU stamps, and the minimum sticks to them
+    theta_at = interpolate.CubicSpline(t_imu, theta, extrapolate=False)
+
+    # GNSS yaw-rate samples over baselines of m epochs
+    dt_med = float(np.median(np.diff(t_g)))
+    m = max(1, int(round(baseline_s / dt_med)))
+    speed = np.hypot(v[:, 0], v[:, 1])
+    course = np.unwrap(np.arctan2(v[:, 0], v[:, 1]))
+    if t_g.shape[0] <= m:
+        return fail("fewer GNSS epochs than one baseline")
+    a, b = t_g[:-m], t_g[m:]
+    # every epoch of the baseline fast enough: a sliding minimum over m + 1 epochs
+    fast = speed > min_speed
+    run = np.convolve(fast.astype(int), np.ones(m + 1, dtype=int), mode="valid") == m + 1
+    ok = (run
+          & (b - a <= 1.5 * m * dt_med)                       # no gap inside the baseline
+          & (a - max_lag_s >= t_imu[0]) & (b + max_lag_s <= t_imu[-1]))
+    # a course jump of more than pi between epochs is not a turn the unwrap can resolve
+    step = np.abs(np.diff(course))
+    big = np.convolve((step > 0.5 * np.pi).astype(int), np.ones(m, dtype=int), mode="valid") > 0
+    ok &= ~big
+    r = -(course[m:] - course[:-m]) / (b - a)
+    a, b, r = a[ok], b[ok], r[ok]
+    n = int(r.shape[0])
+    if n < _MIN_SAMPLES:
+        return fail(f"only {n} course-rate samples at speed > {min_speed:g} m/s "
+                    f"(need {_MIN_SAMPLES})", n)
+
+    def gyro_mean(dt: float, sel: slice | np.ndarray = slice(None)) -> np.ndarray:
+        aa, bb = a[sel], b[sel]
+        return (theta_at(bb + dt) - theta_at(aa + dt)) / (bb - aa)
+
+    def neg_corr(dt: float, sel: slice | np.ndarray = slice(None)) -> float:
+        g = gyro_mean(dt, sel)
+        rr = r[sel]
+        gs, rs = g - g.mean(), rr - rr.mean()
+        den = np.sqrt(np.dot(gs, gs) * np.dot(rs, rs))
+        return -float(np.dot(gs, rs) / den) if den > 0 else 0.0
+
+    lags = np.arange(-max_lag_s, max_lag_s + 0.5 * lag_step_s, lag_step_s)
+
+    def best_lag(sel: slice | np.ndarray = slice(None)) -> tuple[float, float, bool]:
+        costs = np.array([neg_corr(d, sel) for d in lags])
+        i = int(np.argmin(costs))
+        lo, hi = lags[max(i - 1, 0)], lags[min(i + 1, lags.shape[0] - 1)]
+        res = optimize.minimize_scalar(lambda d: neg_corr(d, sel), bounds=(lo, hi), method="bounded",
+                                       options={"xatol": 1e-5})
+        d, c = (float(res.x), float(res.fun)) if res.fun <= costs[i] else (float(lags[i]), float(costs[i]))
+        edge = i == 0 or i == lags.shape[0] - 1
+        return d, -c, edge
+
+    offset, corr, at_edge = best_lag()
+    g = gyro_mean(offset)
+    scale, c0 = np.polyfit(g, r, 1)
+    bias = -c0 / scale if scale != 0 else nan
+    # how much turning: the gyro over the samples used, bias removed, each sample weighted
+    # by its share of time (overlapping baselines count once: divide by m)
+    turn_deg = float(np.degrees(np.sum(np.abs(g - bias) * (b - a)) / m))
+
+    sigma = _hac_sigma(r, g, (theta_at(b + offset, 1) - theta_at(a + offset, 1)) / (b - a),
+                       float(scale), float(c0), max(m + 3, int(round(hac_lag_s / dt_med))))
+
+    checks = []
+    if turn_deg < min_turn_deg:
+        checks.append(f"turn {turn_deg:.0f} deg < {min_turn_deg:g}")
+    if corr < min_correlation:
+        checks.append(f"correlation {corr:.2f} < {min_correlation:g}")
+    if not sigma <= max_sigma_s:
+        checks.append(f"sigma {sigma * 1e3:.1f} ms > {max_sigma_s * 1e3:g}")
+    if at_edge:
+        checks.append(f"peak at the search edge (+-{max_lag_s:g} s)")
+    summary = (f"offset {offset * 1e3:+.1f} +- {sigma * 1e3:.1f} ms (IMU late if > 0), corr {corr:.3f}, "
+               f"{n} samples, turn {turn_deg:.0f} deg")
+    confident = not checks
+    reason = summary + ("" if confident else ": not confident: " + "; ".join(checks))
+    return ClockOffset(offset_s=offset, sigma_s=sigma, correlation=corr, n_samples=n,
+                       turn_deg=turn_deg, scale=float(scale), bias_rad_s=float(bias),
+                       at_edge=bool(at_edge), confident=bool(confident), reason=reason)
+
+
+_MIN_SAMPLES = 40
+
+
+def _hac_sigma(r: np.ndarray, g: np.ndarray, dg: np.ndarray, scale: float, c0: float,
+               n_lag: int) -> float:
+    """1-sigma of the lag in ``r = scale * g(dt) + c0``: Gauss-Newton, autocorrelation-consistent.
+
+    ``dg`` (n,) is ``d g / d dt`` at the solution.  Returns NaN for a singular fit.
+    """
+    e = r - scale * g - c0
+    jac = np.stack([scale * dg, g, np.ones_like(g)], axis=1)           # (n, 3)
+    try:
+        bread = np.linalg.inv(jac.T @ jac)
+    except np.linalg.LinAlgError:
+        return float("nan")
+    u = jac * e[:, None]                                                # scores (n, 3)
+    # truncated (flat) kernel: overlapping differences of course make the residuals strongly
+    # negatively correlated at the baseline's lag, which a tapered (Bartlett) kernel would
+    # under-count (variance over-estimated 2-4 x); flat is exact for correlation spans <= n_lag.
+    # Should it come out not positive (rare, short data), fall back to Bartlett.
+    gams = [u[lag:].T @ u[:-lag] for lag in range(1, min(n_lag, u.shape[0] - 1) + 1)]
+    meat = u.T @ u + sum(g + g.T for g in gams)
+    if np.linalg.eigvalsh(meat)[0] <= 0:
+        meat = u.T @ u + sum((1.0 - (i + 1) / (n_lag + 1.0)) * (g + g.T) for i, g in enumerate(gams))
+    cov = bread @ meat @ bread
+    return float(np.sqrt(cov[0, 0])) if cov[0, 0] > 0 else float("nan")

@@ -1,0 +1,224 @@
+"""Stale IMU rows and the IMU-GNSS clock offset: synthetic oracles, plus the shared real logs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from navpp.geodesy import geodetic_to_enu
+from navpp.ins.timing_estimates import (
+    ClockOffset,
+    estimate_clock_offset,
+    find_stale_rows,
+    velocity_from_positions,
+)
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+
+
+def _real(name: str) -> Path:
+    d = REAL / name
+    if not (d / "imu.csv").is_file():
+        pytest.skip(f"shared real data absent: {d}")
+    return d
+
+
+def _load(path: Path) -> np.ndarray:
+    return np.loadtxt(path, delimiter=",", skiprows=1)
+
+
+# ------------------------------------------------------------------------------------------
+# synthetic streams
+# ------------------------------------------------------------------------------------------
+
+def _polled_stream(seed: int, duration: float = 60.0, sensor_hz: float = 100.0,
+                   step: float | None = None, sigma: float = 1.0):
+    """A sensor at ``sensor_hz`` read by a logger polling every 6..9 ms.
+
+    Returns t (polls), gyro, accel (the latest sensor sample at each poll) and the true
+    stale mask (polls that saw no new sample).  ``step`` quantises the values.
+    """
+    rng = np.random.default_rng(seed)
+    t_s = np.arange(0.0, duration, 1.0 / sensor_hz) + 0.0003
+    vals = sigma * rng.standard_normal((t_s.size, 6)) + np.array([0, 0, 0, 0, 0, 9.8])
+    if step is not None:
+        vals = np.round(vals / step) * step
+    polls = np.cumsum(rng.integers(6, 10, size=int(duration / 0.006) + 10) * 1e-3)
+    polls = polls[(polls > t_s[0]) & (polls < duration)]
+    idx = np.searchsorted(t_s, polls, side="right") - 1
+    stale = np.concatenate([[False], idx[1:] == idx[:-1]])
+    return polls, vals[idx, :3], vals[idx, 3:], stale
+
+
+def _quantised_quiet(seed: int, n: int = 20000, rate: float = 100.0, ratio=(0.3, 0.4, 0.5, 0.35, 0.45, 0.6)):
+    """A coarse sensor at rest: each channel N(0, ratio * step) quantised to ``step``."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / rate
+    step = 0.01
+    vals = np.round(np.asarray(ratio) * rng.standard_normal((n, 6))) * step + 0.0    # no -0.0
+    return t, vals[:, :3], vals[:, 3:] + 9.81
+
+
+def test_stale_rows_polled_stream_found_exactly() -> None:
+    t, gyro, accel, truth = _polled_stream(seed=1)
+    res = find_stale_rows(t, gyro, accel)
+    assert truth.mean() > 0.2                                  # the oracle is a real polling case
+    np.testing.assert_array_equal(res.mask, truth)
+    assert res.count == int(truth.sum())
+    assert res.fraction == pytest.approx(truth.mean())
+    assert res.fresh_rate_hz == pytest.approx(100.0, rel=0.01)
+    assert res.confident, res.reason
+    assert res.reason.startswith("stale")
+
+
+def test_stale_rows_quantised_quiet_sensor_not_flagged() -> None:
+    t, gyro, accel = _quantised_quiet(seed=2)
+    res = find_stale_rows(t, gyro, accel)
+    assert res.n_repeats > 20                   # the chance repeats really happen
+    assert res.count == 0 and not res.mask.any()
+    assert res.expected_by_chance == pytest.approx(res.n_repeats, rel=0.5)
+    assert res.confident, res.reason
+
+
+def test_stale_rows_very_quiet_sensor_not_flagged() -> None:
+    # most readings repeat per channel; all six repeat ~30 % of the time by chance alone
+    t, gyro, accel = _quantised_quiet(seed=3, ratio=(0.3,) * 6)
+    res = find_stale_rows(t, gyro, accel)
+    assert res.n_repeats > 0.2 * t.size
+    assert res.expected_by_chance == pytest.approx(res.n_repeats, rel=0.1)
+    assert res.count == 0, res.reason
+    assert res.confident, res.reason
+
+
+def test_stale_rows_coarse_sensor_polled_is_flagged() -> None:
+    # a coarse sensor (chance repeats) read by a polling logger: the polling signature decides
+    t, gyro, accel, truth = _polled_stream(seed=4, step=0.5, sigma=0.5)
+    res = find_stale_rows(t, gyro, accel)
+    assert res.count >= truth.sum()
+    assert res.mask[truth].all()
+    assert res.dispersion < 0.3, res.reason
+
+
+def test_stale_rows_no_repeats() -> None:
+    rng = np.random.default_rng(5)
+    t = np.arange(1000) * 0.01
+    res = find_stale_rows(t, rng.standard_normal((1000, 3)), rng.standard_normal((1000, 3)))
+    assert res.count == 0 and res.n_repeats == 0 and res.confident
+    assert res.fresh_rate_hz == pytest.approx(100.0)
+
+
+def test_stale_rows_real_walk() -> None:
+    d = _load(_real("walk_0827") / "imu.csv")
+    res = find_stale_rows(d[:, 0] - d[0, 0], d[:, 1:4], d[:, 4:7])
+    assert res.count == 6958 and d.shape[0] == 20455             # the log's README
+    assert res.fraction == pytest.approx(0.340, abs=0.001)
+    assert res.fresh_rate_hz == pytest.approx(100.5, abs=0.1)
+    assert res.confident, res.reason
+
+
+def test_stale_rows_real_car_not_flagged() -> None:
+    d = _load(_real("car_balzer82") / "imu.csv")
+    res = find_stale_rows(d[:, 0] - d[0, 0], d[:, 1:4], d[:, 4:7])
+    assert res.count == 0, res.reason
+    assert res.fresh_rate_hz == pytest.approx(50.0, abs=0.1)
+
+
+# ------------------------------------------------------------------------------------------
+# clock offset
+# ------------------------------------------------------------------------------------------
+
+def _drive(offset: float, seed: int, duration: float = 200.0, straight: bool = False,
+           speed: float = 10.0, gyro_bias: float = 0.01, pos_noise: float = 0.05):
+    """A car at constant speed with smooth random turns; IMU stamps late by ``offset``.
+
+    IMU 100 Hz (yaw rate + bias + 0.01 rad/s white noise), GNSS 10 Hz positions with
+    ``pos_noise`` m white noise.  Returns t_imu, gz, t_gnss, east, north.
+    """
+    rng = np.random.default_rng(seed)
+    fine = 1000.0
+    tt = np.arange(0.0, duration + 4.0, 1.0 / fine) - 2.0
+    rate = np.zeros_like(tt)
+    if not straight:
+        for _ in range(4):
+            rate += 0.1 * np.sin(2 * np.pi * rng.uniform(0.02, 0.15) * tt + rng.uniform(0, 2 * np.pi))
+    course = -np.cumsum(rate) / fine + rng.uniform(0, 2 * np.pi)       # clockwise from north
+    east = np.cumsum(speed * np.sin(course)) / fine
+    north = np.cumsum(speed * np.cos(course)) / fine
+    t_imu = np.arange(0.0, duration, 0.01)
+    gz = np.interp(t_imu - offset, tt, rate) + gyro_bias + 0.01 * rng.standard_normal(t_imu.size)
+    t_g = np.arange(0.05, duration, 0.1)
+    e = np.interp(t_g, tt, east) + pos_noise * rng.standard_normal(t_g.size)
+    n = np.interp(t_g, tt, north) + pos_noise * rng.standard_normal(t_g.size)
+    return t_imu, gz, t_g, e, n
+
+
+def _estimate(offset: float, seed: int, **kw) -> ClockOffset:
+    t_imu, gz, t_g, e, n = _drive(offset, seed, **kw)
+    return estimate_clock_offset(t_imu, gz, t_g, velocity_from_positions(t_g, e, n))
+
+
+def test_velocity_from_positions_exact_for_quadratic() -> None:
+    t = np.arange(0.0, 5.0, 0.1)
+    v = velocity_from_positions(t, 3.0 * t + 0.5 * t**2, -2.0 * t)
+    np.testing.assert_allclose(v[1:-1, 0], 3.0 + t[1:-1], atol=1e-9)
+    np.testing.assert_allclose(v[:, 1], -2.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("offset,seed", [(0.010, 11), (-0.3, 12), (0.25, 13)])
+def test_clock_offset_synthetic(offset: float, seed: int) -> None:
+    res = _estimate(offset, seed)
+    assert res.confident, res.reason
+    assert abs(res.offset_s - offset) < 3.0 * res.sigma_s, res.reason
+    assert res.sigma_s < 0.02                      # and so an error beyond 60 ms fails
+    assert res.bias_rad_s == pytest.approx(0.01, abs=0.005)
+
+
+def test_clock_offset_velocity_input_and_sign() -> None:
+    # noise-free ENU velocities: a sharp answer, and the sign of the documented convention
+    t_imu, gz, t_g, e, n = _drive(0.12, 21, pos_noise=0.0)
+    res = estimate_clock_offset(t_imu, gz, t_g, velocity_from_positions(t_g, e, n))
+    assert res.offset_s == pytest.approx(0.12, abs=0.005), res.reason
+    # GNSS stamps shifted later by 0.1 s = IMU comparatively 0.1 s earlier
+    res2 = estimate_clock_offset(t_imu, gz, t_g + 0.1, velocity_from_positions(t_g, e, n))
+    assert res2.offset_s == pytest.approx(0.02, abs=0.005), res2.reason
+
+
+def test_clock_offset_straight_drive_not_confident() -> None:
+    res = _estimate(0.1, 31, straight=True)
+    assert not res.confident
+    assert "turn" in res.reason
+
+
+def test_clock_offset_too_slow_gives_nan() -> None:
+    res = _estimate(0.1, 32, speed=1.0)
+    assert not res.confident and np.isnan(res.offset_s) and res.n_samples == 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("offset", [0.010, -0.3])
+def test_clock_offset_sigma_is_honest(offset: float) -> None:
+    z = []
+    for seed in range(100, 120):
+        res = _estimate(offset, seed)
+        z.append((res.offset_s - offset) / res.sigma_s)
+    z = np.asarray(z)
+    assert np.all(np.abs(z) < 3.5), z
+    # not over-confident; in these simulations sigma is ~2x conservative (documented)
+    assert 0.3 < np.sqrt(np.mean(z**2)) < 1.2, z
+
+
+def test_clock_offset_real_car() -> None:
+    d = _real("car_balzer82")
+    imu, gnss = _load(d / "imu.csv"), _load(d / "gnss.csv")
+    t0 = imu[0, 0]
+    lat, lon = np.radians(gnss[:, 1]), np.radians(gnss[:, 2])
+    enu = geodetic_to_enu(lat, lon, gnss[:, 3], lat[0], lon[0], gnss[0, 3])
+    t_g = gnss[:, 0] - t0
+    res = estimate_clock_offset(imu[:, 0] - t0, imu[:, 3], t_g,
+                                velocity_from_positions(t_g, enu[:, 0], enu[:, 1]))
+    # README: positions ~0.51 s late against the IMU (-0.42 s from 1-s courses), i.e. IMU early
+    assert -0.7 < res.offset_s < -0.2, res.reason
+    assert abs(res.offset_s + 0.51) < 3.0 * res.sigma_s, res.reason
+    assert res.n_samples > 1000
