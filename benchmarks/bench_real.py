@@ -27,6 +27,7 @@ import navpp
 from navpp.config import AutoConfig, load_config
 from navpp.errors import NavppError
 
+CAR_LATENCY_S = 0.51   #: car_balzer82's GNSS position latency measured in its README
 STEPS = ("standstill", "noise", "biases", "mounting", "heading", "recovery", "stale_rows", "clock_offset")
 
 
@@ -74,7 +75,12 @@ def _car(data: Path, filt: str, auto_off: str | None) -> str:
     cfg = _cfg(None, auto_off)
     windows = [(s, 10.0) for s in np.arange(30.0, 200.0, 30.0)]
     t0 = time.perf_counter()
-    gn = navpp.api.read_log(d, cfg).gnss
+    from navpp import api
+
+    gn = api.read_log(d, cfg).gnss
+    # the withheld fixes at the time they are valid: the README's measured 0.51 s latency, the
+    # same for every variant (navpp's own estimate is what is being tested)
+    gn = replace(gn, t=gn.t - CAR_LATENCY_S)
     res = navpp.process(d, filter_name=filt, config=cfg, gnss_outages=windows, write=False)
     sol = res.solution
     from navpp import geodesy

@@ -28,8 +28,10 @@ from .filters.smoother import ForwardStore, smooth_arrays
 from .ins.alignment import Alignment, AlignmentSettings, align
 from .ins.attitude import rpy_matrix
 from .ins.model import (
+    ATT,
     BA,
     BG,
+    VEL,
     LONG_GAP_PERIODS,
     POS,
     GnssPosition,
@@ -464,11 +466,113 @@ def _vehicle_mounting(recording: Recording, config: Config, cov_step_s: float
     return (0.0, est.pitch_deg, est.yaw_deg), [note], []
 
 
+#: What a forced fix re-opens (1-sigma floors): velocity m/s per axis, attitude deg per axis.
+RECOVER_VEL_STD = 1.0
+RECOVER_ATT_STD_DEG = (2.0, 2.0, 20.0)
+
+
+def _realigned_velocity(state: GaussianState, gnss, sel: np.ndarray, k: int, lat: np.ndarray, lon: np.ndarray,
+                        alt: np.ndarray) -> GaussianState:
+    """After a forced fix: the velocity from the GNSS (its velocity, else a straight line through
+    the fixes within 1 s either side), when there is one; the covariance is already re-opened."""
+    from . import geodesy
+
+    idx = sel[k]
+    if gnss.vel_enu is not None and np.all(np.isfinite(gnss.vel_enu[idx])):
+        v = np.asarray(gnss.vel_enu[idx], dtype=float)
+    else:
+        near = np.nonzero(np.abs(gnss.t[sel] - gnss.t[idx]) <= 1.0)[0]
+        if near.size < 3:
+            return state
+        enu = geodesy.geodetic_to_enu(lat[near], lon[near], alt[near], float(lat[k]), float(lon[k]), float(alt[k]))
+        tt = gnss.t[sel][near] - gnss.t[sel][near].mean()
+        stt = float(tt @ tt)
+        if stt <= 0.0:
+            return state
+        v = (tt @ (enu - enu.mean(axis=0))) / stt
+    x = state.x.copy()
+    x[4:7] = v
+    return GaussianState(state.t, x, state.P)
+
+
+#: A clock offset estimate is applied when it is confident, or when it departs from zero by
+#: this many sigmas (the data reject "no offset" at about 99 %) with a sigma below
+#: CLOCK_MAX_SIGMA_S: a latency of tenths of a second is worth metres at speed.
+CLOCK_SIGMAS = 2.5
+CLOCK_MAX_SIGMA_S = 0.2
+
+
+def timing_fixes(recording: Recording, config: Config) -> tuple[Recording, list[str], list[str]]:
+    """What the IMU stamps and values say about timing (:mod:`navpp.ins.timing_estimates`):
+    stale IMU rows (a logger polling faster than the sensor) are dropped; the IMU-GNSS clock
+    offset is estimated from the gyro's yaw rate and the GNSS course rate and applied to the
+    GNSS stamps when the data are sure of it (unless ``[gnss] time_offset_s`` is set).
+    Returns the recording to process, notes and warnings."""
+    from dataclasses import replace as dc_replace
+
+    from . import geodesy
+    from .ins.timing_estimates import estimate_clock_offset, find_stale_rows, velocity_from_positions
+    from .recording import ImuData
+
+    auto = config.auto
+    notes: list[str] = []
+    warnings: list[str] = []
+    imu, gnss, src = recording.imu, recording.gnss, recording.source
+    if auto.stale_rows and len(imu) > 10:
+        stale = find_stale_rows(imu.t, imu.gyro, imu.accel)
+        if stale.count:
+            keep = ~stale.mask
+            imu = ImuData(imu.t[keep], imu.gyro[keep], imu.accel[keep])
+            recording = dc_replace(recording, imu=imu)
+            warnings.append(f"{src}: IMU: {stale.count} stale rows ({100.0 * stale.fraction:.1f} %) repeat the previous "
+                            f"row's six values under a new stamp (a logger polling faster than the sensor): dropped; "
+                            f"fresh samples at {stale.fresh_rate_hz:.1f} Hz ([auto] stale_rows = false keeps them)")
+        elif stale.n_repeats:
+            notes.append(f"IMU: {stale.n_repeats} rows repeat the previous row's values, no more than chance: kept "
+                         f"({stale.reason})")
+    if auto.clock_offset and config.gnss.time_offset_s == 0.0 and len(gnss) >= 20:
+        up = imu.accel.mean(axis=0)
+        if any(a != 0.0 for a in config.imu.mounting_rpy_deg):
+            up = mounting_matrix(config.imu.mounting_rpy_deg).T @ up      # the sensor's up, as logged
+        up = up / max(float(np.linalg.norm(up)), 1e-9)
+        if gnss.vel_enu is not None:
+            vel = np.asarray(gnss.vel_enu[:, :2], dtype=float)
+        else:
+            lat0, lon0 = math.radians(float(gnss.lat_deg[0])), math.radians(float(gnss.lon_deg[0]))
+            enu = geodesy.geodetic_to_enu(np.radians(gnss.lat_deg), np.radians(gnss.lon_deg), gnss.alt, lat0, lon0,
+                                          float(gnss.alt[0]))
+            vel = velocity_from_positions(gnss.t, enu[:, 0], enu[:, 1])
+        ok = np.all(np.isfinite(vel), axis=1)
+        try:
+            est = estimate_clock_offset(imu.t, imu.gyro @ up, gnss.t[ok], vel[ok])
+        except ValueError:
+            est = None
+        if est is not None and math.isfinite(est.offset_s):
+            sure = est.confident or (not est.at_edge and est.sigma_s < CLOCK_MAX_SIGMA_S
+                                     and abs(est.offset_s) > CLOCK_SIGMAS * est.sigma_s)
+            what = (f"IMU-GNSS clock offset from the gyro's yaw rate against the GNSS course rate: the GNSS is "
+                    f"{-est.offset_s:+.3f} s +- {est.sigma_s:.3f} late against the IMU (correlation "
+                    f"{est.correlation:.2f}, {est.turn_deg:.0f} deg of turns)")
+            if sure and abs(est.offset_s) > 0.5 * est.sigma_s:
+                gnss = dc_replace(gnss, t=gnss.t + est.offset_s)
+                recording = dc_replace(recording, gnss=gnss)
+                warnings.append(f"{src}: {what}: applied to the GNSS stamps (write [gnss] time_offset_s = "
+                                f"{est.offset_s:.2f} to fix it, or [auto] clock_offset = false)")
+            else:
+                notes.append(f"{what}: not applied ({est.reason})")
+        else:
+            notes.append("IMU-GNSS clock offset: not estimated (too little turning at speed)")
+    return recording, notes, warnings
+
+
 def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
          cov_step_s: float, smooth: bool = False) -> RunResult:
     t_wall = time.perf_counter()
     notes: list[str] = []
     warnings = check_imu_plausible(recording)
+    recording, t_notes, t_warnings = timing_fixes(recording, config)
+    notes += t_notes
+    warnings += t_warnings
     warnings += check_data(recording, config)
     imu, gnss = recording.imu, recording.gnss
     gyro, accel = imu.gyro, imu.accel
@@ -537,6 +641,14 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
             knot()
 
     knot()
+    # recovery: a forced fix re-opens velocity, attitude and gyro bias as well as the position
+    reopen = None
+    recoveries: list[float] = []
+    if config.auto.recovery:
+        reopen = np.zeros(al.P.shape[0])
+        reopen[VEL] = RECOVER_VEL_STD
+        reopen[ATT] = np.radians(RECOVER_ATT_STD_DEG)
+        reopen[BG] = np.sqrt(np.diagonal(al.P)[BG])
     mounting, mounting_note, mounting_warning = _vehicle_mounting(recording, config, cov_step_s)
     notes += mounting_note
     warnings += mounting_warning
@@ -580,10 +692,14 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
             checked(t_e)                            # the prediction
             used_prior, reset, applied = None, False, False
             if k >= 0:
-                meas = GnssPosition(t_e, float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever)
+                meas = GnssPosition(t_e, float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever,
+                                    reopen)
                 inn = apply(meas, t_e)
                 if inn.accepted:
                     last_good = t_e
+                if inn.forced and reopen is not None:
+                    state = _realigned_velocity(state, gnss, sel, k, lat, lon, alt)
+                    recoveries.append(t_e)
                 nu[k] = inn.nu
                 nis[k] = inn.nis
                 accepted[k] = inn.accepted
@@ -671,6 +787,12 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     biases = BiasHistory(tg, bias[:, :3], bias[:, 3:], bias_std[:, :3], bias_std[:, 3:])
     rejected = int((~accepted).sum())
     warnings += list(al.warnings)
+    if recoveries:
+        warnings.append(f"{recording.source}: the INS had drifted from the GNSS (a run of rejected fixes) "
+                        f"{len(recoveries)} time{'s' if len(recoveries) > 1 else ''}, at t = "
+                        + ", ".join(f"{v:.1f}" for v in recoveries[:10]) + (" ..." if len(recoveries) > 10 else "")
+                        + " s: velocity re-aligned on the GNSS, attitude and gyro-bias uncertainty re-opened "
+                        "([auto] recovery = false re-opens the position only)")
     warnings += _consistency_checks(recording.source, filt.name, config, tg, nis, accepted, list(warnings))
     warnings += _aid_checks(recording.source, aiding.counts.as_dict())
     if smoothed is not None and smoothed.breaks:

@@ -128,6 +128,17 @@ class Calibration:
         return out
 
 
+def sample_period(t: np.ndarray) -> float:
+    """The IMU's sample period, s: the mean interval without the gaps (intervals over 5 times
+    the median), so that a jittery polled stream gets its real rate, not its commonest interval."""
+    if t.shape[0] < 2:
+        return 1.0
+    d = np.diff(t)
+    med = float(np.median(d))
+    d = d[d <= 5.0 * med]
+    return float(d.mean()) if d.size else med
+
+
 def _blocks(x: np.ndarray, w: int, nb: int) -> np.ndarray:
     return x[: nb * w].reshape(nb, w, x.shape[1])
 
@@ -138,7 +149,7 @@ def block_statistics(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s
     (nb, 3) of the rate (rad/s) and the specific force (m/s^2); ``w`` samples per block, ``m``
     per sub-block."""
     n = t.shape[0]
-    dt = float(np.median(np.diff(t))) if n > 1 else 1.0
+    dt = sample_period(t)
     m = max(1, int(round(sub_s / dt)))
     w = max(2 * m, int(round(block_s / dt / m)) * m)
     nb = n // w
@@ -201,7 +212,7 @@ def noise_profile(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: f
     ``sqrt(dt)``.  The profile is widened by one block either way, so an interval's Q also covers
     the shaking just before and after it."""
     n = t.shape[0]
-    dt = float(np.median(np.diff(t))) if n > 1 else 1.0
+    dt = sample_period(t)
     w = max(span + 1, int(round(block_s / dt)))
     nb = n // w
     if nb < 1:
@@ -247,7 +258,8 @@ def standstill(t: np.ndarray, stats: dict, gnss, gyro_arw: float, accel_vrw: flo
     has = np.isfinite(speed)
     limit = np.maximum(GNSS_STILL_SPEED, np.minimum(3.0 * np.nan_to_num(speed_std, nan=0.0), GNSS_STILL_SPEED_MAX))
     gnss_still = has & (speed <= limit)
-    gnss_moving = has & ~gnss_still
+    # moving only when the speed is beyond its own noise: a noisy fix says nothing either way
+    gnss_moving = has & ~gnss_still & (speed > 3.0 * np.nan_to_num(speed_std, nan=0.0))
     thr_g = np.where(gnss_still, max(K_QUIET * q_g, mid_g), K_QUIET * q_g)
     thr_a = np.where(gnss_still, max(K_QUIET * q_a, mid_a), K_QUIET * q_a)
     quiet = (lp_g <= np.maximum(thr_g, floor_g)) & (lp_a <= np.maximum(thr_a, floor_a)) & ~gnss_moving
@@ -255,11 +267,11 @@ def standstill(t: np.ndarray, stats: dict, gnss, gyro_arw: float, accel_vrw: flo
     # must agree with the run's median within what the shaking allows
     sub_n = math.sqrt(w / m)
     for i0, i1 in _spans(np.arange(nb, dtype=float), quiet, 1.0):
-        for name, lp, fl in (("gyro", stats["gyro_lp"], floor_g), ("accel", stats["accel_lp"], floor_a)):
-            means = stats[f"{name}_mean"][i0:i1]
-            dev = np.abs(means - np.median(means, axis=0))
-            allowed = np.maximum(3.0 * lp[i0:i1] / sub_n + 2.0 * np.median(lp[i0:i1], axis=0), fl)
-            quiet[i0:i1] &= np.all(dev <= allowed, axis=1)
+        # the rate only: a hand-held IMU tilts slowly at rest, which moves the mean force, not the rate
+        lp = stats["gyro_lp"]
+        dev = np.abs(stats["gyro_mean"][i0:i1] - np.median(stats["gyro_mean"][i0:i1], axis=0))
+        allowed = np.maximum(3.0 * lp[i0:i1] / sub_n + 2.0 * np.median(lp[i0:i1], axis=0), floor_g)
+        quiet[i0:i1] &= np.all(dev <= allowed, axis=1)
     confirmed = quiet.copy()
     confirmed[1:] &= quiet[:-1]
     confirmed[:-1] &= quiet[1:]
@@ -350,7 +362,7 @@ def calibrate(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, *, gyro_
     accel_bias = np.zeros(3)
     accel_bias_std = np.full(3, accel_bias_sigma)
     still_arw = still_vrw = None
-    dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 1.0
+    dt = sample_period(t)
     if spans:
         sel = np.concatenate([np.arange(a, b) for a, b in spans])
         f_all = accel[sel].mean(axis=0)

@@ -593,6 +593,9 @@ class GnssPosition:
     h: float     # m
     R: np.ndarray
     lever_arm_b: np.ndarray
+    #: (15,) 1-sigma floors a forced fix re-opens besides the position (velocity, attitude, gyro
+    #: bias: a run of rejections is INS drift, not a GNSS jump); None: the position only
+    reopen_std: np.ndarray | None = None
     axes: ClassVar[tuple[str, ...]] = ("e", "n", "u")     # names of the measurement's elements
     kind: ClassVar[str] = "gnss_position"
 
@@ -606,15 +609,23 @@ class GnssPosition:
         """``h(x ⊞ dX_i) ⊟ h(x)`` in ENU metres, (m, 3)."""
         return _gnss_points(x, np.ascontiguousarray(dX, dtype=float), self.lever_arm_b)
 
-    @staticmethod
-    def reanchor(P: np.ndarray, nu: np.ndarray, R: np.ndarray) -> np.ndarray:
+    def reanchor(self, P: np.ndarray, nu: np.ndarray, R: np.ndarray) -> np.ndarray:
         """Covariance for a fix forced through the gate: the position block restarts from the
         innovation (``diag(nu^2) + R``) uncorrelated with the rest, so a GNSS jump moves the
-        position without kicking velocity and attitude through stale cross-covariances."""
+        position without kicking velocity and attitude through stale cross-covariances.  With
+        ``reopen_std``, every state with a positive floor is re-opened too (its variance at least
+        the floor squared, its correlations dropped): the INS drifted, and what it was sure of
+        (heading, velocity, gyro bias) is what the rejections say is wrong."""
         P = P.copy()
         P[POS, :] = 0.0
         P[:, POS] = 0.0
         P[POS, POS] = np.diag(nu ** 2) + R
+        if self.reopen_std is not None:
+            idx = np.nonzero(np.asarray(self.reopen_std) > 0.0)[0]
+            keep = np.diagonal(P)[idx].copy()
+            P[idx, :] = 0.0
+            P[:, idx] = 0.0
+            P[idx, idx] = np.maximum(keep, np.asarray(self.reopen_std)[idx] ** 2)
         return P
 
 
