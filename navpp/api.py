@@ -533,7 +533,7 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     except BaseException:
         remove_created_dirs(created)
         raise
-    notes = tuple(cfg.notes) + tuple(result.alignment.lines) + tuple(result.notes) + tuple(
+    notes = tuple(cfg.notes) + tuple(result.notes) + tuple(result.alignment.lines) + tuple(
         f"GNSS outage {o['start_s']:g}-{o['end_s']:g} s ({o['duration_s']:g} s from the log start): "
         f"{o['gnss_removed']} fixes removed, the INS coasts" for o in outages)
     warnings = (tuple(rec.warnings) + tuple(result.warnings) + tuple(forced_fix_warnings(rec, cfg, result))

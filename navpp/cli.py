@@ -27,12 +27,19 @@ app = typer.Typer(
 )
 
 
-def _fail(message: str) -> None:
+def _fail(message: str, exc: BaseException | None = None) -> None:
+    """One error line and exit 1; what the run had warned about and noted before it failed
+    (``exc.warnings``, ``exc.notes``) is printed first, since it often names the cause."""
     from rich.console import Console
     from rich.markup import escape
 
+    err = Console(stderr=True, highlight=False, soft_wrap=True)
+    for line in getattr(exc, "warnings", ()):
+        err.print(f"[yellow]warning:[/] {escape(line)}")
+    for line in getattr(exc, "notes", ()):
+        _note(err, line)
     # escape: messages name config sections such as "[init]", which rich would eat as markup
-    Console(stderr=True, highlight=False, soft_wrap=True).print(f"[bold red]navpp: error:[/] {escape(message)}")
+    err.print(f"[bold red]navpp: error:[/] {escape(message)}")
     raise typer.Exit(1)
 
 
@@ -184,7 +191,7 @@ def process(
                               gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss,
                               formats=formats, embed_input=embed_input, gnss_outages=gnss_outage, smooth=smooth)
     except NavppError as exc:
-        _fail(str(exc))
+        _fail(str(exc), exc)
         return
     _print_summary(res, quiet)
 

@@ -567,9 +567,22 @@ def timing_fixes(recording: Recording, config: Config) -> tuple[Recording, list[
 
 def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
          cov_step_s: float, smooth: bool = False) -> RunResult:
-    t_wall = time.perf_counter()
+    """One run; a failure carries what the run had noted and warned about so far
+    (:meth:`navpp.errors.NavppError.with_context`), so the user sees the likely cause first."""
+    from .errors import NavppError
+
     notes: list[str] = []
-    warnings = check_imu_plausible(recording)
+    warnings: list[str] = []
+    try:
+        return _run_body(recording, config, filt, progress, cov_step_s, smooth, notes, warnings)
+    except NavppError as exc:
+        raise exc.with_context(notes, warnings)
+
+
+def _run_body(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
+              cov_step_s: float, smooth: bool, notes: list[str], warnings: list[str]) -> RunResult:
+    t_wall = time.perf_counter()
+    warnings += check_imu_plausible(recording)
     recording, t_notes, t_warnings = timing_fixes(recording, config)
     notes += t_notes
     warnings += t_warnings
@@ -589,6 +602,8 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     except InputError as exc:  # alignment knows the data, not where it came from
         raise InputError(f"{recording.source}: {exc}") from None
     model.path[al.index] = al.x[:model.path.shape[1]]
+    notes[:0] = list(al.lines)          # for an error's context; the result carries them apart
+    n_al = len(al.lines)
 
     lever = np.asarray(config.gnss.lever_arm_m, dtype=float)
     sel = np.nonzero((gnss.t > al.t) & (gnss.t <= imu.t[-1]))[0]
@@ -802,7 +817,7 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
                         "or a prior covariance that was not positive definite): the smoothed trajectory keeps "
                         "the forward filter's jump there")
     return RunResult(solution, biases, al, diag, m_ep, rejected, time.perf_counter() - t_wall, 0.0,
-                     tuple(warnings), smoothed, tuple(notes), aiding.counts.as_dict())
+                     tuple(warnings), smoothed, tuple(notes[n_al:]), aiding.counts.as_dict())
 
 
 #: Share of an aid's updates the gate may reject before the run says the aid disagrees with the data.

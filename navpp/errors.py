@@ -8,7 +8,21 @@ from __future__ import annotations
 
 
 class NavppError(Exception):
-    """Base class: a failure the user can act on (bad input, bad config, divergence)."""
+    """Base class: a failure the user can act on (bad input, bad config, divergence).
+
+    ``notes`` and ``warnings`` hold what the run had found out before it failed (what it measured
+    in the data, what it decided): the CLI prints them before the error line, since they often
+    name the cause."""
+
+    notes: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+
+    def with_context(self, notes, warnings) -> "NavppError":
+        """Attach the run's notes and warnings (kept when already set by an inner run)."""
+        if not self.notes and not self.warnings:
+            self.notes = tuple(notes)
+            self.warnings = tuple(warnings)
+        return self
 
 
 class InputError(NavppError):

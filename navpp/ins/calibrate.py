@@ -469,22 +469,23 @@ def _with_prior(est: np.ndarray, sd: np.ndarray, prior_sd: float) -> tuple[np.nd
 
 
 def gross_mounting(up_b: np.ndarray) -> np.ndarray | None:
-    """Sensor -> body rotation (3, 3) that puts the sensor's up on +z by the smallest rotation,
-    when up is more than :data:`GROSS_TILT_DEG` from +z (None otherwise).  An axis that reads
-    gravity (y up, FRD written as FLU) becomes the body's z; the forward axis is kept as far as
-    the rotation allows (yaw is not observable from gravity)."""
+    """Sensor -> body rotation (3, 3) that puts the sensor's up on +z, when up is more than
+    :data:`GROSS_TILT_DEG` from +z (None otherwise).
+
+    A roll about x then a pitch about y, as levelling does: the sensor's x axis stays the
+    body's forward as far as gravity allows (y up becomes a roll of 90 deg; FRD written as FLU,
+    a roll of 180 deg).  Yaw is not observable from gravity."""
     up = np.asarray(up_b, dtype=float) / np.linalg.norm(up_b)
     if math.degrees(math.acos(float(np.clip(up[2], -1.0, 1.0)))) <= GROSS_TILT_DEG:
         return None
-    z = np.array([0.0, 0.0, 1.0])
-    axis = np.cross(up, z)
-    s = float(np.linalg.norm(axis))
-    c = float(up @ z)
-    if s < 1e-9:                       # upside down: half a turn about x (FRD written as FLU)
-        return np.diag([1.0, -1.0, -1.0])
-    k = axis / s
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
+    phi = math.atan2(up[1], up[2])
+    r = math.hypot(up[1], up[2])
+    theta = math.atan2(-up[0], r)
+    c, s = math.cos(phi), math.sin(phi)
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+    c, s = math.cos(theta), math.sin(theta)
+    ry = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    return ry @ rx
 
 
 def matrix_to_rpy_deg(mat: np.ndarray) -> tuple[float, float, float]:
