@@ -33,9 +33,10 @@ STEPS = ("standstill", "noise", "biases", "mounting", "heading", "recovery", "st
 
 def _cfg(path, auto_off: str | None):
     cfg = load_config(path)
+    on = {k: True for k in STEPS}         # the steps are opt-in ([auto] in a config)
     if auto_off:
-        cfg = replace(cfg, auto=replace(AutoConfig(), **{auto_off: False}))
-    return cfg
+        on[auto_off] = False
+    return replace(cfg, auto=AutoConfig(**on))
 
 
 def _error_over_sigma(sol, ref_csv: Path, t0_ns: int) -> float:

@@ -466,6 +466,21 @@ def _vehicle_mounting(recording: Recording, config: Config, cov_step_s: float
     return (0.0, est.pitch_deg, est.yaw_deg), [note], []
 
 
+def _drifting(nis: np.ndarray, accepted: np.ndarray, k: int) -> bool:
+    """Whether the GNSS fixes rejected before fix ``k`` (the current run of rejections) show INS
+    drift, innovations that grow (the last quarter's median NIS over twice the first quarter's),
+    rather than a GNSS jump, whose innovations stay the same size."""
+    if k < 4:
+        return False
+    good = np.nonzero(accepted[:k])[0]
+    run = nis[(good[-1] + 1 if good.size else 0):k]
+    run = run[np.isfinite(run)]
+    if run.size < 4:
+        return False
+    q = max(1, run.size // 4)
+    return float(np.median(run[-q:])) > 2.0 * float(np.median(run[:q]))
+
+
 #: What a forced fix re-opens (1-sigma floors): velocity m/s per axis, attitude deg per axis.
 RECOVER_VEL_STD = 1.0
 RECOVER_ATT_STD_DEG = (2.0, 2.0, 20.0)
@@ -708,7 +723,7 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
             used_prior, reset, applied = None, False, False
             if k >= 0:
                 meas = GnssPosition(t_e, float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever,
-                                    reopen)
+                                    reopen if _drifting(nis, accepted, k) else None)
                 inn = apply(meas, t_e)
                 if inn.accepted:
                     last_good = t_e

@@ -29,6 +29,17 @@ def consumer_drive():
     return simulate(SimulationSpec(duration_s=300.0, still_s=30.0, seed=5, preset="consumer"))
 
 
+#: every automatic step on (they are opt-in: [auto] in the config)
+ON = {"auto": {k: True for k in ("standstill", "noise", "biases", "mounting", "heading", "recovery", "stale_rows",
+                                 "clock_offset")}}
+
+
+def _on(raw=None):
+    raw = dict(raw or {})
+    raw.update(ON)
+    return config_from_dict(raw, "t")
+
+
 def _cal(sim, **kw):
     rec = sim.recording()
     noise = config_from_dict({"imu": {"preset": "automotive"}}, "t").imu.noise()
@@ -110,14 +121,14 @@ def drive():
 @pytest.mark.parametrize("rpy", [(90.0, 0.0, 0.0), (180.0, 0.0, 0.0)])
 def test_y_up_or_upside_down_imu_works_and_names_the_setting(drive, rpy):
     rec = _rotated(drive, rpy)
-    cfg = config_from_dict({}, "t")
+    cfg = _on()
     res = engine.run(rec, cfg, api.make_filter("ekf", cfg))
     h = _metrics(res.solution, rec.reference)
     base = engine.run(drive.recording(), cfg, api.make_filter("ekf", cfg))
     assert h < 1.2 * _metrics(base.solution, rec.reference) + 0.05, h
     assert any("mounting_rpy_deg" in w and "not +z" in w for w in res.warnings), res.warnings
     # off: levelled at 90 or 180 deg of roll, and a line names the setting
-    off = replace(cfg, auto=replace(AutoConfig(), mounting=False))
+    off = replace(cfg, auto=replace(cfg.auto, mounting=False))
     res_off = engine.run(rec, off, api.make_filter("ekf", off))
     assert any("mounting_rpy_deg" in w and "tilted" in w for w in res_off.warnings), res_off.warnings
 
@@ -134,7 +145,7 @@ def test_stale_rows_are_dropped(drive):
     src = np.maximum.accumulate(np.where(keep, np.arange(len(imu)), 0))       # stale rows copy the last fresh
     stale = replace(rec, imu=ImuData(t_all, imu.gyro[src], imu.accel[src]))
     fresh = replace(rec, imu=ImuData(t_all[keep], imu.gyro[keep], imu.accel[keep]))
-    cfg = config_from_dict({}, "t")
+    cfg = _on()
     a = engine.run(stale, cfg, api.make_filter("ekf", cfg))
     b = engine.run(fresh, cfg, api.make_filter("ekf", cfg))
     assert any("stale rows" in w for w in a.warnings), a.warnings
@@ -147,12 +158,12 @@ def test_clock_offset_is_found_and_applied():
     rec = simulate(SimulationSpec(duration_s=180.0, still_s=20.0, seed=11, gnss_std_h_m=0.05,
                                   gnss_std_u_m=0.1)).recording()
     late = replace(rec, gnss=replace(rec.gnss, t=rec.gnss.t + 0.3))
-    cfg = config_from_dict({}, "t")
+    cfg = _on()
     res = engine.run(late, cfg, api.make_filter("ekf", cfg))
     line = next(w for w in res.warnings if "clock offset" in w)
     est = float(line.split("the GNSS is ")[1].split(" s")[0])
     assert abs(est - 0.3) < 0.05, line
-    told = config_from_dict({"gnss": {"time_offset_s": -0.3}}, "t")
+    told = _on({"gnss": {"time_offset_s": -0.3}})
     ref = engine.run(replace(late, gnss=replace(late.gnss, t=late.gnss.t - 0.3)), told,
                      api.make_filter("ekf", told))
     assert _metrics(res.solution, rec.reference) < 1.3 * _metrics(ref.solution, rec.reference) + 0.05
@@ -162,7 +173,8 @@ def test_a_diverging_run_prints_its_notes_first(drive, tmp_path):
     """An error carries what the run measured before it failed (the CLI prints it first)."""
     rec = drive.recording()
     bad = replace(rec, gnss=replace(rec.gnss, lat_deg=rec.gnss.lat_deg + np.where(rec.gnss.t > 60, 0.01, 0.0)))
-    cfg = config_from_dict({"auto": {"recovery": False}, "gnss": {"reanchor_after_s": 1e9}}, "t")
+    cfg = _on({"gnss": {"reanchor_after_s": 1e9}})
+    cfg = replace(cfg, auto=replace(cfg.auto, recovery=False))
     with pytest.raises(FilterDivergedError) as info:
         engine.run(bad, cfg, api.make_filter("ekf", cfg))
     assert any("still" in n for n in info.value.notes), info.value.notes
@@ -175,8 +187,8 @@ def test_recovery_after_drift(drive):
     rec = drive.recording()
     true_heading = float(rec.reference.rph_deg[0, 2])
     raw = {"init": {"heading_deg": (true_heading + 90.0) % 360.0}, "gnss": {"max_rejected_fraction": 1.0}}
-    on = config_from_dict(raw, "t")
-    off = replace(on, auto=replace(AutoConfig(), recovery=False))
+    on = _on(raw)
+    off = replace(on, auto=replace(on.auto, recovery=False))
     a = engine.run(rec, on, api.make_filter("ekf", on))
     b = engine.run(rec, off, api.make_filter("ekf", off))
     ha, hb = _metrics(a.solution, rec.reference), _metrics(b.solution, rec.reference)

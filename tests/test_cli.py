@@ -65,18 +65,19 @@ def column(path: Path, name: str) -> np.ndarray:
 
 
 def assert_one_line_error(res, out_dir: Path) -> str:
-    """Exit 1 via a clean failure: one non-empty stderr line, nothing on stdout, no files."""
+    """Exit 1 via a clean failure: one error line, last on stderr, after only the run's own
+    warnings and notes (what it found before it failed); nothing on stdout, no files."""
     assert res.exit_code == 1, (res.exit_code, res.output, res.exception)
     # CliRunner turns an uncaught exception into exit code 1 too: make sure it was a clean exit
     assert isinstance(res.exception, SystemExit), repr(res.exception)
     assert "Traceback" not in res.output
     assert res.stdout.strip() == ""
     lines = [line for line in res.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1, res.stderr
-    assert lines[0].startswith("navpp: error: ")
+    assert lines and lines[-1].startswith("navpp: error: "), res.stderr
+    assert all(line.startswith(("warning: ", "· ")) for line in lines[:-1]), res.stderr
     leftovers = sorted(p.name for p in out_dir.rglob("*")) if out_dir.exists() else []
     assert leftovers == [], leftovers
-    return lines[0]
+    return lines[-1]
 
 
 # --------------------------------------------------------------------------------- process

@@ -154,10 +154,20 @@ def test_reanchor_restarts_position_block():
     P = np.full((15, 15), 0.01) + np.eye(15)
     nu = np.array([20.0, -1.0, 0.5])
     R = np.diag([1.0, 1.0, 4.0])
-    Pn = M.GnssPosition.reanchor(P, nu, R)
+    meas = M.GnssPosition(0.0, 0.7, 0.1, 300.0, R, np.zeros(3))
+    Pn = meas.reanchor(P, nu, R)
     np.testing.assert_allclose(Pn[M.POS, M.POS], np.diag(nu ** 2) + R)
     assert np.all(Pn[M.POS, :3] == 0) and np.all(Pn[M.VEL, M.POS] == 0)
     np.testing.assert_array_equal(Pn[M.VEL, M.VEL], P[M.VEL, M.VEL])
+    # recovery: velocity, attitude and gyro bias re-opened to their floors, uncorrelated
+    floors = np.zeros(15)
+    floors[M.VEL] = 3.0
+    floors[M.ATT] = 0.1
+    Pr = M.GnssPosition(0.0, 0.7, 0.1, 300.0, R, np.zeros(3), floors).reanchor(P, nu, R)
+    np.testing.assert_allclose(np.diagonal(Pr)[M.VEL], 9.0)
+    np.testing.assert_allclose(np.diagonal(Pr)[M.ATT], 1.0)        # the larger of the old 1 and 0.01
+    assert np.all(Pr[M.VEL, M.BA] == 0) and np.all(Pr[M.ATT, M.VEL] == 0)
+    np.testing.assert_array_equal(Pr[M.BA, M.BA], P[M.BA, M.BA])
 
 
 def test_propagate_points_is_the_strapdown_in_error_space(drive):
