@@ -165,7 +165,7 @@ def test_reanchor_restarts_position_block():
     floors[M.ATT] = 0.1
     Pr = M.GnssPosition(0.0, 0.7, 0.1, 300.0, R, np.zeros(3), floors).reanchor(P, nu, R)
     np.testing.assert_allclose(np.diagonal(Pr)[M.VEL], 9.0)
-    np.testing.assert_allclose(np.diagonal(Pr)[M.ATT], 1.0)        # the larger of the old 1 and 0.01
+    np.testing.assert_allclose(np.diagonal(Pr)[M.ATT], 1.01)       # the larger of the old 1.01 and 0.01
     assert np.all(Pr[M.VEL, M.BA] == 0) and np.all(Pr[M.ATT, M.VEL] == 0)
     np.testing.assert_array_equal(Pr[M.BA, M.BA], P[M.BA, M.BA])
 
