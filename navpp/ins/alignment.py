@@ -106,13 +106,6 @@ def still_runs(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_durati
     return runs
 
 
-def mask_runs(t: np.ndarray, mask: np.ndarray, min_duration: float) -> list[tuple[int, int]]:
-    """Runs of True in ``mask`` lasting at least ``min_duration`` s: index ranges [i0, i1)."""
-    d = np.diff(np.concatenate([[0], np.asarray(mask, dtype=np.int8), [0]]))
-    starts, ends = np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]
-    return [(int(a), int(b)) for a, b in zip(starts, ends) if b - a >= 2 and t[b - 1] - t[a] >= min_duration]
-
-
 def _first_gnss_motion(gnss, speed: float = 0.5) -> float:
     """Time (s) of the first GNSS epoch whose speed (velocity, or a fit of the fixes within
     +-1 s) exceeds ``speed`` m/s and by more than 3 sigma; inf when the GNSS never moves."""
@@ -222,6 +215,8 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
     first_fix = float(gnss.t[0])
     still = None
     if settings.still_mask is not None:
+        from .calibrate import spans as mask_runs
+
         runs = mask_runs(t, settings.still_mask, settings.still_min_s)
         first_motion = _first_gnss_motion(gnss)
     else:

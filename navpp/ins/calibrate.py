@@ -266,7 +266,7 @@ def standstill(t: np.ndarray, stats: dict, gnss, gyro_arw: float, accel_vrw: flo
     # a slow turn or a crawl is as smooth as a rest: inside a run of quiet blocks, the block means
     # must agree with the run's median within what the shaking allows
     sub_n = math.sqrt(w / m)
-    for i0, i1 in _spans(np.arange(nb, dtype=float), quiet, 1.0):
+    for i0, i1 in spans(np.arange(nb, dtype=float), quiet, 1.0):
         # the rate only: a hand-held IMU tilts slowly at rest, which moves the mean force, not the rate
         lp = stats["gyro_lp"]
         dev = np.abs(stats["gyro_mean"][i0:i1] - np.median(stats["gyro_mean"][i0:i1], axis=0))
@@ -280,7 +280,7 @@ def standstill(t: np.ndarray, stats: dict, gnss, gyro_arw: float, accel_vrw: flo
     return mask, confirmed
 
 
-def _spans(t: np.ndarray, mask: np.ndarray, min_s: float) -> list[tuple[int, int]]:
+def spans(t: np.ndarray, mask: np.ndarray, min_s: float) -> list[tuple[int, int]]:
     """Index ranges [i0, i1) of runs of ``mask`` lasting at least ``min_s``."""
     d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
     starts, ends = np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]
@@ -351,7 +351,7 @@ def calibrate(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, *, gyro_
     notes: list[str] = []
     stats = block_statistics(t, gyro, accel)
     still, _ = standstill(t, stats, gnss, gyro_arw, accel_vrw)
-    spans = _spans(t, still, min_still_s)
+    runs = spans(t, still, min_still_s)
     profile = noise_profile(t, gyro, accel)
     lat = math.radians(float(np.median(gnss.lat_deg))) if len(gnss) else 0.0
     h = float(np.median(gnss.alt)) if len(gnss) else 0.0
@@ -363,12 +363,12 @@ def calibrate(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, *, gyro_
     accel_bias_std = np.full(3, accel_bias_sigma)
     still_arw = still_vrw = None
     dt = sample_period(t)
-    if spans:
-        sel = np.concatenate([np.arange(a, b) for a, b in spans])
+    if runs:
+        sel = np.concatenate([np.arange(a, b) for a, b in runs])
         f_all = accel[sel].mean(axis=0)
         up = f_all / np.linalg.norm(f_all)
-        up_from = f"{len(spans)} still stretch{'es' if len(spans) > 1 else ''}, {sel.size * dt:.0f} s"
-        a, b = spans[0]
+        up_from = f"{len(runs)} still stretch{'es' if len(runs) > 1 else ''}, {sel.size * dt:.0f} s"
+        a, b = runs[0]
         n = b - a
         w_mean = gyro[a:b].mean(axis=0)
         f_mean = accel[a:b].mean(axis=0)
@@ -394,7 +394,7 @@ def calibrate(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, *, gyro_
         resf = accel[sel] - accel[sel].mean(axis=0)
         still_vrw = float(np.sqrt(np.mean(resf ** 2))) * math.sqrt(dt)
         notes.append(
-            f"still: {len(spans)} stretch{'es' if len(spans) > 1 else ''} of {sel.size * dt:.1f} s in all "
+            f"still: {len(runs)} stretch{'es' if len(runs) > 1 else ''} of {sel.size * dt:.1f} s in all "
             f"(first t = {t[a]:.2f} .. {t[b - 1]:.2f} s), found relative to the log's quietest blocks"
             + (" and confirmed by the GNSS speed" if len(gnss) else ""))
         notes.append(
@@ -443,7 +443,7 @@ def calibrate(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, *, gyro_
     if tilt > 1.0:
         notes.append(f"gravity in body axes ({up_from}): ({up[0]:+.3f}, {up[1]:+.3f}, {up[2]:+.3f}), "
                      f"{tilt:.1f} deg from +z")
-    return Calibration(still, tuple((float(t[a]), float(t[b - 1])) for a, b in spans), up, up_from, gyro_bias,
+    return Calibration(still, tuple((float(t[a]), float(t[b - 1])) for a, b in runs), up, up_from, gyro_bias,
                        gyro_bias_std, accel_bias, accel_bias_std, bias_from, still_arw, still_vrw, profile,
                        tuple(notes))
 
@@ -497,4 +497,4 @@ def matrix_to_rpy_deg(mat: np.ndarray) -> tuple[float, float, float]:
 
 
 __all__ = ["Calibration", "NoiseProfile", "block_statistics", "calibrate", "gnss_speed_at", "gross_mounting",
-           "matrix_to_rpy_deg", "noise_profile", "standstill"]
+           "matrix_to_rpy_deg", "noise_profile", "spans", "standstill"]
