@@ -588,9 +588,8 @@ class VehicleConfig:
 @dataclass(frozen=True)
 class AutoConfig:
     """``[auto]``: what navpp measures from the log itself (:mod:`navpp.ins.calibrate`).
-    Every step is off by default in this release (opt in per key; ``navpp process`` on a real
-    log needs them): with one off, the configured value (a preset, a ``[vehicle]`` threshold)
-    is used as before, so its effect can be measured.
+    Every step is on by default; with one off, the configured value (a preset, a ``[vehicle]``
+    threshold) is used as before, so its effect can be measured.
 
     Attributes
     ----------
@@ -611,14 +610,14 @@ class AutoConfig:
         GNSS course rate and applied when the estimate is confident.
     """
 
-    standstill: bool = False
-    noise: bool = False
-    biases: bool = False
-    mounting: bool = False
-    heading: bool = False
-    recovery: bool = False
-    stale_rows: bool = False
-    clock_offset: bool = False
+    standstill: bool = True
+    noise: bool = True
+    biases: bool = True
+    mounting: bool = True
+    heading: bool = True
+    recovery: bool = True
+    stale_rows: bool = True
+    clock_offset: bool = True
 
     def __post_init__(self) -> None:
         for f in fields(self):

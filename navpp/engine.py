@@ -403,6 +403,17 @@ def _state_fault(state: GaussianState) -> str | None:
 
 _CAUSES = ("check the IMU units and axes ([imu] mounting_rpy_deg), the lever arm, the time bases "
            "([gnss] time_offset_s) and the GNSS standard deviations")
+
+
+def _causes(config: Config) -> str:
+    """The usual causes of a filter and GNSS that disagree, with the vehicle mounting when the
+    non-holonomic constraint holds the IMU's lateral velocity to zero on a configured mounting
+    (a degree of yaw is 0.3 m/s of side-slip at 60 km/h)."""
+    v = config.vehicle
+    if v.type == "car" and v.nhc and not isinstance(v.mounting_rpy_deg, str):
+        return (_CAUSES.replace("([imu] mounting_rpy_deg)", "([imu] mounting_rpy_deg), the vehicle mounting "
+                                '([vehicle] mounting_rpy_deg = "auto" estimates it)'))
+    return _CAUSES
 _CHI2_3_MEDIAN = 2.365973884375338     # median of the chi-square distribution with 3 dof
 
 
@@ -427,10 +438,10 @@ def _consistency_checks(source: str, name: str, config: Config, tg: np.ndarray, 
             f"{source}: {name} diverged: {what}, the first at t = {first:.1f} s, and the GNSS innovations are "
             f"{scale:.1f} times larger than predicted; "
             + ("; ".join(w.removeprefix(f"{source}: ") for w in noticed) + "; otherwise " if noticed else "")
-            + f"{_CAUSES} (set [gnss] max_rejected_fraction = 1 to write the trajectory anyway)")
+            + f"{_causes(config)} (set [gnss] max_rejected_fraction = 1 to write the trajectory anyway)")
     warnings = []
     if rejected > 0.05 * m:
-        warnings.append(f"{source}: {what}: the IMU and GNSS disagree; {_CAUSES}")
+        warnings.append(f"{source}: {what}: the IMU and GNSS disagree; {_causes(config)}")
     elif m >= 20 and scale > 1.5:
         warnings.append(f"{source}: the GNSS innovations are {scale:.1f} times larger than the filter predicts: the "
                         "GNSS standard deviations (or the IMU noise) are too optimistic")
@@ -517,6 +528,46 @@ CLOCK_SIGMAS = 2.5
 CLOCK_MAX_SIGMA_S = 0.2
 
 
+#: The gyro's yaw rate against the GNSS course rate: a fit this well correlated over this many
+#: degrees of GNSS turning measures the gyro's scale; outside these bounds it is not a tilt
+#: (cos 53 deg = 0.6; the chord courses read about 0.9 on a steady drive) but the wrong unit
+#: or axis.
+GYRO_SCALE_CORRELATION = 0.7
+GYRO_SCALE_TURN_DEG = 90.0
+GYRO_SCALE_BOUNDS = (0.6, 1.6)
+
+
+def _check_gyro_scale(recording: Recording, config: Config, up_s: np.ndarray, enu: np.ndarray) -> list[str]:
+    """The gyro's turns against the GNSS track's (:func:`navpp.ins.timing_estimates.yaw_scale_from_track`):
+    raise InputError when the ratio says the gyro's values are in the wrong unit (1/57.3: deg/s
+    read as rad/s); warn when it is otherwise far from 1 (a wrong axis, a bad scale)."""
+    from .ins.timing_estimates import yaw_scale_from_track
+
+    imu, gnss, source = recording.imu, recording.gnss, recording.source
+    std_h = np.hypot(gnss.std_enu[:, 0], gnss.std_enu[:, 1]) / math.sqrt(2.0) if gnss.std_enu is not None else 0.0
+    est = yaw_scale_from_track(imu.t, imu.gyro @ up_s, gnss.t, enu[:, 0], enu[:, 1], std_h)
+    scale = abs(est.scale) if math.isfinite(est.scale) else float("nan")
+    if not (math.isfinite(scale) and scale > 0 and math.isfinite(est.correlation)
+            and est.correlation >= GYRO_SCALE_CORRELATION and est.gnss_turn_deg >= GYRO_SCALE_TURN_DEG):
+        return []
+    lo, hi = GYRO_SCALE_BOUNDS
+    if lo <= scale <= hi:
+        return []
+    what = (f"the GNSS track turns {scale:.3g} x as much as the gyro measures about the vertical "
+            f"(correlation {est.correlation:.2f} over {est.gnss_turn_deg:.0f} deg of turns)")
+    deg = math.degrees(1.0)
+    unit = config.imu.gyro_units
+    if abs(math.log(scale * deg)) < math.log(1.2):
+        hint = ('the gyro is in deg/s: set [imu] gyro_units = "deg/s"' if unit != "deg/s"
+                else "check [imu] gyro_units")
+    elif abs(math.log(scale / deg)) < math.log(1.2):
+        hint = ('the gyro is in rad/s: set [imu] gyro_units = "rad/s"' if unit == "deg/s"
+                else "check [imu] gyro_units")
+    else:
+        return [f"{source}: {what}: check the gyro columns and their axes ([imu] mounting_rpy_deg)"]
+    raise InputError(f"{source}: {what}: {hint}")
+
+
 def timing_fixes(recording: Recording, config: Config) -> tuple[Recording, list[str], list[str]]:
     """What the IMU stamps and values say about timing (:mod:`navpp.ins.timing_estimates`):
     stale IMU rows (a logger polling faster than the sensor) are dropped; the IMU-GNSS clock
@@ -545,17 +596,18 @@ def timing_fixes(recording: Recording, config: Config) -> tuple[Recording, list[
         elif stale.n_repeats:
             notes.append(f"IMU: {stale.n_repeats} rows repeat the previous row's values, no more than chance: kept "
                          f"({stale.reason})")
-    if auto.clock_offset and config.gnss.time_offset_s == 0.0 and len(gnss) >= 20:
-        up = imu.accel.mean(axis=0)
-        if any(a != 0.0 for a in config.imu.mounting_rpy_deg):
-            up = mounting_matrix(config.imu.mounting_rpy_deg).T @ up      # the sensor's up, as logged
-        up = up / max(float(np.linalg.norm(up)), 1e-9)
+    if len(gnss) < 20 or len(imu) < 20:
+        return recording, notes, warnings
+    up = imu.accel.mean(axis=0)            # the sensor's up, as logged
+    up = up / max(float(np.linalg.norm(up)), 1e-9)
+    lat0, lon0 = math.radians(float(gnss.lat_deg[0])), math.radians(float(gnss.lon_deg[0]))
+    enu = geodesy.geodetic_to_enu(np.radians(gnss.lat_deg), np.radians(gnss.lon_deg), gnss.alt, lat0, lon0,
+                                  float(gnss.alt[0]))
+    warnings += _check_gyro_scale(recording, config, up, enu)
+    if auto.clock_offset and config.gnss.time_offset_s == 0.0:
         if gnss.vel_enu is not None:
             vel = np.asarray(gnss.vel_enu[:, :2], dtype=float)
         else:
-            lat0, lon0 = math.radians(float(gnss.lat_deg[0])), math.radians(float(gnss.lon_deg[0]))
-            enu = geodesy.geodetic_to_enu(np.radians(gnss.lat_deg), np.radians(gnss.lon_deg), gnss.alt, lat0, lon0,
-                                          float(gnss.alt[0]))
             vel = velocity_from_positions(gnss.t, enu[:, 0], enu[:, 1])
         ok = np.all(np.isfinite(vel), axis=1)
         try:
@@ -722,12 +774,13 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
             checked(t_e)                            # the prediction
             used_prior, reset, applied = None, False, False
             if k >= 0:
+                drift = reopen is not None and _drifting(nis, accepted, k)
                 meas = GnssPosition(t_e, float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever,
-                                    reopen if _drifting(nis, accepted, k) else None)
+                                    reopen if drift else None)
                 inn = apply(meas, t_e)
                 if inn.accepted:
                     last_good = t_e
-                if inn.forced and reopen is not None:
+                if inn.forced and drift:
                     state = _realigned_velocity(state, gnss, sel, k, lat, lon, alt)
                     recoveries.append(t_e)
                 nu[k] = inn.nu

@@ -206,7 +206,7 @@ def test_process_duplicate_imu_stamps_warned(log_copy: Path, tmp_path: Path) -> 
     assert (out / "trajectory.csv").is_file()
 
 
-def test_process_gyro_in_deg_per_s_is_a_divergence_naming_the_cause(log_copy: Path, tmp_path: Path) -> None:
+def test_process_gyro_in_deg_per_s_is_refused_naming_the_setting(log_copy: Path, tmp_path: Path) -> None:
     imu = log_copy / "imu.csv"
     lines = read_lines(imu)
     rows = []
@@ -217,7 +217,8 @@ def test_process_gyro_in_deg_per_s_is_a_divergence_naming_the_cause(log_copy: Pa
     write_lines(imu, [lines[0], *rows])
     res = invoke("process", log_copy, "--out", tmp_path / "out", "--quiet")
     msg = assert_one_line_error(res, tmp_path / "out")
-    assert "diverged" in msg and 'gyro_units = "deg/s"' in msg
+    # the GNSS track turns 1/57 as much as the gyro says: refused before any filtering
+    assert "gnss track turns 0.0" in msg.lower() and 'gyro_units = "deg/s"' in msg
 
 
 def test_process_warnings_are_printed_even_when_quiet(log_copy: Path, tmp_path: Path) -> None:

@@ -244,19 +244,38 @@ def test_accelerometer_in_g_is_a_clear_error():
         engine.run(rec, cfg, api.make_filter("ekf", cfg))
 
 
-def test_gyro_in_deg_per_s_stops_as_divergence_naming_the_cause():
-    from navpp.errors import FilterDivergedError
+def test_gyro_in_deg_per_s_is_refused_and_a_bad_scale_warned():
+    from navpp.errors import FilterDivergedError, InputError
     from navpp.recording import ImuData
 
     rec = _recording_with(edit_imu=lambda imu: ImuData(imu.t, np.degrees(imu.gyro), imu.accel))
     cfg = config_from_dict({}, "test")
-    with pytest.raises(FilterDivergedError) as exc:
+    # the track's turns against the gyro's: refused before any filtering, naming the setting
+    with pytest.raises(InputError, match=r"GNSS track turns 0\.01[5-8]\d* x as much as the gyro.*"
+                                         r'gyro_units = "deg/s"'):
         engine.run(rec, cfg, api.make_filter("ekf", cfg))
+    # a scale 57 the other way (rad/s declared as deg/s) names the setting too
+    slow = _recording_with(edit_imu=lambda imu: ImuData(imu.t, np.radians(imu.gyro), imu.accel))
+    with pytest.raises(InputError, match=r"GNSS track turns (5\d|6\d)\.?\d* x as much"):
+        engine.run(slow, cfg, api.make_filter("ekf", cfg))
+    # half the true rates: not a unit, a warning naming the columns and axes
+    half = _recording_with(edit_imu=lambda imu: ImuData(imu.t, 0.5 * imu.gyro, imu.accel))
+    cfg_half = config_from_dict({"gnss": {"max_rejected_fraction": 1.0}}, "test")
+    res = engine.run(half, cfg_half, api.make_filter("ekf", cfg_half))
+    assert any("GNSS track turns 1." in w and "gyro columns" in w for w in res.warnings), res.warnings
+    # a gyro 3x too large is no known unit: the track check warns, and with the estimated noise
+    # and the recovery off the filter's gate stops the run, the warning printed with the error
+    triple = _recording_with(edit_imu=lambda imu: ImuData(imu.t, 3.0 * imu.gyro, imu.accel))
+    manual = {"auto": {"noise": False, "recovery": False}}
+    cfg = config_from_dict(manual, "test")
+    with pytest.raises(FilterDivergedError) as exc:
+        engine.run(triple, cfg, api.make_filter("ekf", cfg))
     msg = str(exc.value)
-    assert "diverged" in msg and "failed the innovation gate" in msg and 'gyro_units = "deg/s"' in msg
+    assert "diverged" in msg and "failed the innovation gate" in msg and "mounting_rpy_deg" in msg
+    assert any("GNSS track turns 0.3" in w for w in exc.value.warnings), exc.value.warnings
     # and with the stop disabled, the run completes and warns
-    cfg = config_from_dict({"gnss": {"max_rejected_fraction": 1.0}}, "test")
-    res = engine.run(rec, cfg, api.make_filter("ekf", cfg))
+    cfg = config_from_dict({**manual, "gnss": {"max_rejected_fraction": 1.0}}, "test")
+    res = engine.run(triple, cfg, api.make_filter("ekf", cfg))
     assert any("failed the innovation gate" in w for w in res.warnings)
 
 

@@ -48,6 +48,7 @@ from .. import geodesy
 BLOCK_S = 0.5            #: standstill block, s
 SUB_S = 0.05             #: sub-block for the low-passed spread, s
 NOISE_BLOCK_S = 1.0      #: block of the noise profile, s
+OUTLIER_K = 10.0  #: departures beyond this many block medians are glitches, not noise
 NOISE_SPAN = 5           #: samples of the local mean the noise is read against
 QUIET_PERCENTILE = 5.0   #: the log's quietest level: this percentile of the block spreads
 K_QUIET = 3.0            #: quiet = within this factor of the quietest level (no GNSS to confirm)
@@ -163,6 +164,21 @@ def block_statistics(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s
     return out
 
 
+def gnss_scatter_h(tg: np.ndarray, enu: np.ndarray) -> float:
+    """Horizontal scatter of the fixes (m, 1-sigma per axis) from their second differences over
+    evenly spaced triplets: ``p[k+1] - 2 p[k] + p[k-1]`` has variance ``6 sigma^2`` for white
+    noise, and motion adds only ``a dt^2`` (8 cm at 2 m/s^2 and 5 Hz).  Robust (median of the
+    absolute values); 0 with fewer than 10 triplets.  Correlated errors are under-read: a floor."""
+    if tg.shape[0] < 12:
+        return 0.0
+    d1 = np.diff(tg)
+    even = np.abs(d1[1:] - d1[:-1]) <= 0.1 * np.minimum(d1[1:], d1[:-1])
+    if int(even.sum()) < 10:
+        return 0.0
+    d2 = (enu[2:, :2] - 2.0 * enu[1:-1, :2] + enu[:-2, :2])[even]
+    return float(1.4826 * np.median(np.abs(d2)) / math.sqrt(6.0))
+
+
 def gnss_speed_at(gnss, times: np.ndarray, half_window: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Horizontal GNSS speed (m/s) and its 1-sigma near each of ``times`` (NaN: no GNSS there).
 
@@ -188,6 +204,8 @@ def gnss_speed_at(gnss, times: np.ndarray, half_window: float = 1.0) -> tuple[np
     lat0, lon0, h0 = math.radians(float(gnss.lat_deg[0])), math.radians(float(gnss.lon_deg[0])), float(gnss.alt[0])
     enu = geodesy.geodetic_to_enu(np.radians(gnss.lat_deg), np.radians(gnss.lon_deg), gnss.alt, lat0, lon0, h0)
     std_h = (np.mean(gnss.std_enu[:, :2], axis=1) if gnss.std_enu is not None else np.full(tg.shape, 2.0))
+    # the log's std columns may be optimistic: the fixes' own scatter is a floor
+    std_h = np.maximum(np.nan_to_num(std_h, nan=2.0), gnss_scatter_h(tg, enu))
     for i in np.nonzero(hi - lo >= 3)[0]:
         s = slice(lo[i], hi[i])
         tt = tg[s] - tg[s].mean()
@@ -224,7 +242,15 @@ def noise_profile(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: f
         res = np.empty((nb * w, 3))
         for j in range(3):
             res[:, j] = x[: nb * w, j] - np.convolve(x[: nb * w, j], kernel, mode="same")
-        var = (res ** 2).reshape(nb, w, 3).mean(axis=1).mean(axis=1) * span / (span - 1.0)
+        # a burst of absurd samples (a glitch, a saturated register) is not vibration: departures
+        # beyond OUTLIER_K times the block's median departure are left out (Gaussian samples
+        # reach that with probability ~1e-11, so vibration is never clipped)
+        a = np.abs(res).reshape(nb, w * 3)
+        with np.errstate(invalid="ignore", over="ignore"):
+            med = np.median(np.where(np.isfinite(a), a, np.inf), axis=1)
+            keep = np.isfinite(a) & (a <= OUTLIER_K * med[:, None])
+            sq = np.where(keep, a, 0.0) ** 2
+        var = sq.sum(axis=1) / np.maximum(keep.sum(axis=1), 1) * span / (span - 1.0)
         d = np.sqrt(var * dt)
         wide = d.copy()
         wide[1:] = np.maximum(wide[1:], d[:-1])
@@ -297,43 +323,52 @@ def _vertical_bias_from_course(t, gyro_up, gnss, min_speed: float = 3.0) -> tupl
     if gnss.vel_enu is not None:
         ve, vn = gnss.vel_enu[:, 0], gnss.vel_enu[:, 1]
         tc = tg
+        course_sd = np.full(tg.shape, math.radians(3.0))
     else:
         lat0, lon0 = math.radians(float(gnss.lat_deg[0])), math.radians(float(gnss.lon_deg[0]))
         enu = geodesy.geodetic_to_enu(np.radians(gnss.lat_deg), np.radians(gnss.lon_deg), gnss.alt, lat0, lon0,
                                       float(gnss.alt[0]))
-        step = max(1, int(round(0.5 / max(float(np.median(np.diff(tg))), 1e-3))))    # ~0.5 s chords
+        std_h = float(np.nanmedian(gnss.std_enu[:, :2])) if gnss.std_enu is not None else 2.0
+        std_h = max(std_h if math.isfinite(std_h) else 2.0, gnss_scatter_h(tg, enu))
+        # chords long enough that the fixes' noise moves their course by a few degrees at most:
+        # 0.5 s for RTK, up to 5 s for metre-level fixes (20 sigma at ~10 m/s)
+        span_s = min(5.0, max(0.5, 2.0 * std_h))
+        step = max(1, int(round(span_s / max(float(np.median(np.diff(tg))), 1e-3))))
         d = enu[step:] - enu[:-step]
         dtc = tg[step:] - tg[:-step]
         ve, vn = d[:, 0] / dtc, d[:, 1] / dtc
         tc = 0.5 * (tg[step:] + tg[:-step])
-    ok = np.hypot(ve, vn) > min_speed
+        length = np.hypot(d[:, 0], d[:, 1])
+        course_sd = math.sqrt(2.0) * std_h / np.maximum(length, 1e-9)
+    ok = (np.hypot(ve, vn) > min_speed) & (course_sd < math.radians(5.0))
     ok &= (tc >= t[0]) & (tc <= t[-1])
     if np.count_nonzero(ok) < 10:
         return None
-    yaw = np.unwrap(-np.arctan2(ve, vn))        # counter-clockwise from north... as a rate only
+    yaw = -np.arctan2(ve, vn)        # counter-clockwise from north... as a rate only
     nominal = float(np.median(np.diff(tc)))
-    # stretches: consecutive ok epochs without a gap over 3 nominal intervals
+    # stretches: consecutive ok epochs without a gap over 3 nominal intervals, and without a course
+    # step the unwrap could take either way
     idx = np.nonzero(ok)[0]
-    breaks = np.nonzero((np.diff(idx) > 1) | (np.diff(tc[idx]) > 3.0 * nominal))[0]
+    jump = np.abs(np.angle(np.exp(1j * np.diff(yaw[idx])))) > 0.5 * math.pi
+    breaks = np.nonzero((np.diff(idx) > 1) | (np.diff(tc[idx]) > 3.0 * nominal) | jump)[0]
     starts = np.concatenate([[0], breaks + 1])
     ends = np.concatenate([breaks, [idx.size - 1]])
     turned = np.concatenate([[0.0], np.cumsum(0.5 * (gyro_up[1:] + gyro_up[:-1]) * np.diff(t))])
-    num = tot = 0.0
-    nseg = 0
+    num = tot = var = 0.0
     for a, b in zip(starts, ends):
         i, j = idx[a], idx[b]
         T = float(tc[j] - tc[i])
         if T < 5.0:
             continue
         gyro_turn = float(np.interp(tc[j], t, turned) - np.interp(tc[i], t, turned))
-        num += gyro_turn - float(yaw[j] - yaw[i])
+        course = np.unwrap(yaw[idx[a:b + 1]])
+        num += gyro_turn - float(course[-1] - course[0])
         tot += T
-        nseg += 1
+        var += float(course_sd[i]) ** 2 + float(course_sd[j]) ** 2
     if tot < 20.0:
         return None
-    # course noise of a chord at the ends of each stretch: a few degrees each
-    sigma = math.radians(3.0) * math.sqrt(2.0 * nseg) / tot
-    return num / tot, sigma, tot
+    # the chords' course noise at the ends of each stretch
+    return num / tot, math.sqrt(var) / tot, tot
 
 
 def calibrate(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, *, gyro_arw: float, accel_vrw: float,

@@ -12,6 +12,9 @@ IMU stamp); body frame FLU, navigation frame ENU; gyro in rad/s, specific force 
 - :func:`estimate_clock_offset` finds the delay of the IMU stamps against the GNSS stamps by
   matching the vertical angular rate from the gyro with the course rate of the GNSS
   velocity; :func:`velocity_from_positions` turns GNSS positions into that velocity.
+- :func:`yaw_scale_from_track` compares the gyro's turns with the GNSS track's over a few
+  seconds (robust to metre-level fix noise): a gyro read in the wrong unit shows as a scale
+  of 1/57.3 or 57.3.
 """
 
 from __future__ import annotations
@@ -27,6 +30,8 @@ __all__ = [
     "ClockOffset",
     "estimate_clock_offset",
     "velocity_from_positions",
+    "YawScale",
+    "yaw_scale_from_track",
 ]
 
 
@@ -523,3 +528,93 @@ def _hac_sigma(r: np.ndarray, g: np.ndarray, dg: np.ndarray, scale: float, c0: f
         meat = u.T @ u + sum((1.0 - (i + 1) / (n_lag + 1.0)) * (g + g.T) for i, g in enumerate(gams))
     cov = bread @ meat @ bread
     return float(np.sqrt(cov[0, 0])) if cov[0, 0] > 0 else float("nan")
+
+
+# --------------------------------------------------------------------------------------------
+# Gyro scale against the GNSS track
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class YawScale:
+    """Result of :func:`yaw_scale_from_track`.
+
+    Attributes
+    ----------
+    scale : float, GNSS turn / gyro turn (slope of the fit with a constant for the bias);
+        1 for a vertical gyro axis in rad/s, 1/57.3 for one in deg/s read as rad/s. NaN when
+        there are fewer than 5 chord pairs.
+    correlation : float, correlation coefficient of the two turns.
+    gnss_turn_deg : float, deg, sum of |GNSS turn| over the pairs used.
+    n_pairs : int.
+    """
+
+    scale: float
+    correlation: float
+    gnss_turn_deg: float
+    n_pairs: int
+
+
+def yaw_scale_from_track(t_imu: np.ndarray, gyro_z_up: np.ndarray, t_gnss: np.ndarray,
+                         east_m: np.ndarray, north_m: np.ndarray, std_h_m: np.ndarray | float = 0.0,
+                         *, window_s: float = 4.0, min_chord_m: float = 5.0) -> YawScale:
+    """How the gyro's turns compare with the GNSS track's.
+
+    The track is cut into consecutive, non-overlapping chords of about ``window_s`` (from one
+    GNSS epoch to the first at least ``window_s`` later); a chord's course ``atan2(dE, dN)`` is
+    the heading at its middle for a steady turn, and its error is about ``sigma_h / length``
+    rad, so chords shorter than ``max(min_chord_m, 20 sigma_h)`` or spanning a gap are dropped.
+    For each pair of adjacent chords, the GNSS turn (course change, counter-clockwise positive,
+    wrapped to +-pi) is compared with the gyro's turn between the two middles (trapezoidal
+    integral of ``gyro_z_up``); the fit ``gnss = scale * gyro + c`` absorbs a constant bias.
+
+    Parameters
+    ----------
+    t_imu : (N,) s, increasing; gyro_z_up : (N,) rad/s about the local vertical (up, CCW).
+    t_gnss : (M,) s, increasing, the same time base; east_m, north_m : (M,) m, local ENU.
+    std_h_m : scalar or (M,) m, horizontal 1-sigma per fix (0: unknown, ``min_chord_m`` rules).
+    """
+    nan = float("nan")
+    t_imu = np.asarray(t_imu, dtype=float)
+    w = np.asarray(gyro_z_up, dtype=float)
+    t_g = np.asarray(t_gnss, dtype=float)
+    e, nn = np.asarray(east_m, dtype=float), np.asarray(north_m, dtype=float)
+    if t_g.shape[0] < 4 or t_imu.shape[0] < 4:
+        return YawScale(nan, nan, 0.0, 0)
+    sig = np.broadcast_to(np.nan_to_num(np.asarray(std_h_m, dtype=float), nan=0.0), t_g.shape)
+    theta = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t_imu))])
+    dt_med = float(np.median(np.diff(t_g)))
+    gap = np.concatenate([[0], np.cumsum(np.diff(t_g) > 3.0 * dt_med)])   # gap count up to each epoch
+    starts = []
+    i = 0
+    m = t_g.shape[0]
+    while i < m - 1:
+        j = int(np.searchsorted(t_g, t_g[i] + window_s - 1e-9))
+        if j >= m:
+            break
+        starts.append((i, j))
+        i = j
+    mids, courses, ok = [], [], []
+    for i, j in starts:
+        de, dn = e[j] - e[i], nn[j] - nn[i]
+        length = float(np.hypot(de, dn))
+        need = max(min_chord_m, 20.0 * float(max(sig[i], sig[j])))
+        good = (gap[j] == gap[i]) and length >= need and (t_g[j] - t_g[i]) <= 1.5 * window_s
+        mids.append(0.5 * (t_g[i] + t_g[j]))
+        courses.append(float(np.arctan2(dn, de)))     # counter-clockwise from east
+        ok.append(good)
+    if len(mids) < 2:
+        return YawScale(nan, nan, 0.0, 0)
+    mids_a, courses_a, ok_a = np.array(mids), np.array(courses), np.array(ok)
+    pair = ok_a[1:] & ok_a[:-1] & (mids_a[:-1] >= t_imu[0]) & (mids_a[1:] <= t_imu[-1])
+    y = np.angle(np.exp(1j * np.diff(courses_a)))[pair]
+    th = np.interp(mids_a, t_imu, theta)
+    x = np.diff(th)[pair]
+    n = int(y.shape[0])
+    if n < 5:
+        return YawScale(nan, nan, float(np.degrees(np.abs(y).sum())) if n else 0.0, n)
+    xs, ys = x - x.mean(), y - y.mean()
+    sxx, syy, sxy = float(xs @ xs), float(ys @ ys), float(xs @ ys)
+    if sxx <= 0.0 or syy <= 0.0:
+        return YawScale(nan, nan, float(np.degrees(np.abs(y).sum())), n)
+    return YawScale(scale=sxy / sxx, correlation=sxy / np.sqrt(sxx * syy),
+                    gnss_turn_deg=float(np.degrees(np.abs(y).sum())), n_pairs=n)
