@@ -687,7 +687,12 @@ def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solu
 
 
 def simulate_log(out: str | Path, **spec: Any) -> Path:
-    """Simulate a drive and write it as a CSV log directory (see :mod:`navpp.simulate`)."""
+    """Simulate a drive and write it as a CSV log directory (see :mod:`navpp.simulate`).
+
+    ``spec`` are :class:`~navpp.simulate.SimulationSpec` fields, the real-world effects too
+    (``realism="consumer-car"``, ``mounting_rpy_deg``, ``start_in_motion``, ``gnss_gap_s``, ...);
+    with one on, ``realism.json`` (their truth) is written beside the CSV files.
+    """
     from .simulate import SimulationSpec, simulate, write_csv_log
 
     sim = simulate(SimulationSpec(**spec))

@@ -509,8 +509,28 @@ def _lever_arm(value: Optional[str]) -> Optional[tuple[float, float, float]]:
     return la  # type: ignore[return-value]
 
 
+def _mounting(value: Optional[str]) -> Optional[tuple[float, float, float]]:
+    if value is None:
+        return None
+    try:
+        rpy = tuple(float(v) for v in value.split(","))
+    except ValueError:
+        rpy = ()
+    if len(rpy) != 3 or not all(math.isfinite(v) for v in rpy):
+        raise typer.BadParameter(f"needs three finite numbers 'roll,pitch,yaw' (deg), got {value!r}",
+                                 param_hint="'--mounting'")
+    return rpy  # type: ignore[return-value]
+
+
+REALISM = ("consumer-car",)
+#: options the realism bundle sets unless given: CLI parameter -> SimulationSpec field
+_BUNDLE_OPTIONS = {"imu_rate": "imu_rate_hz", "gnss_rate": "gnss_rate_hz", "preset": "preset", "still": "still_s",
+                   "gnss_std_h": "gnss_std_h_m", "gnss_std_u": "gnss_std_u_m"}
+
+
 @app.command()
 def simulate(
+    ctx: typer.Context,
     out: Annotated[Path, typer.Argument(metavar="OUT", help="Output directory for the CSV log (imu.csv, gnss.csv, "
                                         "reference.csv, navpp.toml).")],
     duration: Annotated[float, typer.Option(help="Drive length, s, >= 30 (includes the initial still period).",
@@ -535,6 +555,22 @@ def simulate(
         help="Antenna lever arm in body FLU, m: 'x,y,z'.  [default: 0,0,0]")] = None,
     still: Annotated[float, typer.Option(help="Initial still period, s (at most half of --duration).",
                                          callback=_require(_finite(0.0), "a finite number of seconds >= 0"))] = 60.0,
+    realism: Annotated[Optional[str], typer.Option(
+        help="Real-world effects of a consumer car log at once (vibration, large turn-on biases, scale factors, "
+             "non-orthogonality, stale rows, a 10 ms IMU clock offset, a GNSS gap; IMU 100 Hz, GNSS 4 Hz at 5 cm, "
+             "still 35 s, preset consumer unless given); the truth goes to realism.json.",
+        callback=_require(lambda v: v in REALISM, f"one of {', '.join(REALISM)}"))] = None,
+    mounting: Annotated[Optional[str], typer.Option(
+        help="IMU mounting against the vehicle, deg: 'roll,pitch,yaw' (as [imu] mounting_rpy_deg; '90,0,0': y up).  "
+             "[default: none]")] = None,
+    start_in_motion: Annotated[bool, typer.Option("--start-in-motion", help="Start while driving (8 m/s, no "
+                                                  "still period).")] = False,
+    gnss_gap: Annotated[Optional[float], typer.Option(
+        help="GNSS gap, s, in the first turn at least 20 s into the log (0: none).  [default: none; 15 with "
+             "--realism]", callback=_require(_finite(0.0), "a finite number of seconds >= 0"))] = None,
+    gnss_gap_start: Annotated[Optional[float], typer.Option(
+        help="Start of the GNSS gap, s after the first sample.  [default: the first turn]",
+        callback=_require(_finite(0.0), "a finite number of seconds >= 0"))] = None,
 ) -> None:
     """Simulate a car-like drive and write it as a CSV log with its reference."""
     from rich.console import Console
@@ -542,13 +578,28 @@ def simulate(
     from .errors import NavppError
 
     la = _lever_arm(lever_arm)
+    rpy = _mounting(mounting)
     try:
         from . import api
 
         kwargs = dict(duration_s=duration, imu_rate_hz=imu_rate, gnss_rate_hz=gnss_rate, preset=preset, seed=seed,
                       gnss_std_h_m=gnss_std_h, gnss_std_u_m=gnss_std_u, gnss_error=gnss_error, still_s=still)
+        if realism is not None:
+            kwargs["realism"] = realism
+            for option, name in _BUNDLE_OPTIONS.items():   # the bundle's value unless given
+                source = ctx.get_parameter_source(option)      # Typer's own (vendored) click enum
+                if source is None or source.name == "DEFAULT":
+                    del kwargs[name]
         if la is not None:
             kwargs["lever_arm_m"] = la
+        if rpy is not None:
+            kwargs["mounting_rpy_deg"] = rpy
+        if start_in_motion:
+            kwargs["start_in_motion"] = True
+        if gnss_gap is not None:
+            kwargs["gnss_gap_s"] = gnss_gap
+        if gnss_gap_start is not None:
+            kwargs["gnss_gap_start_s"] = gnss_gap_start
         try:
             path = api.simulate_log(out, **kwargs)
         except ValueError as exc:
@@ -560,11 +611,13 @@ def simulate(
     from .simulate import SimulationSpec
 
     spec = SimulationSpec(**kwargs)
-    if spec.still_effective_s < spec.still_s:
+    if not spec.start_in_motion and spec.still_effective_s < spec.still_s:
         _note(Console(stderr=True, highlight=False, soft_wrap=True),
-              f"still period shortened to {spec.still_effective_s:g} s: --still {still:g} s is more than half "
-              f"of --duration {duration:g} s")
-    typer.echo(f"wrote {path}/imu.csv, gnss.csv, reference.csv, navpp.toml")
+              f"still period shortened to {spec.still_effective_s:g} s: "
+              + (f"--still {spec.still_s:g} s" if "still_s" in kwargs else f"the {realism} still period {spec.still_s:g} s")
+              + f" is more than half of --duration {duration:g} s")
+    typer.echo(f"wrote {path}/imu.csv, gnss.csv, reference.csv, navpp.toml"
+               + (", realism.json" if spec.realistic else ""))
 
 
 @app.command("inspect")

@@ -52,7 +52,51 @@ vertical.  ``gnss_error="correlated"``: a first-order Gauss-Markov error (tau =
 ``std_e/std_n/std_u`` are then the total 1-sigma, ``sqrt(1.25)`` times the stds.
 
 Randomness: one ``numpy.random.SeedSequence(seed)`` spawns independent streams for the IMU
-and the GNSS, so changing the IMU preset does not change the GNSS noise (and vice versa).
+and the GNSS, so changing the IMU preset does not change the GNSS noise (and vice versa); a
+third stream draws the real-world effects below (vibration, stale rows), so turning them on
+leaves the other two streams as they were.
+
+Real-world effects (consumer car logs)
+--------------------------------------
+All off by default: a spec without them writes the same files as before they existed.
+``realism="consumer-car"`` turns on the bundle :data:`REALISM_BUNDLES` at once; a field given
+explicitly overrides the bundle's value (0 turns an effect off).  ``imu_rate_hz``,
+``gnss_rate_hz``, ``preset``, ``still_s``, ``gnss_std_h_m`` and ``gnss_std_u_m`` default to None:
+the bundle's value with one, else 125 Hz, 5 Hz, automotive, 60 s, 1.8 m, 2.5 m.
+
+- Mounting ``mounting_rpy_deg`` (deg, roll/pitch/yaw about x, y, z, ROS rpy): the IMU is rotated
+  against the body (vehicle, FLU); with ``C_bs = rpy_matrix(mounting_rpy_deg)`` (sensor -> body,
+  the convention of navpp's ``[imu] mounting_rpy_deg``) it reads ``w_s = C_bs^T w_b`` and
+  ``f_s = C_bs^T f_b``, so ``[imu] mounting_rpy_deg`` = the same angles undoes it exactly.  Roll
+  90 deg: the IMU's +y is up.  All sensor errors below are in the sensor axes.
+- Turn-on biases ``gyro_bias_dps`` (deg/s) and ``accel_bias_mg`` (mg), and scale factors
+  ``gyro_scale_factor_pct``, ``accel_scale_factor_pct`` (%), per sensor axis, replace the
+  preset's drawn ones; the preset's Gauss-Markov instability and white noise stay.
+- Axis non-orthogonality ``gyro_misalignment_deg``, ``accel_misalignment_deg`` = (yx, zx, zy)
+  deg: ``measured = (I + diag(sf) + N) true + ...`` with ``N[1,0] = yx, N[2,0] = zx,
+  N[2,1] = zy`` (rad): the y axis senses some x, the z axis some x and y.
+- Vibration ``vibration_gyro_dps = (a, b)`` (deg/s, deg/s per m/s), ``vibration_accel_mps2 =
+  (a, b)`` (m/s^2, m/s^2 per m/s): white Gaussian noise added to each sensor axis with sample
+  std ``a + b * speed`` (true speed of the body, m/s), the engine running for the whole log
+  (idling while still).  It is a per-sample std, independent of the IMU rate (vibration far
+  above the IMU's band, aliased into its samples).
+- Stale rows ``stale_fraction``: each IMU row after the first is, independently with this
+  probability, a copy of the previous row's six values under its own (new) stamp.
+- Clock offset ``imu_time_offset_s`` (s): the IMU row's written stamp = true sample time +
+  offset (> 0: the IMU stamps are late against the GNSS); ``[gnss] time_offset_s`` = offset puts
+  the GNSS on the IMU's time base.  The reference and the GNSS stay at true times.
+- ``start_in_motion``: no still period; the log starts on the first pull-away where the speed
+  is :data:`START_SPEED_MPS` (accelerating); heading and position at t = 0 are the spec's.
+- GNSS gap ``gnss_gap_s``: the fixes of ``[start, start + gnss_gap_s)`` (true time) are
+  missing; the start is ``gnss_gap_start_s`` or the start of the first turn at least
+  :data:`GAP_EARLIEST_S` into the log and after the still period.
+
+Order: ideal IMU -> mounting -> sensor errors and vibration -> stale rows -> stamps.  With
+``errors=False`` the sensor errors and the vibration are off; mounting, stale rows, clock offset,
+start and gap still apply.  :func:`write_csv_log` writes what was applied (the true biases,
+scale factors, error matrices, vibration model, stale rows, clock offset, mounting, gap window)
+to ``realism.json``; its ``navpp.toml`` for a bundle holds only what a user would write (the
+lever arm and ``[vehicle] type = "car"``).
 
 References: Groves, *Principles of GNSS, Inertial, and Multisensor Integrated Navigation
 Systems*, 2nd ed., eqs 5.53-5.54 (ENU mechanisation, whose inverse gives the ideal IMU),
@@ -61,6 +105,7 @@ eq 2.56 (Euler-rate kinematics) and section 14.2.6 (Gauss-Markov processes).
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -74,7 +119,7 @@ from scipy.signal import lfilter
 
 from navpp.errors import ConfigError
 from navpp.geodesy import A, E2, OMEGA_E, gravity, radii
-from navpp.ins.attitude import rph_to_dcm
+from navpp.ins.attitude import rph_to_dcm, rpy_matrix
 from navpp.recording import GnssData, ImuData, Recording, ReferenceData
 
 G0 = 9.80665  #: standard gravity, m/s^2 (mg conversion and the roll lean law)
@@ -116,6 +161,53 @@ IMU_GRADES: dict[str, ImuGrade] = {
 }
 
 
+# --------------------------------------------------------------------------- real-world effects
+
+#: Values of the fields left at None when no realism bundle is chosen.
+_PLAIN_DEFAULTS: dict[str, object] = {
+    "imu_rate_hz": 125.0, "gnss_rate_hz": 5.0, "preset": "automotive", "still_s": 60.0,
+    "gnss_std_h_m": 1.8, "gnss_std_u_m": 2.5,
+}
+
+#: The real-world effects' own fields (None: off).
+_EFFECT_FIELDS = (
+    "vibration_gyro_dps", "vibration_accel_mps2", "gyro_bias_dps", "accel_bias_mg", "gyro_scale_factor_pct",
+    "accel_scale_factor_pct", "gyro_misalignment_deg", "accel_misalignment_deg", "stale_fraction",
+    "imu_time_offset_s", "mounting_rpy_deg", "gnss_gap_s",
+)
+
+#: ``SimulationSpec.realism`` bundles: field values used where the spec leaves a field at None.
+REALISM_BUNDLES: dict[str, dict[str, object]] = {
+    "consumer-car": {
+        "imu_rate_hz": 100.0, "gnss_rate_hz": 4.0, "gnss_std_h_m": 0.05, "gnss_std_u_m": 0.05,
+        "preset": "consumer", "still_s": 35.0,
+        "vibration_gyro_dps": (2.0, 0.5), "vibration_accel_mps2": (0.13, 0.0325),
+        "gyro_bias_dps": (0.25, -0.30, 0.17), "accel_bias_mg": (30.0, -25.0, 40.0),
+        "gyro_scale_factor_pct": (1.0, -0.8, 1.2), "accel_scale_factor_pct": (-0.7, 1.0, 0.6),
+        "gyro_misalignment_deg": (0.5, -0.4, 0.3), "accel_misalignment_deg": (-0.3, 0.5, 0.4),
+        "stale_fraction": 0.02, "imu_time_offset_s": 0.010, "gnss_gap_s": 15.0,
+    },
+}
+
+GAP_EARLIEST_S = 20.0  #: the default GNSS gap starts in the first turn at least this far into the log, s
+START_SPEED_MPS = 8.0  #: speed at the first sample with ``start_in_motion`` (on the first pull-away), m/s
+
+
+def _start_cut_s() -> float:
+    """Time into a drive cycle where the first pull-away (0 -> 12 m/s in 10 s) reaches
+    :data:`START_SPEED_MPS`: ``12 S(x) = 8`` solved for x by bisection (S is increasing)."""
+    start, length, delta = _CYCLE_SPEED[0]
+    target = START_SPEED_MPS / delta
+    lo, hi = 0.0, 1.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if _scalar_shape(mid, True) < target:
+            lo = mid
+        else:
+            hi = mid
+    return start + length * 0.5 * (lo + hi)
+
+
 # --------------------------------------------------------------------------- the spec
 
 
@@ -125,31 +217,58 @@ class SimulationSpec:
 
     Times in s, rates in Hz, angles in degrees where the name says ``_deg``, lengths in m.
     ``errors=False`` makes the IMU exact whatever the preset (GNSS noise is controlled by
-    its stds; set them to 0 for exact GNSS).
+    its stds; set them to 0 for exact GNSS).  The fields after ``errors`` are the real-world
+    effects (module docstring, "Real-world effects"): None / False is off.
     """
 
     duration_s: float = 900.0
-    imu_rate_hz: float = 125.0
-    gnss_rate_hz: float = 5.0
+    imu_rate_hz: float | None = None  #: None: 125 Hz (the realism bundle's rate with one)
+    gnss_rate_hz: float | None = None  #: None: 5 Hz (or the bundle's)
     reference_rate_hz: float = 10.0
-    preset: str = "automotive"
+    preset: str | None = None  #: None: "automotive" (or the bundle's)
     seed: int = 0
-    still_s: float = 60.0
+    still_s: float | None = None  #: None: 60 s (or the bundle's)
     lat0_deg: float = 45.0
     lon0_deg: float = 7.0
     alt0_m: float = 300.0
     heading0_deg: float = 30.0
     lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    gnss_std_h_m: float = 1.8
-    gnss_std_u_m: float = 2.5
+    gnss_std_h_m: float | None = None  #: None: 1.8 m (or the bundle's)
+    gnss_std_u_m: float | None = None  #: None: 2.5 m (or the bundle's)
     gnss_error: str = "white"
     gnss_corr_time_s: float = 120.0
     gnss_velocity: bool = False
     t0_unix: float = 1_700_000_000.0
     gnss_std_vel_mps: float = 0.05
     errors: bool = True
+    # -- real-world effects (module docstring, "Real-world effects"); None / False: off ------
+    realism: str | None = None
+    vibration_gyro_dps: tuple[float, float] | None = None
+    vibration_accel_mps2: tuple[float, float] | None = None
+    gyro_bias_dps: tuple[float, float, float] | None = None
+    accel_bias_mg: tuple[float, float, float] | None = None
+    gyro_scale_factor_pct: tuple[float, float, float] | None = None
+    accel_scale_factor_pct: tuple[float, float, float] | None = None
+    gyro_misalignment_deg: tuple[float, float, float] | None = None
+    accel_misalignment_deg: tuple[float, float, float] | None = None
+    stale_fraction: float | None = None
+    imu_time_offset_s: float | None = None
+    mounting_rpy_deg: tuple[float, float, float] | None = None
+    start_in_motion: bool = False
+    gnss_gap_s: float | None = None
+    gnss_gap_start_s: float | None = None
 
     def __post_init__(self) -> None:
+        if self.realism is not None and self.realism not in REALISM_BUNDLES:
+            raise ConfigError(f"simulate: unknown realism {self.realism!r}; choose one of {', '.join(REALISM_BUNDLES)}")
+        bundle = REALISM_BUNDLES[self.realism] if self.realism is not None else {}
+        for name, plain in _PLAIN_DEFAULTS.items():
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, bundle.get(name, plain))
+        for name, value in bundle.items():
+            if name not in _PLAIN_DEFAULTS and getattr(self, name) is None:
+                object.__setattr__(self, name, value)
+        self._check_realism()
         lever = tuple(float(x) for x in self.lever_arm_m)
         if len(lever) != 3:
             raise ConfigError(f"simulate: lever_arm_m needs 3 numbers (body FLU, m), got {self.lever_arm_m!r}")
@@ -189,10 +308,62 @@ class SimulationSpec:
         if not -85.0 <= self.lat0_deg <= 85.0:
             raise ConfigError(f"simulate: lat0_deg must be within +-85 deg, got {self.lat0_deg!r}")
 
+    def _check_realism(self) -> None:
+        """Validate the real-world effects' fields (tuples become tuples of floats)."""
+        def number(name: str, value) -> float:
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                    or not math.isfinite(value):
+                raise ConfigError(f"simulate: {name} must be a finite number, got {value!r}")
+            return float(value)
+
+        for name, size, limit in (("vibration_gyro_dps", 2, None), ("vibration_accel_mps2", 2, None),
+                                  ("gyro_bias_dps", 3, None), ("accel_bias_mg", 3, None),
+                                  ("gyro_scale_factor_pct", 3, 50.0), ("accel_scale_factor_pct", 3, 50.0),
+                                  ("gyro_misalignment_deg", 3, 10.0), ("accel_misalignment_deg", 3, 10.0),
+                                  ("mounting_rpy_deg", 3, None)):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            try:
+                vec = tuple(float(x) for x in value)
+            except (TypeError, ValueError):
+                vec = ()
+            if len(vec) != size or not all(math.isfinite(x) for x in vec):
+                raise ConfigError(f"simulate: {name} needs {size} finite numbers, got {value!r}")
+            if name.startswith("vibration") and min(vec) < 0.0:
+                raise ConfigError(f"simulate: {name} (a, b) must be >= 0, got {value!r}")
+            if limit is not None and max(abs(x) for x in vec) > limit:
+                raise ConfigError(f"simulate: {name} must be within +-{limit:g}, got {value!r}")
+            object.__setattr__(self, name, vec)
+        if self.stale_fraction is not None and not 0.0 <= number("stale_fraction", self.stale_fraction) <= 0.5:
+            raise ConfigError(f"simulate: stale_fraction must be within 0-0.5, got {self.stale_fraction!r}")
+        if self.imu_time_offset_s is not None and not abs(number("imu_time_offset_s", self.imu_time_offset_s)) <= 1.0:
+            raise ConfigError(f"simulate: imu_time_offset_s must be within +-1 s, got {self.imu_time_offset_s!r}")
+        if not isinstance(self.start_in_motion, (bool, np.bool_)):
+            raise ConfigError(f"simulate: start_in_motion must be true or false, got {self.start_in_motion!r}")
+        if self.gnss_gap_s is not None and not number("gnss_gap_s", self.gnss_gap_s) >= 0.0:
+            raise ConfigError(f"simulate: gnss_gap_s must be >= 0 s, got {self.gnss_gap_s!r}")
+        if self.gnss_gap_start_s is not None and not number("gnss_gap_start_s", self.gnss_gap_start_s) >= 0.0:
+            raise ConfigError(f"simulate: gnss_gap_start_s must be >= 0 s, got {self.gnss_gap_start_s!r}")
+
     @property
     def still_effective_s(self) -> float:
-        """Still period actually used: ``min(still_s, duration_s / 2)``."""
+        """Still period actually used: ``min(still_s, duration_s / 2)``; 0 with ``start_in_motion``."""
+        if self.start_in_motion:
+            return 0.0
         return min(self.still_s, 0.5 * self.duration_s)
+
+    @property
+    def start_cut_s(self) -> float:
+        """Time into the first drive cycle at which the log starts: 0, or with ``start_in_motion``
+        the moment the first pull-away passes :data:`START_SPEED_MPS`."""
+        return _start_cut_s() if self.start_in_motion else 0.0
+
+    @property
+    def realistic(self) -> bool:
+        """Whether any real-world effect is on (then ``realism.json`` is written)."""
+        return self.realism is not None or self.start_in_motion or any(
+            getattr(self, name) is not None for name in _EFFECT_FIELDS)
 
 
 # --------------------------------------------------------------------------- smooth pieces
@@ -328,7 +499,11 @@ class DriveControls:
 
     @classmethod
     def scripted(cls, duration_s: float, still_s: float, heading0_rad: float) -> DriveControls:
-        """Still for ``still_s``, then 200-s drive cycles until past ``duration_s``."""
+        """Still for ``still_s``, then 200-s drive cycles until past ``duration_s``.
+
+        A negative ``still_s`` starts the first cycle that long before t = 0 (a log that
+        starts in motion).
+        """
         n_cycles = max(1, int(math.ceil((duration_s - still_s) / CYCLE_S)) + 1)
         offsets = still_s + CYCLE_S * np.arange(n_cycles)
 
@@ -444,9 +619,14 @@ class Trajectory:
 
     @classmethod
     def from_spec(cls, spec: SimulationSpec) -> Trajectory:
-        """The scripted drive of ``spec`` (valid to ``duration_s + 1`` s for finite differences)."""
-        controls = DriveControls.scripted(spec.duration_s + 1.0, spec.still_effective_s,
-                                          math.radians(spec.heading0_deg))
+        """The scripted drive of ``spec`` (valid to ``duration_s + 1`` s for finite differences).
+
+        With ``start_in_motion`` the first cycle starts ``start_cut_s`` before t = 0 (the car is
+        already pulling away at ``START_SPEED_MPS``); ``heading0_deg`` and the start position
+        are then those at t = 0.
+        """
+        offset = spec.still_effective_s - spec.start_cut_s if spec.start_in_motion else spec.still_effective_s
+        controls = DriveControls.scripted(spec.duration_s + 1.0, offset, math.radians(spec.heading0_deg))
         return cls(controls, math.radians(spec.lat0_deg), math.radians(spec.lon0_deg),
                    spec.alt0_m, spec.duration_s + 1.0)
 
@@ -631,6 +811,11 @@ class Simulation:
     ``gyro_white_sigma``, ``accel_white_sigma`` per-sample sigmas; ``gnss_error_enu`` (M, 3) m;
     ``gnss_true_lat_deg``, ``gnss_true_lon_deg``, ``gnss_true_alt`` (antenna truth);
     ``gnss_true_vel_enu`` (M, 3) when GNSS velocity is simulated.
+
+    ``truth_imu`` is the error-free IMU of the body (FLU) at the true sample times; with a
+    mounting the logged ``imu`` is in the sensor axes and its errors (``sensor_errors``) too.
+    ``imu.t`` are the written stamps (true time + ``imu_time_offset_s``).  ``realism``: the
+    real-world effects applied (see :func:`realism_json`), None when none is on.
     """
 
     imu: ImuData
@@ -641,6 +826,7 @@ class Simulation:
     spec: SimulationSpec
     sensor_errors: dict = field(repr=False)
     trajectory: Trajectory | None = field(default=None, repr=False, compare=False)
+    realism: dict | None = field(default=None, repr=False)
 
     def recording(self) -> Recording:
         """The simulated log as a :class:`~navpp.recording.Recording` (unix time base)."""
@@ -667,25 +853,39 @@ def simulate(spec: SimulationSpec) -> Simulation:
     Simulation
     """
     traj = Trajectory.from_spec(spec)
-    imu_rng, gnss_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(spec.seed).spawn(2))
+    streams = np.random.SeedSequence(spec.seed).spawn(3)  # the first two as ever: spawn keys (0,), (1,)
+    imu_rng, gnss_rng = (np.random.default_rng(s) for s in streams[:2])
 
     # IMU ---------------------------------------------------------------------------------
     dt = 1.0 / spec.imu_rate_hz
     t_imu = _sample_times(spec.duration_s, spec.imu_rate_hz)
-    gyro_true, accel_true = traj.ideal_imu(t_imu)
+    st_imu = traj.state(t_imu) if spec.realistic else None
+    gyro_true, accel_true = traj.ideal_imu(t_imu, st_imu)
+    gyro_in, accel_in = gyro_true, accel_true
+    mount = None
+    if spec.mounting_rpy_deg is not None:
+        mount = rpy_matrix(spec.mounting_rpy_deg)  # sensor -> body, as navpp's [imu] mounting_rpy_deg
+        gyro_in, accel_in = gyro_true @ mount, accel_true @ mount  # rows: C_bs^T w_b, C_bs^T f_b
     grade = IMU_GRADES[spec.preset] if spec.errors else IMU_GRADES["ideal"]
     err = draw_imu_errors(imu_rng, t_imu.size, dt, grade)
     gyro_white = err.pop("_gyro_white")
     accel_white = err.pop("_accel_white")
+    if spec.realistic and spec.errors:
+        _override_turn_on(spec, err)
     if spec.preset == "ideal" or not spec.errors:
-        gyro, accel = gyro_true.copy(), accel_true.copy()
+        gyro, accel = gyro_in.copy(), accel_in.copy()
     else:
         # measured = (1 + sf) * true + turn-on bias + Gauss-Markov + white, per axis
-        gyro = ((1.0 + err["gyro_scale_factor"]) * gyro_true + err["gyro_bias"]
+        gyro = ((1.0 + err["gyro_scale_factor"]) * gyro_in + err["gyro_bias"]
                 + err["gyro_gauss_markov"] + gyro_white)
-        accel = ((1.0 + err["accel_scale_factor"]) * accel_true + err["accel_bias"]
+        accel = ((1.0 + err["accel_scale_factor"]) * accel_in + err["accel_bias"]
                  + err["accel_gauss_markov"] + accel_white)
     del gyro_white, accel_white
+    applied = None
+    t_imu_written = t_imu
+    if spec.realistic:
+        gyro, accel, t_imu_written, applied = _real_world_imu(
+            spec, np.random.default_rng(streams[2]), t_imu, st_imu, gyro_in, accel_in, gyro, accel, err, mount)
 
     # GNSS --------------------------------------------------------------------------------
     t_gnss = _sample_times(spec.duration_s, spec.gnss_rate_hz)
@@ -715,6 +915,14 @@ def simulate(spec: SimulationSpec) -> Simulation:
         errors["gnss_true_vel_enu"] = vel_a
     gnss = GnssData(t=t_gnss, lat_deg=np.degrees(lat_m), lon_deg=np.degrees(lon_m), alt=h_m,
                     std_enu=np.tile(std_total, (m, 1)), vel_enu=vel_m, std_vel_enu=std_vel)
+    if spec.realistic:
+        gnss, applied["gnss_gap"] = _gnss_gap(spec, traj, gnss)
+        if applied["gnss_gap"] is not None:
+            keep = applied["gnss_gap"].pop("_keep")
+            for key in ("gnss_error_enu", "gnss_true_lat_deg", "gnss_true_lon_deg", "gnss_true_alt",
+                        "gnss_true_vel_enu"):
+                if key in errors:
+                    errors[key] = errors[key][keep]
 
     # reference ---------------------------------------------------------------------------
     t_ref = _sample_times(spec.duration_s, spec.reference_rate_hz)
@@ -727,7 +935,7 @@ def simulate(spec: SimulationSpec) -> Simulation:
                               source="navpp.simulate truth (body origin)")
 
     return Simulation(
-        imu=ImuData(t=t_imu, gyro=gyro, accel=accel),
+        imu=ImuData(t=t_imu_written, gyro=gyro, accel=accel),
         gnss=gnss,
         reference=reference,
         truth_imu=ImuData(t=t_imu.copy(), gyro=gyro_true, accel=accel_true),
@@ -735,7 +943,135 @@ def simulate(spec: SimulationSpec) -> Simulation:
         spec=spec,
         sensor_errors=errors,
         trajectory=traj,
+        realism=applied,
     )
+
+
+def _real_world_imu(spec: SimulationSpec, rng: np.random.Generator, t: np.ndarray, state: dict,
+                    gyro_s: np.ndarray, accel_s: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
+                    err: dict, mount: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """The real-world effects on the IMU (module docstring, "Real-world effects").
+
+    ``gyro_s, accel_s`` are the error-free readings in the sensor frame, ``gyro, accel`` the
+    readings with the preset's errors; returns the readings with the effects, the written
+    stamps (s from ``t0_unix``) and the applied effects (``realism.json``).  Draws from
+    ``rng`` in a fixed order: gyro vibration, accel vibration, stale rows.
+    """
+    on = spec.errors
+    speed = np.linalg.norm(state["vel_enu"], axis=1)
+    applied: dict = {"realism": spec.realism}
+
+    meas = {"gyro": gyro, "accel": accel}
+    true_s = {"gyro": gyro_s, "accel": accel_s}
+    for kind, unit, mis_deg in (("gyro", math.radians(1.0), spec.gyro_misalignment_deg),
+                                ("accel", _MG, spec.accel_misalignment_deg)):
+        mis = np.zeros(3) if mis_deg is None or not on else np.radians(mis_deg)
+        n = np.zeros((3, 3))
+        n[1, 0], n[2, 0], n[2, 1] = mis  # axis y senses x, z senses x, z senses y (rad)
+        if n.any():
+            meas[kind] = meas[kind] + true_s[kind] @ n.T
+        real = on and spec.preset != "ideal"  # the preset's errors are in (or the extras alone)
+        sf = err[f"{kind}_scale_factor"] if real else np.zeros(3)
+        bias = err[f"{kind}_bias"] if real else np.zeros(3)
+        if not real and on and spec.preset == "ideal":  # an ideal IMU with explicit extras
+            sf, bias = _extras_alone(spec, kind)
+            meas[kind] = meas[kind] + sf * true_s[kind] + bias
+        applied[kind] = {
+            "turn_on_bias": (bias / unit).tolist(),
+            "turn_on_bias_units": "deg/s" if kind == "gyro" else "mg",
+            "scale_factor": np.asarray(sf, dtype=float).tolist(),
+            "misalignment_deg": np.degrees(mis).tolist(),
+            "error_matrix": (np.eye(3) + np.diag(sf) + n).tolist(),
+            "model": "measured = error_matrix @ true (sensor axes) + turn_on_bias + Gauss-Markov + white "
+                     "+ vibration",
+        }
+
+    vib_model = {"model": "white noise per sensor axis, sample std = a + b * speed (true speed, m/s), "
+                          "independent of the IMU rate; engine on for the whole log"}
+    for kind, pair, unit in (("gyro", spec.vibration_gyro_dps, math.radians(1.0)),
+                             ("accel", spec.vibration_accel_mps2, 1.0)):
+        if pair is None or not on:
+            vib_model[f"{kind}_{'dps' if kind == 'gyro' else 'mps2'}"] = None
+            continue
+        sigma = (pair[0] + pair[1] * speed) * unit
+        meas[kind] = meas[kind] + rng.standard_normal((t.size, 3)) * sigma[:, None]
+        vib_model[f"{kind}_{'dps' if kind == 'gyro' else 'mps2'}"] = {"a": pair[0], "b": pair[1]}
+    applied["vibration"] = vib_model
+
+    gyro, accel = meas["gyro"], meas["accel"]
+    stale_idx = np.zeros(0, dtype=np.int64)
+    if spec.stale_fraction:
+        stale = rng.random(t.size) < spec.stale_fraction
+        stale[0] = False
+        src = np.maximum.accumulate(np.where(stale, 0, np.arange(t.size)))  # the last fresh row
+        gyro, accel = gyro[src], accel[src]
+        stale_idx = np.nonzero(stale)[0]
+    applied["stale_rows"] = {"fraction": spec.stale_fraction, "count": int(stale_idx.size),
+                             "rows": stale_idx.tolist(),
+                             "meaning": "0-based IMU rows (after the header) that repeat the previous row's six "
+                                        "values under their own stamp"}
+    offset = spec.imu_time_offset_s or 0.0
+    applied["imu_time_offset_s"] = spec.imu_time_offset_s
+    applied["imu_time_offset_meaning"] = ("written IMU stamp = true time + offset (the IMU is late for > 0); "
+                                          "[gnss] time_offset_s = offset puts the GNSS on the IMU's time base")
+    applied["mounting_rpy_deg"] = None if mount is None else list(spec.mounting_rpy_deg)
+    applied["mounting_matrix"] = None if mount is None else mount.tolist()
+    applied["mounting_meaning"] = ("sensor -> body rotation (as [imu] mounting_rpy_deg, rpy_matrix): the IMU "
+                                   "reads w_s = C^T w_b, f_s = C^T f_b")
+    applied["start_in_motion"] = bool(spec.start_in_motion)
+    applied["start_speed_mps"] = float(speed[0])
+    applied["start_cut_s"] = spec.start_cut_s
+    applied["still_s"] = spec.still_effective_s
+    t_written = t + offset if offset else t
+    return gyro, accel, t_written, applied
+
+
+def _override_turn_on(spec: SimulationSpec, err: dict) -> None:
+    """The spec's turn-on biases and scale factors replace the preset's drawn ones (in ``err``)."""
+    for kind, bias, sf in (("gyro", spec.gyro_bias_dps, spec.gyro_scale_factor_pct),
+                           ("accel", spec.accel_bias_mg, spec.accel_scale_factor_pct)):
+        extra_sf, extra_bias = _extras_alone(spec, kind)
+        if bias is not None:
+            err[f"{kind}_bias"] = extra_bias
+        if sf is not None:
+            err[f"{kind}_scale_factor"] = extra_sf
+
+
+def _extras_alone(spec: SimulationSpec, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """The spec's own scale factor (ratio) and turn-on bias (SI) of ``kind``; zeros where None."""
+    if kind == "gyro":
+        sf, bias, unit = spec.gyro_scale_factor_pct, spec.gyro_bias_dps, math.radians(1.0)
+    else:
+        sf, bias, unit = spec.accel_scale_factor_pct, spec.accel_bias_mg, _MG
+    return (np.zeros(3) if sf is None else np.asarray(sf) * 1e-2,
+            np.zeros(3) if bias is None else np.asarray(bias) * unit)
+
+
+def _gnss_gap(spec: SimulationSpec, traj: Trajectory, gnss: GnssData) -> tuple[GnssData, dict | None]:
+    """GNSS without the fixes of ``[start, start + gnss_gap_s)`` (true time, s from ``t0_unix``).
+
+    The start is ``gnss_gap_start_s``, or the start of the first turn (heading step) that
+    begins at least :data:`GAP_EARLIEST_S` after the first sample and after the still period.
+    """
+    if not spec.gnss_gap_s:
+        return gnss, None
+    start = spec.gnss_gap_start_s
+    if start is None:
+        hd = traj.controls.heading
+        ok = hd.start >= max(GAP_EARLIEST_S, spec.still_effective_s)
+        if not ok.any():
+            raise ConfigError("simulate: no turn to put the GNSS gap in; give gnss_gap_start_s")
+        start = float(hd.start[np.argmax(ok)])
+    end = start + spec.gnss_gap_s
+    if end > spec.duration_s:
+        raise ConfigError(f"simulate: the GNSS gap ({start:g}-{end:g} s) ends after the log "
+                          f"({spec.duration_s:g} s); shorten gnss_gap_s or make the log longer")
+    keep = ~((gnss.t >= start) & (gnss.t < end))
+    sel = lambda a: None if a is None else a[keep]  # noqa: E731
+    out = GnssData(t=gnss.t[keep], lat_deg=gnss.lat_deg[keep], lon_deg=gnss.lon_deg[keep], alt=gnss.alt[keep],
+                   std_enu=gnss.std_enu[keep], vel_enu=sel(gnss.vel_enu), std_vel_enu=sel(gnss.std_vel_enu))
+    return out, {"start_s": start, "end_s": end, "removed_fixes": int(np.count_nonzero(~keep)), "_keep": keep,
+                 "meaning": "GNSS fixes with start_s <= true time < end_s (s from t0_unix) are missing"}
 
 
 # --------------------------------------------------------------------------- CSV output
@@ -776,6 +1112,8 @@ def _table(t0_unix: float, t: np.ndarray, header: list[str], columns: list[tuple
 
 def _toml(sim: Simulation) -> str:
     sp = sim.spec
+    if sp.realism is not None:
+        return _toml_realism(sim)
     lines = [
         "# navpp.toml -- generated by navpp.simulate (navpp simulate): a simulated car drive.",
         f"# duration {sp.duration_s:g} s (still {sp.still_effective_s:g} s first), start "
@@ -797,8 +1135,46 @@ def _toml(sim: Simulation) -> str:
     return "\n".join(lines)
 
 
+def _toml_realism(sim: Simulation) -> str:
+    """What a user of a real car log would write: the lever arm (measured on the car) and the
+    vehicle type; no IMU preset or noise figures, no mounting, no clock offset (those are the
+    truth the run has to find; they are in ``realism.json``)."""
+    sp = sim.spec
+    lever = ", ".join(repr(float(x)) for x in sp.lever_arm_m)
+    return "\n".join([
+        f"# navpp.toml -- generated by navpp.simulate (navpp simulate --realism {sp.realism}): a simulated",
+        "# car drive with the effects of a real log; what the run has to find is in realism.json.",
+        "# imu.csv, gnss.csv, reference.csv: t in unix seconds; reference.csv is the exact truth of the",
+        "# body (vehicle) origin at true times.",
+        "",
+        "[gnss]",
+        f"lever_arm_m = [{lever}]",
+        "",
+        "[vehicle]",
+        'type = "car"',
+        "",
+    ])
+
+
+def realism_json(sim: Simulation) -> dict:
+    """The real-world effects applied to ``sim`` (the content of ``realism.json``), or {}."""
+    if sim.realism is None:
+        return {}
+    sp = sim.spec
+    out = {
+        "note": "truth of the simulated log (navpp.simulate): frames body FLU (vehicle), sensor = the IMU's "
+                "axes; times s from t0_unix (true time); do not give these to the run",
+        "t0_unix": sp.t0_unix, "duration_s": sp.duration_s, "seed": sp.seed, "preset": sp.preset,
+        "errors": bool(sp.errors), "imu_rate_hz": sp.imu_rate_hz, "gnss_rate_hz": sp.gnss_rate_hz,
+        "gnss_std_h_m": sp.gnss_std_h_m, "gnss_std_u_m": sp.gnss_std_u_m, "lever_arm_m": list(sp.lever_arm_m),
+    }
+    out.update(sim.realism)
+    return out
+
+
 def write_csv_log(sim: Simulation, out_dir: str | os.PathLike) -> None:
-    """Write ``imu.csv``, ``gnss.csv``, ``reference.csv`` and ``navpp.toml`` into ``out_dir``.
+    """Write ``imu.csv``, ``gnss.csv``, ``reference.csv`` and ``navpp.toml`` into ``out_dir``,
+    and ``realism.json`` (:func:`realism_json`) when a real-world effect is on.
 
     Times are absolute (``spec.t0_unix + t``, 6 decimals, exact to the microsecond); IMU
     values are written with 17 significant digits (round-trip exact).  Each file is written
@@ -833,3 +1209,5 @@ def write_csv_log(sim: Simulation, out_dir: str | os.PathLike) -> None:
         t0, r.t, ["t", "lat", "lon", "alt", "ve", "vn", "vu", "roll", "pitch", "heading"], cols))
 
     _write_atomic(out / "navpp.toml", [_toml(sim)])
+    if sim.realism is not None:
+        _write_atomic(out / "realism.json", [json.dumps(realism_json(sim), indent=1) + "\n"])
