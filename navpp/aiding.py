@@ -72,6 +72,8 @@ class Aiding:
     still : (N,) bool, the still samples as calibration found them
         (:func:`navpp.ins.calibrate.standstill`); None: the fixed-threshold detector of
         :func:`navpp.ins.aids.standstill.still_mask` with the ``[vehicle]`` thresholds.
+    profile : :class:`navpp.ins.calibrate.NoiseProfile` or None, the data's noise per second: ZARU's
+        mean-rate 1-sigma uses the larger of it and ``gyro_arw``.
     gaps : (K, 2) s, the long IMU gaps (:attr:`navpp.ins.model.InsModel.gaps`): no constraint
         epoch is placed inside one (there is no IMU to say whether the vehicle is still, and the
         model's unseen-motion noise of a gap must not be cut into pieces).
@@ -79,8 +81,10 @@ class Aiding:
 
     def __init__(self, config: Config, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gyro_arw: float,
                  accel_vrw: float, gnss, sel: np.ndarray, gaps: np.ndarray | None = None,
-                 mounting_rpy_deg: tuple[float, float, float] | None = None, still: np.ndarray | None = None) -> None:
+                 mounting_rpy_deg: tuple[float, float, float] | None = None, still: np.ndarray | None = None,
+                 profile=None) -> None:
         veh = config.vehicle
+        self.profile = profile            # the data's noise (navpp.ins.calibrate.NoiseProfile) or None
         self.t, self.gyro = t, gyro
         self.gaps = np.zeros((0, 2)) if gaps is None else np.asarray(gaps, dtype=float).reshape(-1, 2)
         self.gyro_arw = gyro_arw
@@ -205,7 +209,10 @@ class Aiding:
         if self.zaru and t_prev is not None:
             lo, hi = np.searchsorted(self.t, t_prev, side="right"), np.searchsorted(self.t, t, side="right")
             if hi - lo >= 2 and self.still[lo:hi].all():
-                out.append(ZeroRate.at(t, self.gyro[lo:hi].mean(axis=0), t - t_prev, self.gyro_arw, self.zaru_floor))
+                arw = self.gyro_arw
+                if self.profile is not None:          # an idling engine shakes the mean rate too
+                    arw = max(arw, self.profile.over(t_prev, t)[0])
+                out.append(ZeroRate.at(t, self.gyro[lo:hi].mean(axis=0), t - t_prev, arw, self.zaru_floor))
         return out
 
 

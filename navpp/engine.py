@@ -736,7 +736,7 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
     warnings += mounting_warning
     aiding = Aiding(config, model.t, model.gyro, model.accel, model.noise.gyro_arw, model.noise.accel_vrw, gnss,
                     sel, model.gaps, mounting,
-                    still=cal.still if (cal is not None and config.auto.standstill) else None)
+                    still=cal.still if (cal is not None and config.auto.standstill) else None, profile=profile)
     ev_t, ev_fix, ev_cons = aiding.schedule(al.t, float(imu.t[-1]), tg)
     n_ev = ev_t.shape[0]
     vel_nu = np.full((m_ep, 3), np.nan) if aiding.has_velocity else None

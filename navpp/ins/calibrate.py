@@ -15,11 +15,12 @@ two compare.  Everything here is plain numpy over blocks of the IMU stream, in o
   (a hand-held rest with tremor, an idling engine).  Inside a run of quiet blocks the block
   means must agree (a slow turn or a crawl is smooth, but its mean rate or force changes).  A block is still when it and both neighbours are quiet (stops are confirmed
   from both sides).  No time rule: a still stretch may be anywhere in the log.
-- **Noise for Q.**  Per second of log, the white-noise density of the sample-to-sample
-  scatter (each sample against the mean of the ``NOISE_SPAN`` samples around it, so motion
-  slower than a few samples does not count), ``sigma x sqrt(dt)`` in rad/sqrt(s) and
-  m/s/sqrt(s).  Engine vibration that grows with speed raises it; the engine takes the larger
-  of it and the preset, interval by interval.
+- **Noise for Q.**  Per second of log, the white-noise density the data show: the quieter of
+  two bands, the second differences of 0.1-s means (``NOISE_TAU_S``; a mount's fast shaking,
+  which the strapdown integrates to an oscillation rather than a drift, averages out) and each
+  sample against its ``NOISE_SPAN`` neighbours (a walker's steps do not reach it), in
+  rad/sqrt(s) and m/s/sqrt(s).  Vibration that grows with speed raises it; the engine takes the
+  larger of it and the preset, interval by interval.
 - **Biases.**  Gyro: the mean rate of the first still stretch, less the vertical Earth rate
   (its horizontal part, unknown without a heading, is in the 1-sigma).  Without any still
   stretch, the mean rate over the log across the vertical (a land vehicle or a walker does
@@ -49,7 +50,9 @@ BLOCK_S = 0.5            #: standstill block, s
 SUB_S = 0.05             #: sub-block for the low-passed spread, s
 NOISE_BLOCK_S = 1.0      #: block of the noise profile, s
 OUTLIER_K = 10.0  #: departures beyond this many block medians are glitches, not noise
-NOISE_SPAN = 5           #: samples of the local mean the noise is read against
+NOISE_TAU_S = 0.1        #: averaging time of the noise reading, s
+NOISE_TAU_STEPS = (1, 2, 5)  #: ... and its multiples read too (the quietest band is the white floor)
+NOISE_SPAN = 5           #: samples of the local mean the top band is read against
 QUIET_PERCENTILE = 5.0   #: the log's quietest level: this percentile of the block spreads
 K_QUIET = 3.0            #: quiet = within this factor of the quietest level (no GNSS to confirm)
 K_WHITE = 4.0            #: or within this many white-noise sigmas of the configured IMU
@@ -219,43 +222,76 @@ def gnss_speed_at(gnss, times: np.ndarray, half_window: float = 1.0) -> tuple[np
     return speed, sigma
 
 
+def _pooled_var(v: np.ndarray) -> np.ndarray:
+    """(nb,) mean square per row of ``v`` (nb, k) pooled with the neighbouring rows (a 3-row
+    window), departures beyond ``OUTLIER_K`` times the row's median |v| left out (glitches)."""
+    av = np.abs(v)
+    with np.errstate(invalid="ignore", over="ignore"):
+        med = np.median(np.where(np.isfinite(av), av, np.inf), axis=1)
+        keep = np.isfinite(av) & (av <= OUTLIER_K * med[:, None])
+        sq = np.where(keep, av, 0.0) ** 2
+    ssq, cnt = sq.sum(axis=1), keep.sum(axis=1).astype(float)
+    ssq3, cnt3 = ssq.copy(), cnt.copy()
+    ssq3[1:] += ssq[:-1]
+    cnt3[1:] += cnt[:-1]
+    ssq3[:-1] += ssq[1:]
+    cnt3[:-1] += cnt[1:]
+    return ssq3 / np.maximum(cnt3, 1.0)
+
+
 def noise_profile(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: float = NOISE_BLOCK_S,
-                  span: int = NOISE_SPAN) -> NoiseProfile:
+                  tau_s: float = NOISE_TAU_S) -> NoiseProfile:
     """White-noise densities per block of ``block_s`` (see the module docstring).
 
-    Each sample's departure from the mean of the ``span`` samples centred on it is what the
-    sensor adds to the motion at the sample rate (white noise, vibration, quantisation): motion
-    slower than a few samples cancels in it.  Per block, the rms departure over the three axes,
-    corrected for the mean it is taken from (``span / (span - 1)`` for white noise), times
-    ``sqrt(dt)``.  The profile is widened by one block either way, so an interval's Q also covers
-    the shaking just before and after it."""
+    White noise is flat across the spectrum, so any band's level bounds it from above; the
+    reading is the quieter of two bands:
+
+    - around ``1 / tau_s``: the samples averaged over ``tau_s`` (m samples); the second
+      difference of consecutive means, ``d = a[k+1] - 2 a[k] + a[k-1]``, has variance
+      ``6 N^2 / tau`` for white noise of density ``N``, and removes motion that changes slowly
+      over ``3 tau`` (a turn, a brake).  A mount's shaking, faster than ``1 / tau``, averages out
+      of the means (it oscillates; the strapdown does not drift on it).
+    - the top: each sample against the mean of the ``NOISE_SPAN`` samples around it,
+      ``N^2 = dt * mean(r^2) * span / (span - 1)``.  A walker's steps (1-5 Hz) barely reach it.
+
+    Each band's mean square is taken over the three axes of a block, departures beyond
+    ``OUTLIER_K`` times the block's median left out (glitches), pooled with the neighbouring
+    blocks (a 3-block window, so an interval's Q also covers the shaking just before and after
+    it)."""
     n = t.shape[0]
     dt = sample_period(t)
-    w = max(span + 1, int(round(block_s / dt)))
+    m = max(1, int(round(tau_s / dt)))
+    tau = m * dt
+    per = max(3, int(round(block_s / tau)))         # means per block
+    w = per * m
     nb = n // w
-    if nb < 1:
+    if nb < 1 or n < 3 * m:
         zero = np.zeros(1)
         return NoiseProfile(np.array([float(t[0]), float(t[-1])]), zero, zero)
-    kernel = np.ones(span) / span
     dens = []
     for x in (gyro, accel):
-        res = np.empty((nb * w, 3))
+        xb = x[: nb * w]
+        # the bands around 1 / tau, 1 / (2 tau), 1 / (4 tau): second differences of the means
+        # (variance 6 N^2 / tau each)
+        band = np.full(nb, np.inf)
+        for mult in NOISE_TAU_STEPS:
+            mm = m * mult
+            if per % mult or per // mult < 3:
+                continue
+            a = xb.reshape(nb * per // mult, mm, 3).mean(axis=1)
+            d = np.zeros_like(a)
+            d[1:-1] = a[2:] - 2.0 * a[1:-1] + a[:-2]
+            d[0], d[-1] = d[1], d[-2]
+            band = np.minimum(band, _pooled_var(d.reshape(nb, per // mult * 3)) / 6.0 * (tau * mult))
+        # the top of the band: each sample against the mean of the NOISE_SPAN around it
+        kernel = np.ones(NOISE_SPAN) / NOISE_SPAN
+        res = np.empty_like(xb)
         for j in range(3):
-            res[:, j] = x[: nb * w, j] - np.convolve(x[: nb * w, j], kernel, mode="same")
-        # a burst of absurd samples (a glitch, a saturated register) is not vibration: departures
-        # beyond OUTLIER_K times the block's median departure are left out (Gaussian samples
-        # reach that with probability ~1e-11, so vibration is never clipped)
-        a = np.abs(res).reshape(nb, w * 3)
-        with np.errstate(invalid="ignore", over="ignore"):
-            med = np.median(np.where(np.isfinite(a), a, np.inf), axis=1)
-            keep = np.isfinite(a) & (a <= OUTLIER_K * med[:, None])
-            sq = np.where(keep, a, 0.0) ** 2
-        var = sq.sum(axis=1) / np.maximum(keep.sum(axis=1), 1) * span / (span - 1.0)
-        d = np.sqrt(var * dt)
-        wide = d.copy()
-        wide[1:] = np.maximum(wide[1:], d[:-1])
-        wide[:-1] = np.maximum(wide[:-1], d[1:])
-        dens.append(wide)
+            res[:, j] = xb[:, j] - np.convolve(xb[:, j], kernel, mode="same")
+        top = _pooled_var(res.reshape(nb, w * 3)) * NOISE_SPAN / (NOISE_SPAN - 1.0) * dt
+        # white noise is flat: the quieter band bounds it (a mount's shaking fills the top, a
+        # walker's steps the band around 1 / tau)
+        dens.append(np.sqrt(np.minimum(band, top)))
     edges = np.concatenate([t[0: nb * w: w], [t[min(nb * w, n - 1)]]])
     edges[-1] = max(edges[-1], float(t[-1]))
     return NoiseProfile(edges.astype(float), dens[0], dens[1])
