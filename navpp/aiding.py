@@ -30,6 +30,11 @@ from .ins.model import VEL
 #: Aid kinds in the order they are reported (the GNSS position first).
 KINDS = ("gnss_position", "gnss_velocity", "zupt", "zaru", "nhc")
 
+#: ZUPT's consistency check (:meth:`Aiding.observed`): the last this many innovations, and the
+#: sigmas their mean may reach on an axis (white innovations: false alarm ~1e-6 per test).
+ZUPT_RUN = 10
+ZUPT_Z = 5.0
+
 
 def vehicle_matrix(rpy_deg: tuple[float, float, float]) -> np.ndarray:
     """Body -> vehicle rotation ``C_vb`` for the vehicle frame's roll, pitch, yaw (deg) relative to
@@ -119,6 +124,11 @@ class Aiding:
             self.vel_t = np.asarray(gnss.t, dtype=float)[sel]
         self.counts = AidCounts.empty()
         self._last_constraint_t: float | None = None
+        # the still runs, numbered (ZUPT's own consistency check stops a run that is not still)
+        self._run_id = np.cumsum(~self.still) if (self.zupt or self.zaru) else None
+        self._vetoed_run = -1
+        self._zupt_z: list[np.ndarray] = []
+        self.vetoes: list[float] = []
 
     @property
     def constraints(self) -> bool:
@@ -187,6 +197,30 @@ class Aiding:
                 return speed_allows(speed, float(np.sqrt(self.vel_var[j].sum())), self.settings)
         return True
 
+    def observed(self, meas, inn) -> None:
+        """What an applied constraint saw.  ZUPT's innovations at rest are white; a run of them
+        that keeps one direction (the mean of the last ``ZUPT_RUN`` normalised innovations beyond
+        ``ZUPT_Z`` sigmas on an axis) is velocity building up: the vehicle is pulling away gently
+        (too smoothly for the standstill detector), and the rest of this still run gets no ZUPT or
+        ZARU (``vetoes`` records when)."""
+        if getattr(meas, "kind", "") != "zupt" or self._run_id is None:
+            return
+        i = int(np.clip(np.searchsorted(self.t, inn.t), 0, self.t.shape[0] - 1))
+        run = int(self._run_id[i])
+        if self._zupt_z and getattr(self, "_zupt_run", None) != run:
+            self._zupt_z = []
+        self._zupt_run = run
+        sd = np.sqrt(np.maximum(np.diagonal(inn.S), 1e-30))
+        self._zupt_z.append(np.asarray(inn.nu, dtype=float) / sd)
+        if len(self._zupt_z) > ZUPT_RUN:
+            self._zupt_z.pop(0)
+        if len(self._zupt_z) == ZUPT_RUN:
+            z = np.mean(self._zupt_z, axis=0) * math.sqrt(ZUPT_RUN)
+            if np.any(np.abs(z) > ZUPT_Z):
+                self._vetoed_run = run
+                self.vetoes.append(float(inn.t))
+                self._zupt_z = []
+
     def constraint_measurements(self, t: float, x: np.ndarray, P: np.ndarray) -> list:
         """The constraints that apply at epoch ``t`` given the prior (nominal ``x``, covariance
         ``P``): NHC for a car; ZUPT and ZARU when the IMU around ``t`` is still and the speeds
@@ -199,6 +233,8 @@ class Aiding:
             return out
         i = int(np.clip(np.searchsorted(self.t, t), 0, self.t.shape[0] - 1))
         if not self.still[i]:
+            return out
+        if self._run_id is not None and self._run_id[i] == self._vetoed_run:
             return out
         speed = float(np.linalg.norm(x[4:7]))
         speed_std = float(np.sqrt(max(np.trace(P[VEL, VEL]), 0.0)))
