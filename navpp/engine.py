@@ -642,7 +642,7 @@ def timing_fixes(recording: Recording, config: Config) -> tuple[Recording, list[
         except ValueError:
             est = None
         if est is not None and math.isfinite(est.offset_s):
-            sure = est.confident or (not est.at_edge and est.sigma_s < CLOCK_MAX_SIGMA_S
+            sure = est.confident or (not est.at_edge and est.consistent and est.sigma_s < CLOCK_MAX_SIGMA_S
                                      and est.correlation >= CLOCK_MIN_CORRELATION
                                      and abs(est.offset_s) > CLOCK_SIGMAS * est.sigma_s)
             what = (f"IMU-GNSS clock offset from the gyro's yaw rate against the GNSS course rate: the GNSS is "

@@ -222,3 +222,111 @@ def test_clock_offset_real_car() -> None:
     assert -0.7 < res.offset_s < -0.2, res.reason
     assert abs(res.offset_s + 0.51) < 3.0 * res.sigma_s, res.reason
     assert res.n_samples > 1000
+
+
+# ------------------------------------------------------------------------------------------
+# clock offset against the simulator's truth (navpp.simulate, realism "consumer-car")
+# ------------------------------------------------------------------------------------------
+
+def _sim_estimate(seed: int, duration: float = 300.0, **spec_kw) -> tuple[ClockOffset, float]:
+    """As the engine's timing_fixes: stale rows dropped, gyro on the mean specific force,
+    velocity from the positions.  Returns the estimate and the true offset."""
+    from navpp.simulate import SimulationSpec, simulate
+
+    spec = SimulationSpec(duration_s=duration, seed=seed, **spec_kw)
+    sim = simulate(spec)
+    t, gyro, accel = sim.imu.t, sim.imu.gyro, sim.imu.accel
+    stale = find_stale_rows(t, gyro, accel)
+    if stale.count:
+        t, gyro, accel = t[~stale.mask], gyro[~stale.mask], accel[~stale.mask]
+    up = accel.mean(axis=0) / np.linalg.norm(accel.mean(axis=0))
+    g = sim.gnss
+    lat, lon = np.radians(g.lat_deg), np.radians(g.lon_deg)
+    enu = geodetic_to_enu(lat, lon, g.alt, lat[0], lon[0], g.alt[0])
+    vel = velocity_from_positions(g.t, enu[:, 0], enu[:, 1])
+    return estimate_clock_offset(t, gyro @ up, g.t, vel), float(spec.imu_time_offset_s or 0.0)
+
+
+def test_velocity_from_positions_gap_and_uneven_stamps() -> None:
+    # jittered stamps, a gap, a lone fix: exact for a quadratic track, nothing across a gap
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 10.0, 0.25) + rng.uniform(-0.05, 0.05, 40)
+    t = np.concatenate([t, t[-1] + 15.0 + 0.25 * np.arange(6), [60.0]])
+    east, north = 3.0 * t + 0.4 * t**2, -2.0 * t + 0.1 * t**2
+    v = velocity_from_positions(t, east, north)
+    np.testing.assert_allclose(v[:-1, 0], 3.0 + 0.8 * t[:-1], atol=1e-8)
+    np.testing.assert_allclose(v[:-1, 1], -2.0 + 0.2 * t[:-1], atol=1e-8)
+    assert np.all(np.isnan(v[-1]))
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_clock_offset_consumer_car_not_confidently_wrong(seed: int) -> None:
+    # seed 1 was "-0.167 s +- 0.006, confident" against a truth of +0.010: velocities
+    # differenced across the GNSS gap (course 30-60 deg off at its edges) times the gyro's
+    # vibration (7 deg/s per sample) made a false peak, and a Gauss-Newton sigma ~10x small
+    res, truth = _sim_estimate(seed, realism="consumer-car")
+    assert res.n_samples > 800, res.reason
+    assert abs(res.offset_s - truth) < 3.0 * res.sigma_s, res.reason
+    assert res.sigma_s < 0.3, res.reason
+    if res.confident:
+        assert abs(res.offset_s - truth) < 0.03, res.reason
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_clock_offset_consumer_car_without_vibration(seed: int) -> None:
+    # the same drive (gap, stale rows, biases, scale factors, misalignment) minus the
+    # vibration: a sharp, confident estimate of the +10 ms
+    res, truth = _sim_estimate(seed, realism="consumer-car", vibration_gyro_dps=(0.0, 0.0))
+    assert res.confident, res.reason
+    assert res.consistent, res.reason
+    assert abs(res.offset_s - truth) < max(3.0 * res.sigma_s, 0.005), res.reason
+    assert res.sigma_s < 0.02, res.reason
+
+
+def test_clock_offset_gap_glitch_dropped() -> None:
+    # velocities differenced across the gap (what velocity_from_positions did): the two
+    # glitches at its edges are dropped as outliers, not fitted
+    from navpp.simulate import SimulationSpec, simulate
+
+    sim = simulate(SimulationSpec(duration_s=300.0, seed=1, realism="consumer-car", vibration_gyro_dps=(0.0, 0.0)))
+    g = sim.gnss
+    lat, lon = np.radians(g.lat_deg), np.radians(g.lon_deg)
+    enu = geodetic_to_enu(lat, lon, g.alt, lat[0], lon[0], g.alt[0])
+    p = enu[:, :2]
+    vel = np.empty_like(p)
+    vel[1:-1] = (p[2:] - p[:-2]) / (g.t[2:] - g.t[:-2])[:, None]
+    vel[0], vel[-1] = (p[1] - p[0]) / (g.t[1] - g.t[0]), (p[-1] - p[-2]) / (g.t[-1] - g.t[-2])
+    up = sim.imu.accel.mean(axis=0) / np.linalg.norm(sim.imu.accel.mean(axis=0))
+    res = estimate_clock_offset(sim.imu.t, sim.imu.gyro @ up, g.t, vel)
+    assert res.n_outliers >= 1, res.reason
+    assert abs(res.offset_s - 0.010) < max(3.0 * res.sigma_s, 0.005), res.reason
+
+
+def test_clock_offset_halves_disagree_not_confident() -> None:
+    # the IMU clock jumps by 0.3 s halfway (a logger restart): each half has its own lag,
+    # the fit is some compromise: reported not consistent, not confident (the engine's
+    # 2.5-sigma rule would otherwise apply it)
+    t_imu, gz, t_g, e, n = _drive(0.0, 41, duration=300.0)
+    t1, gz1, _, _, _ = _drive(0.3, 41, duration=300.0)
+    half = t_imu > 150.0
+    gz = np.where(half, gz1, gz)
+    res = estimate_clock_offset(t_imu, gz, t_g, velocity_from_positions(t_g, e, n))
+    assert not res.consistent and not res.confident, res.reason
+    assert "halves" in res.reason
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kw", [dict(realism="consumer-car", vibration_gyro_dps=(0.0, 0.0)),
+                                dict(gnss_std_h_m=0.05, gnss_std_u_m=0.05, imu_time_offset_s=0.05),
+                                dict(realism="consumer-car")])
+def test_clock_offset_simulated_sigma_is_honest(kw: dict) -> None:
+    z, conf_err = [], []
+    for seed in range(1, 13):
+        res, truth = _sim_estimate(seed, **kw)
+        z.append((res.offset_s - truth) / res.sigma_s)
+        if res.confident:
+            conf_err.append(abs(res.offset_s - truth) / res.sigma_s)
+    z = np.asarray(z)
+    assert np.all(np.abs(z) < 4.0), z
+    assert 0.3 < np.sqrt(np.mean(z**2)) < 1.6, z          # neither >3x conservative nor optimistic
+    assert all(x < 4.0 for x in conf_err), conf_err

@@ -19,6 +19,7 @@ IMU stamp); body frame FLU, navigation frame ENU; gyro in rad/s, specific force 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -274,8 +275,8 @@ class ClockOffset:
     Attributes
     ----------
     offset_s : float, s, the estimate (NaN when nothing could be estimated).
-    sigma_s : float, s, its 1-sigma: linearised least squares with an
-        autocorrelation-consistent residual term, see :func:`estimate_clock_offset`.
+    sigma_s : float, s, its 1-sigma: a delete-one-block jackknife, see
+        :func:`estimate_clock_offset`.
     correlation : float, correlation coefficient between the GNSS yaw rate and the shifted,
         interval-averaged gyro rate at ``offset_s``.
     n_samples : int, number of GNSS course-rate samples used.
@@ -287,6 +288,10 @@ class ClockOffset:
     at_edge : bool, whether the best lag lies at the edge of the search window.
     confident : bool, see :func:`estimate_clock_offset`.
     reason : str, one line saying why.
+    consistent : bool, whether the two halves of the turning agree on the lag (within
+        ``max_split_sigmas``); False also makes ``confident`` False.
+    split_sigmas : float, their disagreement in sigmas (NaN when nothing was estimated).
+    n_outliers : int, course-rate samples dropped as outliers.
     """
 
     offset_s: float
@@ -299,35 +304,61 @@ class ClockOffset:
     at_edge: bool
     confident: bool
     reason: str
+    consistent: bool = False
+    split_sigmas: float = float("nan")
+    n_outliers: int = 0
 
 
 def velocity_from_positions(t: np.ndarray, east_m: np.ndarray,
-                            north_m: np.ndarray) -> np.ndarray:
-    """Horizontal velocity from positions by central differences.
+                            north_m: np.ndarray, *, max_gap_factor: float = 1.5) -> np.ndarray:
+    """Horizontal velocity from positions: the derivative at ``t_k`` of the parabola through
+    three neighbouring fixes, never across a gap.
 
-    ``v_k = (p_{k+1} - p_{k-1}) / (t_{k+1} - t_{k-1})``, one-sided differences at the two
-    ends.  Exact (and centred on ``t_k``) for uniformly spaced stamps and a locally
-    quadratic track.
+    The log is cut into runs of fixes at most ``max_gap_factor`` median intervals apart.
+    Inside a run, ``v_k`` is the derivative at ``t_k`` of the quadratic through epochs
+    ``k - 1, k, k + 1`` (for uniform stamps the central difference ``(p_{k+1} - p_{k-1}) /
+    (t_{k+1} - t_{k-1})``); at the first / last epoch of a run the quadratic through that
+    epoch and its next two (previous two) neighbours, differentiated at the epoch itself.
+    So every ``v_k`` belongs to ``t_k`` and is exact for a locally quadratic track,
+    whatever the spacing.  A run of two fixes gets their difference quotient, a lone fix NaN.
+    (Differencing across a gap would give the chord over the gap: in a turn, a course tens of
+    degrees off at the fixes either side of it.)
 
     Parameters
     ----------
     t : (M,) float, s, strictly increasing, M >= 2.
     east_m, north_m : (M,) float, m, local east / north (e.g. from
         :func:`navpp.geodesy.geodetic_to_enu` about a fixed origin).
+    max_gap_factor : an interval longer than this many median intervals is a gap.
 
     Returns
     -------
-    (M, 2) float, m/s, (v_east, v_north) at ``t``.
+    (M, 2) float, m/s, (v_east, v_north) at ``t``; NaN for a fix alone between two gaps.
     """
     t = np.asarray(t, dtype=float)
     p = np.stack([np.asarray(east_m, dtype=float), np.asarray(north_m, dtype=float)], axis=1)
     if t.shape[0] < 2 or p.shape[0] != t.shape[0]:
         raise ValueError(f"velocity_from_positions: need >= 2 epochs of equal length, got t {t.shape}, "
                          f"positions {p.shape}")
-    v = np.empty_like(p)
-    v[1:-1] = (p[2:] - p[:-2]) / (t[2:] - t[:-2])[:, None]
-    v[0] = (p[1] - p[0]) / (t[1] - t[0])
-    v[-1] = (p[-1] - p[-2]) / (t[-1] - t[-2])
+    dt = np.diff(t)
+    if not np.all(dt > 0):
+        raise ValueError("velocity_from_positions: stamps must be strictly increasing")
+    cut = np.nonzero(dt > max_gap_factor * float(np.median(dt)))[0] + 1
+    v = np.full_like(p, np.nan)
+    for lo, hi in zip(np.concatenate([[0], cut]), np.concatenate([cut, [t.shape[0]]])):
+        ts, ps, n = t[lo:hi], p[lo:hi], hi - lo
+        if n == 2:
+            v[lo:hi] = (ps[1] - ps[0]) / (ts[1] - ts[0])
+        if n < 3:
+            continue
+        h1, h2 = np.diff(ts)[:-1], np.diff(ts)[1:]                  # t_k - t_{k-1}, t_{k+1} - t_k
+        v[lo + 1:hi - 1] = ((-h2 / (h1 * (h1 + h2)))[:, None] * ps[:-2]
+                            + ((h2 - h1) / (h1 * h2))[:, None] * ps[1:-1]
+                            + (h1 / (h2 * (h1 + h2)))[:, None] * ps[2:])
+        for k, j1, j2 in ((0, 1, 2), (n - 1, n - 2, n - 3)):        # one-sided, at the epoch itself
+            d1, d2 = ts[j1] - ts[k], ts[j2] - ts[k]
+            v[lo + k] = (-(d1 + d2) / (d1 * d2) * ps[k] + d2 / (d1 * (d2 - d1)) * ps[j1]
+                         - d1 / (d2 * (d2 - d1)) * ps[j2])
     return v
 
 
@@ -341,7 +372,10 @@ def estimate_clock_offset(
     min_speed: float = 2.0,
     baseline_s: float = 1.0,
     lag_step_s: float = 0.01,
-    hac_lag_s: float = 0.0,
+    smooth_s: float = 0.25,
+    n_blocks: int = 12,
+    outlier_sigmas: float = 12.0,
+    max_split_sigmas: float = 3.0,
     min_turn_deg: float = 90.0,
     min_correlation: float = 0.7,
     max_sigma_s: float = 0.02,
@@ -353,29 +387,42 @@ def estimate_clock_offset(
     ``[a, b]`` (consecutive epochs ``baseline_s`` apart, rounded to whole GNSS intervals,
     consecutive baselines overlapping), ``r_k = -(course(b) - course(a)) / (b - a)`` with the
     course unwrapped.  The gyro is averaged over the same span shifted by the candidate lag,
-    exactly, through its integral: ``g_k(dt) = (Θ(b + dt) - Θ(a + dt)) / (b - a)``, ``Θ`` the
-    trapezoidal integral of ``gyro_z_up`` at the IMU stamps, interpolated by a cubic spline
-    (a cost smooth in ``dt``).  The model is ``r_k = scale * g_k(dt) + c`` (scale
-    and constant ``c`` absorb a tilted axis and the gyro bias); ``offset_s`` maximises the
-    correlation of ``r`` and ``g(dt)`` (equivalently minimises the residual of that linear
-    fit) over a grid of ``lag_step_s`` within ``+-max_lag_s``, refined continuously
-    (bounded scalar minimisation between the grid neighbours).  Only baselines whose every
-    epoch moves faster than ``min_speed`` (m/s, so that the course is defined) and whose
-    shifted span stays inside the IMU data for every lag searched are used; the same
-    samples serve every lag.
+    through its integral: ``g_k(dt) = (Θ(b + dt) - Θ(a + dt)) / (b - a)``, ``Θ`` the
+    integral of ``gyro_z_up`` after a centred moving average over ``smooth_s``, interpolated
+    by a cubic spline (a cost smooth in ``dt``).  The moving average (symmetric, so it moves
+    no peak) keeps the gyro's sample-to-sample noise -- vibration: several deg/s per sample
+    in a car -- from making the cost rough in ``dt``: unsmoothed, each lag step swaps single
+    noisy samples in and out at the window ends.  The model is ``r_k = scale * g_k(dt) +
+    c`` (scale and constant ``c`` absorb a tilted axis and the gyro bias); ``offset_s``
+    maximises the correlation of ``r`` and ``g(dt)`` (equivalently minimises the residual of
+    that linear fit) over a grid of ``lag_step_s`` within ``+-max_lag_s``, refined
+    continuously (bounded scalar minimisation between the grid neighbours).  Only baselines
+    whose every epoch moves faster than ``min_speed`` (m/s, so that the course is defined),
+    with no gap inside, and whose shifted span stays inside the IMU data for every lag
+    searched are used.  Samples whose residual at the first fit exceeds ``outlier_sigmas``
+    robust (MAD) sigmas -- a glitch in the course, e.g. a velocity differenced across a GNSS
+    gap -- are dropped and the lag searched again.
 
     Sign: ``offset_s > 0`` means the IMU stamps are late: ``t_gnss = t_imu - offset_s`` for
     the same physical instant (see :class:`ClockOffset`).
 
-    ``sigma_s`` is the linearised least-squares sigma of the lag in the joint fit of
-    (lag, scale, constant), with a heteroscedasticity- and autocorrelation-consistent
-    middle term (flat window, Bartlett as a fallback): overlapping baselines, differentiated
-    positions and a smooth receiver all make the residuals correlated (over one baseline +
-    3 GNSS intervals, or ``hac_lag_s`` if longer), which a white-noise formula would ignore.
+    ``sigma_s`` is a delete-one-block jackknife over ``n_blocks`` contiguous blocks of the
+    samples (each block far longer than the residuals' correlation span): model-free, it
+    counts the gyro noise that enters the lag through the shifted window's ends, which a
+    linearised least-squares sigma misses (on a simulated consumer car with vibration a
+    Gauss-Newton sandwich sigma came out ~10x optimistic), and it is not inflated by the
+    telescoping course noise of overlapping baselines (the sandwich was ~4x conservative
+    there).
+
+    ``split_sigmas``: the lag is also searched (whole window) on the two halves of the
+    samples that hold equal shares of the turning; ``split_sigmas = |lag_1 - lag_2| /
+    hypot(sigma_1, sigma_2)``, each half's sigma its own jackknife.  More than
+    ``max_split_sigmas`` says the two halves see different delays (or a fit fooled by one
+    part of the log): ``consistent`` is False.
 
     ``confident`` is True when all of: ``turn_deg >= min_turn_deg``, ``correlation >=
     min_correlation``, ``sigma_s <= max_sigma_s``, the peak is not at the edge of the search
-    window (and at least 40 samples were used, else nothing is estimated).
+    window, ``consistent`` (and at least 40 samples were used, else nothing is estimated).
 
     Parameters
     ----------
@@ -395,11 +442,10 @@ def estimate_clock_offset(
     baseline_s : s, span of a course-rate sample (low-pass; longer suppresses position
         noise, shorter keeps faster turns).
     lag_step_s : s, grid step of the coarse search.
-    hac_lag_s : s, residual correlation span allowed for in ``sigma_s`` beyond the one the
-        differencing itself makes (baseline + 3 GNSS intervals, always included).  In
-        simulations (white position noise) the default gives a sigma ~2x the actual error
-        spread (conservative); a longer span shrinks it, because at the fitted optimum the
-        scores sum to zero and a window covering all samples would give sigma -> 0.
+    smooth_s : s, width of the gyro's centred moving average (0: none).
+    n_blocks : number of jackknife blocks for ``sigma_s``.
+    outlier_sigmas : residual beyond which a sample is dropped, in robust sigmas.
+    max_split_sigmas : the consistency rule above.
     min_turn_deg, min_correlation, max_sigma_s : the confidence rule above.
 
     Returns
@@ -418,12 +464,26 @@ def estimate_clock_offset(
     def fail(reason: str, n_used: int = 0) -> ClockOffset:
         return ClockOffset(nan, nan, nan, n_used, nan, nan, nan, False, False, reason)
 
+    fine = np.isfinite(t_g) & np.all(np.isfinite(v[:, :2]), axis=1)     # e.g. a lone fix's NaN velocity
+    t_g, v = t_g[fine], v[fine]
+
     if t_g.shape[0] < 3 or t_imu.shape[0] < 3:
         return fail("too few samples")
     theta = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t_imu))])
     # a C2 interpolant of the integral: with linear interpolation the cost has kinks at every
     # lag that aligns the GNSS stamps with IMU stamps, and the minimum sticks to them
     theta_at = interpolate.CubicSpline(t_imu, theta, extrapolate=False)
+    t_lo, t_hi = float(t_imu[0]), float(t_imu[-1])
+    if smooth_s > 0.0 and t_hi - t_lo > 4.0 * smooth_s:
+        # the centred moving average, on a uniform grid at the IMU's median step; its integral
+        step = float(np.median(np.diff(t_imu)))
+        grid = np.arange(t_lo + 0.5 * smooth_s, t_hi - 0.5 * smooth_s, step)
+        lo = np.clip(grid - 0.5 * smooth_s, t_lo, t_hi)
+        hi = np.clip(grid + 0.5 * smooth_s, t_lo, t_hi)
+        ws = (theta_at(hi) - theta_at(lo)) / (hi - lo)
+        phi = np.concatenate([[0.0], np.cumsum(0.5 * (ws[1:] + ws[:-1]) * step)])
+        theta_at = interpolate.CubicSpline(grid, phi, extrapolate=False)
+        t_lo, t_hi = float(grid[0]), float(grid[-1])
 
     # GNSS yaw-rate samples over baselines of m epochs
     dt_med = float(np.median(np.diff(t_g)))
@@ -438,7 +498,7 @@ def estimate_clock_offset(
     run = np.convolve(fast.astype(int), np.ones(m + 1, dtype=int), mode="valid") == m + 1
     ok = (run
           & (b - a <= 1.5 * m * dt_med)                       # no gap inside the baseline
-          & (a - max_lag_s >= t_imu[0]) & (b + max_lag_s <= t_imu[-1]))
+          & (a - max_lag_s >= t_lo) & (b + max_lag_s <= t_hi))
     # a course jump of more than pi between epochs is not a turn the unwrap can resolve
     step = np.abs(np.diff(course))
     big = np.convolve((step > 0.5 * np.pi).astype(int), np.ones(m, dtype=int), mode="valid") > 0
@@ -474,15 +534,37 @@ def estimate_clock_offset(
         return d, -c, edge
 
     offset, corr, at_edge = best_lag()
+    # glitches in the course (a velocity across a gap, a receiver jump): drop, search again
     g = gyro_mean(offset)
     scale, c0 = np.polyfit(g, r, 1)
+    e = r - scale * g - c0
+    mad = 1.4826 * float(np.median(np.abs(e - np.median(e))))
+    keep = np.abs(e - np.median(e)) <= outlier_sigmas * mad if mad > 0 else np.ones(n, bool)
+    n_out = int(n - np.count_nonzero(keep))
+    if n_out:
+        a, b, r = a[keep], b[keep], r[keep]
+        n = int(r.shape[0])
+        if n < _MIN_SAMPLES:
+            return fail(f"only {n} course-rate samples left after {n_out} outliers (need {_MIN_SAMPLES})", n)
+        offset, corr, at_edge = best_lag()
+        g = gyro_mean(offset)
+        scale, c0 = np.polyfit(g, r, 1)
     bias = -c0 / scale if scale != 0 else nan
     # how much turning: the gyro over the samples used, bias removed, each sample weighted
     # by its share of time (overlapping baselines count once: divide by m)
-    turn_deg = float(np.degrees(np.sum(np.abs(g - bias) * (b - a)) / m))
+    turn = np.abs(g - bias) * (b - a) / m
+    turn_deg = float(np.degrees(np.sum(turn)))
 
-    sigma = _hac_sigma(r, g, (theta_at(b + offset, 1) - theta_at(a + offset, 1)) / (b - a),
-                       float(scale), float(c0), max(m + 3, int(round(hac_lag_s / dt_med))))
+    sigma = _jackknife_sigma(neg_corr, offset, np.ones(n, bool), n_blocks, max_lag_s)
+    # the two halves of the turning, each searched over the whole window, each with its own
+    # jackknife sigma (the whole log's would grow with their disagreement)
+    half = np.cumsum(turn) <= 0.5 * np.sum(turn)
+    lag_1, _, _ = best_lag(half)
+    lag_2, _, _ = best_lag(~half)
+    sig_12 = math.hypot(_jackknife_sigma(neg_corr, lag_1, half, n_blocks, max_lag_s),
+                        _jackknife_sigma(neg_corr, lag_2, ~half, n_blocks, max_lag_s))
+    split = abs(lag_1 - lag_2) / sig_12 if sig_12 > 0 else float("inf")
+    consistent = bool(split <= max_split_sigmas)
 
     checks = []
     if turn_deg < min_turn_deg:
@@ -493,41 +575,42 @@ def estimate_clock_offset(
         checks.append(f"sigma {sigma * 1e3:.1f} ms > {max_sigma_s * 1e3:g}")
     if at_edge:
         checks.append(f"peak at the search edge (+-{max_lag_s:g} s)")
+    if not consistent:
+        checks.append(f"the two halves of the turns disagree: {lag_1 * 1e3:+.0f} vs {lag_2 * 1e3:+.0f} ms "
+                      f"({split:.1f} sigma)")
     summary = (f"offset {offset * 1e3:+.1f} +- {sigma * 1e3:.1f} ms (IMU late if > 0), corr {corr:.3f}, "
-               f"{n} samples, turn {turn_deg:.0f} deg")
+               f"{n} samples" + (f" ({n_out} outliers dropped)" if n_out else "") + f", turn {turn_deg:.0f} deg, "
+               f"halves {lag_1 * 1e3:+.0f} / {lag_2 * 1e3:+.0f} ms")
     confident = not checks
     reason = summary + ("" if confident else ": not confident: " + "; ".join(checks))
     return ClockOffset(offset_s=offset, sigma_s=sigma, correlation=corr, n_samples=n,
                        turn_deg=turn_deg, scale=float(scale), bias_rad_s=float(bias),
-                       at_edge=bool(at_edge), confident=bool(confident), reason=reason)
+                       at_edge=bool(at_edge), confident=bool(confident), reason=reason,
+                       consistent=consistent, split_sigmas=float(split), n_outliers=n_out)
 
 
 _MIN_SAMPLES = 40
 
 
-def _hac_sigma(r: np.ndarray, g: np.ndarray, dg: np.ndarray, scale: float, c0: float,
-               n_lag: int) -> float:
-    """1-sigma of the lag in ``r = scale * g(dt) + c0``: Gauss-Newton, autocorrelation-consistent.
-
-    ``dg`` (n,) is ``d g / d dt`` at the solution.  Returns NaN for a singular fit.
-    """
-    e = r - scale * g - c0
-    jac = np.stack([scale * dg, g, np.ones_like(g)], axis=1)           # (n, 3)
-    try:
-        bread = np.linalg.inv(jac.T @ jac)
-    except np.linalg.LinAlgError:
+def _jackknife_sigma(neg_corr, offset: float, use: np.ndarray, n_blocks: int, max_lag_s: float) -> float:
+    """Delete-one-block jackknife 1-sigma of the lag fitted on the samples ``use`` (bool mask):
+    ``neg_corr(dt, sel)`` is the cost on the samples ``sel``; the blocks are contiguous runs
+    of the used samples; each block-deleted lag is refined within ``+-max_lag_s / 2`` of
+    ``offset`` (a lag far off is a large deviation either way)."""
+    idx = np.nonzero(use)[0]
+    k = int(min(max(n_blocks, 2), idx.shape[0] // 4))
+    if k < 2:
         return float("nan")
-    u = jac * e[:, None]                                                # scores (n, 3)
-    # truncated (flat) kernel: overlapping differences of course make the residuals strongly
-    # negatively correlated at the baseline's lag, which a tapered (Bartlett) kernel would
-    # under-count (variance over-estimated 2-4 x); flat is exact for correlation spans <= n_lag.
-    # Should it come out not positive (rare, short data), fall back to Bartlett.
-    gams = [u[lag:].T @ u[:-lag] for lag in range(1, min(n_lag, u.shape[0] - 1) + 1)]
-    meat = u.T @ u + sum(g + g.T for g in gams)
-    if np.linalg.eigvalsh(meat)[0] <= 0:
-        meat = u.T @ u + sum((1.0 - (i + 1) / (n_lag + 1.0)) * (g + g.T) for i, g in enumerate(gams))
-    cov = bread @ meat @ bread
-    return float(np.sqrt(cov[0, 0])) if cov[0, 0] > 0 else float("nan")
+    edges = np.linspace(0, idx.shape[0], k + 1).round().astype(int)
+    half_w = 0.5 * max_lag_s
+    lags = np.empty(k)
+    for i in range(k):
+        sel = use.copy()
+        sel[idx[edges[i]:edges[i + 1]]] = False
+        res = optimize.minimize_scalar(lambda d: neg_corr(d, sel), bounds=(offset - half_w, offset + half_w),
+                                       method="bounded", options={"xatol": 1e-5})
+        lags[i] = float(res.x)
+    return float(np.sqrt((k - 1) / k * np.sum((lags - lags.mean()) ** 2)))
 
 
 # --------------------------------------------------------------------------------------------
