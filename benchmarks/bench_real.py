@@ -59,6 +59,25 @@ def _error_over_sigma(sol, ref_csv: Path, t0_ns: int) -> float:
     return math.sqrt(float(np.mean((e[:, 0] / se) ** 2 + (e[:, 1] / sn) ** 2) / 2.0))
 
 
+def held_fix_rmse(gnss_csv: Path, ref_csv: Path) -> float:
+    """Horizontal RMSE (m) of a receiver that holds its last fix through each outage: at every
+    reference epoch, the last fix of gnss.csv before it (the baseline an INS must beat)."""
+    import pandas as pd
+
+    from navpp import geodesy
+
+    g, r = pd.read_csv(gnss_csv), pd.read_csv(ref_csv)
+    k = np.searchsorted(g["t"].to_numpy(), r["t"].to_numpy()) - 1
+    ok = k >= 0
+    lat0, lon0 = math.radians(float(r["lat"][0])), math.radians(float(r["lon"][0]))
+
+    def enu(lat, lon):
+        return geodesy.geodetic_to_enu(np.radians(lat), np.radians(lon), np.zeros(len(lat)), lat0, lon0, 0.0)
+
+    e = enu(g["lat"].to_numpy()[k[ok]], g["lon"].to_numpy()[k[ok]]) - enu(r["lat"].to_numpy()[ok], r["lon"].to_numpy()[ok])
+    return math.sqrt(float(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2)))
+
+
 def _walk(data: Path, filt: str, auto_off: str | None) -> str:
     d = data / "walk_0827"
     cfg = _cfg(d / "mounting.toml", auto_off)
@@ -66,7 +85,9 @@ def _walk(data: Path, filt: str, auto_off: str | None) -> str:
     res = navpp.process(d, filter_name=filt, config=cfg, reference=d / "reference_outages.csv", write=False)
     m = res.metrics["position_m"]
     ratio = _error_over_sigma(res.solution, d / "reference_outages.csv", res.recording.t0_ns)
-    return (f"H RMSE in outages {m['horizontal']['rmse']:6.2f} m, max {m['horizontal']['max']:6.2f} m, "
+    held = held_fix_rmse(d / "gnss.csv", d / "reference_outages.csv")
+    return (f"H RMSE in outages {m['horizontal']['rmse']:6.2f} m (last fix held: {held:.2f}), "
+            f"max {m['horizontal']['max']:6.2f} m, "
             f"U RMSE {m['up']['rmse']:5.2f} m" + (f", err/sigma {ratio:.2f}" if ratio else "")
             + f", rejected {res.run.gnss_rejected}, {time.perf_counter() - t0:.1f} s")
 

@@ -506,7 +506,7 @@ def calibrate(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, *, gyro_
         notes.append(f"the gyro biases are beyond the configured turn-on 1-sigma ({math.degrees(gyro_bias_sigma) * 3600:.3g} "
                      "deg/h): the IMU is of a lower grade than the preset says; the bias prior is widened")
     mp = profile
-    notes.append(f"IMU noise for Q from the data (sample scatter, per second of log): gyro median "
+    notes.append(f"IMU noise for Q from the data (quietest band of each second of log): gyro median "
                  f"{math.degrees(float(np.median(mp.gyro_arw))) * 60:.3g}, 90 % "
                  f"{math.degrees(float(np.percentile(mp.gyro_arw, 90))) * 60:.3g} deg/sqrt(h); accel median "
                  f"{float(np.median(mp.accel_vrw)) * 60:.3g}, 90 % {float(np.percentile(mp.accel_vrw, 90)) * 60:.3g} "
