@@ -26,12 +26,16 @@ import math
 import numpy as np
 
 
+#: ``[auto]`` keys turned off (``--auto-off``)
+AUTO: dict[str, bool] = {}
+
+
 def _run(rec, filt: str, preset: str, vehicle: dict, gnss: dict | None = None, outages=()):
     from navpp import api, engine
     from navpp.config import config_from_dict
     from navpp.metrics import compute_metrics
 
-    cfg = config_from_dict({"imu": {"preset": preset}, "vehicle": vehicle, "gnss": gnss or {}}, "bench")
+    cfg = config_from_dict({"imu": {"preset": preset}, "vehicle": vehicle, "gnss": gnss or {}, "auto": AUTO}, "bench")
     cut, _ = api.apply_outages(rec, list(outages), "sim")
     res = engine.run(cut, cfg, api.make_filter(filt, cfg))
     m = compute_metrics(res.solution, rec.reference, filter_name=filt, log="sim", reference="truth",
@@ -121,7 +125,14 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--filter", default="ekf")
     ap.add_argument("--only", choices=("velocity", "outages", "zaru"))
+    ap.add_argument("--auto-off", default="", help="[auto] steps to turn off, comma-separated, or 'all' "
+                    "(what the calibration from the data changes)")
     args = ap.parse_args()
+    from navpp.config import AutoConfig
+
+    steps = [f.name for f in __import__("dataclasses").fields(AutoConfig)]
+    off = steps if args.auto_off == "all" else [k for k in args.auto_off.split(",") if k]
+    AUTO.update({k: False for k in off})
     if args.only in (None, "velocity"):
         velocity(args.seeds, args.filter)
     if args.only in (None, "outages"):

@@ -520,6 +520,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         removed = [o["gnss_removed"] for o in outages]
         metrics = run_metrics(rec, cfg, result, sol, filter_name=filter_name, log=str(log), runtime_s=runtime,
                               windows=windows, removed=removed)
+        if metrics is not None and result.calibration:
+            metrics["calibration"] = result.calibration
         if metrics is not None and smooth:
             forward = run_metrics(rec, cfg, result, result.solution, filter_name=filter_name, log=str(log),
                                   runtime_s=result.forward_runtime_s, windows=windows, removed=removed)

@@ -115,6 +115,9 @@ class RunResult:
     notes: tuple[str, ...] = ()       # what the run decided (e.g. the estimated vehicle mounting)
     #: updates applied / rejected by the gate per kind: gnss_position, gnss_velocity, zupt, zaru, nhc
     updates: dict[str, dict[str, int]] = field(default_factory=dict)
+    #: what the run measured from the log itself (``[auto]``), plain numbers for metrics.json:
+    #: standstill, biases, noise, gravity axis, mounting, stale rows, clock offset, recoveries
+    calibration: dict = field(default_factory=dict)
 
     @property
     def forward_runtime_s(self) -> float:
@@ -163,7 +166,7 @@ def noise_model(config: Config, noise=None) -> NoiseModel:
                                      n.gyro_bias_tau, n.accel_bias_sigma, n.accel_bias_instability, n.accel_bias_tau)
 
 
-def _calibrated(recording: Recording, config: Config, gyro: np.ndarray, accel: np.ndarray):
+def _calibrated(recording: Recording, config: Config, gyro: np.ndarray, accel: np.ndarray, info: dict | None = None):
     """Measure the log (:func:`navpp.ins.calibrate.calibrate`) and apply what ``[auto]`` allows:
     a gross mounting (gravity not on +z) rotates the IMU; a turn-on bias prior the data
     contradict is widened (its instability with it).  Returns (gyro, accel, noise, calibration
@@ -198,6 +201,8 @@ def _calibrated(recording: Recording, config: Config, gyro: np.ndarray, accel: n
                         f"the IMU is rotated so that it is; write [imu] mounting_rpy_deg = "
                         f"{list(matrix_to_rpy_deg(total))} to say so (yaw is not known from gravity: check it)")
         cal = measure(gyro, accel)
+        if info is not None:
+            info["gross_mounting_rpy_deg"] = [round(float(v), 3) for v in matrix_to_rpy_deg(total)]
     notes += list(cal.notes)
     if auto.biases:
         wide_g = float(np.max(np.abs(cal.gyro_bias)))
@@ -227,6 +232,10 @@ def _calibrated(recording: Recording, config: Config, gyro: np.ndarray, accel: n
                 cal = dc_replace(cal, accel_bias_std=np.maximum(cal.accel_bias_std, a_sigma))
                 notes.append(f"no still stretch to measure the accelerometer biases on: their prior is widened to the "
                              f"{grade} grade the gyro biases show ({PRESETS[grade]['accel_bias_mg']:g} mg 1-sigma)")
+    if info is not None:
+        info.update(cal.report())
+        info["bias_prior"] = {"gyro_deg_per_h": round(noise.gyro_bias_sigma / DEG_PER_H_TO_RAD_PER_S, 3),
+                              "accel_mg": round(noise.accel_bias_sigma / MG_TO_MPS2, 3)}
     return gyro, accel, noise, cal, notes, warnings
 
 
@@ -595,12 +604,14 @@ def _check_gyro_scale(recording: Recording, config: Config, up_s: np.ndarray, en
     raise InputError(f"{source}: {what}: {hint}")
 
 
-def timing_fixes(recording: Recording, config: Config) -> tuple[Recording, list[str], list[str]]:
+def timing_fixes(recording: Recording, config: Config,
+                 info: dict | None = None) -> tuple[Recording, list[str], list[str]]:
     """What the IMU stamps and values say about timing (:mod:`navpp.ins.timing_estimates`):
     stale IMU rows (a logger polling faster than the sensor) are dropped; the IMU-GNSS clock
     offset is estimated from the gyro's yaw rate and the GNSS course rate and applied to the
     GNSS stamps when the data are sure of it (unless ``[gnss] time_offset_s`` is set).
-    Returns the recording to process, notes and warnings."""
+    Returns the recording to process, notes and warnings; ``info`` (when given) receives the
+    figures for metrics.json."""
     from dataclasses import replace as dc_replace
 
     from . import geodesy
@@ -613,6 +624,9 @@ def timing_fixes(recording: Recording, config: Config) -> tuple[Recording, list[
     imu, gnss, src = recording.imu, recording.gnss, recording.source
     if auto.stale_rows and len(imu) > 10:
         stale = find_stale_rows(imu.t, imu.gyro, imu.accel)
+        if info is not None:
+            info["stale_rows"] = {"dropped": int(stale.count), "fraction": round(float(stale.fraction), 5),
+                                  "fresh_rate_hz": round(float(stale.fresh_rate_hz), 3) if stale.count else None}
         if stale.count:
             keep = ~stale.mask
             imu = ImuData(imu.t[keep], imu.gyro[keep], imu.accel[keep])
@@ -648,7 +662,13 @@ def timing_fixes(recording: Recording, config: Config) -> tuple[Recording, list[
             what = (f"IMU-GNSS clock offset from the gyro's yaw rate against the GNSS course rate: the GNSS is "
                     f"{-est.offset_s:+.3f} s +- {est.sigma_s:.3f} late against the IMU (correlation "
                     f"{est.correlation:.2f}, {est.turn_deg:.0f} deg of turns)")
-            if sure and abs(est.offset_s) > 0.5 * est.sigma_s:
+            applied = bool(sure and abs(est.offset_s) > 0.5 * est.sigma_s)
+            if info is not None:
+                info["clock_offset"] = {"imu_late_s": round(float(est.offset_s), 4), "sigma_s": round(float(est.sigma_s), 4),
+                                        "correlation": round(float(est.correlation), 3),
+                                        "turn_deg": round(float(est.turn_deg), 1), "confident": bool(est.confident),
+                                        "applied": applied}
+            if applied:
                 gnss = dc_replace(gnss, t=gnss.t + est.offset_s)
                 recording = dc_replace(recording, gnss=gnss)
                 warnings.append(f"{src}: {what}: applied to the GNSS stamps (write [gnss] time_offset_s = "
@@ -657,6 +677,8 @@ def timing_fixes(recording: Recording, config: Config) -> tuple[Recording, list[
                 notes.append(f"{what}: not applied ({est.reason})")
         else:
             notes.append("IMU-GNSS clock offset: not estimated (too little turning at speed)")
+            if info is not None:
+                info["clock_offset"] = {"estimated": False, "reason": "too little turning at speed"}
     return recording, notes, warnings
 
 
@@ -678,7 +700,8 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
               cov_step_s: float, smooth: bool, notes: list[str], warnings: list[str]) -> RunResult:
     t_wall = time.perf_counter()
     warnings += check_imu_plausible(recording)
-    recording, t_notes, t_warnings = timing_fixes(recording, config)
+    calibration: dict = {}
+    recording, t_notes, t_warnings = timing_fixes(recording, config, calibration)
     notes += t_notes
     warnings += t_warnings
     warnings += check_data(recording, config)
@@ -687,7 +710,7 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
     if any(a != 0.0 for a in config.imu.mounting_rpy_deg):
         m = mounting_matrix(config.imu.mounting_rpy_deg)
         gyro, accel = gyro @ m.T, accel @ m.T
-    gyro, accel, noise, cal, cal_notes, cal_warnings = _calibrated(recording, config, gyro, accel)
+    gyro, accel, noise, cal, cal_notes, cal_warnings = _calibrated(recording, config, gyro, accel, calibration)
     notes += cal_notes
     warnings += cal_warnings
     profile = cal.profile if (cal is not None and config.auto.noise) else None
@@ -919,7 +942,9 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
                         "or a prior covariance that was not positive definite): the smoothed trajectory keeps "
                         "the forward filter's jump there")
     return RunResult(solution, biases, al, diag, m_ep, rejected, time.perf_counter() - t_wall, 0.0,
-                     tuple(warnings), smoothed, tuple(notes[n_al:]), aiding.counts.as_dict())
+                     tuple(warnings), smoothed, tuple(notes[n_al:]), aiding.counts.as_dict(),
+                     {**calibration, "recoveries_s": [round(v, 3) for v in recoveries],
+                      "standstill_ended_early_s": [round(v, 3) for v in aiding.vetoes]})
 
 
 #: Share of an aid's updates the gate may reject before the run says the aid disagrees with the data.

@@ -121,14 +121,14 @@ class Calibration:
             "gyro_bias_std_dps": [round(float(v) * rad2deg, 5) for v in self.gyro_bias_std],
             "accel_bias_mg": [round(float(v) / 9.80665e-3, 3) for v in self.accel_bias],
             "accel_bias_std_mg": [round(float(v) / 9.80665e-3, 3) for v in self.accel_bias_std],
-            "gyro_arw_dph_motion_median": round(float(np.median(self.profile.gyro_arw)) * rad2deg * 60.0, 3),
-            "gyro_arw_dph_motion_p90": round(float(np.percentile(self.profile.gyro_arw, 90)) * rad2deg * 60.0, 3),
-            "accel_vrw_mpsh_motion_median": round(float(np.median(self.profile.accel_vrw)) * 60.0, 4),
-            "accel_vrw_mpsh_motion_p90": round(float(np.percentile(self.profile.accel_vrw, 90)) * 60.0, 4),
+            "gyro_arw_deg_per_sqrt_h_median": round(float(np.median(self.profile.gyro_arw)) * rad2deg * 60.0, 3),
+            "gyro_arw_deg_per_sqrt_h_p90": round(float(np.percentile(self.profile.gyro_arw, 90)) * rad2deg * 60.0, 3),
+            "accel_vrw_mps_per_sqrt_h_median": round(float(np.median(self.profile.accel_vrw)) * 60.0, 4),
+            "accel_vrw_mps_per_sqrt_h_p90": round(float(np.percentile(self.profile.accel_vrw, 90)) * 60.0, 4),
         }
         if self.still_arw is not None:
-            out["gyro_arw_dph_still"] = round(self.still_arw * rad2deg * 60.0, 4)
-            out["accel_vrw_mpsh_still"] = round(float(self.still_vrw) * 60.0, 5)
+            out["gyro_arw_deg_per_sqrt_h_still"] = round(self.still_arw * rad2deg * 60.0, 4)
+            out["accel_vrw_mps_per_sqrt_h_still"] = round(float(self.still_vrw) * 60.0, 5)
         return out
 
 
