@@ -510,14 +510,19 @@ def _vehicle_mounting(recording: Recording, config: Config, cov_step_s: float
     return (0.0, est.pitch_deg, est.yaw_deg), [note], []
 
 
-def _drifting(nis: np.ndarray, accepted: np.ndarray, k: int) -> bool:
+def _drifting(nis: np.ndarray, accepted: np.ndarray, k: int, last_accepted: int | None = None) -> bool:
     """Whether the GNSS fixes rejected before fix ``k`` (the current run of rejections) show INS
     drift, innovations that grow (the last quarter's median NIS over twice the first quarter's),
-    rather than a GNSS jump, whose innovations stay the same size."""
+    rather than a GNSS jump, whose innovations stay the same size.  ``last_accepted``: the index
+    of the last accepted fix before ``k`` (-1: none), when the caller tracks it."""
     if k < 4:
         return False
-    good = np.nonzero(accepted[:k])[0]
-    run = nis[(good[-1] + 1 if good.size else 0):k]
+    if last_accepted is None:
+        good = np.nonzero(accepted[:k])[0]
+        last_accepted = int(good[-1]) if good.size else -1
+    if k - last_accepted - 1 < 4:
+        return False
+    run = nis[last_accepted + 1:k]
     run = run[np.isfinite(run)]
     if run.size < 4:
         return False
@@ -800,6 +805,7 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
 
     def _epochs() -> None:
         nonlocal state, last_good
+        last_acc = -1                 # index of the last accepted fix (the start of a run of rejections)
         used_prior = None           # per epoch: the prior the first applied update corrected,
         reset = applied = False     # whether an update re-anchored the covariance, whether any applied
 
@@ -825,7 +831,7 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
             checked(t_e)                            # the prediction
             used_prior, reset, applied = None, False, False
             if k >= 0:
-                drift = reopen is not None and _drifting(nis, accepted, k)
+                drift = reopen is not None and k - last_acc - 1 >= 4 and _drifting(nis, accepted, k, last_acc)
                 meas = GnssPosition(t_e, float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever,
                                     reopen if drift else None)
                 inn = apply(meas, t_e)
@@ -837,6 +843,8 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
                 nu[k] = inn.nu
                 nis[k] = inn.nis
                 accepted[k] = inn.accepted
+                if inn.accepted:
+                    last_acc = k
                 forced[k] = inn.forced
                 r_std[k] = np.sqrt(np.diagonal(inn.R))
                 for name, value in filt.noise_report().items():

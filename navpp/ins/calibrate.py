@@ -39,8 +39,10 @@ with thresholds relative to the sensor.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -74,10 +76,20 @@ class NoiseProfile:
     accel_vrw: np.ndarray
 
     def over(self, t0: float, t1: float) -> tuple[float, float]:
-        """The largest densities of the blocks that ``[t0, t1]`` touches (gyro, accel)."""
-        k0 = int(np.clip(np.searchsorted(self.t, t0, side="right") - 1, 0, self.gyro_arw.shape[0] - 1))
-        k1 = int(np.clip(np.searchsorted(self.t, t1, side="left"), k0 + 1, self.gyro_arw.shape[0]))
-        return float(self.gyro_arw[k0:k1].max()), float(self.accel_vrw[k0:k1].max())
+        """The largest densities of the blocks that ``[t0, t1]`` touches (gyro, accel).
+
+        Called once per filter interval: plain Python on cached lists (bisect), no numpy
+        scalar overhead."""
+        edges, g, a = self._lists
+        k0 = min(max(bisect.bisect_right(edges, t0) - 1, 0), len(g) - 1)
+        k1 = min(max(bisect.bisect_left(edges, t1), k0 + 1), len(g))
+        if k1 == k0 + 1:
+            return g[k0], a[k0]
+        return max(g[k0:k1]), max(a[k0:k1])
+
+    @cached_property
+    def _lists(self) -> tuple[list[float], list[float], list[float]]:
+        return ([float(v) for v in self.t], [float(v) for v in self.gyro_arw], [float(v) for v in self.accel_vrw])
 
 
 @dataclass(frozen=True)
@@ -209,16 +221,26 @@ def gnss_speed_at(gnss, times: np.ndarray, half_window: float = 1.0) -> tuple[np
     std_h = (np.mean(gnss.std_enu[:, :2], axis=1) if gnss.std_enu is not None else np.full(tg.shape, 2.0))
     # the log's std columns may be optimistic: the fixes' own scatter is a floor
     std_h = np.maximum(np.nan_to_num(std_h, nan=2.0), gnss_scatter_h(tg, enu))
-    for i in np.nonzero(hi - lo >= 3)[0]:
-        s = slice(lo[i], hi[i])
-        tt = tg[s] - tg[s].mean()
-        stt = float(tt @ tt)
-        if stt <= 0.0:
-            continue
-        ve = float(tt @ (enu[s, 0] - enu[s, 0].mean())) / stt
-        vn = float(tt @ (enu[s, 1] - enu[s, 1].mean())) / stt
-        speed[i] = math.hypot(ve, vn)
-        sigma[i] = float(np.mean(std_h[s])) / math.sqrt(stt)
+    # straight-line fits over every window at once, from prefix sums (times relative to the
+    # first fix: no cancellation worth the name over windows of seconds)
+    tr = tg - tg[0]
+
+    def csum(x: np.ndarray) -> np.ndarray:
+        return np.concatenate([[0.0], np.cumsum(x)])
+
+    c1, ct, ctt = csum(np.ones_like(tr)), csum(tr), csum(tr * tr)
+    ce, cn, cte, ctn, cs = csum(enu[:, 0]), csum(enu[:, 1]), csum(tr * enu[:, 0]), csum(tr * enu[:, 1]), csum(std_h)
+    n = c1[hi] - c1[lo]
+    ok = n >= 3
+    nn = np.where(ok, n, 1.0)
+    st, stt_raw = ct[hi] - ct[lo], ctt[hi] - ctt[lo]
+    stt = stt_raw - st * st / nn                       # sum of (t - mean t)^2
+    good = ok & (stt > 1e-12)
+    sden = np.where(good, stt, 1.0)
+    ve = ((cte[hi] - cte[lo]) - st * (ce[hi] - ce[lo]) / nn) / sden
+    vn = ((ctn[hi] - ctn[lo]) - st * (cn[hi] - cn[lo]) / nn) / sden
+    speed = np.where(good, np.hypot(ve, vn), np.nan)
+    sigma = np.where(good, (cs[hi] - cs[lo]) / nn / np.sqrt(sden), np.nan)
     return speed, sigma
 
 

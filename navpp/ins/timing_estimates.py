@@ -371,7 +371,7 @@ def estimate_clock_offset(
     max_lag_s: float = 1.0,
     min_speed: float = 2.0,
     baseline_s: float = 1.0,
-    lag_step_s: float = 0.01,
+    lag_step_s: float = 0.05,
     smooth_s: float = 0.25,
     n_blocks: int = 12,
     outlier_sigmas: float = 12.0,
@@ -505,6 +505,11 @@ def estimate_clock_offset(
     ok &= ~big
     r = -(course[m:] - course[:-m]) / (b - a)
     a, b, r = a[ok], b[ok], r[ok]
+    if r.shape[0] > MAX_SAMPLES:
+        # overlapping baselines repeat each other: every k-th loses little (a long log's search
+        # would otherwise cost seconds of spline evaluations per lag)
+        k = -(-r.shape[0] // MAX_SAMPLES)
+        a, b, r = a[::k], b[::k], r[::k]
     n = int(r.shape[0])
     if n < _MIN_SAMPLES:
         return fail(f"only {n} course-rate samples at speed > {min_speed:g} m/s "
@@ -555,14 +560,18 @@ def estimate_clock_offset(
     turn = np.abs(g - bias) * (b - a) / m
     turn_deg = float(np.degrees(np.sum(turn)))
 
-    sigma = _jackknife_sigma(neg_corr, offset, np.ones(n, bool), n_blocks, max_lag_s)
+    # the gyro means of every sample at every lag of a fine grid, once: the jackknife's many
+    # block-deleted fits are then a few matrix products each (no spline evaluations)
+    grid = np.arange(-max_lag_s, max_lag_s + 0.5 * _JACK_STEP_S, _JACK_STEP_S)
+    table = np.stack([gyro_mean(d) for d in grid])            # (L, n)
+    sigma = _jackknife_sigma(grid, table, r, offset, np.ones(n, bool), n_blocks, max_lag_s)
     # the two halves of the turning, each searched over the whole window, each with its own
     # jackknife sigma (the whole log's would grow with their disagreement)
     half = np.cumsum(turn) <= 0.5 * np.sum(turn)
     lag_1, _, _ = best_lag(half)
     lag_2, _, _ = best_lag(~half)
-    sig_12 = math.hypot(_jackknife_sigma(neg_corr, lag_1, half, n_blocks, max_lag_s),
-                        _jackknife_sigma(neg_corr, lag_2, ~half, n_blocks, max_lag_s))
+    sig_12 = math.hypot(_jackknife_sigma(grid, table, r, lag_1, half, n_blocks, max_lag_s),
+                        _jackknife_sigma(grid, table, r, lag_2, ~half, n_blocks, max_lag_s))
     split = abs(lag_1 - lag_2) / sig_12 if sig_12 > 0 else float("inf")
     consistent = bool(split <= max_split_sigmas)
 
@@ -590,26 +599,48 @@ def estimate_clock_offset(
 
 
 _MIN_SAMPLES = 40
+#: At most this many course-rate samples enter the lag search (evenly thinned beyond).
+MAX_SAMPLES = 2000
+#: Lag grid of the jackknife's block-deleted fits, s.
+_JACK_STEP_S = 0.005
 
 
-def _jackknife_sigma(neg_corr, offset: float, use: np.ndarray, n_blocks: int, max_lag_s: float) -> float:
-    """Delete-one-block jackknife 1-sigma of the lag fitted on the samples ``use`` (bool mask):
-    ``neg_corr(dt, sel)`` is the cost on the samples ``sel``; the blocks are contiguous runs
-    of the used samples; each block-deleted lag is refined within ``+-max_lag_s / 2`` of
-    ``offset`` (a lag far off is a large deviation either way)."""
+def _jackknife_sigma(grid: np.ndarray, table: np.ndarray, r: np.ndarray, offset: float, use: np.ndarray,
+                     n_blocks: int, max_lag_s: float) -> float:
+    """Delete-one-block jackknife 1-sigma of the lag fitted on the samples ``use`` (bool mask).
+
+    ``table`` (L, n) holds every sample's gyro mean at each lag of ``grid`` (L,) and ``r`` (n,)
+    the GNSS yaw rates; the blocks are contiguous runs of the used samples; each block-deleted
+    lag maximises the correlation over the grid points within ``+-max_lag_s / 2`` of ``offset``
+    (a lag far off is a large deviation either way), refined by a parabola through the best grid
+    point and its neighbours."""
     idx = np.nonzero(use)[0]
     k = int(min(max(n_blocks, 2), idx.shape[0] // 4))
     if k < 2:
         return float("nan")
+    near = np.abs(grid - offset) <= 0.5 * max_lag_s
+    lg, T = grid[near], table[near]
+    if lg.shape[0] < 3:
+        return float("nan")
     edges = np.linspace(0, idx.shape[0], k + 1).round().astype(int)
-    half_w = 0.5 * max_lag_s
+    step = float(lg[1] - lg[0])
     lags = np.empty(k)
     for i in range(k):
         sel = use.copy()
         sel[idx[edges[i]:edges[i + 1]]] = False
-        res = optimize.minimize_scalar(lambda d: neg_corr(d, sel), bounds=(offset - half_w, offset + half_w),
-                                       method="bounded", options={"xatol": 1e-5})
-        lags[i] = float(res.x)
+        G, rr = T[:, sel], r[sel]
+        gs = G - G.mean(axis=1, keepdims=True)
+        rs = rr - rr.mean()
+        den = np.sqrt(np.einsum("ij,ij->i", gs, gs) * float(rs @ rs))
+        corr = np.where(den > 0.0, (gs @ rs) / np.where(den > 0.0, den, 1.0), -np.inf)
+        j = int(np.argmax(corr))
+        lag = float(lg[j])
+        if 0 < j < lg.shape[0] - 1:
+            c0, c1, c2 = corr[j - 1], corr[j], corr[j + 1]
+            curv = c0 - 2.0 * c1 + c2
+            if curv < 0.0:
+                lag += step * 0.5 * (c0 - c2) / curv
+        lags[i] = lag
     return float(np.sqrt((k - 1) / k * np.sum((lags - lags.mean()) ** 2)))
 
 
