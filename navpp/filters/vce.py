@@ -43,6 +43,18 @@ sum.  At the GNSS rate (one predict per update) this is exact; over an outage it
 the part of ``P⁻`` due to the outage's noise, which then counts towards ``r_x`` instead.  The
 sum restarts after every accepted (or forced) update; forced updates are not learnt from.
 
+Propagated shares (``q_share = "propagated"``, the default on the INS): a group's noise reaches
+an innovation mostly through what it has added to ``P⁻`` over many time updates, not through the
+last step's ``U_g`` (on the INS at 5 Hz the step redundancy is about 1e-8, so the step form never
+moves Q).  Each group's share of the covariance, ``P_g``, is carried along like ``P`` itself:
+``P_g ← Φ P_g Φᵀ + f_g U_g`` at every time update (``Φ = Cᵀ P⁻¹``, the statistically linearised
+transition from the update's cross-covariance) and ``P_g ← L P_g Lᵀ`` at every applied update
+(``L = I − Pxz S⁻¹ Pxzᵀ A``, aids included; a forced update restarts the shares).  Then
+``r_g = tr(P_g M)`` and ``q_num = f_g yᵀ P_g y``: at consistency ``E[yᵀ P_g y] = tr(P_g M)``, so
+the pooled quotient is again the factor itself.  When a factor changes, its share is rescaled
+with it (``P_g`` is linear in ``f_g``).  Step mode remains the paper's reading (its small
+benchmarks, where every step's noise reaches the measurement, keep it).
+
 Pooling (paper 003 cites Wang 2009 for it): a single epoch's estimate is one squared residual,
 far too noisy to use raw.
 
@@ -74,6 +86,7 @@ from .base import _chol_solve, _cholesky
 
 ADAPT_CHOICES = ("QR", "Q", "R", "none")
 Q_GROUP_CHOICES = ("triad", "axis")
+Q_SHARE_CHOICES = ("auto", "step", "propagated")
 
 
 @dataclass(frozen=True)
@@ -89,6 +102,11 @@ class VCEOptions:
     q_groups : process-noise groups on the INS: ``"triad"`` (gyro white, accel white, gyro bias
         drive, accel bias drive) or ``"axis"`` (each per axis: 12 groups); models whose
         ``noise_groups`` takes no ``per`` argument use their own groups.
+    q_share : what a group's redundancy is measured on: ``"step"``, the noise of the time
+        update(s) since the last fix (the paper's), or ``"propagated"``, the group's whole share
+        of the prior covariance, carried through every time update and measurement (see the
+        module docstring); ``"auto"``: propagated on the INS (a model whose ``noise_groups``
+        takes ``per``), step elsewhere.
     """
 
     window: int = 50
@@ -97,6 +115,7 @@ class VCEOptions:
     floor: float = 0.1
     ceiling: float = 10.0
     q_groups: str = "triad"
+    q_share: str = "auto"
 
     def __post_init__(self) -> None:
         if isinstance(self.window, bool) or int(self.window) != self.window or self.window < 1:
@@ -111,6 +130,9 @@ class VCEOptions:
                              f"got floor={self.floor!r}, ceiling={self.ceiling!r}")
         if self.q_groups not in Q_GROUP_CHOICES:
             raise ValueError(f"q_groups must be 'triad' or 'axis', got {self.q_groups!r}")
+        if self.q_share not in Q_SHARE_CHOICES:
+            raise ValueError(f"q_share must be one of {', '.join(repr(a) for a in Q_SHARE_CHOICES)}, "
+                             f"got {self.q_share!r}")
 
     @property
     def adapt_q(self) -> bool:
@@ -175,6 +197,9 @@ class HelmertVCE:
         self._Q_total: np.ndarray | None = None   # (n, n) process noise used since the last update
         self._R_given: np.ndarray | None = None
         self._per: bool | None = None
+        self.propagated = options.q_share == "propagated"   # "auto" decided at the first predict
+        self._Pg: np.ndarray | None = None       # (G, n, n) each group's share of P (propagated mode)
+        self._pending: np.ndarray | None = None  # (G, n, n) this time update's f_g U_g, not yet propagated
         W = options.window
         self._k = 0                                # accepted epochs learnt from
         self._q_num = self._q_red = np.zeros((W, 0))
@@ -186,6 +211,8 @@ class HelmertVCE:
             return ["Q"], np.asarray(model.process_noise(x, interval), dtype=float)[None]
         if self._per is None:
             self._per = _accepts_per(model)
+            if self.o.q_share == "auto":
+                self.propagated = self._per
         if self._per:
             names, Qs = model.noise_groups(x, interval, per=self.o.q_groups)
         else:
@@ -209,10 +236,51 @@ class HelmertVCE:
         elif names != self.q_group_names:
             raise ValueError(f"VCE: the model's noise groups changed from {self.q_group_names} to {names}")
         self._U = Us.copy() if self._U is None else self._U + Us
+        if self.propagated:
+            self._pending = self.q_factor[:, None, None] * Us
         Q = np.einsum("g,gij->ij", self.q_factor, Us)
         Q = 0.5 * (Q + Q.T)
         self._Q_total = Q.copy() if self._Q_total is None else self._Q_total + Q
         return Q
+
+    def propagate(self, P_before: np.ndarray, cross: np.ndarray) -> None:
+        """Propagated mode: carry each group's share of P through a time update,
+        ``P_g <- Phi P_g Phi^T + f_g U_g``, with the statistically linearised transition
+        ``Phi = C^T P^-1`` from the update's cross-covariance ``C = E[dx_k dx_k+1^T]`` and the
+        covariance ``P`` before it."""
+        if not self.propagated or self._pending is None:
+            return
+        pending, self._pending = self._pending, None
+        L, ok = _cholesky(np.ascontiguousarray(P_before, dtype=float))
+        if not ok:
+            self._Pg = None
+            return
+        phi = _chol_solve(L, np.ascontiguousarray(cross, dtype=float)).T          # (n, n)
+        if self._Pg is None:
+            self._Pg = pending
+        else:
+            Pg = np.einsum("ij,gjk,lk->gil", phi, self._Pg, phi) + pending
+            self._Pg = 0.5 * (Pg + np.transpose(Pg, (0, 2, 1)))
+
+    def corrected(self, P_prior: np.ndarray, Pxz: np.ndarray, S: np.ndarray, *, reset: bool = False) -> None:
+        """Propagated mode: after any applied update (GNSS or an aid), each group's share of P
+        shrinks like P itself, ``P_g <- L P_g L^T`` with ``L = I - Pxz S^-1 Pxz^T P^-1`` (the
+        statistically linearised ``I - K H``); a re-anchored (forced) update restarts them."""
+        if not self.propagated or self._Pg is None:
+            return
+        if reset:
+            self._Pg = None
+            return
+        LP, okP = _cholesky(np.ascontiguousarray(P_prior, dtype=float))
+        LS, okS = _cholesky(np.ascontiguousarray(S, dtype=float))
+        if not (okP and okS):
+            self._Pg = None
+            return
+        B = _chol_solve(LP, np.ascontiguousarray(Pxz, dtype=float))                 # A Pxz (n, m)
+        KH = np.ascontiguousarray(Pxz, dtype=float) @ _chol_solve(LS, np.ascontiguousarray(B.T))   # (n, n)
+        L = np.eye(KH.shape[0]) - KH
+        Pg = np.einsum("ij,gjk,lk->gil", L, self._Pg, L)
+        self._Pg = 0.5 * (Pg + np.transpose(Pg, (0, 2, 1)))
 
     # measurement update --------------------------------------------------------------------
     def measurement_noise(self, R_given: np.ndarray) -> np.ndarray:
@@ -263,7 +331,11 @@ class HelmertVCE:
         r_z = 1.0 - np.diagonal(T)
         Q_total = self._Q_total if self._Q_total is not None else np.zeros((n, n))
         r_x = float(np.sum((P_prior - Q_total) * M))
-        if self.o.adapt_q and self._U is not None:
+        if self.o.adapt_q and self.propagated and self._Pg is not None:
+            f = self.q_factor
+            r_g = np.einsum("gij,ij->g", self._Pg, M)
+            q_num = f * np.einsum("i,gij,j->g", y, self._Pg, y)
+        elif self.o.adapt_q and self._U is not None:
             f = self.q_factor
             r_g = f * np.einsum("gij,ij->g", self._U, M)
             q_num = f ** 2 * np.einsum("i,gij,j->g", y, self._U, y)
@@ -290,9 +362,13 @@ class HelmertVCE:
             self.last = e
             slot = self._k % self.o.window
             self._k += 1
-            if self.o.adapt_q and self.q_group_names is not None:
+            if self.o.adapt_q and self.q_group_names is not None and e.r_g.shape == self.q_factor.shape:
                 self._q_num[slot], self._q_red[slot] = e.q_num, e.r_g
+                old_f = self.q_factor
                 self.q_factor = self._pooled(self._q_num, self._q_red, self.q_factor)
+                if self.propagated and self._Pg is not None:
+                    # each share is linear in its factor
+                    self._Pg = self._Pg * (self.q_factor / old_f)[:, None, None]
             if self.o.adapt_r and self.r_factor is not None and np.all(np.isfinite(e.z_num)):
                 self._z_num[slot], self._z_red[slot] = e.z_num, e.r_z
                 self.r_factor = self._pooled(self._z_num, self._z_red, self.r_factor)

@@ -50,6 +50,17 @@ class VCECKF(SigmaPointFilter):
     def process_noise(self, model, x: np.ndarray, interval: tuple[float, float]) -> np.ndarray:
         return self.adapter.process_noise(model, x, interval)
 
+    def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> GaussianState:
+        out = super().predict(state, model, interval)
+        self.adapter.propagate(state.P, self.last_cross)
+        return out
+
+    def update(self, state: GaussianState, model, meas):
+        new, inn = super().update(state, model, meas)
+        if inn.accepted:                      # every applied update shrinks the groups' shares
+            self.adapter.corrected(state.P, inn.Pxz, inn.S, reset=inn.forced)
+        return new, inn
+
     def predict_measurement(self, state: GaussianState, model, meas) -> MeasurementPrediction:
         self._prior_P = state.P               # P⁻ of this update, for A = (P⁻)⁻¹
         return super().predict_measurement(state, model, meas)
