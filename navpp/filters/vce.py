@@ -259,7 +259,7 @@ class HelmertVCE:
         if self._Pg is None:
             self._Pg = pending
         else:
-            Pg = np.einsum("ij,gjk,lk->gil", phi, self._Pg, phi) + pending
+            Pg = phi @ self._Pg @ phi.T + pending
             self._Pg = 0.5 * (Pg + np.transpose(Pg, (0, 2, 1)))
 
     def corrected(self, P_prior: np.ndarray, Pxz: np.ndarray, S: np.ndarray, *, reset: bool = False) -> None:
@@ -279,7 +279,7 @@ class HelmertVCE:
         B = _chol_solve(LP, np.ascontiguousarray(Pxz, dtype=float))                 # A Pxz (n, m)
         KH = np.ascontiguousarray(Pxz, dtype=float) @ _chol_solve(LS, np.ascontiguousarray(B.T))   # (n, n)
         L = np.eye(KH.shape[0]) - KH
-        Pg = np.einsum("ij,gjk,lk->gil", L, self._Pg, L)
+        Pg = L @ self._Pg @ L.T
         self._Pg = 0.5 * (Pg + np.transpose(Pg, (0, 2, 1)))
 
     # measurement update --------------------------------------------------------------------
