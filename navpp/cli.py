@@ -497,29 +497,25 @@ def bench(
 PRESETS = ("consumer", "automotive", "tactical", "navigation", "ideal")
 
 
-def _lever_arm(value: Optional[str]) -> Optional[tuple[float, float, float]]:
+def _triplet(value: Optional[str], names: str, unit: str, option: str) -> Optional[tuple[float, float, float]]:
+    """Three finite numbers written ``a,b,c`` (None stays None); else one line naming the option."""
     if value is None:
         return None
     try:
-        la = tuple(float(v) for v in value.split(","))
+        v = tuple(float(x) for x in value.split(","))
     except ValueError:
-        la = ()
-    if len(la) != 3 or not all(math.isfinite(v) for v in la):
-        raise typer.BadParameter(f"needs three finite numbers 'x,y,z' (m), got {value!r}", param_hint="'--lever-arm'")
-    return la  # type: ignore[return-value]
+        v = ()
+    if len(v) != 3 or not all(math.isfinite(x) for x in v):
+        raise typer.BadParameter(f"needs three finite numbers '{names}' ({unit}), got {value!r}", param_hint=option)
+    return v  # type: ignore[return-value]
+
+
+def _lever_arm(value: Optional[str]) -> Optional[tuple[float, float, float]]:
+    return _triplet(value, "x,y,z", "m", "'--lever-arm'")
 
 
 def _mounting(value: Optional[str]) -> Optional[tuple[float, float, float]]:
-    if value is None:
-        return None
-    try:
-        rpy = tuple(float(v) for v in value.split(","))
-    except ValueError:
-        rpy = ()
-    if len(rpy) != 3 or not all(math.isfinite(v) for v in rpy):
-        raise typer.BadParameter(f"needs three finite numbers 'roll,pitch,yaw' (deg), got {value!r}",
-                                 param_hint="'--mounting'")
-    return rpy  # type: ignore[return-value]
+    return _triplet(value, "roll,pitch,yaw", "deg", "'--mounting'")
 
 
 REALISM = ("consumer-car",)
