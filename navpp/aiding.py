@@ -127,7 +127,8 @@ class Aiding:
         # the still runs, numbered (ZUPT's own consistency check stops a run that is not still)
         self._run_id = np.cumsum(~self.still) if (self.zupt or self.zaru) else None
         self._vetoed_run = -1
-        self._zupt_z: list[np.ndarray] = []
+        self._zupt_z: list[np.ndarray] = []     # ZUPT's last normalised innovations, of run _zupt_run
+        self._zupt_run = -1
         self.vetoes: list[float] = []
 
     @property
@@ -207,7 +208,7 @@ class Aiding:
             return
         i = int(np.clip(np.searchsorted(self.t, inn.t), 0, self.t.shape[0] - 1))
         run = int(self._run_id[i])
-        if self._zupt_z and getattr(self, "_zupt_run", None) != run:
+        if self._zupt_run != run:
             self._zupt_z = []
         self._zupt_run = run
         sd = np.sqrt(np.maximum(np.diagonal(inn.S), 1e-30))

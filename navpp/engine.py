@@ -434,19 +434,25 @@ def _state_fault(state: GaussianState) -> str | None:
     return None
 
 
-_CAUSES = ("check the IMU units and axes ([imu] mounting_rpy_deg), the lever arm, the time bases "
-           "([gnss] time_offset_s) and the GNSS standard deviations")
+def _causes_text(vehicle_mounting: bool = False) -> str:
+    """The usual causes of a filter and GNSS that disagree, as one clause."""
+    imu = "check the IMU units and axes ([imu] mounting_rpy_deg)"
+    if vehicle_mounting:
+        imu += ', the vehicle mounting ([vehicle] mounting_rpy_deg = "auto" estimates it)'
+    return f"{imu}, the lever arm, the time bases ([gnss] time_offset_s) and the GNSS standard deviations"
+
+
+_CAUSES = _causes_text()
 
 
 def _causes(config: Config) -> str:
-    """The usual causes of a filter and GNSS that disagree, with the vehicle mounting when the
-    non-holonomic constraint holds the IMU's lateral velocity to zero on a configured mounting
-    (a degree of yaw is 0.3 m/s of side-slip at 60 km/h)."""
+    """:data:`_CAUSES`, with the vehicle mounting when the non-holonomic constraint holds the
+    IMU's lateral velocity to zero on a configured mounting (a degree of yaw is 0.3 m/s of
+    side-slip at 60 km/h)."""
     v = config.vehicle
-    if v.type == "car" and v.nhc and not isinstance(v.mounting_rpy_deg, str):
-        return (_CAUSES.replace("([imu] mounting_rpy_deg)", "([imu] mounting_rpy_deg), the vehicle mounting "
-                                '([vehicle] mounting_rpy_deg = "auto" estimates it)'))
-    return _CAUSES
+    return _causes_text(v.type == "car" and v.nhc and not isinstance(v.mounting_rpy_deg, str))
+
+
 _CHI2_3_MEDIAN = 2.365973884375338     # median of the chi-square distribution with 3 dof
 
 
@@ -510,16 +516,11 @@ def _vehicle_mounting(recording: Recording, config: Config, cov_step_s: float
     return (0.0, est.pitch_deg, est.yaw_deg), [note], []
 
 
-def _drifting(nis: np.ndarray, accepted: np.ndarray, k: int, last_accepted: int | None = None) -> bool:
-    """Whether the GNSS fixes rejected before fix ``k`` (the current run of rejections) show INS
-    drift, innovations that grow (the last quarter's median NIS over twice the first quarter's),
-    rather than a GNSS jump, whose innovations stay the same size.  ``last_accepted``: the index
-    of the last accepted fix before ``k`` (-1: none), when the caller tracks it."""
-    if k < 4:
-        return False
-    if last_accepted is None:
-        good = np.nonzero(accepted[:k])[0]
-        last_accepted = int(good[-1]) if good.size else -1
+def _drifting(nis: np.ndarray, last_accepted: int, k: int) -> bool:
+    """Whether the GNSS fixes rejected before fix ``k`` since fix ``last_accepted`` (-1: none),
+    the current run of rejections, show INS drift: innovations that grow (the last quarter's
+    median NIS over twice the first quarter's), rather than a GNSS jump, whose innovations stay
+    the same size."""
     if k - last_accepted - 1 < 4:
         return False
     run = nis[last_accepted + 1:k]
@@ -831,7 +832,7 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
             checked(t_e)                            # the prediction
             used_prior, reset, applied = None, False, False
             if k >= 0:
-                drift = reopen is not None and k - last_acc - 1 >= 4 and _drifting(nis, accepted, k, last_acc)
+                drift = reopen is not None and _drifting(nis, last_acc, k)
                 meas = GnssPosition(t_e, float(lat[k]), float(lon[k]), float(alt[k]), np.diag(var[k]), lever,
                                     reopen if drift else None)
                 inn = apply(meas, t_e)

@@ -418,6 +418,48 @@ def _gnss_velocity_at(gnss, t0: float, lat: float, lon: float, h: float, span: f
     return (tt @ (enu - enu.mean(axis=0))) / float(tt @ tt)
 
 
+def _rotated_track(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, min_speed, use_velocity):
+    """The GNSS track after the still period, as displacements, with the gyro's turn since
+    ``t_start`` at each of them (shared by :func:`_heading_from_gnss` and
+    :func:`_heading_first_motion`).
+
+    Displacements come from GNSS velocity x dt when the log has it and ``use_velocity`` (zero
+    below ``min_speed``), else from positions, the still position as the origin.  Returns a dict:
+    ``tg`` (K,) fix times, ``dt`` (K,) s since the previous fix (or the still end), ``d`` (K, 2)
+    E/N displacements m, ``t_mid`` (K,) s their middles, ``rot`` (K,) rad turned (counter-clockwise) at each displacement's
+    middle, ``moving`` (K,) bool, ``step_noise`` (K,) m per displacement from velocity (None
+    from positions: their sum telescopes, only the end's noise remains, the start being the
+    mean of the still fixes)."""
+    C = rph_to_dcm(roll, pitch, 0.0)
+    i0 = int(np.searchsorted(t, t_start))
+    w_up = gyro[i0:] @ C[2] - geodesy.OMEGA_E * math.sin(lat)
+    ts = t[i0:]
+    turned = np.concatenate([[0.0], np.cumsum(0.5 * (w_up[1:] + w_up[:-1]) * np.diff(ts))])
+    after = gnss.t > t_still_end
+    tg = gnss.t[after]
+    if tg.size == 0:
+        raise InputError("no GNSS fix after the still period: cannot find the heading; give [init] heading_deg "
+                         "in the config")
+    prev = np.concatenate([[t_still_end], tg[:-1]])
+    dt = tg - prev
+    if use_velocity and gnss.vel_enu is not None:
+        v = gnss.vel_enu[after]
+        moving = np.hypot(v[:, 0], v[:, 1]) > min_speed
+        d = v[:, :2] * dt[:, None]
+        d[~moving] = 0.0
+        t_mid = tg - 0.5 * dt
+        std_v = float(np.mean(gnss.std_vel_enu[after][:, :2])) if gnss.std_vel_enu is not None else 0.1
+        step_noise = std_v * dt          # independent per displacement
+    else:
+        enu = _gnss_enu(gnss, lat, lon, h)[after][:, :2]
+        d = np.diff(np.vstack([np.zeros((1, 2)), enu]), axis=0)
+        t_mid = 0.5 * (prev + tg)
+        step_noise = None
+        moving = np.hypot(d[:, 0], d[:, 1]) > min_speed * dt
+    return {"tg": tg, "dt": dt, "d": d, "t_mid": t_mid, "rot": np.interp(t_mid, ts, turned), "moving": moving,
+            "step_noise": step_noise}
+
+
 def _heading_from_gnss(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, fix_std, min_speed,
                        use_velocity=True, path_length=150.0, min_length=30.0, max_window=120.0):
     """Heading at ``t_start`` from the GNSS track once moving, referred back with the gyro.
@@ -431,36 +473,9 @@ def _heading_from_gnss(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lo
     ``use_velocity`` chooses GNSS velocity (when present) over positions.
     Returns (heading rad, 1-sigma rad, time the summed track ends).
     """
-    C = rph_to_dcm(roll, pitch, 0.0)
-    i0 = int(np.searchsorted(t, t_start))
-    w_up = gyro[i0:] @ C[2] - geodesy.OMEGA_E * math.sin(lat)
-    # vehicle turn since t_start (counter-clockwise positive) at every IMU sample
-    ts = t[i0:]
-    turned = np.concatenate([[0.0], np.cumsum(0.5 * (w_up[1:] + w_up[:-1]) * np.diff(ts))])
-
-    after = gnss.t > t_still_end
-    tg = gnss.t[after]
-    if use_velocity and gnss.vel_enu is not None:
-        v = gnss.vel_enu[after]
-        moving = np.hypot(v[:, 0], v[:, 1]) > min_speed
-        dt = np.diff(np.concatenate([[t_still_end], tg]))
-        d = v[:, :2] * dt[:, None]
-        d[~moving] = 0.0
-        t_mid = tg - 0.5 * dt
-        std_v = float(np.mean(gnss.std_vel_enu[after][:, :2])) if gnss.std_vel_enu is not None else 0.1
-        step_noise = std_v * dt          # independent per displacement
-    else:
-        enu = _gnss_enu(gnss, lat, lon, h)[after][:, :2]
-        pts = np.vstack([np.zeros((1, 2)), enu])          # the still position is the origin
-        d = np.diff(pts, axis=0)
-        t_mid = 0.5 * (np.concatenate([[t_still_end], tg[:-1]]) + tg)
-        step_noise = None                # the sum telescopes: only the end's noise remains (the
-                                         # start is the mean of the still fixes)
-    if tg.size == 0:
-        raise InputError("no GNSS fix after the still period: cannot find the heading; give [init] heading_deg "
-                         "in the config")
+    tr = _rotated_track(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, min_speed, use_velocity)
+    tg, d, rot, step_noise = tr["tg"], tr["d"], tr["rot"], tr["step_noise"]
     # rotate each displacement back to the start heading: course + turn (complex N + iE)
-    rot = np.interp(t_mid, ts, turned)
     z = (d[:, 1] + 1j * d[:, 0]) * np.exp(1j * rot)
     csum = np.cumsum(z)
     reach = np.nonzero((np.abs(csum) >= path_length) | (tg - t_still_end > max_window))[0]
@@ -491,34 +506,10 @@ def _heading_first_motion(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat,
     (rad: the body's x axis may not point along the motion).
     Returns (heading rad, 1-sigma rad, time the summed track ends).
     """
-    C = rph_to_dcm(roll, pitch, 0.0)
-    i0 = int(np.searchsorted(t, t_start))
-    w_up = gyro[i0:] @ C[2] - geodesy.OMEGA_E * math.sin(lat)
-    ts = t[i0:]
-    turned = np.concatenate([[0.0], np.cumsum(0.5 * (w_up[1:] + w_up[:-1]) * np.diff(ts))])
-    after = gnss.t > t_still_end
-    tg = gnss.t[after]
-    if tg.size == 0:
-        raise InputError("no GNSS fix after the still period: cannot find the heading; give [init] heading_deg "
-                         "in the config")
+    tr = _rotated_track(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, min_speed, use_velocity)
+    tg, dt, d, t_mid, rot = tr["tg"], tr["dt"], tr["d"], tr["t_mid"], tr["rot"]
+    moving, step_noise = tr["moving"], tr["step_noise"]
     nominal = float(np.median(np.diff(gnss.t))) if len(gnss) > 1 else 1.0
-    prev = np.concatenate([[t_still_end], tg[:-1]])
-    dt = tg - prev
-    if use_velocity and gnss.vel_enu is not None:
-        v = gnss.vel_enu[after]
-        moving = np.hypot(v[:, 0], v[:, 1]) > min_speed
-        d = v[:, :2] * dt[:, None]
-        d[~moving] = 0.0
-        t_mid = tg - 0.5 * dt
-        std_v = float(np.mean(gnss.std_vel_enu[after][:, :2])) if gnss.std_vel_enu is not None else 0.1
-        step_noise = std_v * dt
-    else:
-        enu = _gnss_enu(gnss, lat, lon, h)[after][:, :2]
-        pts = np.vstack([np.zeros((1, 2)), enu])
-        d = np.diff(pts, axis=0)
-        t_mid = 0.5 * (prev + tg)
-        step_noise = None
-        moving = np.hypot(d[:, 0], d[:, 1]) > min_speed * dt
     first = np.nonzero(moving)[0]
     if first.size == 0 or float(tg[first[0]]) - t_still_end > max_window:
         # a slow platform (a walker, a robot): moving is relative to the log's own pace
@@ -534,7 +525,6 @@ def _heading_first_motion(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat,
     if first.size == 0:
         raise InputError(f"the vehicle never moves faster than {min_speed:.1f} m/s in the GNSS log: cannot find "
                          "the heading; give [init] heading_deg in the config")
-    rot = np.interp(t_mid, ts, turned)
     rot0 = rot[first[0]]
     # the track: from the start, up to a gap, a large turn (relative to the first motion), or its length
     stop = (dt > max(3.0 * nominal, 1.0)) | (np.abs(rot - rot0) > max_turn) | (tg - t_still_end > max_window)
