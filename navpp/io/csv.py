@@ -126,7 +126,7 @@ def read_csv_log(
     header = _read_header(imu_path)
     imu_format, imu_cols = _imu_format(imu_path, header)
     imu = _read_table(imu_path, header, imu_cols, warnings, progress)
-    imu = _check_time(imu, warnings)
+    imu = _check_time(_with_ns(imu, header), warnings)
     if imu_format == "increments":
         if imu.n < 3:
             raise _need_more(imu, "at least 3 rows are needed for IMU increments (the first row is dropped)")
@@ -145,7 +145,7 @@ def read_csv_log(
     _gap_warning(imu.path.name, t_imu, imu_lines, warnings)
     t_first = float(t_imu[0])
     t_last = float(t_imu[-1])
-    imu_ns = _stamps_ns(imu, header)
+    imu_ns = imu.data["t_ns"]
     if imu_format == "increments":
         imu_ns = imu_ns[1:]
     t0_ns = int(imu_ns[0])
@@ -168,11 +168,10 @@ def read_csv_log(
             "'ve', 'vn', 'vu'"
         )
     gnss = _read_table(gnss_path, header, gnss_cols, warnings)
-    gnss_header = header
     _check_lat_lon(gnss)
     _check_positive(gnss, [c for g in (_GNSS_GROUPS[0], _GNSS_GROUPS[2]) for c in g])
     _check_integral(gnss, _GNSS_SINGLES)
-    gnss = _check_time(gnss, warnings)
+    gnss = _check_time(_with_ns(gnss, header), warnings)
     gnss = _drop_invalid_fixes(gnss, warnings)
     _check_rate(gnss, gnss.data["t"], "GNSS", 0.01, 1000.0)
     if gnss.n < 1:  # cannot happen after _read_table's row check; kept as the contract
@@ -196,7 +195,7 @@ def read_csv_log(
             + "); kept, but the engine ignores them"
         )
     gnss_data = GnssData(
-        t=(_stamps_ns(gnss, gnss_header) + round(float(time_offset_s) * 1e9) - t0_ns) * 1e-9,
+        t=(gnss.data["t_ns"] + round(float(time_offset_s) * 1e9) - t0_ns) * 1e-9,
         lat_deg=gnss.col("lat"),
         lon_deg=gnss.col("lon"),
         alt=gnss.col("alt"),
@@ -255,10 +254,10 @@ def read_reference_csv(
     cols = _select_columns(ref_path, header, _REF_REQUIRED, _REF_GROUPS, ())
     ref = _read_table(ref_path, header, cols, warnings)
     _check_lat_lon(ref)
-    ref = _check_time(ref, warnings)
+    ref = _check_time(_with_ns(ref, header), warnings)
     if warnings_out is not None:
         warnings_out.extend(warnings)
-    t_rel = (_stamps_ns(ref, header) - int(t0_ns)) * 1e-9
+    t_rel = (ref.data["t_ns"] - int(t0_ns)) * 1e-9
     return ReferenceData(
         t=t_rel,
         lat_deg=ref.col("lat"),
@@ -355,8 +354,21 @@ def _check_options(time_base: str, gyro_units: str, accel_units: str) -> tuple[f
     return GYRO_UNITS[gyro_units], ACCEL_UNITS[accel_units]
 
 
+def _cell_decimals(cell: str) -> int:
+    """Decimal places a number written as text carries, in any float form: ``1700000000.123``,
+    ``+1.700000000123E+09``, ``1.7e9`` (-8: none), with blanks or quotes around it.  0 if the
+    cell is not a number (the float parse reports those)."""
+    s = cell.strip().strip('"').strip().lstrip("+-")
+    mantissa, _, exponent = s.lower().partition("e")
+    try:
+        shift = int(exponent) if exponent else 0
+    except ValueError:
+        return 0
+    return len(mantissa.partition(".")[2]) - shift
+
+
 def _stamp_decimals(path: Path, header: list[str], max_lines: int = 2000) -> int:
-    """Most decimals written in the ``t`` column over the first data lines."""
+    """Most decimals written in the ``t`` column over the first data lines (any float form)."""
     j = header.index("t")
     d = 0
     with open(path, encoding="utf-8-sig", errors="replace") as f:
@@ -364,31 +376,68 @@ def _stamp_decimals(path: Path, header: list[str], max_lines: int = 2000) -> int
         for _, line in zip(range(max_lines), f):
             cells = line.split(",")
             if len(cells) > j:
-                cell = cells[j].strip()
-                if "." in cell and "e" not in cell.lower():
-                    d = max(d, len(cell.split(".", 1)[1]))
+                d = max(d, _cell_decimals(cells[j]))
     return d
 
 
 def _stamps_ns(table: _Table, header: list[str]) -> np.ndarray:
     """The ``t`` column as exact integer nanoseconds (what the file says, not float64's nearest
-    value): rounding at the written number of decimals recovers the text exactly while
-    ``|t| 10^d < 2^51``; beyond that (e.g. unix stamps with 7+ decimals) the column is re-read
-    as text."""
+    value), whatever the float form (plain, e-notation, ``+`` sign, blanks).
+
+    Fast path: with ``d`` the most decimals written over the first 2000 lines (for e-notation
+    the mantissa's decimals minus the exponent), ``round(t 10^d)`` recovers the text exactly
+    while ``|t| 10^d < 2^51``, and the residual ``|t 10^d - round(t 10^d)|`` stays within
+    float64's error (4 eps |t| 10^d).  A larger residual means a later row carries more
+    decimals: then, as when ``|t| 10^d >= 2^51`` (e.g. unix stamps with 7+ decimals), the
+    column is re-read as text and converted exactly (half-even at 1 ns).  A later row whose
+    extra decimals lie below float64's resolution of ``t`` is rounded to ``d`` decimals."""
     t = table.data["t"]
     d = min(_stamp_decimals(table.path, header), 9)
-    if t.size == 0 or float(np.max(np.abs(t))) * 10.0 ** d < 2.0 ** 51:
-        return np.round(t * 10.0 ** d).astype(np.int64) * 10 ** (9 - d)
-    text = pd.read_csv(table.path, usecols=["t"], dtype={"t": str}, encoding="utf-8-sig",
-                       skip_blank_lines=False)["t"].to_numpy()[table.lines - 2]
-    out = np.empty(text.shape[0], dtype=np.int64)
-    for k, cell in enumerate(text):
-        cell = cell.strip()
-        neg = cell.startswith("-")
-        whole, _, frac = cell.lstrip("+-").partition(".")
-        v = int(whole or "0") * 1_000_000_000 + int((frac[:9] or "0").ljust(9, "0"))
-        out[k] = -v if neg else v
+    if t.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    t_max = float(np.max(np.abs(t)))
+    scale = 10.0 ** d
+    if t_max * scale < 2.0 ** 51:
+        scaled = t * scale
+        rounded = np.round(scaled)
+        if float(np.max(np.abs(scaled - rounded))) <= 4.0 * np.finfo(np.float64).eps * t_max * scale:
+            return rounded.astype(np.int64) * 10 ** (9 - d)
+    return _stamps_ns_text(table, header)
+
+
+def _stamps_ns_text(table: _Table, header: list[str]) -> np.ndarray:
+    """Slow exact path of :func:`_stamps_ns`: the ``t`` cells of ``table``'s rows as text,
+    converted with :class:`decimal.Decimal` (any float form), a chunk at a time."""
+    from decimal import Decimal, InvalidOperation
+
+    want = table.lines - 2          # data row index of every kept row, increasing
+    out = np.empty(want.shape[0], dtype=np.int64)
+    j = header.index("t")
+    k = 0
+    start = 0
+    with open(table.path, "rb") as fh:
+        reader = pd.read_csv(fh, engine="c", header=0, usecols=[j], dtype=str, keep_default_na=False,
+                             skip_blank_lines=False, encoding="utf-8-sig", chunksize=_CHUNK_ROWS)
+        with reader:
+            for chunk in reader:
+                cells = chunk.iloc[:, 0].to_numpy()
+                stop = start + cells.shape[0]
+                while k < want.shape[0] and want[k] < stop:
+                    cell = cells[want[k] - start]
+                    try:
+                        out[k] = int(Decimal(cell.strip().strip('"')).scaleb(9).to_integral_value())
+                    except (InvalidOperation, ValueError, OverflowError) as e:
+                        raise InputError(f"{table.path}: line {table.lines[k]}, column 't': cannot read "
+                                         f"{_echo(cell)} as seconds") from e
+                    k += 1
+                start = stop
     return out
+
+
+def _echo(value: object, limit: int = 60) -> str:
+    """``repr(value)`` cut to about ``limit`` characters: a bad cell may be megabytes long."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(str(value)):,} characters)"
 
 
 def _names(names: Sequence[str]) -> str:
@@ -689,10 +738,20 @@ def _check_integral(table: _Table, names: Sequence[str]) -> None:
                 )
 
 
+def _with_ns(table: _Table, header: list[str]) -> _Table:
+    """``table`` with its stamps as exact integer ns in ``data["t_ns"]`` (see :func:`_stamps_ns`)."""
+    return _Table(table.path, {**table.data, "t_ns": _stamps_ns(table, header)}, table.lines)
+
+
 def _check_time(table: _Table, warnings: list[str]) -> _Table:
-    """Stamps must not decrease; equal consecutive stamps: the later row is dropped (warned)."""
+    """Stamps must not decrease; equal consecutive stamps: the later row is dropped (warned).
+
+    Compares the exact ns stamps (``data["t_ns"]``, see :func:`_with_ns`) when present, the float
+    seconds otherwise.  A dropped row that repeats the row before it in every column is named an
+    exact duplicate row (a logger writing a row twice), not a coarse stamp."""
     t = table.data["t"]
-    dt = np.diff(t)
+    stamps = table.data.get("t_ns", t)
+    dt = np.diff(stamps)
     back = dt < 0
     if back.any():
         k = int(np.argmax(back)) + 1
@@ -703,17 +762,27 @@ def _check_time(table: _Table, warnings: list[str]) -> _Table:
     dup = dt == 0
     if not dup.any():
         return table
+    same = dup.copy()
+    for name, v in table.data.items():
+        if name not in ("t", "t_ns"):
+            same &= v[1:] == v[:-1]
     n_dup = int(np.count_nonzero(dup))
+    n_same = int(np.count_nonzero(same))
+    n_other = n_dup - n_same
     first_line = int(table.lines[int(np.argmax(dup)) + 1])
-    hint = ""
-    if n_dup >= 10 and n_dup > 0.01 * t.shape[0]:
-        step = float(np.min(dt[dt > 0])) if (dt > 0).any() else 0.0
-        hint = (f"; that many repeats mean the stamps are too coarse (steps of {step:.3g} s): write t with more "
-                "decimals")
-    warnings.append(
-        f"{table.path.name}: dropped {n_dup} duplicate timestamp{'s' if n_dup > 1 else ''} "
-        f"(first at line {first_line}){hint}"
-    )
+    text = (f"{table.path.name}: dropped {n_dup} duplicate timestamp{'s' if n_dup > 1 else ''} "
+            f"(first at line {first_line})")
+    if n_same:
+        k = int(np.argmax(same)) + 1
+        which = "all are" if n_same == n_dup else f"{n_same} are"
+        text += (f"; {which} exact duplicate rows, the same in every column as the row before "
+                 f"(e.g. line {table.lines[k]} = line {table.lines[k - 1]})")
+    if n_other >= 10 and n_other > 0.01 * t.shape[0]:
+        pos = dt[dt > 0]
+        step = float(np.min(pos)) * (1e-9 if "t_ns" in table.data else 1.0) if pos.size else 0.0
+        text += (f"; {'that many' if not n_same else f'{n_other} with other values:'} repeats mean the stamps are "
+                 f"too coarse (steps of {step:.3g} s): write t with more decimals")
+    warnings.append(text)
     keep = np.concatenate(([True], ~dup))
     return table.take(keep)
 
