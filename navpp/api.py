@@ -756,6 +756,8 @@ def inspect(log: str | Path, *, config: str | Path | Config | None = None
             f = where / name
             if not f.is_file():
                 continue
+            from .io.csv import prescan
+            prescan(f)      # NUL bytes, overlong lines: refused before pandas holds them in memory
             try:
                 t = pd.read_csv(f, usecols=["t"], dtype={"t": float}, engine="c")["t"].to_numpy()
                 ns = np.round(t * 1e9).astype(np.int64)

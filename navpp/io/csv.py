@@ -60,6 +60,12 @@ _REF_REQUIRED = ("t", "lat", "lon", "alt")
 _REF_GROUPS = (("ve", "vn", "vu"), ("roll", "pitch", "heading"))
 _MAX_NAMES_SHOWN = 20
 
+MAX_LINE_BYTES = 1 << 20
+"""A CSV line longer than this (1 MiB) is refused before parsing.  A row of navpp's widest
+schema (gnss.csv, 16 columns) written at full float precision is under 500 bytes; 1 MiB leaves
+room for thousands of extra columns, and keeps a run's memory bounded whatever the file holds."""
+_SCAN_BLOCK = MAX_LINE_BYTES // 2   # a longer line spans a whole block holding no newline
+
 
 # --------------------------------------------------------------------------------------------
 # public API
@@ -440,19 +446,80 @@ def _echo(value: object, limit: int = 60) -> str:
     return text if len(text) <= limit else f"{text[:limit]}... ({len(str(value)):,} characters)"
 
 
-def _names(names: Sequence[str]) -> str:
-    shown = ", ".join(repr(n) for n in names[:_MAX_NAMES_SHOWN])
-    if len(names) > _MAX_NAMES_SHOWN:
-        shown += f", ... ({len(names)} columns)"
+def _names(names: Sequence[str], limit: int = 120) -> str:
+    """The names quoted, at most ``_MAX_NAMES_SHOWN`` of them and about ``limit`` characters."""
+    shown = ", ".join(_echo(n, 30) for n in names[:_MAX_NAMES_SHOWN])
+    if len(shown) > limit:
+        shown = shown[:limit].rsplit(", ", 1)[0] + ", ..."
+    if len(names) > _MAX_NAMES_SHOWN or shown.endswith("..."):
+        shown += f" ({len(names)} columns)"
     return shown
 
 
+def prescan(path: Path) -> None:
+    """Refuse a file holding NUL bytes or a line longer than :data:`MAX_LINE_BYTES` before any
+    parser sees it (a pre-allocated or crash-truncated log ends in NULs; a parser would hold the
+    whole "line" in memory and echo it).  One pass of memchr over 512 KiB blocks; the line number
+    is counted only when something is found."""
+    buf = bytearray(_SCAN_BLOCK)
+    view = memoryview(buf)
+    offset = 0          # file offset of buf[0]
+    line_start = 0      # file offset where the current line starts
+    try:
+        with open(path, "rb", buffering=0) as f:
+            while True:
+                n = f.readinto(buf)
+                if not n:
+                    return
+                block = buf if n == _SCAN_BLOCK else view[:n].tobytes()
+                z = block.find(b"\0")
+                end = z if z >= 0 else n
+                i = block.find(b"\n", 0, end)
+                if (i if i >= 0 else end) + offset - line_start > MAX_LINE_BYTES:
+                    raise _long_line(path, f, line_start)
+                if i >= 0:
+                    line_start = offset + block.rfind(b"\n", 0, end) + 1
+                if z >= 0:
+                    line = _line_number(f, offset + z)
+                    raise InputError(
+                        f"{path}: line {line}: NUL byte (\\0) at byte {offset + z:,} of "
+                        f"{path.stat().st_size:,}: not text from there (pre-allocated or cut short while "
+                        "logging?); cut the file before it")
+                offset += n
+    except OSError as e:
+        raise InputError(f"{path}: cannot read: {e.strerror or e}") from e
+
+
+def _line_number(f, at: int) -> int:
+    """1-based number of the line holding byte ``at`` of the open binary file ``f``."""
+    f.seek(0)
+    count = 1
+    remaining = at
+    while remaining > 0:
+        block = f.read(min(_SCAN_BLOCK, remaining))
+        if not block:
+            break
+        count += block.count(b"\n")
+        remaining -= len(block)
+    return count
+
+
+def _long_line(path: Path, f, start: int) -> InputError:
+    line = _line_number(f, start)
+    f.seek(start)
+    head = f.read(40).decode("utf-8", errors="replace")
+    return InputError(f"{path}: line {line}: longer than {MAX_LINE_BYTES // (1 << 20)} MiB (starts {head!r}...); "
+                      "a CSV row is a few hundred bytes")
+
+
 def _read_header(path: Path) -> list[str]:
-    """The header's column names, stripped of surrounding blanks; checks the file is usable."""
+    """The header's column names, stripped of surrounding blanks; checks the file is usable
+    (:func:`prescan`) and comma separated."""
     if not path.exists():
         raise InputError(f"{path}: file not found")
     if not path.is_file():
         raise InputError(f"{path}: not a file")
+    prescan(path)
     try:
         with path.open(newline="", encoding="utf-8-sig") as f:
             row = next(csv.reader(f), None)
@@ -463,6 +530,12 @@ def _read_header(path: Path) -> list[str]:
     if row is None:
         raise InputError(f"{path}: empty file; expected a header row (line 1) and data rows")
     names = [c.strip() for c in row]
+    if len(names) == 1:
+        for sep, what in ((";", "semicolons (';')"), ("\t", "tabs"), ("|", "bars ('|')")):
+            if len(names[0].split(sep)) > 1:
+                raise InputError(
+                    f"{path}: line 1 (header): columns separated by {what}, not commas ({_echo(names[0], 30)}); "
+                    "save it with ',' between columns and '.' as the decimal point")
     if not any(names):
         raise InputError(f"{path}: line 1: empty header; expected column names (a header row is required)")
     seen: set[str] = set()
@@ -625,28 +698,33 @@ def _utf8_error(path: Path, cause: UnicodeDecodeError) -> InputError:
 
 
 def _locate_non_numeric(path: Path, wanted: list[str], positions: list[int], cause: Exception) -> InputError:
-    """Slow path, only after the fast parse failed: find the first cell that is not a number."""
-    try:
-        raw = pd.read_csv(
-            path, engine="c", header=0, usecols=positions, dtype=object,
-            skip_blank_lines=False, encoding="utf-8-sig",
-        )
-    except Exception:  # noqa: BLE001 - fall back to the fast parser's own message
-        return InputError(f"{path}: non-numeric value: {cause}")
-    best: tuple[int, str, object] | None = None
+    """Slow path, only after the fast parse failed: find the first cell that is not a number
+    (read as text a chunk at a time, so memory stays bounded)."""
     # usecols returns columns in file order; map back to names by position.
     by_position = dict(zip(positions, wanted))
-    for k, pos in enumerate(sorted(positions)):
-        s = raw.iloc[:, k]
-        bad = pd.to_numeric(s, errors="coerce").isna().to_numpy() & s.notna().to_numpy()
-        if bad.any():
-            row = int(np.argmax(bad))
-            if best is None or row < best[0]:
-                best = (row, by_position[pos], s.iloc[row])
-    if best is None:
-        return InputError(f"{path}: non-numeric value: {cause}")
-    row, name, value = best
-    return InputError(f"{path}: line {row + 2}, column {name!r}: non-numeric value {value!r}")
+    start = 0
+    try:
+        with open(path, "rb") as fh:
+            reader = pd.read_csv(fh, engine="c", header=0, usecols=positions, dtype=object,
+                                 skip_blank_lines=False, encoding="utf-8-sig", chunksize=_CHUNK_ROWS)
+            with reader:
+                for raw in reader:
+                    best: tuple[int, str, object] | None = None
+                    for k, pos in enumerate(sorted(positions)):
+                        s = raw.iloc[:, k]
+                        bad = pd.to_numeric(s, errors="coerce").isna().to_numpy() & s.notna().to_numpy()
+                        if bad.any():
+                            row = int(np.argmax(bad))
+                            if best is None or row < best[0]:
+                                best = (row, by_position[pos], s.iloc[row])
+                    if best is not None:
+                        row, name, value = best
+                        return InputError(f"{path}: line {start + row + 2}, column {name!r}: non-numeric value "
+                                          f"{_echo(value)}")
+                    start += raw.shape[0]
+    except Exception:  # noqa: BLE001 - fall back to the fast parser's own message
+        pass
+    return InputError(f"{path}: non-numeric value: {_echo(str(cause))}")
 
 
 def _check_lat_lon(table: _Table) -> None:
