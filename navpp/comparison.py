@@ -516,8 +516,32 @@ def parse_filters(text: str) -> list[str]:
     if dup:
         raise ConfigError(f"--filters: {', '.join(dup)} given more than once")
     for n in names:
+        if "[" in n:
+            _refuse_options(n)
         get_filter(n)
     return names
+
+
+def _refuse_options(spec: str) -> None:
+    """``compare`` runs each filter with the config's ``[filter.<name>]`` options; a spec with
+    options in brackets (``bench``'s syntax) is refused, naming an unknown key and the valid ones."""
+    import dataclasses
+    import difflib
+
+    from .filters import get_filter
+
+    name, _, body = spec.partition("[")
+    cls = get_filter(name.strip())
+    valid = [f.name for f in dataclasses.fields(cls.Options)]
+    for item in filter(None, (part.strip() for part in body.rstrip("]").split(";"))):
+        key = item.partition("=")[0].strip()
+        if key not in valid:
+            near = difflib.get_close_matches(key, valid, n=1)
+            raise ConfigError(f"--filters: {spec!r}: unknown key {key!r} for {cls.name}"
+                              + (f" (did you mean {near[0]!r}?)" if near else "")
+                              + f"; valid keys: {', '.join(valid) or 'none'}")
+    raise ConfigError(f"--filters: {spec!r}: compare takes filter names only; set the options in the config's "
+                      f"[filter.{cls.name}] table (--config FILE.toml)")
 
 
 @dataclass(frozen=True)
