@@ -13,9 +13,10 @@ warning; see ``INTERFACES.md``):
 - ``reference.csv``: ``t, lat, lon, alt``; optional ``ve, vn, vu``; optional
   ``roll, pitch, heading`` (deg).
 
-Time: ``t`` is float seconds on the log's time base (``unix``, ``gpst`` or ``relative``).  The
-recording's ``t0_ns`` is the first IMU stamp (as parsed to float64) converted exactly to integer
-nanoseconds; every relative time is ``t - t_imu[0]`` in float64 (the reference, read on its own,
+Time: ``t`` is float seconds on the log's time base (``unix``, ``gpst`` or ``relative``), in
+any float form (plain, e-notation, ``+``, blanks).  Stamps are read as the exact integer
+nanoseconds the text says (:func:`_stamps_ns`); the recording's ``t0_ns`` is the first IMU
+stamp; every relative time is ``t - t_imu[0]`` in float64 (the reference, read on its own,
 uses ``t0_ns``).
 
 Validation happens before any array is handed out.  Every failure is an ``InputError`` whose
