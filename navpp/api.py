@@ -599,7 +599,9 @@ def apply_outages(rec: Recording, windows: Sequence[tuple[float, float]],
     Raises
     ------
     InputError
-        A window that does not lie inside the log's IMU span.
+        A window that does not lie inside the log's IMU span: one starting after the log's end,
+        or one running past it (not clipped: the outage metrics are read as the error after
+        ``duration`` s without GNSS; the message gives the longest window that fits).
     """
     from dataclasses import fields, replace
 
@@ -611,9 +613,14 @@ def apply_outages(rec: Recording, windows: Sequence[tuple[float, float]],
     info = []
     for start, dur in windows:
         end = start + dur
+        if start >= t_end:
+            raise InputError(f"{label}: GNSS outage {start:g}:{dur:g} ({start:g}-{end:g} s) starts after the log "
+                             f"ends: it spans 0-{t_end:.3f} s from its first IMU sample")
         if end > t_end + 1e-9:
-            raise InputError(f"{label}: GNSS outage {start:g}:{dur:g} ({start:g}-{end:g} s) lies outside the log, "
-                             f"which spans 0-{t_end:.3f} s from its first IMU sample")
+            # not clipped: the outage metrics are read as "error after DUR s without GNSS"
+            raise InputError(f"{label}: GNSS outage {start:g}:{dur:g} ({start:g}-{end:g} s) runs past the end of "
+                             f"the log at {t_end:.3f} s (from its first IMU sample); the longest outage from "
+                             f"{start:g} s is {start:g}:{math.floor((t_end - start) * 1000) / 1000:g}")
         inside = (t >= start) & (t <= end)
         drop |= inside
         info.append({"start_s": float(start), "duration_s": float(dur), "end_s": float(end),
@@ -756,6 +763,8 @@ def inspect(log: str | Path, *, config: str | Path | Config | None = None
             f = where / name
             if not f.is_file():
                 continue
+            from .io.csv import prescan
+            prescan(f)      # NUL bytes, overlong lines: refused before pandas holds them in memory
             try:
                 t = pd.read_csv(f, usecols=["t"], dtype={"t": float}, engine="c")["t"].to_numpy()
                 ns = np.round(t * 1e9).astype(np.int64)

@@ -278,6 +278,18 @@ def _internal(exc: BaseException) -> str:
     return f"internal error: {type(exc).__name__}: {first}" if first else f"internal error: {type(exc).__name__}"
 
 
+def _naming_log(warning: str, log: str | Path) -> str:
+    """A reader or engine warning as ``compare`` prints it among several logs' warnings: naming
+    the log (a CSV reader's ``imu.csv: ...`` becomes ``LOG/imu.csv: ...``)."""
+    log_text = str(log)
+    if warning.startswith(log_text):
+        return warning
+    head, sep, rest = warning.partition(": ")
+    if sep and head and "/" not in head and " " not in head and Path(log_text, head).exists():
+        return f"{Path(log_text, head)}: {rest}"
+    return f"{log_text}: {warning}"
+
+
 def _failed(task: _Task, status: str, log_series: LogSeries | None = None) -> _Outcome:
     row = CompareRow(task.log, task.filter, " ".join(status.split()), None)
     smoothed = (replace(row, filter=smoothed_name(task.filter)), None) if task.smooth else None
@@ -322,7 +334,7 @@ def _execute(task: _Task, cache: _RecordingCache, progress: ProgressFn | None) -
     except Exception as exc:  # noqa: BLE001  (a bug in one filter must not lose the other runs)
         return _failed(task, _internal(exc), log_series)
     ref_source = (rec.reference.source or "reference") if rec.reference is not None else ""
-    warnings = tuple(rec.warnings) + tuple(res.warnings)
+    warnings = tuple(_naming_log(w, task.log) for w in (*rec.warnings, *res.warnings))
     row = CompareRow(task.log, task.filter, "ok", metrics, res.gnss_epochs, res.gnss_rejected, forward_s,
                      len(rec.imu), ref_source, warnings)
     sm_row = None
@@ -504,8 +516,32 @@ def parse_filters(text: str) -> list[str]:
     if dup:
         raise ConfigError(f"--filters: {', '.join(dup)} given more than once")
     for n in names:
+        if "[" in n:
+            _refuse_options(n)
         get_filter(n)
     return names
+
+
+def _refuse_options(spec: str) -> None:
+    """``compare`` runs each filter with the config's ``[filter.<name>]`` options; a spec with
+    options in brackets (``bench``'s syntax) is refused, naming an unknown key and the valid ones."""
+    import dataclasses
+    import difflib
+
+    from .filters import get_filter
+
+    name, _, body = spec.partition("[")
+    cls = get_filter(name.strip())
+    valid = [f.name for f in dataclasses.fields(cls.Options)]
+    for item in filter(None, (part.strip() for part in body.rstrip("]").split(";"))):
+        key = item.partition("=")[0].strip()
+        if key not in valid:
+            near = difflib.get_close_matches(key, valid, n=1)
+            raise ConfigError(f"--filters: {spec!r}: unknown key {key!r} for {cls.name}"
+                              + (f" (did you mean {near[0]!r}?)" if near else "")
+                              + f"; valid keys: {', '.join(valid) or 'none'}")
+    raise ConfigError(f"--filters: {spec!r}: compare takes filter names only; set the options in the config's "
+                      f"[filter.{cls.name}] table (--config FILE.toml)")
 
 
 @dataclass(frozen=True)

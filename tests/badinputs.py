@@ -85,7 +85,11 @@ def snapshot(root: Path, skip: Path | None = None) -> dict[str, tuple[str, int]]
         if skip is not None and (p == skip or skip in p.parents):
             continue
         if p.is_file():
-            out[str(p.relative_to(root))] = (hashlib.sha256(p.read_bytes()).hexdigest(), p.stat().st_mtime_ns)
+            # hashed a block at a time: a whole 2 GB input read into this process would raise its
+            # peak RSS, which a vfork'ed child's ru_maxrss then reports as its own
+            with open(p, "rb") as f:
+                digest = hashlib.file_digest(f, "sha256").hexdigest()
+            out[str(p.relative_to(root))] = (digest, p.stat().st_mtime_ns)
     return out
 
 

@@ -79,8 +79,13 @@ def test_invalid_windows_are_config_errors(sim_log_dir, bad):
 
 
 def test_window_outside_the_log_is_an_input_error(sim_log_dir):
-    with pytest.raises(InputError, match=r"GNSS outage 100:50 \(100-150 s\) lies outside the log"):
+    """A window running past the end is said as such, with the longest window that fits (the
+    log spans 0-120 s); one starting after the end is said as that."""
+    with pytest.raises(InputError, match=r"GNSS outage 100:50 \(100-150 s\) runs past the end of the log at "
+                                         r"120.000 s .* the longest outage from 100 s is 100:20$"):
         api.process(sim_log_dir, write=False, gnss_outages=[(100.0, 50.0)])
+    with pytest.raises(InputError, match=r"GNSS outage 130:5 \(130-135 s\) starts after the log ends"):
+        api.process(sim_log_dir, write=False, gnss_outages=[(130.0, 5.0)])
 
 
 # --------------------------------------------------------------------------- metrics
@@ -154,7 +159,7 @@ def test_cli_outage_outside_the_log_exits_1(sim_log_dir, tmp_path):
     r = CliRunner().invoke(app, ["process", str(sim_log_dir), "--out", str(tmp_path / "o"),
                                  "--gnss-outage", "110:30"])
     assert r.exit_code == 1, r.output
-    assert "lies outside the log" in r.output and "Traceback" not in r.output
+    assert "runs past the end of the log" in r.output and "Traceback" not in r.output
 
 
 # --------------------------------------------------------------------------- gate and outliers

@@ -52,8 +52,18 @@ def _stamp_text(ns) -> str:
     return f"{sec}.{frac:09d} s"
 
 
-def _stamps(msgs, source: str) -> np.ndarray:
-    return np.asarray(msgs.log_ns if source == "log" else msgs.stamp_ns, dtype=np.int64)
+def _stamps(msgs, source: str, what: str | None = None) -> np.ndarray:
+    """The messages' stamps (ns): header stamps, or record times with ``source == "log"``.
+    With ``what``, refuses a topic of 2+ messages whose stamps are all the same (a driver that
+    never fills ``header.stamp`` leaves every one 0): said as such, not as "too few messages"."""
+    stamps = np.asarray(msgs.log_ns if source == "log" else msgs.stamp_ns, dtype=np.int64)
+    if what is not None and stamps.shape[0] >= 2 and stamps[0] == stamps[-1] and (stamps == stamps[0]).all():
+        value = "0" if stamps[0] == 0 else f"the same, t = {_stamp_text(stamps[0])}"
+        kind = "header stamps" if source != "log" else "record (log) times"
+        hint = ('; the driver does not fill header.stamp: use the record times, [time] source = "log"'
+                if source != "log" else "")
+        raise InputError(f"{what}: all {stamps.shape[0]} {kind} are {value}{hint}")
+    return stamps
 
 
 def _ordered(stamps: np.ndarray, values: np.ndarray, what: str, warnings: list[str]) -> np.ndarray:
@@ -94,7 +104,7 @@ def _fixes(fix: FixMessages, source: str, what: str, default_std: tuple[float, f
            warnings: list[str], std_used: bool = True) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Valid fixes of a NavSatFix topic: stamps (ns) and the GnssData columns.  ``std_used``
     False (the reference, whose std nothing uses): no warning about missing covariances."""
-    stamps = _stamps(fix, source)
+    stamps = _stamps(fix, source, what)
     valid = (np.asarray(fix.status) >= 0) & np.isfinite(fix.lat_deg) & np.isfinite(fix.lon_deg) & np.isfinite(fix.alt)
     n_bad = int(np.count_nonzero(~valid))
     if n_bad:
@@ -165,7 +175,7 @@ def _assemble(contents: LogContents, *, imu_topic: str | None = None, gnss_topic
     if imu is None or imu.stamp_ns.shape[0] == 0:
         raise InputError(f"{src}: topic {imu_name!r} has no IMU message")
     what = f"{src}: topic {imu_name!r}"
-    stamps = _stamps(imu, time_source)
+    stamps = _stamps(imu, time_source, what)
     _finite_rows([imu.gyro, imu.accel], ["angular_velocity", "linear_acceleration"], what, stamps)
     keep = _ordered(stamps, np.hstack([np.asarray(imu.gyro, float), np.asarray(imu.accel, float)]), what, warnings)
     stamps = stamps[keep]

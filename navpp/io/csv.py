@@ -13,9 +13,10 @@ warning; see ``INTERFACES.md``):
 - ``reference.csv``: ``t, lat, lon, alt``; optional ``ve, vn, vu``; optional
   ``roll, pitch, heading`` (deg).
 
-Time: ``t`` is float seconds on the log's time base (``unix``, ``gpst`` or ``relative``).  The
-recording's ``t0_ns`` is the first IMU stamp (as parsed to float64) converted exactly to integer
-nanoseconds; every relative time is ``t - t_imu[0]`` in float64 (the reference, read on its own,
+Time: ``t`` is float seconds on the log's time base (``unix``, ``gpst`` or ``relative``), in
+any float form (plain, e-notation, ``+``, blanks).  Stamps are read as the exact integer
+nanoseconds the text says (:func:`_stamps_ns`); the recording's ``t0_ns`` is the first IMU
+stamp; every relative time is ``t - t_imu[0]`` in float64 (the reference, read on its own,
 uses ``t0_ns``).
 
 Validation happens before any array is handed out.  Every failure is an ``InputError`` whose
@@ -59,6 +60,12 @@ _GNSS_SINGLES = ("fix", "num_sats")
 _REF_REQUIRED = ("t", "lat", "lon", "alt")
 _REF_GROUPS = (("ve", "vn", "vu"), ("roll", "pitch", "heading"))
 _MAX_NAMES_SHOWN = 20
+
+MAX_LINE_BYTES = 1 << 20
+"""A CSV line longer than this (1 MiB) is refused before parsing.  A row of navpp's widest
+schema (gnss.csv, 16 columns) written at full float precision is under 500 bytes; 1 MiB leaves
+room for thousands of extra columns, and keeps a run's memory bounded whatever the file holds."""
+_SCAN_BLOCK = MAX_LINE_BYTES // 2   # a longer line spans a whole block holding no newline
 
 
 # --------------------------------------------------------------------------------------------
@@ -126,7 +133,7 @@ def read_csv_log(
     header = _read_header(imu_path)
     imu_format, imu_cols = _imu_format(imu_path, header)
     imu = _read_table(imu_path, header, imu_cols, warnings, progress)
-    imu = _check_time(imu, warnings)
+    imu = _check_time(_with_ns(imu, header), warnings)
     if imu_format == "increments":
         if imu.n < 3:
             raise _need_more(imu, "at least 3 rows are needed for IMU increments (the first row is dropped)")
@@ -145,7 +152,7 @@ def read_csv_log(
     _gap_warning(imu.path.name, t_imu, imu_lines, warnings)
     t_first = float(t_imu[0])
     t_last = float(t_imu[-1])
-    imu_ns = _stamps_ns(imu, header)
+    imu_ns = imu.data["t_ns"]
     if imu_format == "increments":
         imu_ns = imu_ns[1:]
     t0_ns = int(imu_ns[0])
@@ -168,11 +175,10 @@ def read_csv_log(
             "'ve', 'vn', 'vu'"
         )
     gnss = _read_table(gnss_path, header, gnss_cols, warnings)
-    gnss_header = header
     _check_lat_lon(gnss)
     _check_positive(gnss, [c for g in (_GNSS_GROUPS[0], _GNSS_GROUPS[2]) for c in g])
     _check_integral(gnss, _GNSS_SINGLES)
-    gnss = _check_time(gnss, warnings)
+    gnss = _check_time(_with_ns(gnss, header), warnings)
     gnss = _drop_invalid_fixes(gnss, warnings)
     _check_rate(gnss, gnss.data["t"], "GNSS", 0.01, 1000.0)
     if gnss.n < 1:  # cannot happen after _read_table's row check; kept as the contract
@@ -196,7 +202,7 @@ def read_csv_log(
             + "); kept, but the engine ignores them"
         )
     gnss_data = GnssData(
-        t=(_stamps_ns(gnss, gnss_header) + round(float(time_offset_s) * 1e9) - t0_ns) * 1e-9,
+        t=(gnss.data["t_ns"] + round(float(time_offset_s) * 1e9) - t0_ns) * 1e-9,
         lat_deg=gnss.col("lat"),
         lon_deg=gnss.col("lon"),
         alt=gnss.col("alt"),
@@ -255,10 +261,10 @@ def read_reference_csv(
     cols = _select_columns(ref_path, header, _REF_REQUIRED, _REF_GROUPS, ())
     ref = _read_table(ref_path, header, cols, warnings)
     _check_lat_lon(ref)
-    ref = _check_time(ref, warnings)
+    ref = _check_time(_with_ns(ref, header), warnings)
     if warnings_out is not None:
         warnings_out.extend(warnings)
-    t_rel = (_stamps_ns(ref, header) - int(t0_ns)) * 1e-9
+    t_rel = (ref.data["t_ns"] - int(t0_ns)) * 1e-9
     return ReferenceData(
         t=t_rel,
         lat_deg=ref.col("lat"),
@@ -355,8 +361,21 @@ def _check_options(time_base: str, gyro_units: str, accel_units: str) -> tuple[f
     return GYRO_UNITS[gyro_units], ACCEL_UNITS[accel_units]
 
 
+def _cell_decimals(cell: str) -> int:
+    """Decimal places a number written as text carries, in any float form: ``1700000000.123``,
+    ``+1.700000000123E+09``, ``1.7e9`` (-8: none), with blanks or quotes around it.  0 if the
+    cell is not a number (the float parse reports those)."""
+    s = cell.strip().strip('"').strip().lstrip("+-")
+    mantissa, _, exponent = s.lower().partition("e")
+    try:
+        shift = int(exponent) if exponent else 0
+    except ValueError:
+        return 0
+    return len(mantissa.partition(".")[2]) - shift
+
+
 def _stamp_decimals(path: Path, header: list[str], max_lines: int = 2000) -> int:
-    """Most decimals written in the ``t`` column over the first data lines."""
+    """Most decimals written in the ``t`` column over the first data lines (any float form)."""
     j = header.index("t")
     d = 0
     with open(path, encoding="utf-8-sig", errors="replace") as f:
@@ -364,46 +383,144 @@ def _stamp_decimals(path: Path, header: list[str], max_lines: int = 2000) -> int
         for _, line in zip(range(max_lines), f):
             cells = line.split(",")
             if len(cells) > j:
-                cell = cells[j].strip()
-                if "." in cell and "e" not in cell.lower():
-                    d = max(d, len(cell.split(".", 1)[1]))
+                d = max(d, _cell_decimals(cells[j]))
     return d
 
 
 def _stamps_ns(table: _Table, header: list[str]) -> np.ndarray:
     """The ``t`` column as exact integer nanoseconds (what the file says, not float64's nearest
-    value): rounding at the written number of decimals recovers the text exactly while
-    ``|t| 10^d < 2^51``; beyond that (e.g. unix stamps with 7+ decimals) the column is re-read
-    as text."""
+    value), whatever the float form (plain, e-notation, ``+`` sign, blanks).
+
+    Fast path: with ``d`` the most decimals written over the first 2000 lines (for e-notation
+    the mantissa's decimals minus the exponent), ``round(t 10^d)`` recovers the text exactly
+    while ``|t| 10^d < 2^51``, and the residual ``|t 10^d - round(t 10^d)|`` stays within
+    float64's error (4 eps |t| 10^d).  A larger residual means a later row carries more
+    decimals: then, as when ``|t| 10^d >= 2^51`` (e.g. unix stamps with 7+ decimals), the
+    column is re-read as text and converted exactly (half-even at 1 ns).  A later row whose
+    extra decimals lie below float64's resolution of ``t`` is rounded to ``d`` decimals."""
     t = table.data["t"]
     d = min(_stamp_decimals(table.path, header), 9)
-    if t.size == 0 or float(np.max(np.abs(t))) * 10.0 ** d < 2.0 ** 51:
-        return np.round(t * 10.0 ** d).astype(np.int64) * 10 ** (9 - d)
-    text = pd.read_csv(table.path, usecols=["t"], dtype={"t": str}, encoding="utf-8-sig",
-                       skip_blank_lines=False)["t"].to_numpy()[table.lines - 2]
-    out = np.empty(text.shape[0], dtype=np.int64)
-    for k, cell in enumerate(text):
-        cell = cell.strip()
-        neg = cell.startswith("-")
-        whole, _, frac = cell.lstrip("+-").partition(".")
-        v = int(whole or "0") * 1_000_000_000 + int((frac[:9] or "0").ljust(9, "0"))
-        out[k] = -v if neg else v
+    if t.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    t_max = float(np.max(np.abs(t)))
+    scale = 10.0 ** d
+    if t_max * scale < 2.0 ** 51:
+        scaled = t * scale
+        rounded = np.round(scaled)
+        if float(np.max(np.abs(scaled - rounded))) <= 4.0 * np.finfo(np.float64).eps * t_max * scale:
+            return rounded.astype(np.int64) * 10 ** (9 - d)
+    return _stamps_ns_text(table, header)
+
+
+def _stamps_ns_text(table: _Table, header: list[str]) -> np.ndarray:
+    """Slow exact path of :func:`_stamps_ns`: the ``t`` cells of ``table``'s rows as text,
+    converted with :class:`decimal.Decimal` (any float form), a chunk at a time."""
+    from decimal import Decimal, InvalidOperation
+
+    want = table.lines - 2          # data row index of every kept row, increasing
+    out = np.empty(want.shape[0], dtype=np.int64)
+    j = header.index("t")
+    k = 0
+    start = 0
+    with open(table.path, "rb") as fh:
+        reader = pd.read_csv(fh, engine="c", header=0, usecols=[j], dtype=str, keep_default_na=False,
+                             skip_blank_lines=False, encoding="utf-8-sig", chunksize=_CHUNK_ROWS)
+        with reader:
+            for chunk in reader:
+                cells = chunk.iloc[:, 0].to_numpy()
+                stop = start + cells.shape[0]
+                while k < want.shape[0] and want[k] < stop:
+                    cell = cells[want[k] - start]
+                    try:
+                        out[k] = int(Decimal(cell.strip().strip('"')).scaleb(9).to_integral_value())
+                    except (InvalidOperation, ValueError, OverflowError) as e:
+                        raise InputError(f"{table.path}: line {table.lines[k]}, column 't': cannot read "
+                                         f"{_echo(cell)} as seconds") from e
+                    k += 1
+                start = stop
     return out
 
 
-def _names(names: Sequence[str]) -> str:
-    shown = ", ".join(repr(n) for n in names[:_MAX_NAMES_SHOWN])
-    if len(names) > _MAX_NAMES_SHOWN:
-        shown += f", ... ({len(names)} columns)"
+def _echo(value: object, limit: int = 60) -> str:
+    """``repr(value)`` cut to about ``limit`` characters: a bad cell may be megabytes long."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(str(value)):,} characters)"
+
+
+def _names(names: Sequence[str], limit: int = 120) -> str:
+    """The names quoted, at most ``_MAX_NAMES_SHOWN`` of them and about ``limit`` characters."""
+    shown = ", ".join(_echo(n, 30) for n in names[:_MAX_NAMES_SHOWN])
+    if len(shown) > limit:
+        shown = shown[:limit].rsplit(", ", 1)[0] + ", ..."
+    if len(names) > _MAX_NAMES_SHOWN or shown.endswith("..."):
+        shown += f" ({len(names)} columns)"
     return shown
 
 
+def prescan(path: Path) -> None:
+    """Refuse a file holding NUL bytes or a line longer than :data:`MAX_LINE_BYTES` before any
+    parser sees it (a pre-allocated or crash-truncated log ends in NULs; a parser would hold the
+    whole "line" in memory and echo it).  One pass of memchr over 512 KiB blocks; the line number
+    is counted only when something is found."""
+    buf = bytearray(_SCAN_BLOCK)
+    view = memoryview(buf)
+    offset = 0          # file offset of buf[0]
+    line_start = 0      # file offset where the current line starts
+    try:
+        with open(path, "rb", buffering=0) as f:
+            while True:
+                n = f.readinto(buf)
+                if not n:
+                    return
+                block = buf if n == _SCAN_BLOCK else view[:n].tobytes()
+                z = block.find(b"\0")
+                end = z if z >= 0 else n
+                i = block.find(b"\n", 0, end)
+                if (i if i >= 0 else end) + offset - line_start > MAX_LINE_BYTES:
+                    raise _long_line(path, f, line_start)
+                if i >= 0:
+                    line_start = offset + block.rfind(b"\n", 0, end) + 1
+                if z >= 0:
+                    line = _line_number(f, offset + z)
+                    raise InputError(
+                        f"{path}: line {line}: NUL byte (\\0) at byte {offset + z:,} of "
+                        f"{path.stat().st_size:,}: not text from there (pre-allocated or cut short while "
+                        "logging?); cut the file before it")
+                offset += n
+    except OSError as e:
+        raise InputError(f"{path}: cannot read: {e.strerror or e}") from e
+
+
+def _line_number(f, at: int) -> int:
+    """1-based number of the line holding byte ``at`` of the open binary file ``f``."""
+    f.seek(0)
+    count = 1
+    remaining = at
+    while remaining > 0:
+        block = f.read(min(_SCAN_BLOCK, remaining))
+        if not block:
+            break
+        count += block.count(b"\n")
+        remaining -= len(block)
+    return count
+
+
+def _long_line(path: Path, f, start: int) -> InputError:
+    line = _line_number(f, start)
+    f.seek(start)
+    head = f.read(40).decode("utf-8", errors="replace")
+    return InputError(f"{path}: line {line}: longer than {MAX_LINE_BYTES // (1 << 20)} MiB (starts {head!r}...); "
+                      "a CSV row is a few hundred bytes")
+
+
 def _read_header(path: Path) -> list[str]:
-    """The header's column names, stripped of surrounding blanks; checks the file is usable."""
+    """The header's column names, stripped of surrounding blanks; checks the file is usable
+    (:func:`prescan`) and comma separated."""
     if not path.exists():
         raise InputError(f"{path}: file not found")
     if not path.is_file():
         raise InputError(f"{path}: not a file")
+    prescan(path)
     try:
         with path.open(newline="", encoding="utf-8-sig") as f:
             row = next(csv.reader(f), None)
@@ -414,6 +531,12 @@ def _read_header(path: Path) -> list[str]:
     if row is None:
         raise InputError(f"{path}: empty file; expected a header row (line 1) and data rows")
     names = [c.strip() for c in row]
+    if len(names) == 1:
+        for sep, what in ((";", "semicolons (';')"), ("\t", "tabs"), ("|", "bars ('|')")):
+            if len(names[0].split(sep)) > 1:
+                raise InputError(
+                    f"{path}: line 1 (header): columns separated by {what}, not commas ({_echo(names[0], 30)}); "
+                    "save it with ',' between columns and '.' as the decimal point")
     if not any(names):
         raise InputError(f"{path}: line 1: empty header; expected column names (a header row is required)")
     seen: set[str] = set()
@@ -576,28 +699,33 @@ def _utf8_error(path: Path, cause: UnicodeDecodeError) -> InputError:
 
 
 def _locate_non_numeric(path: Path, wanted: list[str], positions: list[int], cause: Exception) -> InputError:
-    """Slow path, only after the fast parse failed: find the first cell that is not a number."""
-    try:
-        raw = pd.read_csv(
-            path, engine="c", header=0, usecols=positions, dtype=object,
-            skip_blank_lines=False, encoding="utf-8-sig",
-        )
-    except Exception:  # noqa: BLE001 - fall back to the fast parser's own message
-        return InputError(f"{path}: non-numeric value: {cause}")
-    best: tuple[int, str, object] | None = None
+    """Slow path, only after the fast parse failed: find the first cell that is not a number
+    (read as text a chunk at a time, so memory stays bounded)."""
     # usecols returns columns in file order; map back to names by position.
     by_position = dict(zip(positions, wanted))
-    for k, pos in enumerate(sorted(positions)):
-        s = raw.iloc[:, k]
-        bad = pd.to_numeric(s, errors="coerce").isna().to_numpy() & s.notna().to_numpy()
-        if bad.any():
-            row = int(np.argmax(bad))
-            if best is None or row < best[0]:
-                best = (row, by_position[pos], s.iloc[row])
-    if best is None:
-        return InputError(f"{path}: non-numeric value: {cause}")
-    row, name, value = best
-    return InputError(f"{path}: line {row + 2}, column {name!r}: non-numeric value {value!r}")
+    start = 0
+    try:
+        with open(path, "rb") as fh:
+            reader = pd.read_csv(fh, engine="c", header=0, usecols=positions, dtype=object,
+                                 skip_blank_lines=False, encoding="utf-8-sig", chunksize=_CHUNK_ROWS)
+            with reader:
+                for raw in reader:
+                    best: tuple[int, str, object] | None = None
+                    for k, pos in enumerate(sorted(positions)):
+                        s = raw.iloc[:, k]
+                        bad = pd.to_numeric(s, errors="coerce").isna().to_numpy() & s.notna().to_numpy()
+                        if bad.any():
+                            row = int(np.argmax(bad))
+                            if best is None or row < best[0]:
+                                best = (row, by_position[pos], s.iloc[row])
+                    if best is not None:
+                        row, name, value = best
+                        return InputError(f"{path}: line {start + row + 2}, column {name!r}: non-numeric value "
+                                          f"{_echo(value)}")
+                    start += raw.shape[0]
+    except Exception:  # noqa: BLE001 - fall back to the fast parser's own message
+        pass
+    return InputError(f"{path}: non-numeric value: {_echo(str(cause))}")
 
 
 def _check_lat_lon(table: _Table) -> None:
@@ -689,10 +817,20 @@ def _check_integral(table: _Table, names: Sequence[str]) -> None:
                 )
 
 
+def _with_ns(table: _Table, header: list[str]) -> _Table:
+    """``table`` with its stamps as exact integer ns in ``data["t_ns"]`` (see :func:`_stamps_ns`)."""
+    return _Table(table.path, {**table.data, "t_ns": _stamps_ns(table, header)}, table.lines)
+
+
 def _check_time(table: _Table, warnings: list[str]) -> _Table:
-    """Stamps must not decrease; equal consecutive stamps: the later row is dropped (warned)."""
+    """Stamps must not decrease; equal consecutive stamps: the later row is dropped (warned).
+
+    Compares the exact ns stamps (``data["t_ns"]``, see :func:`_with_ns`) when present, the float
+    seconds otherwise.  A dropped row that repeats the row before it in every column is named an
+    exact duplicate row (a logger writing a row twice), not a coarse stamp."""
     t = table.data["t"]
-    dt = np.diff(t)
+    stamps = table.data.get("t_ns", t)
+    dt = np.diff(stamps)
     back = dt < 0
     if back.any():
         k = int(np.argmax(back)) + 1
@@ -703,17 +841,27 @@ def _check_time(table: _Table, warnings: list[str]) -> _Table:
     dup = dt == 0
     if not dup.any():
         return table
+    same = dup.copy()
+    for name, v in table.data.items():
+        if name not in ("t", "t_ns"):
+            same &= v[1:] == v[:-1]
     n_dup = int(np.count_nonzero(dup))
+    n_same = int(np.count_nonzero(same))
+    n_other = n_dup - n_same
     first_line = int(table.lines[int(np.argmax(dup)) + 1])
-    hint = ""
-    if n_dup >= 10 and n_dup > 0.01 * t.shape[0]:
-        step = float(np.min(dt[dt > 0])) if (dt > 0).any() else 0.0
-        hint = (f"; that many repeats mean the stamps are too coarse (steps of {step:.3g} s): write t with more "
-                "decimals")
-    warnings.append(
-        f"{table.path.name}: dropped {n_dup} duplicate timestamp{'s' if n_dup > 1 else ''} "
-        f"(first at line {first_line}){hint}"
-    )
+    text = (f"{table.path.name}: dropped {n_dup} duplicate timestamp{'s' if n_dup > 1 else ''} "
+            f"(first at line {first_line})")
+    if n_same:
+        k = int(np.argmax(same)) + 1
+        which = "all are" if n_same == n_dup else f"{n_same} are"
+        text += (f"; {which} exact duplicate rows, the same in every column as the row before "
+                 f"(e.g. line {table.lines[k]} = line {table.lines[k - 1]})")
+    if n_other >= 10 and n_other > 0.01 * t.shape[0]:
+        pos = dt[dt > 0]
+        step = float(np.min(pos)) * (1e-9 if "t_ns" in table.data else 1.0) if pos.size else 0.0
+        text += (f"; {'that many' if not n_same else f'{n_other} with other values:'} repeats mean the stamps are "
+                 f"too coarse (steps of {step:.3g} s): write t with more decimals")
+    warnings.append(text)
     keep = np.concatenate(([True], ~dup))
     return table.take(keep)
 

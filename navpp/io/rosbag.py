@@ -301,9 +301,30 @@ def _open_error(path: Path, kind: str, exc: BaseException) -> InputError:
         if index_pos is not None and index_pos >= size:
             return InputError(f"{path}: ROS 1 bag is truncated: its index should start at byte {index_pos} "
                               f"but the file has {size} bytes")
+    if kind == "ROS 2" and path.is_dir():
+        cut = _truncated_mcap(path)
+        if cut is not None:
+            return InputError(f"{cut}: the ROS 2 bag's MCAP storage file is truncated (no end magic; the recording "
+                              f"was not closed); navpp reads a cut-off .mcap given on its own: process {cut.name}")
     if _is_definition_error(exc):
         return InputError(f"{path}: the message definitions stored in the {kind} bag cannot be used: {reason}")
     return InputError(f"{path}: cannot read {kind} bag: {reason}")
+
+
+def _truncated_mcap(bag_dir: Path) -> Path | None:
+    """The first ``.mcap`` storage file of a ROS 2 bag directory that does not end with the MCAP
+    magic (cut off while recording), or None."""
+    for f in sorted(bag_dir.glob("*.mcap")):
+        try:
+            size = f.stat().st_size
+            with open(f, "rb") as fh:
+                fh.seek(max(size - len(_MCAP_MAGIC), 0))
+                tail = fh.read(len(_MCAP_MAGIC))
+        except OSError:
+            continue
+        if tail != _MCAP_MAGIC:
+            return f
+    return None
 
 
 def _is_definition_error(exc: BaseException) -> bool:
