@@ -67,6 +67,18 @@ GAP_JERK = 2.0              # m/s^3
 GAP_ACCEL = 1.0             # m/s^2
 GAP_ANG_ACCEL = 0.2         # rad/s^2
 GAP_RATE = 0.1              # rad/s
+#: The longest IMU gap the INS bridges: the gap whose unseen rotation (1-sigma
+#: ``min(GAP_ANG_ACCEL * T, GAP_RATE) * T``, :meth:`InsModel.gap_noise`) reaches this many rad.
+#: At 1 rad the 3-sigma heading spans the whole circle and the error model's small angles
+#: (sin x = x) are off by 16 %: after such a gap the attitude is unknown, not uncertain, and
+#: propagating through it writes free-inertial nonsense (10 s with the constants above).
+GAP_MAX_ATT_STD = 1.0       # rad
+
+
+def max_bridgeable_gap_s() -> float:
+    """The longest IMU gap (s) whose unseen-rotation 1-sigma stays within :data:`GAP_MAX_ATT_STD`."""
+    t = math.sqrt(GAP_MAX_ATT_STD / GAP_ANG_ACCEL)         # while the rate is still growing
+    return t if GAP_ANG_ACCEL * t <= GAP_RATE else GAP_MAX_ATT_STD / GAP_RATE
 
 _DGDH_H1 = geodesy._H1
 _DGDH_H1_LAT = geodesy._H1_LAT
