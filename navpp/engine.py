@@ -25,6 +25,7 @@ from .config import DEG_PER_H_TO_RAD_PER_S, MG_TO_MPS2, PRESETS, Config
 from .errors import FilterDivergedError, InputError
 from .filters.base import Filter, GaussianState
 from .filters.smoother import ForwardStore, smooth_arrays
+from .gnss_jumps import check_gnss_jumps
 from .ins.alignment import Alignment, AlignmentSettings, align
 from .ins.attitude import rpy_matrix
 from .ins.model import (
@@ -733,6 +734,7 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
               cov_step_s: float, smooth: bool, notes: list[str], warnings: list[str]) -> RunResult:
     t_wall = time.perf_counter()
     check_imu_gaps(recording)
+    check_gnss_jumps(recording, config.vehicle.type, config.gnss.default_std_m, config.gnss.reanchor_after_s)
     warnings += check_imu_plausible(recording)
     calibration: dict = {}
     recording, t_notes, t_warnings = timing_fixes(recording, config, calibration)
