@@ -339,7 +339,7 @@ def _imu_gaps(source: str, t: np.ndarray) -> list[str]:
 
 def check_imu_gaps(recording: Recording) -> None:
     """Refuse an IMU gap longer than the INS can bridge
-    (:func:`navpp.ins.model.max_bridgeable_gap_s`, 10 s): the motion unseen over it leaves the
+    (:func:`navpp.ins.model.max_bridgeable_gap_s`, 10.5 s): the motion unseen over it leaves the
     attitude unknown, and integrating across it writes a free-inertial trajectory (an hour's gap:
     thousands of km off).  Raises InputError naming the first such gap, its start and length.
 
@@ -361,7 +361,7 @@ def check_imu_gaps(recording: Recording) -> None:
     at = recording.absolute_time(t[k])
     raise InputError(f"{recording.source}: IMU gap of {float(dt[k]):.4g} s after t = {float(t[k]):.3f} s (stamp "
                      f"{at:.3f}){f', and {n - 1} more' if n > 1 else ''}: longer than the INS can bridge "
-                     f"({limit:g} s, the unseen motion leaves the attitude unknown); split the log at the gap")
+                     f"({limit:.3g} s, the unseen motion leaves the attitude unknown); split the log at the gap")
 
 
 def _saturation(source: str, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray,

@@ -68,11 +68,12 @@ GAP_ACCEL = 1.0             # m/s^2
 GAP_ANG_ACCEL = 0.2         # rad/s^2
 GAP_RATE = 0.1              # rad/s
 #: The longest IMU gap the INS bridges: the gap whose unseen rotation (1-sigma
-#: ``min(GAP_ANG_ACCEL * T, GAP_RATE) * T``, :meth:`InsModel.gap_noise`) reaches this many rad.
-#: At 1 rad the 3-sigma heading spans the whole circle and the error model's small angles
-#: (sin x = x) are off by 16 %: after such a gap the attitude is unknown, not uncertain, and
-#: propagating through it writes free-inertial nonsense (10 s with the constants above).
-GAP_MAX_ATT_STD = 1.0       # rad
+#: ``min(GAP_ANG_ACCEL * T, GAP_RATE) * T``, :meth:`InsModel.gap_noise`) reaches pi/3 rad, where
+#: the 3-sigma attitude interval spans the whole circle: after a longer gap the heading is
+#: unknown, not uncertain, the small-angle error model (sin x = x: 17 % off at pi/3) no longer
+#: holds, and propagating through it writes free-inertial nonsense (10.5 s with the constants
+#: above; a 10 s stall in motion is bridged, tests/test_faults.py, a 20 s one is not).
+GAP_MAX_ATT_STD = math.pi / 3.0     # rad
 
 
 def max_bridgeable_gap_s() -> float:
