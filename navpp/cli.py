@@ -309,6 +309,11 @@ def compare(
     scheduler: Annotated[str | None, typer.Option(
         "--scheduler", metavar="ADDR", help="Dask scheduler address (tcp://HOST:8786) for --executor dask; the "
                                             "workers must see the logs at the same paths.")] = None,
+    time_limit: Annotated[float, typer.Option(
+        "--time-limit", metavar="S", help="Watchdog: a run may take S seconds per 100,000 IMU samples of its log "
+                                          "(at least 120 s); one that takes longer fails with a row naming the log "
+                                          "and the rest go on. 0: no watchdog.",
+        callback=_require(lambda v: math.isfinite(v) and v >= 0, "a number of seconds >= 0"))] = 600.0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars.")] = False,
 ) -> None:
     """Run several filters on each log; print the MAE/RMSE table; write summary.csv and the report.
@@ -344,7 +349,7 @@ def compare(
                 result = cmp.compare(logs, names, config=config, reference=reference, imu_topic=imu_topic,
                                      gnss_topic=gnss_topic, reference_topic=reference_topic, jobs=jobs,
                                      out_dir=out, progress=prog, smooth=smooth, executor=executor,
-                                     scheduler=scheduler)
+                                     scheduler=scheduler, time_limit_s=time_limit)
         except BaseException:
             api.remove_created_dirs(created)
             raise

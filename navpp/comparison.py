@@ -207,6 +207,7 @@ class _Task:
     log_series: bool            # also the log's own series (the first filter of each log)
     smooth: bool = False        # also smooth the run: a second row, "<filter>+rts"
     path: str | None = None     # where to read the log (absolute for remote workers); None: ``log``
+    time_limit_s: float = 0.0   # the watchdog's s per 100,000 IMU samples (:func:`watchdog_limit_s`); 0: off
 
 
 @dataclass(frozen=True)
@@ -234,6 +235,78 @@ def smoothed_name(filter_name: str) -> str:
     return filter_name + SMOOTHED_SUFFIX
 
 
+#: The compare watchdog (:func:`watchdog_limit_s`): a run may take ``time_limit`` s for every
+#: 100,000 IMU samples of its log (about 15 minutes at 100 Hz), and never less than
+#: WATCHDOG_MIN_S.  The default, 600 s, is about 60 times what the EKF takes on the 2-core
+#: reference machine and 7 times the slowest filter (RWCKF) with smoothing: generous, since
+#: the watchdog is for a run that hangs, not for a slow one.
+DEFAULT_TIME_LIMIT_S = 600.0
+WATCHDOG_MIN_S = 120.0
+#: While the log is read its sample count is not known: the files' size over this many bytes
+#: (less than any reader's IMU row or message takes) stands for it.
+WATCHDOG_BYTES_PER_SAMPLE = 40.0
+
+
+def watchdog_limit_s(time_limit_s: float, n_imu: float) -> float:
+    """The watchdog's limit (s) for a run on a log of ``n_imu`` IMU samples; 0: no watchdog."""
+    if not time_limit_s > 0.0:
+        return 0.0
+    return max(WATCHDOG_MIN_S, time_limit_s * n_imu / 1e5)
+
+
+class _WatchdogExpired(BaseException):
+    """Raised in a run by the watchdog's alarm (a BaseException: no ``except Exception`` of the
+    run's own code swallows it)."""
+
+
+class _Watchdog:
+    """``with _Watchdog(seconds):`` raises :class:`_WatchdogExpired` in the block once
+    ``seconds`` have passed (SIGALRM).  Only on the main thread of a POSIX process (the CLI,
+    and the worker processes of ``--jobs``); elsewhere (Dask's worker threads) it does nothing.
+    The alarm is handled when the interpreter next runs Python code: a compiled kernel that never
+    returns is not interrupted."""
+
+    def __init__(self, seconds: float) -> None:
+        self.seconds = seconds
+        self.old: Any = None
+
+    def __enter__(self) -> _Watchdog:
+        import signal
+        import threading
+
+        if self.seconds > 0.0 and hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread():
+            def expired(signum, frame):
+                raise _WatchdogExpired(self.seconds)
+
+            self.old = signal.signal(signal.SIGALRM, expired)
+            signal.setitimer(signal.ITIMER_REAL, self.seconds)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        import signal
+
+        if self.old is not None:
+            signal.setitimer(signal.ITIMER_REAL, 0.0)
+            signal.signal(signal.SIGALRM, self.old)
+            self.old = None
+
+
+def _log_bytes(path: Path) -> int:
+    """Size of a log on disk (a file, or the files of a directory), bytes; 0 if unreadable."""
+    try:
+        if path.is_dir():
+            return sum(p.stat().st_size for p in path.iterdir() if p.is_file())
+        return path.stat().st_size
+    except OSError:
+        return 0
+
+
+def _watchdog_message(task: _Task, seconds: float, n_imu: int | None) -> str:
+    what = (f"the limit for {n_imu} IMU samples" if n_imu is not None else "reading the log")
+    return (f"{task.log}: stopped by the watchdog after {seconds:.0f} s ({what}; compare --time-limit sets it, "
+            f"{task.time_limit_s:g} s per 100,000 samples)")
+
+
 class _RecordingCache:
     """The last (config, recording) read, keyed by what determines them; read errors are kept
     too, so the other filters of an unreadable log fail at once with the same message."""
@@ -250,11 +323,13 @@ class _RecordingCache:
             self.key, self.value = None, None          # free the previous recording first
             log = Path(task.path or task.log)
             label = f"reading {Path(task.log).name}"
+            limit = watchdog_limit_s(task.time_limit_s, _log_bytes(log) / WATCHDOG_BYTES_PER_SAMPLE)
             try:
                 cfg = api.resolve_config(log, task.config)
-                rec = api.read_log(log, cfg, reference=task.reference, imu_topic=task.imu_topic,
-                                   gnss_topic=task.gnss_topic, reference_topic=task.reference_topic,
-                                   progress=(lambda f: progress(label, f)) if progress else None)
+                with _Watchdog(limit):
+                    rec = api.read_log(log, cfg, reference=task.reference, imu_topic=task.imu_topic,
+                                       gnss_topic=task.gnss_topic, reference_topic=task.reference_topic,
+                                       progress=(lambda f: progress(label, f)) if progress else None)
                 if progress:
                     progress(label, 1.0)
                 # [gnss] outages of the log's config: the same simulated outages as `navpp process`
@@ -262,6 +337,8 @@ class _RecordingCache:
                 self.value = (cfg, rec, [w["gnss_removed"] for w in removed])
             except NavppError as exc:
                 self.value = exc
+            except _WatchdogExpired:      # the log's other runs fail at once with the same message
+                self.value = NavppError(_watchdog_message(task, limit, None))
             except Exception as exc:  # noqa: BLE001  (a bug, or a file no reader expected: a row, not a crash)
                 self.value = NavppError(_internal(exc))
             self.key = key
@@ -309,8 +386,10 @@ def _execute(task: _Task, cache: _RecordingCache, progress: ProgressFn | None) -
         log_series = _log_series(rec) if task.log_series else None
         label = f"{Path(task.log).name} {task.filter}"
         filt = api.make_filter(task.filter, cfg)
-        res = engine.run(rec, cfg, filt, progress=(lambda f: progress(label, f)) if progress else None,
-                         smooth=task.smooth)
+        limit = watchdog_limit_s(task.time_limit_s, len(rec.imu))
+        with _Watchdog(limit):
+            res = engine.run(rec, cfg, filt, progress=(lambda f: progress(label, f)) if progress else None,
+                             smooth=task.smooth)
         # the forward row's time is the forward filter's; the smoothed row's includes the smoothing
         forward_s = res.forward_runtime_s
 
@@ -331,6 +410,8 @@ def _execute(task: _Task, cache: _RecordingCache, progress: ProgressFn | None) -
             smoothed = (sm_metrics, sm_series)
     except NavppError as exc:
         return _failed(task, str(exc), log_series)
+    except _WatchdogExpired:
+        return _failed(task, _watchdog_message(task, limit, len(rec.imu)), log_series)
     except Exception as exc:  # noqa: BLE001  (a bug in one filter must not lose the other runs)
         return _failed(task, _internal(exc), log_series)
     ref_source = (rec.reference.source or "reference") if rec.reference is not None else ""
@@ -604,7 +685,8 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
             reference: str | Path | None = None, jobs: int = 1, out_dir: str | Path | None = None,
             imu_topic: str | None = None, gnss_topic: str | None = None, reference_topic: str | None = None,
             report: bool = True, progress: ProgressFn | None = None, smooth: bool = False,
-            executor: str = "local", scheduler: str | None = None) -> CompareResult:
+            executor: str = "local", scheduler: str | None = None,
+            time_limit_s: float = DEFAULT_TIME_LIMIT_S) -> CompareResult:
     """Run every filter on every log; rows in (log, filter) order.
 
     Parameters
@@ -633,6 +715,10 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
         rows, the forward filter's (``runtime_s`` its own time) and ``"<filter>+rts"`` (the
         smoothed solution; ``runtime_s`` forward plus smoothing), side by side in the summary,
         the report and its plots.
+    time_limit_s : the watchdog: a run (reading its log included) that takes longer than this
+        many seconds per 100,000 IMU samples (at least :data:`WATCHDOG_MIN_S`) is stopped and
+        becomes a failed row naming the log; the other runs go on.  0 turns it off.  Local runs
+        only (the CLI's process and ``jobs`` workers), not Dask.
 
     Returns
     -------
@@ -661,6 +747,9 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
         get_filter(n)
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ConfigError(f"--jobs must be an integer >= 1, got {jobs!r}")
+    if isinstance(time_limit_s, bool) or not (isinstance(time_limit_s, (int, float)) and time_limit_s >= 0.0
+                                              and math.isfinite(time_limit_s)):
+        raise ConfigError(f"--time-limit must be a number of seconds >= 0 (0: no watchdog), got {time_limit_s!r}")
     if executor not in EXECUTORS:
         raise ConfigError(f"--executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
     if scheduler is not None and executor != "dask":
@@ -677,7 +766,7 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
             api.make_filter(n, cfg)
     tasks = [_Task(i * len(names) + j, log, name, None if config is None else str(config),
                    None if reference is None else str(reference), imu_topic, gnss_topic, reference_topic,
-                   report, report and j == 0, bool(smooth))
+                   report, report and j == 0, bool(smooth), time_limit_s=float(time_limit_s))
              for i, log in enumerate(logs) for j, name in enumerate(names)]
     workers = min(jobs, len(tasks))
     out = Path(out_dir) if out_dir is not None else None

@@ -25,6 +25,7 @@ from .config import DEG_PER_H_TO_RAD_PER_S, MG_TO_MPS2, PRESETS, Config
 from .errors import FilterDivergedError, InputError
 from .filters.base import Filter, GaussianState
 from .filters.smoother import ForwardStore, smooth_arrays
+from .gnss_jumps import check_gnss_jumps
 from .ins.alignment import Alignment, AlignmentSettings, align
 from .ins.attitude import rpy_matrix
 from .ins.model import (
@@ -334,6 +335,33 @@ def _imu_gaps(source: str, t: np.ndarray) -> list[str]:
             f"({float(dt[kmax]):.3g} s); integrated across with the true interval, the unseen motion added to "
             "the uncertainty")
     return [line]
+
+
+def check_imu_gaps(recording: Recording) -> None:
+    """Refuse an IMU gap longer than the INS can bridge
+    (:func:`navpp.ins.model.max_bridgeable_gap_s`, 10.5 s): the motion unseen over it leaves the
+    attitude unknown, and integrating across it writes a free-inertial trajectory (an hour's gap:
+    thousands of km off).  Raises InputError naming the first such gap, its start and length.
+
+    Checked before anything else runs: after it, the IMU's time span is bounded by its sample
+    count (at most one bridgeable gap per sample), so no loop over time can run away.
+    """
+    from .ins.model import max_bridgeable_gap_s
+
+    t = recording.imu.t
+    if t.shape[0] < 2:
+        return
+    limit = max_bridgeable_gap_s()
+    dt = np.diff(t)
+    long_ = dt > limit
+    if not long_.any():
+        return
+    k = int(np.argmax(long_))
+    n = int(np.count_nonzero(long_))
+    at = recording.absolute_time(t[k])
+    raise InputError(f"{recording.source}: IMU gap of {float(dt[k]):.4g} s after t = {float(t[k]):.3f} s (stamp "
+                     f"{at:.3f}){f', and {n - 1} more' if n > 1 else ''}: longer than the INS can bridge "
+                     f"({limit:.3g} s, the unseen motion leaves the attitude unknown); split the log at the gap")
 
 
 def _saturation(source: str, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
@@ -705,6 +733,8 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
 def _run_body(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
               cov_step_s: float, smooth: bool, notes: list[str], warnings: list[str]) -> RunResult:
     t_wall = time.perf_counter()
+    check_imu_gaps(recording)
+    check_gnss_jumps(recording, config.vehicle.type, config.gnss.default_std_m, config.gnss.reanchor_after_s)
     warnings += check_imu_plausible(recording)
     calibration: dict = {}
     recording, t_notes, t_warnings = timing_fixes(recording, config, calibration)

@@ -67,6 +67,65 @@ class ImuData:
         return float(1.0 / np.median(np.diff(self.t)))
 
 
+def lone_stamp(t: np.ndarray, reorder_s: float = MAX_REORDER_S) -> tuple[int, float] | None:
+    """A lone outlier stamp in log order: ``(index, distance s)`` or None.
+
+    One sample whose stamp is far from both neighbours while the neighbours agree with each
+    other (a clock not yet set, a header stamp of 0, a corrupted field) -- the samples around
+    it are regular, so the stamp is what is wrong, not the stream.  "Far" is decided from the
+    stream itself, in seconds:
+
+    - inside the stream (``0 < k < N-1``): the two neighbours are at most two long-gap spans
+      apart (``2 * 5`` median intervals, :data:`navpp.ins.model.LONG_GAP_PERIODS`) and stamp
+      ``k`` lies outside their interval by more than that span and more than ``reorder_s``
+      (a smaller step back is a reordering, sorted by :func:`order_samples`);
+    - at either end: the step to the neighbour is longer than the whole rest of the stream
+      lasts (and than the long-gap span and ``reorder_s``), while the neighbour's next step is
+      regular (a stamp 0 before a unix-time log: 1.7e9 s against the log's minutes).
+
+    A long gap between two runs of samples is not a lone stamp (the samples on both sides are
+    many); nor is one sample at either end a short gap away from the rest.
+
+    Parameters
+    ----------
+    t : (N,) stamps in log order, s (float) or ns (int64; the distance is then returned in s).
+    reorder_s : the largest step back, s, that is a reordering rather than a bad stamp.
+
+    Returns
+    -------
+    (k, d) with ``k`` the index in ``t`` and ``d`` how far (s) stamp k lies from its nearest
+    neighbour; None when there is no such stamp.  O(N).
+    """
+    n = t.shape[0]
+    if n < 4:
+        return None
+    scale = 1e-9 if np.issubdtype(np.asarray(t).dtype, np.integer) else 1.0
+    d = np.diff(np.asarray(t)).astype(float) * scale      # exact int differences before scaling
+    pos = d[d > 0]
+    if pos.size == 0:
+        return None
+    from .ins.model import LONG_GAP_PERIODS
+
+    span = LONG_GAP_PERIODS * float(np.median(pos))        # the longest regular step, s
+    regular = (d > 0) & (d <= span)
+    floor = max(span, reorder_s)
+    # inside: both steps irregular, the neighbours regular with each other, stamp k outside them
+    skip = d[:-1] + d[1:]                                       # t[k+1] - t[k-1], k = 1 .. N-2
+    out = np.maximum(-d[:-1], -d[1:])       # how far t[k] lies before t[k-1] or after t[k+1]
+    bad = (skip > 0) & (skip <= 2.0 * span) & (out > floor)
+    if bad.any():
+        k = int(np.argmax(bad)) + 1
+        return k, float(out[k - 1])
+    # the first sample: a step longer than the rest of the stream lasts, the next step regular
+    rest0 = float(np.asarray(t[-1] - t[1]).astype(float)) * scale
+    if regular[1] and abs(d[0]) > max(rest0, floor):
+        return 0, abs(float(d[0]))
+    rest1 = float(np.asarray(t[-2] - t[0]).astype(float)) * scale
+    if regular[-2] and abs(d[-1]) > max(rest1, floor):
+        return n - 1, abs(float(d[-1]))
+    return None
+
+
 def _stamp_s(ns: int) -> str:
     sec, frac = divmod(int(ns), 1_000_000_000)
     return f"{sec}.{frac:09d} s"

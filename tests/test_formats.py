@@ -412,6 +412,20 @@ def test_header_stamps_going_backwards(logs: Logs, tmp_path: Path) -> None:
     path = write_mcap(tmp_path / "backwards.mcap", [imu_stream(logs, stamps=stamps, log_ns=logs.imu_ns),
                                                      fix_stream(logs)])
     line = assert_one_line_error(invoke("process", path, "--out", tmp_path / "o"), tmp_path / "o")
+    # one message 3 s back among regular neighbours: a lone bad stamp, named (issue 15)
+    assert line.startswith(f"navpp: error: {path}: topic '/imu/data': message {k} "
+                           f"(t = {ns_text(int(stamps[k]))}) lies ")
+    assert "a lone bad stamp" in line
+    assert line.endswith('try [time] source = "log"')
+
+
+def test_header_stamps_jumping_back_for_good(logs: Logs, tmp_path: Path) -> None:
+    k = 7000
+    stamps = logs.imu_ns.copy()
+    stamps[k:] -= 3_000_000_000  # every stamp from k on 3 s back: a clock jump
+    path = write_mcap(tmp_path / "backwards.mcap", [imu_stream(logs, stamps=stamps, log_ns=logs.imu_ns),
+                                                     fix_stream(logs)])
+    line = assert_one_line_error(invoke("process", path, "--out", tmp_path / "o"), tmp_path / "o")
     assert line.startswith(f"navpp: error: {path}: topic '/imu/data': sample {k} has stamp "
                            f"{ns_text(int(stamps[k]))}, ")
     assert "a clock jump (more than 1 s back), not a reordering" in line

@@ -177,7 +177,15 @@ def _not_still(t, accel, gnss, i0: int, i1: int, window_s: float = 1.0, max_chan
         change = float(np.max(np.linalg.norm(means - np.median(means, axis=0), axis=1)))
         if change > max_change:
             return f"the specific force changes by {change:.2f} m/s^2"
-    for a in np.arange(t0, max(t1 - 5.0, t0) + 1e-9, 5.0):
+    # 5 s windows from t0; only those holding a fix can show motion, so the loop visits the
+    # windows of the fixes near the run (at most two each), not every window of its time span
+    n_win = int(math.floor((max(t1 - 5.0, t0) + 1e-9 - t0) / 5.0)) + 1
+    g = gnss.t[near]
+    lo = np.clip(np.ceil((g - 5.5 - t0) / 5.0) - 1, 0, n_win - 1).astype(np.int64)
+    hi = np.clip(np.floor((g + 0.5 - t0) / 5.0) + 1, 0, n_win - 1).astype(np.int64)
+    cand = lo[:, None] + np.arange(4)[None, :]             # hi - lo <= 3 for a window of 6 s
+    wins = np.unique(cand[cand <= hi[:, None]])
+    for a in t0 + 5.0 * wins.astype(float):
         sel = near & (gnss.t >= a - 0.5) & (gnss.t <= min(a + 5.0, t1) + 0.5)
         speed, speed_std = gnss_speed_bound(gnss, sel, lat, lon, h)
         if speed > max(0.5, 3.0 * speed_std):

@@ -67,6 +67,19 @@ GAP_JERK = 2.0              # m/s^3
 GAP_ACCEL = 1.0             # m/s^2
 GAP_ANG_ACCEL = 0.2         # rad/s^2
 GAP_RATE = 0.1              # rad/s
+#: The longest IMU gap the INS bridges: the gap whose unseen rotation (1-sigma
+#: ``min(GAP_ANG_ACCEL * T, GAP_RATE) * T``, :meth:`InsModel.gap_noise`) reaches pi/3 rad, where
+#: the 3-sigma attitude interval spans the whole circle: after a longer gap the heading is
+#: unknown, not uncertain, the small-angle error model (sin x = x: 17 % off at pi/3) no longer
+#: holds, and propagating through it writes free-inertial nonsense (10.5 s with the constants
+#: above; a 10 s stall in motion is bridged, tests/test_faults.py, a 20 s one is not).
+GAP_MAX_ATT_STD = math.pi / 3.0     # rad
+
+
+def max_bridgeable_gap_s() -> float:
+    """The longest IMU gap (s) whose unseen-rotation 1-sigma stays within :data:`GAP_MAX_ATT_STD`."""
+    t = math.sqrt(GAP_MAX_ATT_STD / GAP_ANG_ACCEL)         # while the rate is still growing
+    return t if GAP_ANG_ACCEL * t <= GAP_RATE else GAP_MAX_ATT_STD / GAP_RATE
 
 _DGDH_H1 = geodesy._H1
 _DGDH_H1_LAT = geodesy._H1_LAT

@@ -240,7 +240,11 @@ def _median_rate(t: np.ndarray) -> float:
 
 
 def _dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_s: float = 1.0) -> float:
-    """Var(fresh rows per window) / binomial variance if the repeats fell at random."""
+    """Var(fresh rows per window) / binomial variance if the repeats fell at random.
+    NaN when the log has fewer samples than windows (its time is mostly gaps): the windows are
+    never more than the samples, so the cost stays O(N) whatever the stamps span."""
+    if not (t[-1] - t[0]) / window_s <= t.shape[0]:
+        return float("nan")
     edges = np.arange(t[0], t[-1], window_s)
     if edges.shape[0] < 7:                      # >= 5 complete windows once the ends are cut
         return float("nan")

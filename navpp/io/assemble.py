@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
-from ..recording import GnssData, ImuData, Recording, ReferenceData, order_samples
+from ..recording import GnssData, ImuData, Recording, ReferenceData, lone_stamp, order_samples
 from .ros import FIX_TYPE, IMU_TYPE, TWIST_COV_TYPE, TWIST_TYPE, FixMessages, LogContents
 
 GAP_FACTOR = 2.5
@@ -74,6 +74,20 @@ def _ordered(stamps: np.ndarray, values: np.ndarray, what: str, warnings: list[s
         return order_samples(stamps, values, what, warnings)
     except InputError as exc:
         raise InputError(f'{exc} (try [time] source = "log")') from None
+
+
+def _check_lone_stamp(stamps: np.ndarray, what: str, time_source: str) -> None:
+    """One message whose stamp is far from its regular neighbours (a header stamp of 0, a clock
+    not yet set: :func:`navpp.recording.lone_stamp`): an error naming the message, its index
+    and stamp (checked before :func:`navpp.recording.order_samples`, which would call a lone stamp
+    far back a clock jump, and one far ahead a jump back of the message after it)."""
+    hit = lone_stamp(stamps)
+    if hit is None:
+        return
+    k, dist = hit
+    hint = '; try [time] source = "log"' if time_source == "header" else ""
+    raise InputError(f"{what}: message {k} (t = {_stamp_text(stamps[k])}) lies {dist:.4g} s from its neighbours "
+                     f"while the messages around it are regular: a lone bad stamp (a clock not yet set?){hint}")
 
 
 def _finite_rows(arrays: list[np.ndarray], names: list[str], what: str, stamps: np.ndarray) -> None:
@@ -177,6 +191,7 @@ def _assemble(contents: LogContents, *, imu_topic: str | None = None, gnss_topic
     what = f"{src}: topic {imu_name!r}"
     stamps = _stamps(imu, time_source, what)
     _finite_rows([imu.gyro, imu.accel], ["angular_velocity", "linear_acceleration"], what, stamps)
+    _check_lone_stamp(stamps, what, time_source)
     keep = _ordered(stamps, np.hstack([np.asarray(imu.gyro, float), np.asarray(imu.accel, float)]), what, warnings)
     stamps = stamps[keep]
     if stamps.shape[0] < 2:

@@ -37,7 +37,7 @@ import numpy as np
 import pandas as pd
 
 from navpp.errors import ConfigError, InputError
-from navpp.recording import GnssData, ImuData, Recording, ReferenceData
+from navpp.recording import GnssData, ImuData, Recording, ReferenceData, lone_stamp
 
 __all__ = ["increments_to_rates", "is_csv_log", "read_csv_log", "read_reference_csv"]
 
@@ -133,6 +133,7 @@ def read_csv_log(
     header = _read_header(imu_path)
     imu_format, imu_cols = _imu_format(imu_path, header)
     imu = _read_table(imu_path, header, imu_cols, warnings, progress)
+    _check_lone_stamp(imu)
     imu = _check_time(_with_ns(imu, header), warnings)
     if imu_format == "increments":
         if imu.n < 3:
@@ -820,6 +821,23 @@ def _check_integral(table: _Table, names: Sequence[str]) -> None:
 def _with_ns(table: _Table, header: list[str]) -> _Table:
     """``table`` with its stamps as exact integer ns in ``data["t_ns"]`` (see :func:`_stamps_ns`)."""
     return _Table(table.path, {**table.data, "t_ns": _stamps_ns(table, header)}, table.lines)
+
+
+def _check_lone_stamp(table: _Table) -> None:
+    """One row whose stamp is far from its regular neighbours (:func:`navpp.recording.lone_stamp`:
+    a clock not yet set, t = 0 before unix time): an error naming the row.  Not dropped: the
+    row's values may be as wrong as its stamp, and deleting one line is the user's call."""
+    t = table.data["t"]
+    hit = lone_stamp(t, reorder_s=0.0)
+    if hit is None:
+        return
+    k, dist = hit
+    j = k + 1 if k + 1 < t.shape[0] else k - 1
+    raise InputError(
+        f"{table.path}: line {table.lines[k]}, column 't': t={float(t[k])!r} lies {dist:.4g} s from its "
+        f"neighbours (line {table.lines[j]}: t={float(t[j])!r}) while the rows around it are regular: a lone bad "
+        "stamp (a clock not yet set?); delete or correct that row"
+    )
 
 
 def _check_time(table: _Table, warnings: list[str]) -> _Table:
