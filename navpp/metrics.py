@@ -63,8 +63,9 @@ def associate(t_est: np.ndarray, t_ref: np.ndarray) -> Association:
     """Reference epochs at which the estimate can be interpolated.
 
     Keeps the reference epochs with ``t_est[0] <= t_ref <= t_est[-1]`` (the span's ends
-    included: the estimate is known there without extrapolation); non-finite reference times
-    are dropped.
+    included: the estimate is known there without extrapolation), except those inside a hole of
+    the estimate (an interval longer than the INS bridges, 10.5 s, and than 3 of its median
+    intervals: the gap between two segments of a run); non-finite reference times are dropped.
 
     Parameters
     ----------
@@ -81,6 +82,15 @@ def associate(t_est: np.ndarray, t_ref: np.ndarray) -> Association:
         idx = np.empty(0, dtype=np.int64)
         return Association(idx, t_ref[idx])
     inside = np.isfinite(t_ref) & (t_ref >= t_est[0]) & (t_ref <= t_est[-1])
+    if t_est.size > 2:
+        # a hole in the estimate (the IMU gap between two segments of a run, navpp.engine.imu_segments)
+        # is not interpolated across: longer than the INS bridges and 3 of the estimate's own intervals
+        from .ins.model import max_bridgeable_gap_s
+
+        d = np.diff(t_est)
+        holes = np.flatnonzero(d > max(max_bridgeable_gap_s(), 3.0 * float(np.median(d))))
+        for k in holes:
+            inside &= ~((t_ref > t_est[k]) & (t_ref < t_est[k + 1]))
     idx = np.flatnonzero(inside).astype(np.int64)
     return Association(idx, t_ref[idx])
 

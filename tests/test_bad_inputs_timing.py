@@ -104,7 +104,6 @@ CASES = [
          ("drive.mcap", "'/imu/data'", "message 0 (t = 0.000000000 s)", "lone bad stamp", '[time] source = "log"')),
     Case("mcap-header-stamp-0-mid-log", _mcap_stamp_zero(9000),
          ("drive.mcap", "'/imu/data'", "message 9000 (t = 0.000000000 s)", "lone bad stamp")),
-    Case("imu-gap-of-an-hour", _hour_gap, ("IMU gap of 3600 s after t = 149.992 s", "longer than the INS can bridge")),
     Case("half-the-fixes-moved-16000-km", _half_the_fixes_moved,
          ("GNSS", "t = 150.000 s", "stay displaced", "inconsistent")),
 ]
@@ -214,13 +213,32 @@ def _recording_with_gap(gap_s: float):
     return Recording(imu, gnss, int(T0 * 1e9), source="synthetic")
 
 
-def test_a_gap_within_the_limit_is_bridged_one_beyond_is_refused():
-    from navpp.engine import check_imu_gaps
-    from navpp.errors import InputError
+def test_the_log_is_cut_only_at_gaps_beyond_the_limit():
+    from navpp.engine import imu_segments
 
-    check_imu_gaps(_recording_with_gap(10.4))     # a 10.41 s interval
-    with pytest.raises(InputError, match=r"synthetic: IMU gap of 10\.51 s after t = 9\.990 s .*bridge \(10\.5 s"):
-        check_imu_gaps(_recording_with_gap(10.5))
+    assert imu_segments(_recording_with_gap(10.4)) == [(0, 2000)]     # a 10.41 s interval: bridged
+    assert imu_segments(_recording_with_gap(10.5)) == [(0, 1000), (1000, 2000)]
+
+
+def test_an_hour_long_imu_gap_splits_the_run_into_segments_each_aligned_afresh(tmp_path):
+    """Oracle: the reference (exact truth).  The logger paused for an hour 150 s into the drive:
+    no row inside the gap, each side as accurate as a log of its own, the metrics skip the gap."""
+    import json
+
+    from badinputs import run_navpp
+
+    argv = _hour_gap(tmp_path)
+    code, _, err, _ = run_navpp(argv + ["--reference", str(tmp_path / "log" / "reference.csv")])
+    assert code == 0, err
+    assert "IMU gap of 3600 s after t = 149.992 s" in err and "2 segments" in err, err
+    traj = np.genfromtxt(tmp_path / "out" / "trajectory.csv", delimiter=",", names=True)
+    t = traj["t"] - traj["t"][0]
+    assert not ((t > 150.0) & (t < 3750.0)).any()               # nothing written inside the gap
+    assert (t <= 150.0).sum() > 1000 and (t >= 3750.0).sum() > 1000
+    assert np.all(np.abs(traj["alt"] - 300.0) < 50.0)           # no free-inertial stretch anywhere
+    m = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert m["position_m"]["horizontal"]["rmse"] < 1.0, m["position_m"]      # 0.60 m without the gap
+    assert m["position_m"]["up"]["rmse"] < 2.5, m["position_m"]
 
 
 @pytest.fixture(scope="module")
