@@ -293,6 +293,14 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
         roll, pitch = settings.roll, settings.pitch
         level_how = "config"
         att_std = math.radians(0.5)
+    elif math.cos(roll) * math.cos(pitch) < 0.0:
+        # the body's z axis points down (tilt beyond 90 deg): no land vehicle runs upside down, but
+        # forward-right-down axes read as forward-left-up do; the strapdown would carry the roll of
+        # 180 deg and the lever arm's up component would become down (a vertical bias of twice it)
+        where = (f"at rest, t = {t_s0:.1f} .. {t_s1:.1f} s" if not moving else "on the log's mean")
+        raise InputError(f"gravity is measured along -z of the declared forward-left-up body ({where}, roll "
+                         f"{math.degrees(roll):+.0f} deg): the axes look forward-right-down; set [imu] "
+                         f"mounting_rpy_deg = [180, 0, 0]")
     t_start = float(t[start])
 
     # position: GNSS fixes during the still period, else the first fix after the start
