@@ -333,9 +333,9 @@ class ImuConfig:
                 value = _as_float("imu", key, value, minimum=0.0)
                 if key in WHITE_NOISE_KEYS and value == 0.0:
                     raise ConfigError(
-                        f"[imu] {key} = 0: no real IMU is noise-free and the filter would trust the "
-                        f"integrated IMU without limit between fixes; give the datasheet's value, or leave it "
-                        f"out for the {preset} preset's {PRESETS[preset][key]:g}")
+                        f"[imu] {key} = 0: no real IMU is noise-free (the filter would trust it without "
+                        f"limit between fixes); give the datasheet's value or leave it out ({preset} preset: "
+                        f"{PRESETS[preset][key]:g})")
             _set(self, key, value)
         mounting = _as_vector("imu", "mounting_rpy_deg", self.mounting_rpy_deg, 3)
         _set(self, "mounting_rpy_deg", mounting)

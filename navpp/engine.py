@@ -475,7 +475,7 @@ def _likely_cause(recording: Recording, config: Config, noticed: list[str]) -> t
     from .plausibility import fix_suspect
 
     g = recording.gnss
-    suspect = fix_suspect(recording.source, g.lat_deg, g.lon_deg, g.alt)
+    suspect = fix_suspect(recording.source, g.lat_deg, g.lon_deg, g.alt, g.t, g.std_enu, config.vehicle.type)
     if suspect is not None:
         return suspect, [_causes(config)]
     for key, cause in _NOTICED_CAUSES:
@@ -521,7 +521,7 @@ def _consistency_checks(source: str, name: str, config: Config, tg: np.ndarray, 
     if m >= 20 and rejected > config.gnss.max_rejected_fraction * m:
         first = float(tg[np.argmax(~accepted)])
         raise FilterDivergedError(
-            f"{name} diverged: {what} (first at t = {first:.1f} s, innovations {scale:.1f}x the predicted)")
+            f"{name} diverged: {what} (first at t = {first:.1f} s; innovations {scale:.1f}x predicted)")
     warnings = []
     if rejected > 0.05 * m:
         warnings.append(f"{source}: {what}: the IMU and GNSS disagree; {_causes(config)}")
@@ -701,9 +701,12 @@ def timing_fixes(recording: Recording, config: Config,
         return recording, notes, warnings
     up = imu.accel.mean(axis=0)            # the sensor's up, as logged
     up = up / max(float(np.linalg.norm(up)), 1e-9)
-    lat0, lon0 = math.radians(float(gnss.lat_deg[0])), math.radians(float(gnss.lon_deg[0]))
+    # origin at the middle fix, not the first: a first fix on the far side of the globe would mirror
+    # the track in the tangent plane (the yaw-scale check would read it as lat/lon swapped)
+    mid = int(np.argsort(gnss.lat_deg, kind="stable")[len(gnss) // 2])
+    lat0, lon0 = math.radians(float(gnss.lat_deg[mid])), math.radians(float(gnss.lon_deg[mid]))
     enu = geodesy.geodetic_to_enu(np.radians(gnss.lat_deg), np.radians(gnss.lon_deg), gnss.alt, lat0, lon0,
-                                  float(gnss.alt[0]))
+                                  float(gnss.alt[mid]))
     warnings += _check_gyro_scale(recording, config, up, enu)
     if auto.clock_offset and config.gnss.time_offset_s == 0.0:
         if gnss.vel_enu is not None:

@@ -76,11 +76,15 @@ def std_name(source: str, has_std: bool) -> str:
     return "the NavSatFix position_covariance"
 
 
-def fix_suspect(source: str, lat_deg: np.ndarray, lon_deg: np.ndarray, alt: np.ndarray) -> str | None:
-    """What is wrong with the fixes themselves, before blaming the IMU: all identical, or a
-    whole track of latitudes and longitudes inside +-pi/2 and +-pi (radians read as degrees:
-    a track that stays within 1.6 deg of the equator and 3.2 deg of Greenwich, in the Gulf of
-    Guinea).  Returns a short clause naming the file, or None."""
+def fix_suspect(source: str, lat_deg: np.ndarray, lon_deg: np.ndarray, alt: np.ndarray,
+                t: np.ndarray | None = None, std_enu: np.ndarray | None = None,
+                vehicle_type: str = "none") -> str | None:
+    """What is wrong with the fixes themselves, before blaming the IMU: all identical, a whole
+    track of latitudes and longitudes inside +-pi/2 and +-pi (radians read as degrees: a track
+    that stays within 1.6 deg of the equator and 3.2 deg of Greenwich, in the Gulf of Guinea),
+    or (given the times ``t``, s) a step between consecutive fixes longer than the vehicle
+    type's :data:`MAX_SPEED_MPS` covers in the interval plus the gate quantile of the two fixes'
+    sigmas (``std_enu``, m).  Returns a short clause naming the file, or None."""
     n = int(lat_deg.shape[0])
     if n < 2:
         return None
@@ -90,7 +94,21 @@ def fix_suspect(source: str, lat_deg: np.ndarray, lon_deg: np.ndarray, alt: np.n
                 f"{float(alt[0]):.1f} m): the GNSS never moved")
     if float(np.max(np.abs(lat_deg))) <= 0.5 * math.pi and float(np.max(np.abs(lon_deg))) <= math.pi \
             and np.ptp(lat_deg) + np.ptp(lon_deg) > 0.0:
-        return f"{name}'s {n} lat/lon all lie within +-1.571/+-3.142: radians? (navpp reads degrees)"
+        return f"{name}'s {n} lat/lon lie within +-1.571/+-3.142: radians? (degrees expected)"
+    if t is not None:
+        from .geodesy import geodetic_to_ecef
+
+        xyz = geodetic_to_ecef(np.radians(lat_deg), np.radians(lon_deg), np.asarray(alt, float))
+        step = np.linalg.norm(np.diff(xyz, axis=0), axis=1)
+        sig = (np.linalg.norm(std_enu, axis=1) if std_enu is not None else np.zeros(n))
+        k = math.sqrt(gate_quantiles(DEFAULT_GATE_PROBABILITY)[0])
+        reach = MAX_SPEED_MPS.get(vehicle_type, MAX_SPEED_MPS["none"]) * np.abs(np.diff(t)) \
+            + k * np.hypot(sig[1:], sig[:-1])
+        jump = ~(step <= reach)
+        if jump.any():
+            i = int(np.argmax(jump))
+            return (f"{name}'s fix at t = {float(t[i]):.3f} s is {float(step[i]) / 1000.0:.4g} km from the next: "
+                    "a jump no vehicle makes")
     return None
 
 
@@ -153,7 +171,7 @@ def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray
     # a learnt R (or an inflated P) alone is no divergence: AEKF's R holds the prediction error by
     # design; it is one when the fixes it let through lie beyond the gate of the prior R
     if beyond > max_fraction * m and (grown > max_fraction * m or far > max_fraction * max(n_acc, 1)):
-        how = (f"its R grew to {float(np.median(r_ratio)):.3g}x, hiding them" if grown > max_fraction * m
+        how = (f"its learnt R {float(np.median(r_ratio)):.3g}x that" if grown > max_fraction * m
                else f"its solution beyond the gate of {share(far, n_acc)} it accepted")
         out.append(Finding(True, f"{name} diverged: {share(beyond, m)} lie beyond the gate of the configured GNSS "
                                  f"sigma ({how})"))
