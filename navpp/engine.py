@@ -464,7 +464,7 @@ _NOTICED_CAUSES = (
     ("clock offset", "the time bases ([gnss] time_offset_s)"),
     ("look saturated", "a saturated IMU"),
     ("gyro rates reach", 'the gyro\'s unit ([imu] gyro_units = "deg/s"?)'),
-    ("IMU: ", "the IMU's gaps"),
+    ("periods (", "the IMU's gaps"),
 )
 
 
@@ -786,7 +786,7 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
         suspect = fix_suspect(recording.source, gnss.lat_deg, gnss.lon_deg, gnss.alt)
         if suspect is not None:     # the fixes themselves first: the alignment only saw their symptom
             both = f"{recording.source}: {suspect}; {exc}"
-            raise InputError(both if len(both) < 280 else f"{recording.source}: {suspect}") from None
+            raise InputError(both if len(both) < 285 else f"{recording.source}: {suspect}") from None
         raise InputError(f"{recording.source}: {exc}") from None
     model.path[al.index] = al.x[:model.path.shape[1]]
     notes[:0] = list(al.lines)          # for an error's context; the result carries them apart
@@ -1044,12 +1044,12 @@ def _plausibility_checks(recording: Recording, config: Config, name: str, soluti
     sols = [solution] + ([smoothed.solution] if smoothed is not None else [])
     for sol in sols:
         found += pl.solution_findings(name, config.vehicle.type, sol.t, sol.alt, sol.vel_enu, sol.std_enu, fix_alt,
-                                      np.sqrt(var0[:, 2]), config.gnss.gate_probability)
+                                      np.sqrt(var0[:, 2]), config.gnss.gate_probability,
+                                      config.gnss.max_rejected_fraction < 1.0)
     out = []
     for f in found:
         if f.fatal:
-            innov = not f.headline.startswith(f"{name} diverged: its altitude") and "speed exceeds" not in f.headline
-            raise _refusal(recording, config, f.headline, notes, warnings + out, f.cause, anyway=innov)
+            raise _refusal(recording, config, f.headline, notes, warnings + out, f.cause)
         out.append(f"{src}: {f.headline}: {f.cause}" if f.cause else f"{src}: {f.headline}")
     return out
 

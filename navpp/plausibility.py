@@ -91,7 +91,7 @@ def fix_suspect(source: str, lat_deg: np.ndarray, lon_deg: np.ndarray, alt: np.n
     name = gnss_name(source)
     if np.ptp(lat_deg) == 0.0 and np.ptp(lon_deg) == 0.0 and np.ptp(alt) == 0.0:
         return (f"all {n} fixes of {name} are identical ({float(lat_deg[0]):.6f}, {float(lon_deg[0]):.6f}, "
-                f"{float(alt[0]):.1f} m): the GNSS never moved")
+                f"{float(alt[0]):.1f} m)")
     if float(np.max(np.abs(lat_deg))) <= 0.5 * math.pi and float(np.max(np.abs(lon_deg))) <= math.pi \
             and np.ptp(lat_deg) + np.ptp(lon_deg) > 0.0:
         return f"{name}'s {n} lat/lon lie within +-1.571/+-3.142: radians? (degrees expected)"
@@ -189,26 +189,30 @@ _CHI2_3_MEDIAN = 2.365973884375338     # median of the chi-square distribution w
 
 def solution_findings(name: str, vehicle_type: str, t: np.ndarray, alt: np.ndarray, vel_enu: np.ndarray,
                       std_enu: np.ndarray, fix_alt: np.ndarray, fix_std_u: np.ndarray,
-                      gate_probability: float) -> list[Finding]:
-    """The solution's own bounds (O(n), vectorised): finite, altitude within the fixes' range by
-    the 1-dof gate quantile of the fixes' and the solution's vertical sigma, speed within the
-    vehicle type's :data:`MAX_SPEED_MPS`.  t (N,) s; alt (N,) m; vel_enu (N, 3) m/s;
-    std_enu (N, 3) m; fix_alt, fix_std_u (M,) m."""
+                      gate_probability: float, fatal: bool = True) -> list[Finding]:
+    """The solution's own bounds (O(n), vectorised), for gross failures the innovation checks
+    may miss: finite; altitude within the fixes' altitude band widened on each side by the
+    band's own height plus the 1-dof gate quantile of the fixes' and the solution's vertical
+    sigma (an overconfident filter a few metres off is not this check's business); speed within
+    the vehicle type's :data:`MAX_SPEED_MPS`.  t (N,) s; alt (N,) m; vel_enu (N, 3) m/s;
+    std_enu (N, 3) m; fix_alt, fix_std_u (M,) m.  ``fatal`` False: findings are warnings
+    (``[gnss] max_rejected_fraction = 1``: write anyway)."""
     if t.shape[0] == 0 or fix_alt.shape[0] == 0:
         return []
     bad = ~(np.isfinite(alt) & np.isfinite(std_enu).all(axis=1))
     if bad.any():
         i = int(np.argmax(bad))
-        return [Finding(True, f"{name} diverged: its solution is not finite from t = {float(t[i]):.3f} s")]
+        return [Finding(fatal, f"{name} diverged: its solution is not finite from t = {float(t[i]):.3f} s")]
     k = math.sqrt(gate_quantiles(gate_probability)[2])
     su = float(np.max(fix_std_u)) if np.all(np.isfinite(fix_std_u)) else 0.0
-    lo, hi = float(np.min(fix_alt)) - k * su, float(np.max(fix_alt)) + k * su
+    band = float(np.max(fix_alt)) - float(np.min(fix_alt))
+    lo, hi = float(np.min(fix_alt)) - band - k * su, float(np.max(fix_alt)) + band + k * su
     slack = k * std_enu[:, 2]
     out_alt = (alt < lo - slack) | (alt > hi + slack)
     if out_alt.any():
         i = int(np.argmax(out_alt))
         j = int(np.argmax(np.abs(alt - 0.5 * (lo + hi))))
-        return [Finding(True, f"{name} diverged: its altitude leaves the fixes' {lo:.0f} .. {hi:.0f} m at "
+        return [Finding(fatal, f"{name} diverged: its altitude leaves the fixes' {lo:.0f} .. {hi:.0f} m at "
                               f"t = {float(t[i]):.1f} s (reaching {float(alt[j]):.4g} m)")]
     vmax = MAX_SPEED_MPS.get(vehicle_type, MAX_SPEED_MPS["none"])
     speed2 = np.einsum("ij,ij->i", vel_enu, vel_enu)
@@ -216,7 +220,7 @@ def solution_findings(name: str, vehicle_type: str, t: np.ndarray, alt: np.ndarr
     if fast.any():
         i = int(np.argmax(fast))
         j = int(np.argmax(speed2))
-        return [Finding(True, f"{name} diverged: its speed exceeds {vmax:.0f} m/s (the most a [vehicle] type = "
+        return [Finding(fatal, f"{name} diverged: its speed exceeds {vmax:.0f} m/s (the most a [vehicle] type = "
                               f"\"{vehicle_type}\" goes) at t = {float(t[i]):.1f} s, reaching "
                               f"{math.sqrt(float(speed2[j])):.4g} m/s")]
     return []
