@@ -275,6 +275,11 @@ class ImuNoise:
     accel_bias_tau: float
 
 
+#: White-noise densities of ``[imu]``: must be > 0 (a noise-free IMU makes the process noise of
+#: velocity or attitude zero, the filter's prediction then outweighs every fix).
+WHITE_NOISE_KEYS = ("gyro_arw_deg_per_sqrt_h", "accel_vrw_mps_per_sqrt_h")
+
+
 @dataclass(frozen=True)
 class ImuConfig:
     """``[imu]``: noise in datasheet units, mounting rotation and sample units.
@@ -286,11 +291,12 @@ class ImuConfig:
     Attributes
     ----------
     preset : str. One of ``PRESET_NAMES``; default ``"automotive"``.
-    gyro_arw_deg_per_sqrt_h : float, deg/sqrt(h), >= 0. Gyro angle random walk.
+    gyro_arw_deg_per_sqrt_h : float, deg/sqrt(h), > 0. Gyro angle random walk (no gyro is
+        noise-free: 0 would let the filter trust the integrated IMU without limit, so it is refused).
     gyro_bias_deg_per_h : float, deg/h, >= 0. Turn-on gyro bias, 1 sigma.
     gyro_bias_instability_deg_per_h : float, deg/h, >= 0. Gyro bias instability.
     gyro_bias_corr_time_s : float, s, > 0 or ``math.inf`` (TOML ``inf`` or ``"inf"``).
-    accel_vrw_mps_per_sqrt_h : float, m/s/sqrt(h), >= 0. Accelerometer velocity random walk.
+    accel_vrw_mps_per_sqrt_h : float, m/s/sqrt(h), > 0. Accelerometer velocity random walk (0 refused).
     accel_bias_mg : float, mg, >= 0. Turn-on accelerometer bias, 1 sigma.
     accel_bias_instability_mg : float, mg, >= 0. Accelerometer bias instability.
     accel_bias_corr_time_s : float, s, > 0 or ``math.inf``.
@@ -325,6 +331,11 @@ class ImuConfig:
                 )
             else:
                 value = _as_float("imu", key, value, minimum=0.0)
+                if key in WHITE_NOISE_KEYS and value == 0.0:
+                    raise ConfigError(
+                        f"[imu] {key} = 0: no real IMU is noise-free (the filter would trust it without "
+                        f"limit between fixes); give the datasheet's value or leave it out ({preset} preset: "
+                        f"{PRESETS[preset][key]:g})")
             _set(self, key, value)
         mounting = _as_vector("imu", "mounting_rpy_deg", self.mounting_rpy_deg, 3)
         _set(self, "mounting_rpy_deg", mounting)

@@ -617,6 +617,52 @@ def _causes(config: Config) -> str:
 
 _CHI2_3_MEDIAN = 2.365973884375338     # median of the chi-square distribution with 3 dof
 
+#: What a warning the run printed says about the likely cause of a divergence, in the order tried:
+#: (text in the warning, the short cause with its setting).
+_NOTICED_CAUSES = (
+    ("GNSS track turns", "the gyro's unit or axes ([imu] gyro_units, mounting_rpy_deg)"),
+    ("gravity is on", "the IMU's axes ([imu] mounting_rpy_deg)"),
+    ("tilted by", "the IMU's axes ([imu] mounting_rpy_deg)"),
+    ("clock offset", "the time bases ([gnss] time_offset_s)"),
+    ("look saturated", "a saturated IMU"),
+    ("gyro rates reach", 'the gyro\'s unit ([imu] gyro_units = "deg/s"?)'),
+    ("periods (", "the IMU's gaps"),
+)
+
+
+def _likely_cause(recording: Recording, config: Config, noticed: list[str]) -> tuple[str, list[str]]:
+    """The single most likely cause of a filter and GNSS that disagree, and the rest (for a
+    warning line): first the fixes themselves (all identical, radians), then what the run
+    noticed (its warnings), then the IMU's units and axes."""
+    from .plausibility import fix_suspect
+
+    g = recording.gnss
+    suspect = fix_suspect(recording.source, g.lat_deg, g.lon_deg, g.alt, g.t, g.std_enu, config.vehicle.type)
+    if suspect is not None:
+        return suspect, [_causes(config)]
+    for key, cause in _NOTICED_CAUSES:
+        if any(key in w for w in noticed):
+            return f"check {cause}", [_causes(config)]
+    imu = "the IMU's units and axes ([imu] mounting_rpy_deg)"
+    return f"check {imu}", [_causes(config).replace("check the IMU units and axes ([imu] mounting_rpy_deg), ", "check ")]
+
+
+def _refusal(recording: Recording, config: Config, headline: str, notes: list[str], warnings: list[str],
+             cause: str | None = None, anyway: bool = True) -> FilterDivergedError:
+    """A FilterDivergedError as one short line (source, what was seen, the likely cause) with the
+    run's warnings, the other causes and the way to write the trajectory anyway as warnings
+    before it (the CLI prints them first), and the run's notes."""
+    if cause is None:
+        cause, others = _likely_cause(recording, config, warnings)
+    else:
+        others = [_causes(config)]
+    extra = [f"{recording.source}: other causes to check: {'; '.join(others)}"
+             + (" ([gnss] max_rejected_fraction = 1 writes the trajectory anyway)" if anyway else "")]
+    exc = FilterDivergedError(f"{recording.source}: {headline}; likely: {cause}")
+    exc.warnings = tuple(warnings) + tuple(extra)
+    exc.notes = tuple(notes)
+    return exc
+
 
 def _consistency_checks(source: str, name: str, config: Config, tg: np.ndarray, nis: np.ndarray,
                         accepted: np.ndarray, noticed: list[str]) -> list[str]:
@@ -624,9 +670,10 @@ def _consistency_checks(source: str, name: str, config: Config, tg: np.ndarray, 
 
     More than ``[gnss] max_rejected_fraction`` of the fixes failing the gate means the filter
     and the GNSS disagree for good (wrong units, axes, lever arm, time base or standard
-    deviations): FilterDivergedError, whose message carries what the run ``noticed`` before
-    (a likely cause).  Above 5 %, or with the median NIS far above the
-    chi-square median (innovations larger than the filter predicts), a warning.
+    deviations): FilterDivergedError, one short line with the likely cause (see
+    :func:`_refusal`; the other causes and what the run ``noticed`` go in its warnings).  Above
+    5 %, or with the median NIS far above the chi-square median (innovations larger than the
+    filter predicts), a warning.
     """
     m = tg.shape[0]
     rejected = int(np.count_nonzero(~accepted))
@@ -636,10 +683,7 @@ def _consistency_checks(source: str, name: str, config: Config, tg: np.ndarray, 
     if m >= 20 and rejected > config.gnss.max_rejected_fraction * m:
         first = float(tg[np.argmax(~accepted)])
         raise FilterDivergedError(
-            f"{source}: {name} diverged: {what}, the first at t = {first:.1f} s, and the GNSS innovations are "
-            f"{scale:.1f} times larger than predicted; "
-            + ("; ".join(w.removeprefix(f"{source}: ") for w in noticed) + "; otherwise " if noticed else "")
-            + f"{_causes(config)} (set [gnss] max_rejected_fraction = 1 to write the trajectory anyway)")
+            f"{name} diverged: {what} (first at t = {first:.1f} s; innovations {scale:.1f}x predicted)")
     warnings = []
     if rejected > 0.05 * m:
         warnings.append(f"{source}: {what}: the IMU and GNSS disagree; {_causes(config)}")
@@ -750,11 +794,21 @@ def _check_gyro_scale(recording: Recording, config: Config, up_s: np.ndarray, en
     imu, gnss, source = recording.imu, recording.gnss, recording.source
     std_h = np.hypot(gnss.std_enu[:, 0], gnss.std_enu[:, 1]) / math.sqrt(2.0) if gnss.std_enu is not None else 0.0
     est = yaw_scale_from_track(imu.t, imu.gyro @ up_s, gnss.t, enu[:, 0], enu[:, 1], std_h)
+    lo, hi = GYRO_SCALE_BOUNDS
+    if (math.isfinite(est.scale) and -hi <= est.scale <= -lo and est.correlation <= -GYRO_SCALE_CORRELATION
+            and est.gnss_turn_deg >= GYRO_SCALE_TURN_DEG):
+        # the track turns the other way at the gyro's rate: a mirror image, as lat and lon swapped
+        # make it (east and north exchanged); the gyro's up is measured from the accelerometers,
+        # so an IMU that is upside down or forward-right-down does not do this
+        from .plausibility import gnss_name
+
+        raise InputError(f"{source}: the GNSS track turns the other way from the gyro (ratio {est.scale:.2f}, "
+                         f"correlation {est.correlation:.2f} over {est.gnss_turn_deg:.0f} deg): are lat and lon "
+                         f"swapped in {gnss_name(source)}? (else a reversed gyro axis)")
     scale = abs(est.scale) if math.isfinite(est.scale) else float("nan")
     if not (math.isfinite(scale) and scale > 0 and math.isfinite(est.correlation)
             and est.correlation >= GYRO_SCALE_CORRELATION and est.gnss_turn_deg >= GYRO_SCALE_TURN_DEG):
         return []
-    lo, hi = GYRO_SCALE_BOUNDS
     if lo <= scale <= hi:
         return []
     what = (f"the GNSS track turns {scale:.3g} x as much as the gyro measures about the vertical "
@@ -809,9 +863,12 @@ def timing_fixes(recording: Recording, config: Config,
         return recording, notes, warnings
     up = imu.accel.mean(axis=0)            # the sensor's up, as logged
     up = up / max(float(np.linalg.norm(up)), 1e-9)
-    lat0, lon0 = math.radians(float(gnss.lat_deg[0])), math.radians(float(gnss.lon_deg[0]))
+    # origin at the middle fix, not the first: a first fix on the far side of the globe would mirror
+    # the track in the tangent plane (the yaw-scale check would read it as lat/lon swapped)
+    mid = int(np.argsort(gnss.lat_deg, kind="stable")[len(gnss) // 2])
+    lat0, lon0 = math.radians(float(gnss.lat_deg[mid])), math.radians(float(gnss.lon_deg[mid]))
     enu = geodesy.geodetic_to_enu(np.radians(gnss.lat_deg), np.radians(gnss.lon_deg), gnss.alt, lat0, lon0,
-                                  float(gnss.alt[0]))
+                                  float(gnss.alt[mid]))
     warnings += _check_gyro_scale(recording, config, up, enu)
     if auto.clock_offset and config.gnss.time_offset_s == 0.0:
         if gnss.vel_enu is not None:
@@ -887,6 +944,12 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
     try:
         al = align(model.t, model.gyro, model.accel, gnss, alignment_settings(config, noise, cal))
     except InputError as exc:  # alignment knows the data, not where it came from
+        from .plausibility import fix_suspect
+
+        suspect = fix_suspect(recording.source, gnss.lat_deg, gnss.lon_deg, gnss.alt)
+        if suspect is not None:     # the fixes themselves first: the alignment only saw their symptom
+            both = f"{recording.source}: {suspect}; {exc}"
+            raise InputError(both if len(both) < 285 else f"{recording.source}: {suspect}") from None
         raise InputError(f"{recording.source}: {exc}") from None
     model.path[al.index] = al.x[:model.path.shape[1]]
     notes[:0] = list(al.lines)          # for an error's context; the result carries them apart
@@ -911,6 +974,8 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
     accepted = np.zeros(m_ep, bool)
     forced = np.zeros(m_ep, bool)
     r_std = np.full((m_ep, 3), np.nan)
+    s_used = np.full((m_ep, 3, 3), np.nan)     # each fix's innovation covariance and R as the filter had them
+    r_used = np.full((m_ep, 3, 3), np.nan)
     adaptive: dict[str, np.ndarray] = {}
     bias = np.empty((m_ep, 6))
     bias_var = np.empty((m_ep, 6))
@@ -1011,6 +1076,8 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
                     last_acc = k
                 forced[k] = inn.forced
                 r_std[k] = np.sqrt(np.diagonal(inn.R))
+                s_used[k] = inn.S
+                r_used[k] = inn.R
                 for name, value in filt.noise_report().items():
                     if name not in adaptive:
                         adaptive[name] = np.full((m_ep, np.size(value)), np.nan)
@@ -1048,8 +1115,8 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
     def diverged(t: float, why: str) -> FilterDivergedError:
         good = (f"the last good epoch (accepted GNSS update) was t = {last_good:.3f} s" if last_good is not None
                 else f"no GNSS update had been accepted yet (alignment at t = {al.t:.3f} s)")
-        return FilterDivergedError(f"{recording.source}: {filt.name} diverged at t = {t:.3f} s: {why}; {good}; "
-                                   f"nothing written; {_CAUSES}")
+        return _refusal(recording, config, f"{filt.name} diverged at t = {t:.3f} s: {why}; {good}", notes,
+                        warnings, anyway=False)
 
     def checked(t: float) -> None:
         fault = _state_fault(state)
@@ -1105,7 +1172,12 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
                      + ", ".join(f"{x:.1f}" for x in v[:10]) + (" ..." if len(v) > 10 else "")
                      + " s: ZUPT's velocity corrections kept one direction (a gentle start the IMU's spreads did not "
                      "show), so no more ZUPT or ZARU until the next stop")
-    warnings += _consistency_checks(recording.source, filt.name, config, tg, nis, accepted, list(warnings))
+    try:
+        warnings += _consistency_checks(recording.source, filt.name, config, tg, nis, accepted, list(warnings))
+    except FilterDivergedError as exc:
+        raise _refusal(recording, config, str(exc), notes, warnings) from None
+    warnings += _plausibility_checks(recording, config, filt.name, solution, smoothed, tg, nu, s_used, r_used, var,
+                                     accepted, alt, notes, warnings)
     warnings += _aid_checks(recording.source, aiding.counts.as_dict())
     if smoothed is not None and smoothed.breaks:
         n = smoothed.breaks
@@ -1117,6 +1189,32 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
                      tuple(warnings), smoothed, tuple(notes[n_al:]), aiding.counts.as_dict(),
                      {**calibration, "recoveries_s": [round(v, 3) for v in recoveries],
                       "standstill_ended_early_s": [round(v, 3) for v in aiding.vetoes]})
+
+
+def _plausibility_checks(recording: Recording, config: Config, name: str, solution: Solution,
+                         smoothed: SmoothedRun | None, tg: np.ndarray, nu: np.ndarray, s_used: np.ndarray, r_used: np.ndarray,
+                         var0: np.ndarray, accepted: np.ndarray, fix_alt: np.ndarray, notes: list[str],
+                         warnings: list[str]) -> list[str]:
+    """Every filter's finished solution judged against the prior GNSS sigma and the vehicle
+    (:mod:`navpp.plausibility`), before anything is written: FilterDivergedError (one short
+    line) for a run that is wrong, warnings for a doubtful one."""
+    from . import plausibility as pl
+
+    src = recording.source
+    label = pl.std_name(src, recording.gnss.std_enu is not None)
+    found = pl.innovation_findings(name, label, tg, nu, s_used, r_used, var0, accepted, config.gnss.gate_probability,
+                                   config.gnss.max_rejected_fraction)
+    sols = [solution] + ([smoothed.solution] if smoothed is not None else [])
+    for sol in sols:
+        found += pl.solution_findings(name, config.vehicle.type, sol.t, sol.alt, sol.vel_enu, sol.std_enu, fix_alt,
+                                      np.sqrt(var0[:, 2]), config.gnss.gate_probability,
+                                      config.gnss.max_rejected_fraction < 1.0)
+    out = []
+    for f in found:
+        if f.fatal:
+            raise _refusal(recording, config, f.headline, notes, warnings + out, f.cause)
+        out.append(f"{src}: {f.headline}: {f.cause}" if f.cause else f"{src}: {f.headline}")
+    return out
 
 
 #: Share of an aid's updates the gate may reject before the run says the aid disagrees with the data.

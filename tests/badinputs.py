@@ -7,7 +7,7 @@ checkout under test is the one imported) and checks the user's contract for bad 
 - the exit code (1 for bad input, 130 for an interrupt);
 - stderr ends with one ``navpp: ...`` line under 300 characters holding the case's fragment
   (case-insensitive), with no traceback; lines before it may only be ``warning: ...`` lines
-  about the data (what the run noticed before it stopped);
+  about the data and ``· ...`` notes (what the run noticed before it stopped);
 - nothing is written: the ``--out`` directory is absent afterwards, or holds exactly what it
   held before (same names, same bytes);
 - every input is untouched (same names, same bytes, same mtimes under the input directory);
@@ -126,7 +126,10 @@ def run_case(case: Case, work: Path) -> str:
     assert "Traceback" not in stderr and "Traceback" not in stdout, where
     errors = [ln for ln in lines if ln.startswith("navpp:")]
     assert len(errors) == 1 and lines[-1] == errors[0], f"expected one 'navpp: ...' line, last on stderr\n{where}"
-    assert all(ln.startswith("warning:") for ln in lines[:-1]), f"stderr holds more than warnings and the error\n{where}"
+    # the run's warnings and its notes ("· ...", what it measured before it failed) may come first,
+    # as in tests/test_cli.py's assert_one_line_error
+    assert all(ln.startswith(("warning:", "· ")) for ln in lines[:-1]), \
+        f"stderr holds more than warnings, notes and the error\n{where}"
     msg = errors[0]
     assert len(msg) < MAX_LINE, f"message of {len(msg)} characters\n{where}"
     frags = (case.fragment,) if isinstance(case.fragment, str) else case.fragment

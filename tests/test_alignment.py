@@ -146,16 +146,20 @@ def test_gnss_starting_after_the_still_period_starts_in_motion_at_the_first_fix(
     assert any("no GNSS fix yet" in line for line in al.lines)
 
 
-def test_tilted_mounting_is_warned():
-    w, f = _static(math.radians(180.0), 0.0, 1.0)        # FRD-like: z axis pointing down
-    t = np.arange(0.0, 10.0, 0.01)
-    n = t.size
+def test_tilted_mounting_is_warned_and_an_upside_down_one_refused():
+    from navpp.errors import InputError
     from navpp.recording import GnssData
 
+    t = np.arange(0.0, 10.0, 0.01)
+    n = t.size
     tg = np.arange(0.0, 10.0, 0.2)
     gnss = GnssData(tg, np.full(tg.size, 45.0), np.full(tg.size, 7.0), np.full(tg.size, 300.0))
+    w, f = _static(math.radians(60.0), 0.0, 1.0)         # tilted, z still up: a warning
     al = align(t, np.tile(w, (n, 1)), np.tile(f, (n, 1)), gnss, AlignmentSettings(heading=0.5, method="config"))
     assert any("mounting_rpy_deg" in wline for wline in al.warnings)
+    w, f = _static(math.radians(180.0), 0.0, 1.0)        # FRD-like: z axis pointing down (issue 15)
+    with pytest.raises(InputError, match=r"-z of the declared forward-left-up body.*mounting_rpy_deg = \[180, 0, 0\]"):
+        align(t, np.tile(w, (n, 1)), np.tile(f, (n, 1)), gnss, AlignmentSettings(heading=0.5, method="config"))
 
 
 def test_config_heading_is_cross_checked_against_the_track():

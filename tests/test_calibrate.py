@@ -15,7 +15,7 @@ import pytest
 
 from navpp import api, engine
 from navpp.config import AutoConfig, config_from_dict
-from navpp.errors import FilterDivergedError
+from navpp.errors import FilterDivergedError, InputError
 from navpp.ins.calibrate import calibrate, gross_mounting, matrix_to_rpy_deg, noise_profile
 from navpp.ins.attitude import rpy_matrix
 from navpp.metrics import compute_metrics
@@ -134,8 +134,13 @@ def test_y_up_or_upside_down_imu_works_and_names_the_setting(drive, rpy):
     base = engine.run(drive.recording(), cfg, api.make_filter("ekf", cfg))
     assert h < 1.2 * _metrics(base.solution, rec.reference) + 0.05, h
     assert any("mounting_rpy_deg" in w and "not +z" in w for w in res.warnings), res.warnings
-    # off: levelled at 90 or 180 deg of roll, and a line names the setting
+    # off: levelled at 90 deg of roll with a line naming the setting; upside down (180 deg) is
+    # refused naming it (issue 15: the roll of 180 deg and a lever arm turned down were written)
     off = replace(cfg, auto=replace(cfg.auto, mounting=False))
+    if rpy[0] == 180.0:
+        with pytest.raises(InputError, match=r"mounting_rpy_deg = \[180, 0, 0\]"):
+            engine.run(rec, off, api.make_filter("ekf", off))
+        return
     res_off = engine.run(rec, off, api.make_filter("ekf", off))
     assert any("mounting_rpy_deg" in w and "tilted" in w for w in res_off.warnings), res_off.warnings
 

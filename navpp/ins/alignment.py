@@ -69,6 +69,11 @@ class Alignment:
     warnings: tuple[str, ...] = field(default_factory=tuple)
 
 
+#: A still IMU tilted by more than this (deg) is warned about (axes not forward-left-up?); one
+#: tilted beyond 90 deg plus this (its z axis closer to down) is refused as upside down.
+TILT_WARN_DEG = 30.0
+
+
 def still_runs(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_duration: float,
                gyro_arw: float = 0.0, accel_vrw: float = 0.0, window_s: float = 0.5) -> list[tuple[int, int]]:
     """Runs of still IMU windows lasting at least ``min_duration`` s: sample index ranges [i0, i1).
@@ -277,7 +282,7 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
         level_how = "static levelling"
         start = i0
         moving = False
-        if max(abs(roll), abs(pitch)) > math.radians(30.0):
+        if max(abs(roll), abs(pitch)) > math.radians(TILT_WARN_DEG):
             warnings.append(f"the IMU is tilted by roll {math.degrees(roll):+.1f} deg, pitch {math.degrees(pitch):+.1f} "
                             "deg at rest: if its axes are not forward-left-up (e.g. FRD), set [imu] mounting_rpy_deg")
     else:
@@ -301,6 +306,15 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
         roll, pitch = settings.roll, settings.pitch
         level_how = "config"
         att_std = math.radians(0.5)
+    elif math.cos(roll) * math.cos(pitch) < -math.sin(math.radians(TILT_WARN_DEG)):
+        # the body's z axis points down (tilted beyond 90 deg plus the tilt warning's 30 deg, so a
+        # y-up mounting near 90 deg stays a warning): no land vehicle runs upside down, but
+        # forward-right-down axes read as forward-left-up do; the strapdown would carry the roll of
+        # 180 deg and the lever arm's up component would become down (a vertical bias of twice it)
+        where = (f"at rest, t = {t_s0:.1f} .. {t_s1:.1f} s" if not moving else "on the log's mean")
+        raise InputError(f"gravity is measured along -z of the declared forward-left-up body ({where}, roll "
+                         f"{math.degrees(roll):+.0f} deg): the axes look forward-right-down; set [imu] "
+                         f"mounting_rpy_deg = [180, 0, 0]")
     t_start = float(t[start])
 
     # position: GNSS fixes during the still period, else the first fix after the start

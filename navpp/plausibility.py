@@ -1,0 +1,226 @@
+"""Is the finished solution plausible?  Checked after the run, before anything is written.
+
+Adaptive filters learn the GNSS noise R from the innovations (Sage-Husa, AEKF, VCE) or inflate
+the prediction (AUKF's fading): a filter that has lost the GNSS then accepts every fix with a
+normal-looking NIS, and the gate never fires.  So every filter is judged here against the
+PRIOR R: the 1-sigma the log declares per fix (``std_e, std_n, std_u`` of ``gnss.csv``, the
+NavSatFix covariance) or ``[gnss] default_std_m``.  All thresholds are chi-square quantiles at
+the configured gate probability (``[gnss] gate_probability``, 0.9999 by default) and shares of
+the fixes against ``[gnss] max_rejected_fraction``, as for the gate:
+
+- innovations far beyond the prior R: more than the allowed share of fixes whose NIS with
+  the prior R, ``nu' (S - R_used + R_prior)^-1 nu``, exceeds the 3-dof gate quantile;
+  together with R grown far beyond the prior (the learnt 1-sigma above ``sqrt(chi2_1(p))``
+  times the prior's: no single consistent innovation makes R that large) or the solution away
+  from the accepted fixes (the post-fit residual ``R_used S^-1 nu`` normalised by the prior R
+  beyond the 3-dof gate quantile), each at more than that share (a learnt R alone is not
+  wrong: AEKF's holds the prediction error by design);
+- GNSS noise far SMALLER than the prior R says (standard deviations in cm read as m): the
+  difference of consecutive innovations (the INS's drift cancels, the fixes' noise stays),
+  normalised by the two fixes' prior R, below the lower chi-square quantile ``chi2_3(1 - p)``
+  at more than half the fixes (a consistent filter puts about ``1 - p`` of them there; real
+  receivers' time-correlated fixes put up to a fifth there: the bundled RTK walk), i.e. the
+  sigmas at least ``sqrt(chi2_3 median / chi2_3(1 - p))`` = 12x too large at the default p;
+- the solution's altitude beyond the fixes' altitude range by more than the 1-dof gate
+  quantile of the fixes' and the solution's vertical sigma, its speed beyond the vehicle
+  type's (:data:`MAX_SPEED_MPS`), a non-finite position or sigma.
+
+Speeds m/s, distances m, ENU axes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.special import chdtri
+
+#: The highest speed the solution may show per ``[vehicle] type``, m/s: a road car's top speed
+#: is below 150 m/s (540 km/h); with no vehicle model the speed of sound (no platform navpp's
+#: loosely coupled land/walk/robot aiding is meant for flies faster).
+MAX_SPEED_MPS = {"car": 150.0, "none": 343.0}
+
+#: The gate probability the checks use when gating is off (``gate_probability = 0``).
+DEFAULT_GATE_PROBABILITY = 0.9999
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One thing wrong with a run: ``fatal`` refuses the run; ``headline`` is what was seen
+    (short, for the one error line); ``cause`` the single most likely cause with its setting
+    (or None: the caller ranks the usual ones)."""
+
+    fatal: bool
+    headline: str
+    cause: str | None = None
+
+
+def gnss_name(source: str) -> str:
+    """How the user knows the GNSS stream: ``gnss.csv`` for a CSV log directory, else 'the GNSS fixes'."""
+    try:
+        if Path(source).is_dir():
+            return "gnss.csv"
+    except OSError:
+        pass
+    return "the GNSS fixes"
+
+
+def std_name(source: str, has_std: bool) -> str:
+    """The setting or columns the GNSS 1-sigma came from."""
+    if not has_std:
+        return "[gnss] default_std_m"
+    if gnss_name(source) == "gnss.csv":
+        return "std_e, std_n, std_u of gnss.csv"
+    return "the NavSatFix position_covariance"
+
+
+def fix_suspect(source: str, lat_deg: np.ndarray, lon_deg: np.ndarray, alt: np.ndarray,
+                t: np.ndarray | None = None, std_enu: np.ndarray | None = None,
+                vehicle_type: str = "none") -> str | None:
+    """What is wrong with the fixes themselves, before blaming the IMU: all identical, a whole
+    track of latitudes and longitudes inside +-pi/2 and +-pi (radians read as degrees: a track
+    that stays within 1.6 deg of the equator and 3.2 deg of Greenwich, in the Gulf of Guinea),
+    or (given the times ``t``, s) a step between consecutive fixes longer than the vehicle
+    type's :data:`MAX_SPEED_MPS` covers in the interval plus the gate quantile of the two fixes'
+    sigmas (``std_enu``, m).  Returns a short clause naming the file, or None."""
+    n = int(lat_deg.shape[0])
+    if n < 2:
+        return None
+    name = gnss_name(source)
+    if np.ptp(lat_deg) == 0.0 and np.ptp(lon_deg) == 0.0 and np.ptp(alt) == 0.0:
+        return (f"all {n} fixes of {name} are identical ({float(lat_deg[0]):.6f}, {float(lon_deg[0]):.6f}, "
+                f"{float(alt[0]):.1f} m)")
+    if float(np.max(np.abs(lat_deg))) <= 0.5 * math.pi and float(np.max(np.abs(lon_deg))) <= math.pi \
+            and np.ptp(lat_deg) + np.ptp(lon_deg) > 0.0:
+        return f"{name}'s {n} lat/lon lie within +-1.571/+-3.142: radians? (degrees expected)"
+    if t is not None:
+        from .geodesy import geodetic_to_ecef
+
+        xyz = geodetic_to_ecef(np.radians(lat_deg), np.radians(lon_deg), np.asarray(alt, float))
+        step = np.linalg.norm(np.diff(xyz, axis=0), axis=1)
+        sig = (np.linalg.norm(std_enu, axis=1) if std_enu is not None else np.zeros(n))
+        k = math.sqrt(gate_quantiles(DEFAULT_GATE_PROBABILITY)[0])
+        reach = MAX_SPEED_MPS.get(vehicle_type, MAX_SPEED_MPS["none"]) * np.abs(np.diff(t)) \
+            + k * np.hypot(sig[1:], sig[:-1])
+        jump = ~(step <= reach)
+        if jump.any():
+            i = int(np.argmax(jump))
+            return (f"{name}'s fix at t = {float(t[i]):.3f} s is {float(step[i]) / 1000.0:.4g} km from the next: "
+                    "a jump no vehicle makes")
+    return None
+
+
+def gate_quantiles(gate_probability: float) -> tuple[float, float, float]:
+    """(3-dof upper, 3-dof lower, 1-dof upper) chi-square quantiles at the gate probability."""
+    p = gate_probability if 0.0 < gate_probability < 1.0 else DEFAULT_GATE_PROBABILITY
+    return float(chdtri(3, 1.0 - p)), float(chdtri(3, p)), float(chdtri(1, 1.0 - p))
+
+
+def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray, S: np.ndarray,
+                        R_used: np.ndarray, var0: np.ndarray, accepted: np.ndarray, gate_probability: float,
+                        max_fraction: float) -> list[Finding]:
+    """The innovation checks against the prior R (module docstring).
+
+    t : (M,) s, the fixes' times; nu : (M, 3) innovations, ENU m (NaN rows: no update); S : (M, 3, 3) their covariance as the
+    filter computed it; R_used : (M, 3, 3) the R it used; var0 : (M, 3) the prior R's
+    diagonal, m^2; accepted : (M,) bool.  M fixes; nothing is checked below 20.
+    """
+    ok = np.all(np.isfinite(nu), axis=1) & np.all(np.isfinite(S), axis=(1, 2)) & np.all(var0 > 0.0, axis=1)
+    m = int(np.count_nonzero(ok))
+    if m < 20:
+        return []
+    hi3, lo3, hi1 = gate_quantiles(gate_probability)
+    out: list[Finding] = []
+
+    def share(n: int, of: int) -> str:
+        return f"{n} of {of} fixes ({100.0 * n / max(of, 1):.0f}%)"
+
+    # far smaller than predicted: the declared sigma is too large.  The innovation carries the
+    # INS's drift as well as the GNSS noise, and a filter that trusts a too-large sigma little
+    # drifts until the two match; between consecutive fixes the drift hardly changes, so the
+    # difference of consecutive innovations is the GNSS noise R claims to describe.
+    dt = np.diff(t)
+    step = float(np.median(dt)) if dt.size else 0.0
+    pair = ok[1:] & ok[:-1] & (dt <= 1.5 * step)
+    d_nu = (nu[1:] - nu[:-1])[pair]
+    q_d = np.sum(d_nu * d_nu / (var0[1:] + var0[:-1])[pair], axis=1)
+    n_d = int(q_d.shape[0])
+    low = int(np.count_nonzero(q_d < lo3))
+    if n_d >= 20 and low > 0.5 * n_d:
+        scale = math.sqrt(_CHI2_3_MEDIAN / max(float(np.median(q_d)), 1e-300))
+        what = (f"GNSS noise {scale:.3g}x smaller than {std_label} say ({share(low, n_d)} below "
+                f"the chi-square {100.0 * _tail(gate_probability):.2g}% bound)")
+        out.append(Finding(max_fraction < 1.0, what, "those sigmas are too large (cm read as m?)"))
+    nu, S, R_used, var0, acc = nu[ok], S[ok], R_used[ok], var0[ok], accepted[ok]
+    # far beyond the prior R (what a learnt R or an inflated P let through)
+    S0 = S - R_used + var0[:, :, None] * np.eye(3)
+    try:
+        nis0 = np.einsum("ki,ki->k", nu, np.linalg.solve(S0, nu[:, :, None])[:, :, 0])
+    except np.linalg.LinAlgError:
+        nis0 = q_r
+    r_ratio = np.sqrt(np.diagonal(R_used, axis1=1, axis2=2) / var0).max(axis=1)
+    beyond = int(np.count_nonzero(~(nis0 <= hi3)))
+    grown = int(np.count_nonzero(r_ratio > math.sqrt(hi1)))
+    S_inv_nu = np.linalg.solve(S, nu[:, :, None])
+    post = np.einsum("kij,kjl->kil", R_used, S_inv_nu)[:, :, 0]
+    q_post = np.sum(post * post / var0, axis=1)
+    far = int(np.count_nonzero(acc & ~(q_post <= hi3)))
+    n_acc = int(np.count_nonzero(acc))
+    # a learnt R (or an inflated P) alone is no divergence: AEKF's R holds the prediction error by
+    # design; it is one when the fixes it let through lie beyond the gate of the prior R
+    if beyond > max_fraction * m and (grown > max_fraction * m or far > max_fraction * max(n_acc, 1)):
+        how = (f"its learnt R {float(np.median(r_ratio)):.3g}x that" if grown > max_fraction * m
+               else f"its solution beyond the gate of {share(far, n_acc)} it accepted")
+        out.append(Finding(True, f"{name} diverged: {share(beyond, m)} lie beyond the gate of the configured GNSS "
+                                 f"sigma ({how})"))
+    return out
+
+
+def _tail(gate_probability: float) -> float:
+    """The gate's tail probability 1 - p (the lower bound's, mirrored)."""
+    p = gate_probability if 0.0 < gate_probability < 1.0 else DEFAULT_GATE_PROBABILITY
+    return 1.0 - p
+
+
+_CHI2_3_MEDIAN = 2.365973884375338     # median of the chi-square distribution with 3 dof
+
+
+def solution_findings(name: str, vehicle_type: str, t: np.ndarray, alt: np.ndarray, vel_enu: np.ndarray,
+                      std_enu: np.ndarray, fix_alt: np.ndarray, fix_std_u: np.ndarray,
+                      gate_probability: float, fatal: bool = True) -> list[Finding]:
+    """The solution's own bounds (O(n), vectorised), for gross failures the innovation checks
+    may miss: finite; altitude within the fixes' altitude band widened on each side by the
+    band's own height plus the 1-dof gate quantile of the fixes' and the solution's vertical
+    sigma (an overconfident filter a few metres off is not this check's business); speed within
+    the vehicle type's :data:`MAX_SPEED_MPS`.  t (N,) s; alt (N,) m; vel_enu (N, 3) m/s;
+    std_enu (N, 3) m; fix_alt, fix_std_u (M,) m.  ``fatal`` False: findings are warnings
+    (``[gnss] max_rejected_fraction = 1``: write anyway)."""
+    if t.shape[0] == 0 or fix_alt.shape[0] == 0:
+        return []
+    bad = ~(np.isfinite(alt) & np.isfinite(std_enu).all(axis=1))
+    if bad.any():
+        i = int(np.argmax(bad))
+        return [Finding(fatal, f"{name} diverged: its solution is not finite from t = {float(t[i]):.3f} s")]
+    k = math.sqrt(gate_quantiles(gate_probability)[2])
+    su = float(np.max(fix_std_u)) if np.all(np.isfinite(fix_std_u)) else 0.0
+    band = float(np.max(fix_alt)) - float(np.min(fix_alt))
+    lo, hi = float(np.min(fix_alt)) - band - k * su, float(np.max(fix_alt)) + band + k * su
+    slack = k * std_enu[:, 2]
+    out_alt = (alt < lo - slack) | (alt > hi + slack)
+    if out_alt.any():
+        i = int(np.argmax(out_alt))
+        j = int(np.argmax(np.abs(alt - 0.5 * (lo + hi))))
+        return [Finding(fatal, f"{name} diverged: its altitude leaves the fixes' {lo:.0f} .. {hi:.0f} m at "
+                              f"t = {float(t[i]):.1f} s (reaching {float(alt[j]):.4g} m)")]
+    vmax = MAX_SPEED_MPS.get(vehicle_type, MAX_SPEED_MPS["none"])
+    speed2 = np.einsum("ij,ij->i", vel_enu, vel_enu)
+    fast = speed2 > vmax * vmax
+    if fast.any():
+        i = int(np.argmax(fast))
+        j = int(np.argmax(speed2))
+        return [Finding(fatal, f"{name} diverged: its speed exceeds {vmax:.0f} m/s (the most a [vehicle] type = "
+                              f"\"{vehicle_type}\" goes) at t = {float(t[i]):.1f} s, reaching "
+                              f"{math.sqrt(float(speed2[j])):.4g} m/s")]
+    return []

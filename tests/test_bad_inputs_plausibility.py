@@ -1,0 +1,163 @@
+"""Bad inputs, round two (issue 15), points 1, 2, 6 and part of 12: inputs on which a filter
+used to write a plausible-looking but wrong trajectory (adaptive filters that learn the error
+away, GNSS standard deviations in cm, FRD data declared FLU, zero IMU noise) or a misleading
+message (lat/lon swapped, latitude in radians, identical fixes).  Each row: exit code 1, one
+``navpp:`` line holding the fragments, nothing written, inputs untouched (tests/badinputs.py)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from badinputs import Case, copy_drive, edit_csv, run_case
+
+
+def _cols(edit):
+    """An edit of every data row of a CSV file given as ``edit(header, values) -> values``."""
+    def fn(lines):
+        head = lines[0].split(",")
+        out = [lines[0]]
+        for ln in lines[1:]:
+            if ln.strip():
+                out.append(",".join(edit(head, ln.split(","))))
+        return out
+    return fn
+
+
+def _scale(names, factor):
+    def edit(head, v):
+        for n in names:
+            i = head.index(n)
+            v[i] = repr(float(v[i]) * factor)
+        return v
+    return edit
+
+
+def _swap(a, b):
+    def edit(head, v):
+        i, j = head.index(a), head.index(b)
+        v[i], v[j] = v[j], v[i]
+        return v
+    return edit
+
+
+def _chain(*edits):
+    def edit(head, v):
+        for e in edits:
+            v = e(head, v)
+        return v
+    return edit
+
+
+def _argv(work, log, *extra):
+    return ["process", str(log), "--out", str(work / "out"), *extra]
+
+
+def gyro_x10(filt):
+    def build(work):
+        log = copy_drive(work)
+        edit_csv(log / "imu.csv", _cols(_scale(("gx", "gy", "gz"), 10.0)))
+        return _argv(work, log, "--filter", filt)
+    return build
+
+
+def imu_xy_swapped(filt):
+    def build(work):
+        log = copy_drive(work)
+        edit_csv(log / "imu.csv", _cols(_chain(_swap("gx", "gy"), _swap("ax", "ay"))))
+        return _argv(work, log, "--filter", filt)
+    return build
+
+
+def latlon_swapped(filt):
+    def build(work):
+        log = copy_drive(work)
+        edit_csv(log / "gnss.csv", _cols(_swap("lat", "lon")))
+        return _argv(work, log, "--filter", filt)
+    return build
+
+
+def lat_in_radians(filt):
+    def build(work):
+        log = copy_drive(work)
+        edit_csv(log / "gnss.csv", _cols(_scale(("lat", "lon"), math.pi / 180.0)))
+        return _argv(work, log, "--filter", filt)
+    return build
+
+
+def first_fix_elsewhere(filt):
+    def build(work):
+        log = copy_drive(work)
+
+        def fn(lines):
+            v = lines[1].split(",")
+            v[1], v[2] = "-33.9", "151.2"        # Sydney, for a drive near Turin
+            return [lines[0], ",".join(v), *lines[2:]]
+        edit_csv(log / "gnss.csv", fn)
+        return _argv(work, log, "--filter", filt)
+    return build
+
+
+def std_x100(filt):
+    def build(work):
+        log = copy_drive(work)
+        edit_csv(log / "gnss.csv", _cols(_scale(("std_e", "std_n", "std_u"), 100.0)))
+        return _argv(work, log, "--filter", filt)
+    return build
+
+
+def frd_as_flu(filt):
+    """Forward-right-down samples declared forward-left-up, with ``[auto] mounting`` off (on, the
+    run rotates the IMU itself and says so: tests/test_calibrate.py)."""
+    def build(work):
+        log = copy_drive(work)
+        edit_csv(log / "imu.csv", _cols(_scale(("gy", "gz", "ay", "az"), -1.0)))
+        with open(log / "navpp.toml", "a") as f:
+            f.write("\n[auto]\nmounting = false\n")
+        return _argv(work, log, "--filter", filt)
+    return build
+
+
+def zero_noise(filt, keys=("gyro_arw_deg_per_sqrt_h", "accel_vrw_mps_per_sqrt_h")):
+    def build(work):
+        log = copy_drive(work)
+        text = (log / "navpp.toml").read_text().replace("[imu]\n", "[imu]\n" + "".join(f"{k} = 0\n" for k in keys))
+        (log / "navpp.toml").write_text(text)
+        return _argv(work, log, "--filter", filt)
+    return build
+
+
+def identical_fixes(filt):
+    def build(work):
+        log = copy_drive(work)
+
+        def fn(lines):
+            first = lines[1].split(",")
+            return [lines[0]] + [",".join([ln.split(",")[0], *first[1:]]) for ln in lines[1:] if ln.strip()]
+        edit_csv(log / "gnss.csv", fn)
+        return _argv(work, log, "--filter", filt)
+    return build
+
+
+CASES = [
+    Case("sage-husa-gyro-x10", gyro_x10("sage-husa"), ("sage-husa diverged", "configured GNSS sigma", "gyro")),
+    Case("aekf-imu-xy-swapped", imu_xy_swapped("aekf"), ("aekf diverged", "configured GNSS sigma", "mounting_rpy_deg")),
+    Case("aukf-gyro-x10", gyro_x10("aukf"), ("aukf diverged", "gyro")),
+    Case("latlon-swapped", latlon_swapped("sage-husa"), ("gnss.csv", "lat and lon swapped")),
+    Case("first-fix-elsewhere", first_fix_elsewhere("sage-husa"), ("sage-husa diverged", "configured GNSS sigma")),
+    Case("first-fix-elsewhere-ekf", first_fix_elsewhere("ekf"), "ekf diverged"),
+    Case("std-x100", std_x100("ekf"), ("std_e, std_n, std_u of gnss.csv", "too large")),
+    Case("std-x100-sage-husa", std_x100("sage-husa"), ("std_e, std_n, std_u of gnss.csv", "too large")),
+    Case("frd-as-flu", frd_as_flu("ekf"), ("-z", "forward-left-up", "mounting_rpy_deg = [180, 0, 0]")),
+    Case("zero-noise", zero_noise("ekf"), ("navpp.toml", "gyro_arw_deg_per_sqrt_h = 0")),
+    Case("zero-accel-noise", zero_noise("ekf", ("accel_vrw_mps_per_sqrt_h",)), ("navpp.toml", "accel_vrw_mps_per_sqrt_h")),
+    Case("lat-in-radians", lat_in_radians("ekf"), ("gnss.csv", "radians")),
+    Case("lat-in-radians-sage-husa", lat_in_radians("sage-husa"), ("gnss.csv", "radians")),
+    Case("identical-fixes", identical_fixes("ekf"), ("all 1501 fixes of gnss.csv are identical",)),
+]
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+def test_bad_input(case, tmp_path):
+    run_case(case, tmp_path)

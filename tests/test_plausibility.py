@@ -1,0 +1,102 @@
+"""The plausibility checks of a finished run (navpp/plausibility.py, issue 15): no false alarm on
+clean runs of every filter (the simulated drive and the real RTK walk), and each check fires on
+synthetic innovations built to fail it (so the clean runs' silence means something)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from navpp import api
+from navpp import plausibility as pl
+from navpp.filters import FILTERS
+
+SAMPLE = Path(__file__).resolve().parent.parent / "sample_data"
+#: words only the plausibility checks and the fix checks of issue 15 write
+NEW_WORDS = ("configured GNSS sigma", "GNSS noise", "radians", "identical", "swapped", "a jump no vehicle",
+             "altitude leaves", "speed exceeds")
+
+
+@pytest.mark.parametrize("log", ["drive", "walk_0827"])
+@pytest.mark.parametrize("name", sorted(FILTERS))
+def test_clean_logs_pass_every_filter_without_new_warnings(log, name, tmp_path):
+    res = api.process(SAMPLE / log, filter_name=name, out_dir=tmp_path / "out")
+    said = [w for w in res.warnings if any(word in w for word in NEW_WORDS)]
+    assert said == [], said
+    assert (tmp_path / "out" / "trajectory.csv").is_file()
+
+
+def _white(m=600, sigma=(1.8, 1.8, 2.5), scale=1.0, seed=1):
+    rng = np.random.default_rng(seed)
+    var0 = np.tile(np.square(sigma), (m, 1)) * scale ** 2      # what the log declares
+    nu = rng.normal(size=(m, 3)) * np.sqrt(np.square(sigma))   # what the GNSS does
+    S = np.einsum("ki,ij->kij", var0, np.eye(3))
+    return np.arange(m) * 0.2, nu, S, S.copy(), var0, np.ones(m, bool)
+
+
+def test_consistent_innovations_raise_nothing():
+    t, nu, S, R, var0, acc = _white()
+    assert pl.innovation_findings("ekf", "std", t, nu, S, R, var0, acc, 0.9999, 0.25) == []
+
+
+def test_sigmas_far_too_large_are_refused_naming_them():
+    t, nu, S, R, var0, acc = _white(scale=100.0)
+    (f,) = pl.innovation_findings("ekf", "std_e, std_n, std_u of gnss.csv", t, nu, S, R, var0, acc, 0.9999, 0.25)
+    assert f.fatal and "std_e, std_n, std_u of gnss.csv" in f.headline and "too large" in f.cause
+    # twice too large is not refused (real receivers' fixes are time-correlated)
+    t, nu, S, R, var0, acc = _white(scale=2.0)
+    assert pl.innovation_findings("ekf", "std", t, nu, S, R, var0, acc, 0.9999, 0.25) == []
+    # max_rejected_fraction = 1 lets it through as a warning
+    t, nu, S, R, var0, acc = _white(scale=100.0)
+    (f,) = pl.innovation_findings("ekf", "std", t, nu, S, R, var0, acc, 0.9999, 1.0)
+    assert not f.fatal
+
+
+def test_a_learnt_r_hiding_large_innovations_is_a_divergence():
+    t, nu, S, R, var0, acc = _white()
+    nu = nu * 30.0                                  # innovations 30 sigma of the configured R ...
+    R = R * 900.0                                   # ... which the filter learnt away
+    S = S * 900.0
+    (f,) = pl.innovation_findings("sage-husa", "std", t, nu, S, R, var0, acc, 0.9999, 0.25)
+    assert f.fatal and "sage-husa diverged" in f.headline and "configured GNSS sigma" in f.headline
+    # a learnt R alone, with innovations the prior explains (AEKF's R holds the prediction error)
+    t, nu, S, R, var0, acc = _white()
+    assert pl.innovation_findings("aekf", "std", t, nu, S * 9.0, R * 9.0, var0, acc, 0.9999, 0.25) == []
+
+
+def test_solution_bounds():
+    n = 1000
+    t = np.arange(n) * 0.01
+    alt = np.full(n, 300.0)
+    vel = np.zeros((n, 3))
+    vel[:, 0] = 20.0
+    std = np.ones((n, 3))
+    fix_alt, fix_su = np.full(10, 300.0), np.full(10, 2.5)
+    assert pl.solution_findings("ekf", "car", t, alt, vel, std, fix_alt, fix_su, 0.9999) == []
+    low = alt.copy()
+    low[500:] = -15865.0
+    (f,) = pl.solution_findings("ekf", "car", t, low, vel, std, fix_alt, fix_su, 0.9999)
+    assert f.fatal and "altitude" in f.headline and "t = 5.0 s" in f.headline
+    fast = vel.copy()
+    fast[700:, 1] = 3e5
+    (f,) = pl.solution_findings("ekf", "car", t, alt, fast, std, fix_alt, fix_su, 0.9999)
+    assert "speed exceeds 150 m/s" in f.headline and "t = 7.0 s" in f.headline
+    assert pl.solution_findings("ekf", "none", t, alt, vel * 10.0, std, fix_alt, fix_su, 0.9999) == []
+
+
+def test_fix_suspects(tmp_path):
+    (tmp_path / "gnss.csv").write_text("")
+    lat = 45.0 + np.linspace(0, 0.01, 50)
+    lon = 7.0 + np.linspace(0, 0.01, 50)
+    alt = np.full(50, 300.0)
+    t = np.arange(50) * 0.2
+    src = str(tmp_path)
+    assert pl.fix_suspect(src, lat, lon, alt, t, None, "car") is None
+    assert "identical" in pl.fix_suspect(src, np.full(50, 45.0), np.full(50, 7.0), alt)
+    assert "radians" in pl.fix_suspect(src, np.radians(lat), np.radians(lon), alt)
+    far = lat.copy()
+    far[0] = -33.9
+    msg = pl.fix_suspect(src, far, lon, alt, t, None, "car")
+    assert "gnss.csv's fix at t = 0.000 s" in msg and "jump" in msg
