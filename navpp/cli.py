@@ -33,9 +33,9 @@ def _fail(message: str, exc: BaseException | None = None) -> None:
     from rich.console import Console
     from rich.markup import escape
 
-    from .interrupts import Interrupted, received
+    from .interrupts import Interrupted, committed, received
 
-    if received() is not None:       # a signal surfaced as this error (e.g. inside numba): it is the cause
+    if received() is not None and not committed():   # a signal surfaced as this error (e.g. inside numba)
         raise Interrupted(received())
     err = Console(stderr=True, highlight=False, soft_wrap=True)
     for line in getattr(exc, "warnings", ()):

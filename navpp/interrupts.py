@@ -29,6 +29,7 @@ from contextlib import contextmanager
 _received: int | None = None
 _installed = False
 _committing = False
+_guarded: list[str] = []          # output directories whose earlier results a stop leaves as they were
 
 
 class Interrupted(BaseException):
@@ -72,6 +73,13 @@ def received() -> int | None:
     return _received
 
 
+def guard(out: object) -> None:
+    """Note that this run holds ``out`` (its lock, :class:`navpp.outdir.OutDirLock`) and writes
+    there only by a final :func:`commit`: an interrupt message can then say it is untouched."""
+    if str(out) not in _guarded:
+        _guarded.append(str(out))
+
+
 def committed() -> bool:
     """Whether this run has begun moving its results into place (:func:`commit`)."""
     return _committing
@@ -97,8 +105,9 @@ def commit() -> Iterator[None]:
 
 
 def exit_interrupted(signum: int) -> None:
-    """One line for a run stopped by ``signum`` (``navpp: interrupted by SIGINT; ...``), then
-    exit 130.  The interpreter's teardown still runs (it releases the worker pool's semaphores,
+    """One line for a run stopped by ``signum`` (``navpp: interrupted by SIGINT``, and when the
+    run held an output directory ``; nothing was written to DIR (earlier results there are
+    unchanged)``), then exit 130.  The interpreter's teardown still runs (it releases the worker pool's semaphores,
     else multiprocessing's resource tracker complains on stderr), under a watchdog: if it
     hangs for 5 s, the process exits at once."""
     import os
@@ -113,7 +122,9 @@ def exit_interrupted(signum: int) -> None:
         sys.stdout.flush()
     except Exception:  # noqa: BLE001  (a closed pipe: nothing more to say there)
         pass
-    sys.stderr.write(f"navpp: interrupted by {name}; nothing was written (earlier results are unchanged)\n")
+    where = (f"; nothing was written to {_guarded[0]} (earlier results there are unchanged)"
+             if len(_guarded) == 1 and not _committing else "")
+    sys.stderr.write(f"navpp: interrupted by {name}{where}\n")
     sys.stderr.flush()
     watchdog = threading.Timer(5.0, os._exit, (130,))
     watchdog.daemon = True

@@ -16,7 +16,7 @@ The rules, used by :func:`navpp.api.process` and :func:`navpp.comparison.compare
 - **Inputs** (:func:`input_files`): a file that is an input of the current run (same device
   and inode) is never removed or replaced; a run whose output would replace one of its inputs
   is refused before it starts (:func:`refuse_overwriting_inputs`).
-- **Leftovers**: staging directories (``.navpp-run-*``), write probes and temporary files of a
+- **Leftovers**: staging directories (``.navpp-run-*``) and temporary files of a
   run that was killed (SIGKILL, power loss) are removed by the next run that takes the lock:
   while the lock is held no other live navpp run can own them.
 """
@@ -36,7 +36,6 @@ from .errors import InputError
 LOCK_NAME = ".navpp.lock"
 MANIFEST_NAME = ".navpp-manifest.json"
 STAGING_PREFIX = ".navpp-run-"
-PROBE_PREFIX = ".navpp-write-test-"
 
 
 def _reason(exc: OSError) -> str:
@@ -80,6 +79,9 @@ class OutDirLock:
                     who = f"another navpp run (pid {holder})" if holder else "another navpp run"
                     raise InputError(f"{self.label} {self.out}: {who} is writing there; wait for it to end "
                                      f"or choose another {self.label}") from None
+                if exc.errno in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL):
+                    _unlink_quietly(self.path)      # a file system without flock: run unguarded, as before
+                    return
                 raise InputError(f"{self.label} {self.out}: cannot lock it ({_reason(exc)})") from None
             try:
                 same = os.path.samestat(os.fstat(fd), os.stat(self.path))
@@ -91,6 +93,9 @@ class OutDirLock:
         else:
             raise InputError(f"{self.label} {self.out}: cannot lock it (the lock file keeps changing)")
         self.fd = fd
+        from .interrupts import guard
+
+        guard(self.out)
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()}\n".encode())
         remove_leftovers(self.out, self.extra_leftovers)
@@ -99,15 +104,19 @@ class OutDirLock:
         self.release()
 
     def release(self) -> None:
-        """Remove the lock file, then drop the lock (in this order, see ``__enter__``)."""
+        """Remove the lock file, then drop the lock (in this order: see the retry in :meth:`acquire`)."""
         if self.fd is None:
             return
-        try:
-            os.unlink(self.path)
-        except OSError:
-            pass
+        _unlink_quietly(self.path)
         os.close(self.fd)
         self.fd = None
+
+
+def _unlink_quietly(path: Path) -> None:
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
 
 
 def _read_pid(fd: int) -> int | None:
@@ -119,11 +128,13 @@ def _read_pid(fd: int) -> int | None:
 
 
 def remove_leftovers(out: Path, names: Iterable[str] = ()) -> None:
-    """Remove what a killed navpp run left in ``out``: ``.navpp-run-*`` staging directories,
-    ``.navpp-write-test-*`` probes and the temporary files of :func:`navpp.io.writers.atomic_write`
+    """Remove what a killed navpp run left in ``out``: ``.navpp-run-*`` staging directories and
+    the temporary files of :func:`navpp.io.writers.atomic_write`
     (``.<name>.<8 characters>.tmp``) for a navpp file name: one of ``names``, or ending in one
     of them when it starts with ``*`` (``"*_trajectory.png"``).  Only call it while holding
-    ``out``'s lock.  Best effort."""
+    ``out``'s lock: a live run makes these only while it holds the lock.  (Not the write
+    probes of :func:`navpp.api.prepare_out_dir`: a run makes one before it takes the lock.)
+    Best effort."""
     exact = {n for n in names if not n.startswith("*")} | {MANIFEST_NAME}
     endings = tuple(n[1:] for n in names if n.startswith("*"))
     try:
@@ -136,8 +147,7 @@ def remove_leftovers(out: Path, names: Iterable[str] = ()) -> None:
                 shutil.rmtree(e.path, ignore_errors=True)
             elif e.is_file(follow_symlinks=False):
                 m = _TMP.match(e.name)
-                if e.name.startswith(PROBE_PREFIX) or (
-                        m is not None and (m.group(1) in exact or m.group(1).endswith(endings or ("\0",)))):
+                if m is not None and (m.group(1) in exact or m.group(1).endswith(endings or ("\0",))):
                     os.unlink(e.path)
         except OSError:
             pass
