@@ -680,6 +680,8 @@ def main() -> None:
     except BaseException as exc:
         signum = interrupts.received()
         if signum is None or isinstance(exc, SystemExit) and interrupts.committed():
+            if isinstance(exc, SystemExit):
+                interrupts.ignore_from_now()      # the run is over: a late signal changes nothing
             raise
         interrupts.exit_interrupted(signum)
 

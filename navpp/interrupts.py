@@ -22,6 +22,7 @@ Library use (``navpp.process`` from Python) installs nothing: Ctrl-C there is Py
 
 from __future__ import annotations
 
+import os
 import signal
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -47,14 +48,51 @@ class Interrupted(BaseException):
             return f"signal {self.signum}"
 
 
+#: Code where an exception raised by the handler would not unwind the run but be printed as
+#: "Exception ignored ..." with a traceback, or turned into a SystemError: numba's and
+#: llvmlite's compiler (ctypes callbacks, the dispatcher) and finalizers (``__del__``).
+_FRAGILE_PATHS = (f"{os.sep}llvmlite{os.sep}", f"{os.sep}numba{os.sep}")
+_FRAGILE_NAMES = ("__del__", "_raw_object_cache_notify", "_raw_object_cache_getbuffer")
+_RETRY_S = 0.05
+_retrying = False
+
+
+def _fragile(frame) -> bool:
+    """Whether the signal came while Python runs code that must not raise (see above): the
+    current frame and up to 60 callers."""
+    for _ in range(60):
+        if frame is None:
+            return False
+        code = frame.f_code
+        if code.co_name in _FRAGILE_NAMES or any(p in code.co_filename for p in _FRAGILE_PATHS):
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _redeliver(signum: int) -> None:
+    """Send ``signum`` to this process again in a moment (from a daemon thread)."""
+    import threading
+
+    timer = threading.Timer(_RETRY_S, os.kill, (os.getpid(), signum))
+    timer.daemon = True
+    timer.start()
+
+
 def _handler(signum: int, frame) -> None:
-    global _received
-    if _received is not None:        # already stopping: let the clean-up run undisturbed
+    global _received, _retrying
+    if _received is None:
+        _received = signum
+    elif not _retrying:              # already stopping: let the clean-up run undisturbed
         return
-    _received = signum
     if _committing:                  # the results are being moved into place: finish that
         return
-    raise Interrupted(signum)
+    if _fragile(frame):              # raise it once Python is back in navpp's own code
+        _retrying = True
+        _redeliver(_received)
+        return
+    _retrying = False
+    raise Interrupted(_received)
 
 
 def install() -> None:
@@ -66,6 +104,15 @@ def install() -> None:
         if signal.getsignal(sig) is not signal.SIG_IGN:
             signal.signal(sig, _handler)
     _installed = True
+
+
+def ignore_from_now() -> None:
+    """Ignore SIGINT and SIGTERM for the rest of the process (its exit).  Python resets its own
+    handlers to the default at finalisation, so a signal in the last milliseconds of a finished
+    run would kill it with no message and a signal's exit status; ignored ones stay ignored."""
+    if _installed:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
 
 
 def received() -> int | None:
@@ -126,6 +173,7 @@ def exit_interrupted(signum: int) -> None:
              if len(_guarded) == 1 and not _committing else "")
     sys.stderr.write(f"navpp: interrupted by {name}{where}\n")
     sys.stderr.flush()
+    ignore_from_now()
     watchdog = threading.Timer(5.0, os._exit, (130,))
     watchdog.daemon = True
     watchdog.start()

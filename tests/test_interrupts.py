@@ -137,7 +137,7 @@ def _soak(tmp_path: Path, seed: int, n_process: int, n_compare: int) -> list[str
         if out.exists():
             for p in out.iterdir():
                 p.unlink()
-        out.mkdir(exist_ok=True)
+        out.mkdir(parents=True, exist_ok=True)
         for name, text in OLD.items():
             (out / name).write_text(text)
         inputs = snapshot(DRIVE)
@@ -153,7 +153,7 @@ def test_interrupts_fast(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_interrupts_soak(tmp_path: Path) -> None:
-    outcomes = []
+    outcomes: list[str] = []
     for seed in (1, 2, 3, 4):
         outcomes += _soak(tmp_path / str(seed), seed=seed, n_process=6, n_compare=3)
     assert outcomes.count("interrupted") >= len(outcomes) // 2, outcomes
