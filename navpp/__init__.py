@@ -50,6 +50,10 @@ from typing import Any
 __version__ = "0.1.0"
 __all__ = ["__version__", "compare", "process", "simulate_log"]
 
+from .jitcache import configure as _configure_jit_cache  # noqa: E402  (before any module imports numba)
+
+_configure_jit_cache()
+
 
 def _compare(*args: Any, **kwargs: Any) -> Any:
     """Run several filters on several logs: :func:`navpp.comparison.compare` (see its docstring).

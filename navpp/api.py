@@ -20,6 +20,7 @@ import numpy as np
 
 from .config import Config, check_outages, load_config, parse_formats
 from .errors import ConfigError, InputError, NavppError
+from .outdir import OutDirLock, input_files, refuse_overwriting_inputs
 from .recording import Recording, Solution
 
 CONFIG_IN_LOG_DIR = "navpp.toml"
@@ -280,6 +281,15 @@ def reference_checks(rec: Recording, cfg: Config, metrics: dict | None) -> list[
     return []
 
 
+def run_inputs(log: Path, config: str | Path | Config | None, reference: str | Path | None,
+               gnss_file: str | Path | None) -> set[tuple[int, int]]:
+    """(device, inode) of every file a run of :func:`process` reads (:func:`navpp.outdir.input_files`):
+    the log (a file, or the files in its directory), the config, the reference and the GNSS file."""
+    cfg_path = config if isinstance(config, (str, Path)) else companion(log, CONFIG_IN_LOG_DIR)
+    ref_path = reference if reference is not None else companion(log, "reference.csv")
+    return input_files(log, cfg_path, ref_path, gnss_file, not_in_dirs=OUTPUT_FILES)
+
+
 def default_out_dir(log: Path, filter_name: str) -> Path:
     stem = log.name if log.is_dir() else log.stem
     return Path("navpp-out") / f"{stem}-{filter_name}"
@@ -339,46 +349,63 @@ def _write_file(path: Path, write: Callable[[], None]) -> Path:
     return path
 
 
-def write_outputs(out: Path, outputs: Sequence[tuple[str, Callable[[Path], None]]]) -> list[Path]:
+def write_outputs(out: Path, outputs: Sequence[tuple[str, Callable[[Path], None]]],
+                  inputs: set[tuple[int, int]] = frozenset()) -> list[Path]:
     """Write a run's files into ``out`` all together, then remove its stale :data:`OUTPUT_FILES`.
 
     Each ``(name, write)`` is called as ``write(path)`` on a path inside a hidden staging
     directory in ``out``; only when every writer has succeeded are the files renamed to
-    ``out / name`` (keeping the permissions of a file they replace).  If any writer fails,
-    nothing in ``out`` changes: the previous run's outputs stay whole and consistent with each
-    other.  The staging directory is always removed.
+    ``out / name`` (keeping the permissions of a file they replace).  If any writer fails or
+    the run is interrupted, nothing in ``out`` changes: the previous run's outputs stay whole
+    and consistent with each other.  The staging directory is always removed.
+
+    Stale outputs are the :data:`OUTPUT_FILES` of an earlier run that this one did not write;
+    only those the directory's manifest (:mod:`navpp.outdir`) lists as written by navpp are
+    removed, and never one of the run's ``inputs`` (``(device, inode)`` pairs,
+    :func:`navpp.outdir.input_files`), which are never replaced either.  The manifest is then
+    updated.
 
     Returns the paths written, in the order given.  Raises :class:`InputError` naming the
     file (``out / name``) that could not be written or the stale output that could not be
     removed; other exceptions of a writer propagate unchanged.
     """
+    from . import interrupts, outdir
+
+    outdir.refuse_overwriting_inputs(out, [name for name, _ in outputs], inputs)
     try:
-        staging = Path(tempfile.mkdtemp(dir=out, prefix=".navpp-run-"))
+        staging = Path(tempfile.mkdtemp(dir=out, prefix=outdir.STAGING_PREFIX))
     except OSError as exc:
         raise InputError(f"{out}: cannot write there ({_os_reason(exc)})") from None
     written: list[Path] = []
     try:
         for name, write in outputs:
             _write_file(out / name, lambda write=write, name=name: write(staging / name))
-        for name, _ in outputs:
-            staged, target = staging / name, out / name
-            try:
-                if target.is_file():
-                    os.chmod(staged, target.stat().st_mode & 0o7777)
-                os.replace(staged, target)
-            except OSError as exc:
-                raise InputError(f"{target}: cannot write ({_os_reason(exc)})") from None
-            written.append(target)
+        with interrupts.commit():
+            for name, _ in outputs:
+                staged, target = staging / name, out / name
+                try:
+                    if target.is_file():
+                        os.chmod(staged, target.stat().st_mode & 0o7777)
+                    os.replace(staged, target)
+                except OSError as exc:
+                    raise InputError(f"{target}: cannot write ({_os_reason(exc)})") from None
+                written.append(target)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
-    for name in OUTPUT_FILES:          # stale results of an earlier run: not ours any more
+    ours = outdir.read_manifest(out)
+    for name in OUTPUT_FILES:          # stale results of an earlier navpp run: not ours any more
         stale = out / name
-        if stale not in written and stale.is_file():
+        if (stale not in written and name in ours and stale.is_file() and not stale.is_symlink()
+                and not outdir.is_input(stale, inputs)):
             try:
                 stale.unlink()
             except OSError as exc:
                 raise InputError(f"{stale}: cannot remove this output of an earlier run "
                                  f"({_os_reason(exc)})") from None
+    try:
+        outdir.write_manifest(out, {p.name for p in written} | {n for n in ours if (out / n).exists()})
+    except OSError as exc:
+        raise InputError(f"{out / outdir.MANIFEST_NAME}: cannot write ({_os_reason(exc)})") from None
     return written
 
 
@@ -487,8 +514,17 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     smooth = cfg.output.smooth if smooth is None else bool(smooth)
     filt = make_filter(filter_name, cfg)
     out = Path(out_dir) if out_dir is not None else default_out_dir(log, filter_name)
-    created = prepare_out_dir(out, "--out" if out_dir is not None else "output directory") if write else []
+    label = "--out" if out_dir is not None else "output directory"
+    inputs: set[tuple[int, int]] = set()
+    if write:        # before anything is created or read: a run whose result would replace its own input
+        inputs = run_inputs(log, config, reference, gnss_file)
+        refuse_overwriting_inputs(out, [FORMAT_FILES[f] for f in chosen_formats] + list(OUTPUT_FILES[1:5]),
+                                  inputs, label)
+    created = prepare_out_dir(out, label) if write else []
+    lock = OutDirLock(out, label, extra_leftovers=OUTPUT_FILES) if write else None
     try:
+        if lock is not None:          # held until the files are written: a second run into out fails at once
+            lock.acquire()
         if progress:
             progress("reading", 0.0)
         rec = read_log(log, cfg, reference=reference,
@@ -531,10 +567,14 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         if write:
             outputs = _outputs(chosen_formats, log=log, rec=rec, sol_out=sol_out, result=result, metrics=metrics,
                                filter_name=filter_name, embed_input=embed_input, forward_out=fwd_out)
-            files = write_outputs(out, outputs)
+            files = write_outputs(out, outputs, inputs)
     except BaseException:
+        if lock is not None:
+            lock.release()
         remove_created_dirs(created)
         raise
+    if lock is not None:
+        lock.release()
     notes = tuple(cfg.notes) + tuple(result.notes) + tuple(result.alignment.lines) + tuple(
         f"GNSS outage {o['start_s']:g}-{o['end_s']:g} s ({o['duration_s']:g} s from the log start): "
         f"{o['gnss_removed']} fixes removed, the INS coasts" for o in outages)

@@ -33,6 +33,10 @@ def _fail(message: str, exc: BaseException | None = None) -> None:
     from rich.console import Console
     from rich.markup import escape
 
+    from .interrupts import Interrupted, committed, received
+
+    if received() is not None and not committed():   # a signal surfaced as this error (e.g. inside numba)
+        raise Interrupted(received())
     err = Console(stderr=True, highlight=False, soft_wrap=True)
     for line in getattr(exc, "warnings", ()):
         err.print(f"[yellow]warning:[/] {escape(line)}")
@@ -669,7 +673,30 @@ def filters_cmd() -> None:
 
 
 def main() -> None:
-    app(prog_name="navpp")
+    """The ``navpp`` command.  SIGINT and SIGTERM stop a run cleanly (:mod:`navpp.interrupts`):
+    its ``finally`` blocks remove the staging files, drop the ``--out`` lock and stop the
+    workers; then one line ``navpp: interrupted ...`` and exit code 130."""
+    from . import interrupts
+
+    interrupts.install()
+    _numba_cache_note()
+    try:
+        app(prog_name="navpp")
+    except BaseException as exc:
+        signum = interrupts.received()
+        if signum is None or isinstance(exc, SystemExit) and interrupts.committed():
+            if isinstance(exc, SystemExit):
+                interrupts.ignore_from_now()      # the run is over: a late signal changes nothing
+            raise
+        interrupts.exit_interrupted(signum)
+
+
+def _numba_cache_note() -> None:
+    """Print the note of :func:`navpp.jitcache.configure`, if it had to move the numba cache."""
+    from .jitcache import NOTE
+
+    if NOTE:
+        sys.stderr.write(f"note: {NOTE[0]}\n")
 
 
 if __name__ == "__main__":

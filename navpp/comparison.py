@@ -39,13 +39,18 @@ import csv
 import io
 import itertools
 import math
+import os
+import sys
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from . import interrupts
 from .errors import ConfigError, NavppError
+from .outdir import OutDirLock
 
 if TYPE_CHECKING:                       # heavy imports only when used
     import numpy as np
@@ -67,6 +72,11 @@ BASELINE_METRICS = ("horizontal_rmse", "up_rmse")
 #: ``--max-rmse`` keys (case-insensitive) -> ``summary.csv`` column (m).
 LIMIT_KEYS = {"h": "horizontal_rmse", "horizontal": "horizontal_rmse", "e": "east_rmse", "east": "east_rmse",
               "n": "north_rmse", "north": "north_rmse", "u": "up_rmse", "up": "up_rmse", "3d": "3d_rmse"}
+
+#: Files a comparison writes into its output directory (``*``: figure names ending so), whose
+#: temporary files a killed run may leave behind (:func:`navpp.outdir.remove_leftovers`).
+COMPARE_FILES = ("summary.csv", "report.md", "report.html", "*_trajectory.png", "*_error_time.png",
+                 "*_error_cdf.png", "*_adaptive.png")
 
 #: Default ``--tolerance`` with ``--baseline``, percent.
 DEFAULT_TOLERANCE_PCT = 5.0
@@ -430,15 +440,49 @@ _WORKER_CACHE: _RecordingCache | None = None
 _WORKER_QUEUE: Any = None
 
 
-def _init_worker(queue: Any) -> None:
+def _init_worker(queue: Any, parent_pid: int | None = None) -> None:
     import atexit
 
+    _die_with_parent(parent_pid)
     global _WORKER_CACHE, _WORKER_QUEUE
     _WORKER_CACHE = _RecordingCache()
     _WORKER_QUEUE = queue
     if queue is not None:
         queue.cancel_join_thread()       # progress is best effort: never wait at exit to flush it
     atexit.register(_exit_at_once)
+
+
+def _die_with_parent(parent_pid: int | None) -> None:
+    """A worker stops with the comparison that started it: it ignores SIGINT (a Ctrl-C reaches
+    the whole process group; the parent alone decides, and stops the workers), and on Linux the
+    kernel sends it SIGKILL when the parent dies, however the parent dies (``PR_SET_PDEATHSIG``),
+    so no worker is left waiting forever."""
+    import os
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if parent_pid is None or not sys.platform.startswith("linux"):
+        return
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)           # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent_pid:                          # the parent died before the prctl
+        os._exit(1)
+
+
+def _stop_workers(ex: Any) -> None:
+    """Stop the pool's worker processes now (SIGTERM), not after their current task: the
+    comparison was interrupted or failed, and nothing will read their results."""
+    for proc in list((getattr(ex, "_processes", None) or {}).values()):
+        try:
+            proc.terminate()
+        except (OSError, ValueError, AttributeError):
+            pass
+    ex.shutdown(wait=False, cancel_futures=True)
 
 
 def _exit_at_once() -> None:
@@ -774,7 +818,10 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
     created = api.prepare_out_dir(out, "out_dir") if out is not None else []
     labels = [x for n in names for x in ((n, smoothed_name(n)) if smooth else (n,))]
     draw = _FigurePlan(logs, labels) if report and out is not None else None
+    lock = OutDirLock(out, "--out", extra_leftovers=COMPARE_FILES) if out is not None else None
     try:
+        if lock is not None:         # held until the files are written: a second run into out fails at once
+            lock.acquire()
         if executor == "dask":
             from .dask_executor import run_dask
 
@@ -783,19 +830,25 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
             outcomes, plots = _run_serial(tasks, progress, draw)
         else:
             outcomes, plots = _run_parallel(tasks, workers, progress, draw)
+        rows = tuple(row for o in outcomes for row, _ in o.rows())
+        log_series = {o.row.log: o.log_series for o in outcomes if tasks[o.index].log_series}
+        run_series = {(row.log, row.filter): series for o in outcomes for row, series in o.rows()
+                      if series is not None}
+        files: list[Path] = []
+        if out is not None:
+            with interrupts.commit():        # an interrupt from here on lets the writing finish
+                files.append(write_summary(out / "summary.csv", rows))
+                if draw is not None:
+                    from .report import write_report
+
+                    files += write_report(out, rows, plots)
     except BaseException:
+        if lock is not None:
+            lock.release()
         api.remove_created_dirs(created)
         raise
-    rows = tuple(row for o in outcomes for row, _ in o.rows())
-    log_series = {o.row.log: o.log_series for o in outcomes if tasks[o.index].log_series}
-    run_series = {(row.log, row.filter): series for o in outcomes for row, series in o.rows() if series is not None}
-    files: list[Path] = []
-    if out is not None:
-        files.append(write_summary(out / "summary.csv", rows))
-        if draw is not None:
-            from .report import write_report
-
-            files += write_report(out, rows, plots)
+    if lock is not None:
+        lock.release()
     return CompareResult(rows, tuple(files), out, workers, time.perf_counter() - t_start, log_series, run_series)
 
 
@@ -822,6 +875,7 @@ def _run_serial(tasks: Sequence[_Task], progress: ProgressFn | None, draw: _Figu
     out: list[_Outcome] = []
     try:
         for k, task in enumerate(tasks):
+            interrupts.check()            # an interrupt a run turned into a failed row stops here
             out.append(_execute(task, cache, progress))
             if progress:
                 progress("all runs", (k + 1) / len(tasks))
@@ -863,6 +917,23 @@ def _schedule(tasks: Sequence[_Task]) -> list[_Task]:
     return sorted(tasks, key=lambda t: (log_order[t.log], -cost[t.filter], t.index))
 
 
+@contextmanager
+def _sigint_blocked() -> Iterator[None]:
+    """SIGINT blocked in this thread (POSIX): a process spawned meanwhile inherits the mask, so
+    a Ctrl-C during its start-up (before :func:`_die_with_parent` runs) cannot print a
+    traceback from it.  A SIGINT arriving meanwhile is delivered here on leaving."""
+    import signal
+
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def _run_parallel(tasks: Sequence[_Task], workers: int, progress: ProgressFn | None, draw: _FigurePlan | None
                   ) -> tuple[list[_Outcome], dict[str, list]]:
     """The tasks on ``workers`` spawned processes, in :func:`_schedule` order.  Each log's
@@ -893,7 +964,8 @@ def _run_parallel(tasks: Sequence[_Task], workers: int, progress: ProgressFn | N
     todo_runs = deque(_schedule(tasks))
     todo_figures: deque = deque()                    # FigureJobs, drawn before further runs start
     in_flight: dict[Any, Any] = {}                   # future -> _Task or FigureJob
-    ex = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(q,))
+    ex = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
+                             initargs=(q, os.getpid()))
 
     def draw_here(job) -> None:                      # the pool broke: draw it in this process
         drawn[job.log, job.kinds[0]] = render_figures(job)
@@ -905,7 +977,8 @@ def _run_parallel(tasks: Sequence[_Task], workers: int, progress: ProgressFn | N
             while (todo_runs or todo_figures) and len(in_flight) < workers + 1:
                 item = todo_figures.popleft() if todo_figures else todo_runs.popleft()
                 try:
-                    fut = ex.submit(_execute_in_worker if isinstance(item, _Task) else render_figures, item)
+                    with _sigint_blocked():       # a worker started now is born deaf to Ctrl-C
+                        fut = ex.submit(_execute_in_worker if isinstance(item, _Task) else render_figures, item)
                 except (BrokenProcessPool, RuntimeError):
                     if isinstance(item, _Task):
                         results[item.index] = _failed(item, "a worker process died (killed, or out of memory?)")
@@ -940,7 +1013,7 @@ def _run_parallel(tasks: Sequence[_Task], workers: int, progress: ProgressFn | N
                     todo_figures.extend(replace(whole, kinds=(kind,)) for kind in FIGURE_KINDS)
         drain()
     except BaseException:
-        ex.shutdown(wait=False, cancel_futures=True)
+        _stop_workers(ex)
         raise
     ex.shutdown(wait=True)
     if q is not None:

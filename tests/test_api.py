@@ -202,7 +202,8 @@ def test_rerun_without_reference_removes_stale_metrics(log_copy: Path, tmp_path:
     (log_copy / "reference.csv").unlink()
     second = api.process(log_copy, out_dir=out, output_rate_hz=5.0)
     assert second.files == (out / "trajectory.csv", out / "diagnostics.csv")
-    assert sorted(p.name for p in out.iterdir()) == ["diagnostics.csv", "metrics.json.bak", "notes.txt", "old", "trajectory.csv"]
+    assert sorted(p.name for p in out.iterdir()) == [".navpp-manifest.json", "diagnostics.csv", "metrics.json.bak",
+                                                     "notes.txt", "old", "trajectory.csv"]
     assert (out / "old" / "metrics.md").is_file()
     lines = (out / "trajectory.csv").read_text().splitlines()
     t = np.array([float(line.split(",", 1)[0]) for line in lines[1:]])

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from navpp.outdir import MANIFEST_NAME as MANIFEST
 from navpp.cli import app
 
 TRAJECTORY_HEADER = "t,lat,lon,alt,ve,vn,vu,roll,pitch,heading,std_e,std_n,std_u"
@@ -121,7 +122,7 @@ def test_process_trajectory_one_row_per_imu_sample(processed, sim_log_dir: Path)
 def test_process_metrics_files(processed, sim_log_dir: Path) -> None:
     _, out = processed
     assert (out / "metrics.md").is_file()
-    assert sorted(p.name for p in out.iterdir()) == ["diagnostics.csv", "metrics.json", "metrics.md", "trajectory.csv"]
+    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == ["diagnostics.csv", "metrics.json", "metrics.md", "trajectory.csv"]
     m = json.loads((out / "metrics.json").read_text())
     assert METRICS_KEYS <= set(m)
     assert m["filter"] == "ekf"
@@ -163,7 +164,7 @@ def test_process_without_reference_writes_trajectory_only(log_copy: Path, tmp_pa
     out = tmp_path / "out"
     res = invoke("process", log_copy, "--out", out)
     assert res.exit_code == 0, (res.output, res.exception)
-    assert sorted(p.name for p in out.iterdir()) == ["diagnostics.csv", "trajectory.csv"]
+    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == ["diagnostics.csv", "trajectory.csv"]
     assert "position error" not in res.stdout
     assert "trajectory.csv" in flat(res.stdout)
 
@@ -247,12 +248,12 @@ def test_process_rerun_without_reference_leaves_no_stale_metrics(log_copy: Path,
     out = tmp_path / "out"
     res = invoke("process", log_copy, "--out", out, "--quiet")
     assert res.exit_code == 0, (res.output, res.exception)
-    assert sorted(p.name for p in out.iterdir()) == ["diagnostics.csv", "metrics.json", "metrics.md", "trajectory.csv"]
+    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == ["diagnostics.csv", "metrics.json", "metrics.md", "trajectory.csv"]
     first = (out / "trajectory.csv").read_bytes()
     (log_copy / "reference.csv").unlink()
     res = invoke("process", log_copy, "--out", out, "--output-rate", "10")
     assert res.exit_code == 0, (res.output, res.exception)
-    assert sorted(p.name for p in out.iterdir()) == ["diagnostics.csv", "trajectory.csv"]
+    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == ["diagnostics.csv", "trajectory.csv"]
     assert (out / "trajectory.csv").read_bytes() != first
     assert res.stdout.splitlines()[-1] == f"wrote {out / 'trajectory.csv'}, {out / 'diagnostics.csv'}"
 

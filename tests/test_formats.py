@@ -27,6 +27,7 @@ import numpy as np
 import pytest
 from test_cli import assert_one_line_error, flat, invoke
 
+from navpp.outdir import MANIFEST_NAME as MANIFEST
 from navpp import api
 from navpp.config import config_from_dict
 from navpp.io import roswrite
@@ -209,7 +210,7 @@ def test_process_mcap_writes_trajectory(logs: Logs, tmp_path: Path) -> None:
     assert lines[0].startswith("t,lat,lon,alt,")
     assert len(lines) == 1 + N_IMU
     assert lines[1].startswith("1700000000.000000,") and lines[-1].startswith("1700000120.000000,")
-    assert sorted(p.name for p in out.iterdir()) == ["diagnostics.csv", "trajectory.csv"]  # no reference, no metrics
+    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == ["diagnostics.csv", "trajectory.csv"]  # no reference, no metrics
 
 
 @pytest.mark.parametrize("kind", ROS_KINDS)
@@ -263,14 +264,14 @@ def test_gnss_topic_and_reference_topic(logs: Logs, tmp_path: Path) -> None:
 
     out = tmp_path / "gnss"  # --gnss-topic alone settles the GNSS; no reference
     ok(invoke("process", path, "--gnss-topic", "/gnss/fix", "--config", logs.config_file, "--out", out, "-q"))
-    assert sorted(p.name for p in out.iterdir()) == ["diagnostics.csv", "trajectory.csv"]
+    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == ["diagnostics.csv", "trajectory.csv"]
 
     out = tmp_path / "ref"
     res = invoke("process", path, "--reference-topic", "/reference/fix", "--config", logs.config_file,
                  "--out", out, "-q")
     ok(res)
     assert res.stderr.strip() == ""  # no warning (e.g. about the reference's unknown covariance)
-    assert sorted(p.name for p in out.iterdir()) == ["diagnostics.csv", "metrics.json", "metrics.md", "trajectory.csv"]
+    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == ["diagnostics.csv", "metrics.json", "metrics.md", "trajectory.csv"]
     m = json.loads((out / "metrics.json").read_text())
     assert m["reference"] == f"{path}:/reference/fix"
     assert m["epochs"] == 1201  # the 10 Hz reference over 120 s

@@ -1,0 +1,106 @@
+"""Where numba caches navpp's compiled kernels, so a read-only install still runs.
+
+navpp's kernels are compiled with ``cache=True``.  numba stores the machine code beside the
+sources (``__pycache__``) or in the user's cache directory (``$XDG_CACHE_HOME/numba`` or
+``~/.cache/numba``), or in ``$NUMBA_CACHE_DIR`` when set; if none of these can be written
+(a read-only install, a service account without a writable home) it raises ``RuntimeError:
+cannot cache function ...: no locator available`` at import, so even ``navpp filters`` failed.
+
+:func:`configure` (called when :mod:`navpp` is imported, before numba is) checks those places
+the way numba does (creating the directory and a temporary file in it) and, when none is
+writable, points ``NUMBA_CACHE_DIR`` at ``<temp dir>/navpp-numba-cache-<uid>`` (created with
+mode 0700; one that another user owns or others may write is not used, since numba loads
+pickled code from it), else at a fresh private temporary directory (no cache kept between
+runs).  The reason is kept in :data:`NOTE`; the command line prints it as a ``note:`` line.
+Spawned worker processes inherit the variable.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+#: One line saying where the cache went and why, when :func:`configure` moved it; else empty.
+NOTE: list[str] = []
+
+
+def _writable(path: str) -> bool:
+    """What numba's locators check: the directory can be created and a file made in it."""
+    import tempfile
+
+    try:
+        os.makedirs(path, exist_ok=True)
+        tempfile.TemporaryFile(dir=path).close()
+        return True
+    except OSError:
+        return False
+
+
+def _looks_writable(path: str) -> bool:
+    """A cheap first look (``os.access``, which also sees a read-only file system)."""
+    target = path if os.path.isdir(path) else os.path.dirname(path)
+    return os.access(target, os.W_OK | os.X_OK)
+
+
+def _package_dirs() -> list[str]:
+    root = os.path.dirname(os.path.abspath(__file__))
+    return [d for d, subdirs, _ in os.walk(root) if os.path.basename(d) != "__pycache__"]
+
+
+def _user_cache_dir() -> str:
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "numba")
+
+
+def _private_dir(path: str) -> bool:
+    """``path`` is (now) a directory of this user that no one else may write."""
+    try:
+        os.mkdir(path, 0o700)
+    except FileExistsError:
+        pass
+    except OSError:
+        return False
+    try:
+        st = os.lstat(path)
+    except OSError:
+        return False
+    import stat
+
+    return (stat.S_ISDIR(st.st_mode) and st.st_uid == os.getuid() and not st.st_mode & 0o022
+            and _writable(path))
+
+
+def configure() -> None:
+    """Set ``NUMBA_CACHE_DIR`` to a writable temporary place if numba could not cache otherwise."""
+    if NOTE or sys.platform == "win32":
+        return
+    chosen = os.environ.get("NUMBA_CACHE_DIR", "")
+    if chosen:
+        if _writable(chosen):
+            return
+        why = f"NUMBA_CACHE_DIR {chosen} is not writable"
+    else:
+        caches = [os.path.join(d, "__pycache__") for d in _package_dirs()]
+        if all(_looks_writable(c) for c in caches) or all(_writable(c) for c in caches):
+            return
+        user = _user_cache_dir()
+        if _writable(user):
+            return
+        why = f"neither navpp's install directory nor {user} is writable"
+    import tempfile
+
+    shared = os.path.join(tempfile.gettempdir(), f"navpp-numba-cache-{os.getuid()}")
+    if _private_dir(shared):
+        where, kept = shared, "kept between runs"
+    else:
+        try:
+            where, kept = tempfile.mkdtemp(prefix="navpp-numba-"), "for this run only"
+        except OSError:
+            NOTE.append(f"numba cannot cache navpp's compiled kernels: {why}, nor is a temporary directory; "
+                        "set NUMBA_CACHE_DIR to a writable directory")
+            return
+    os.environ["NUMBA_CACHE_DIR"] = where
+    numba_config = sys.modules.get("numba.core.config")
+    if numba_config is not None:          # numba already imported: its config read the variable already
+        numba_config.CACHE_DIR = where
+    NOTE.append(f"{why}: compiled kernels are cached in {where} ({kept}); set NUMBA_CACHE_DIR to choose")
