@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Annotated, Callable, Optional
 
 import typer
@@ -370,8 +371,18 @@ def compare(
         groups: dict[tuple[str, str], list[str]] = {}
         for r in failed:
             groups.setdefault((r.log, r.status), []).append(r.filter)
-        _fail(f"{len(failed)} of {len(result.rows)} runs failed: "
-              + "; ".join(f"{', '.join(f)} on {log}: {status}" for (log, status), f in groups.items()))
+        # each failure's reason on a warning line of its own; the error line stays short
+        reasons = [f"{', '.join(f)} on {log}: {status}" for (log, status), f in groups.items()]
+        head = f"{len(failed)} of {len(result.rows)} runs failed (reasons above, and in summary.csv): "
+        names = [f"{', '.join(f)} on {Path(log).name or log}" for (log, _), f in groups.items()]
+        shown = ""
+        for k, name in enumerate(names):
+            more = f"; and {len(names) - k} more" if k else ""
+            if len(head) + len(shown) + len(name) + 20 > 280:
+                shown += more or name[:200]
+                break
+            shown += ("; " if k else "") + name
+        _fail(head + shown, SimpleNamespace(warnings=reasons, notes=()))
     if code == 3:
         from rich.console import Console
         from rich.markup import escape

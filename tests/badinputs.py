@@ -53,6 +53,13 @@ class Case:
         that must all appear.
     code : expected exit code.
     env : extra environment variables for the child.
+    slow : a variant of a faster row (another filter, a bigger file): run with the slow tests
+        only, so the default run stays within its CPU budget.
+    process : run ``python -m navpp`` in a child process (peak memory measured, the interpreter's
+        own exit path taken).  Otherwise the command line runs in this process through
+        ``typer.testing.CliRunner`` (about 1 s less per row: no interpreter and import start-up),
+        which checks the same contract bar the memory figure.  Rows with ``env`` always run in a
+        child.
     """
 
     name: str
@@ -61,6 +68,15 @@ class Case:
     code: int = 1
     env: dict[str, str] = field(default_factory=dict)
     timeout_s: float = MAX_SECONDS
+    slow: bool = False
+    process: bool = False
+
+
+def params(cases: list[Case]) -> list:
+    """``cases`` as pytest parameters: named by the case, the ``slow`` ones marked slow."""
+    import pytest
+
+    return [pytest.param(c, id=c.name, marks=[pytest.mark.slow] if c.slow else []) for c in cases]
 
 
 def copy_drive(work: Path, name: str = "log") -> Path:
@@ -110,6 +126,30 @@ def run_navpp(argv: list[str], env: dict[str, str] | None = None, timeout_s: flo
     return proc.returncode, proc.stdout, proc.stderr, time.monotonic() - t0
 
 
+def run_in_process(argv: list[str], cwd: Path) -> tuple[int, str, str, float]:
+    """Run the ``navpp`` command line ``argv`` in this process (``CliRunner``, cwd = ``cwd``);
+    returns (exit code, stdout, stderr, wall seconds).  An exception that escapes the command
+    (other than SystemExit) is returned as its traceback on stderr, so a case sees it."""
+    import traceback
+
+    from typer.testing import CliRunner
+
+    from navpp.cli import app
+
+    here = os.getcwd()
+    t0 = time.monotonic()
+    try:
+        os.chdir(cwd)
+        res = CliRunner().invoke(app, argv, env={"COLUMNS": "200"})
+    finally:
+        os.chdir(here)
+    wall = time.monotonic() - t0
+    stderr = res.stderr
+    if res.exception is not None and not isinstance(res.exception, SystemExit):
+        stderr += "".join(traceback.format_exception(res.exception))
+    return res.exit_code, res.stdout, stderr, wall
+
+
 def run_case(case: Case, work: Path) -> str:
     """Build, run and check ``case`` in the fresh directory ``work``; returns the message line."""
     work.mkdir(parents=True, exist_ok=True)
@@ -117,8 +157,12 @@ def run_case(case: Case, work: Path) -> str:
     out = work / "out"
     before_out = snapshot(out)
     before_in = snapshot(work, skip=out)
+    child = case.process or bool(case.env)
     rss0 = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    code, stdout, stderr, wall = run_navpp(argv, case.env, case.timeout_s, cwd=work)
+    if child:
+        code, stdout, stderr, wall = run_navpp(argv, case.env, case.timeout_s, cwd=work)
+    else:
+        code, stdout, stderr, wall = run_in_process(argv, work)
     rss = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     lines = [ln for ln in stderr.splitlines() if ln.strip()]
     where = f"{case.name}: navpp {' '.join(argv)}\nexit {code}\nstderr:\n{stderr[-3000:]}\nstdout:\n{stdout[-1500:]}"
@@ -138,6 +182,6 @@ def run_case(case: Case, work: Path) -> str:
     assert snapshot(out) == before_out, f"--out changed\n{where}"
     assert snapshot(work, skip=out) == before_in, f"an input changed or a file was left beside the inputs\n{where}"
     assert wall < case.timeout_s, where
-    if rss > rss0:   # ru_maxrss is the largest child so far (KiB on Linux): only a new maximum is this run's
+    if child and rss > rss0:   # ru_maxrss is the largest child so far (KiB on Linux): only a new maximum is this run's
         assert rss * 1024 < MAX_RSS_BYTES, f"peak RSS {rss / 1024:.0f} MB\n{where}"
     return msg

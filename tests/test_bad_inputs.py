@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from badinputs import Case, copy_drive, edit_csv, run_case
+from badinputs import Case, copy_drive, edit_csv, run_case, params
 
 
 def _missing_gnss_column(work):
@@ -30,7 +30,7 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+@pytest.mark.parametrize("case", params(CASES))
 def test_bad_input(case, tmp_path):
     run_case(case, tmp_path)
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from badinputs import ROOT, SAMPLE, Case, copy_drive, edit_csv, run_case, run_navpp, snapshot
+from badinputs import ROOT, SAMPLE, Case, copy_drive, edit_csv, run_case, run_navpp, snapshot, params
 from navpp.outdir import LOCK_NAME, MANIFEST_NAME
 
 
@@ -57,7 +57,7 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+@pytest.mark.parametrize("case", params(CASES))
 def test_bad_output_dir(case, tmp_path):
     run_case(case, tmp_path)
 

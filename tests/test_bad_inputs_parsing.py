@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from badinputs import DRIVE, Case, copy_drive, edit_csv, run_case, run_navpp
+from badinputs import DRIVE, Case, copy_drive, edit_csv, run_case, run_navpp, params
 
 IMU_ROWS = 37501       # data rows of sample_data/drive/imu.csv (header = line 1)
 
@@ -123,9 +123,10 @@ def _compare_option_typo(work: Path) -> list[str]:
 
 
 CASES = [
-    Case("imu-nul-tail-2gb", _nul_tail(2 << 30), ("imu.csv", f"line {IMU_ROWS + 2}", "NUL byte")),
-    Case("imu-nul-tail-200mb", _nul_tail(200 << 20), ("imu.csv", f"line {IMU_ROWS + 2}", "NUL byte")),
-    Case("imu-50mb-cell", _long_cell, ("imu.csv", "line 101", "longer than 1 MiB")),
+    Case("imu-nul-tail-2gb", _nul_tail(2 << 30), ("imu.csv", f"line {IMU_ROWS + 2}", "NUL byte"), slow=True,
+         process=True),
+    Case("imu-nul-tail-200mb", _nul_tail(200 << 20), ("imu.csv", f"line {IMU_ROWS + 2}", "NUL byte"), process=True),
+    Case("imu-50mb-cell", _long_cell, ("imu.csv", "line 101", "longer than 1 MiB"), process=True),
     Case("gnss-3mb-header", _long_header, ("gnss.csv", "line 1:", "longer than 1 MiB")),
     Case("imu-500kb-text-cell", _big_text_cell, ("imu.csv", "line 10", "non-numeric value 'abczzz", "characters)")),
     Case("gnss-bad-e-stamp", _bad_e_stamp, ("gnss.csv", "line 6", "column 't'", "1.7000000008e+09x")),
@@ -135,12 +136,12 @@ CASES = [
          ("zero.mcap", "'/imu/data'", "header stamps are 0", '[time] source = "log"')),
     Case("ros2-bag-truncated-mcap", _truncated_bag_mcap, ("bag.mcap", "truncated")),
     Case("outage-past-the-end", _outage_past_end, ("290:60", "runs past the end", "300.000 s", "290:10")),
-    Case("outage-after-the-end", _outage_after_end, ("310:5", "starts after the log ends")),
+    Case("outage-after-the-end", _outage_after_end, ("310:5", "starts after the log ends"), slow=True),
     Case("compare-filter-option-typo", _compare_option_typo, ("'candidtes'", "valid keys", "candidates")),
 ]
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+@pytest.mark.parametrize("case", params(CASES))
 def test_bad_input(case, tmp_path):
     run_case(case, tmp_path)
 
@@ -193,7 +194,8 @@ def plain_outputs(tmp_path_factory):
     return _outputs(work, copy_drive(work))
 
 
-@pytest.mark.parametrize("form", list(FORMS), ids=list(FORMS))
+@pytest.mark.parametrize("form", [pytest.param(f, marks=[] if f == "e-notation" else [pytest.mark.slow]) for f in FORMS],
+                         ids=list(FORMS))
 def test_stamp_forms_give_the_plain_results(form, plain_outputs, tmp_path):
     """Oracle: the same log with t written plainly; the results must be byte-identical (the
     e-notation log gave 4.25 m instead of 0.60 m: its stamps were rounded to whole seconds)."""

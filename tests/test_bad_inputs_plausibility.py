@@ -10,7 +10,7 @@ import math
 
 import pytest
 
-from badinputs import Case, copy_drive, edit_csv, run_case
+from badinputs import Case, copy_drive, edit_csv, run_case, params
 
 
 def _cols(edit):
@@ -146,18 +146,18 @@ CASES = [
     Case("aukf-gyro-x10", gyro_x10("aukf"), ("aukf diverged", "gyro")),
     Case("latlon-swapped", latlon_swapped("sage-husa"), ("gnss.csv", "lat and lon swapped")),
     Case("first-fix-elsewhere", first_fix_elsewhere("sage-husa"), ("sage-husa diverged", "configured GNSS sigma")),
-    Case("first-fix-elsewhere-ekf", first_fix_elsewhere("ekf"), "ekf diverged"),
+    Case("first-fix-elsewhere-ekf", first_fix_elsewhere("ekf"), "ekf diverged", slow=True),
     Case("std-x100", std_x100("ekf"), ("std_e, std_n, std_u of gnss.csv", "too large")),
-    Case("std-x100-sage-husa", std_x100("sage-husa"), ("std_e, std_n, std_u of gnss.csv", "too large")),
+    Case("std-x100-sage-husa", std_x100("sage-husa"), ("std_e, std_n, std_u of gnss.csv", "too large"), slow=True),
     Case("frd-as-flu", frd_as_flu("ekf"), ("-z", "forward-left-up", "mounting_rpy_deg = [180, 0, 0]")),
     Case("zero-noise", zero_noise("ekf"), ("navpp.toml", "gyro_arw_deg_per_sqrt_h = 0")),
-    Case("zero-accel-noise", zero_noise("ekf", ("accel_vrw_mps_per_sqrt_h",)), ("navpp.toml", "accel_vrw_mps_per_sqrt_h")),
+    Case("zero-accel-noise", zero_noise("ekf", ("accel_vrw_mps_per_sqrt_h",)), ("navpp.toml", "accel_vrw_mps_per_sqrt_h"), slow=True),
     Case("lat-in-radians", lat_in_radians("ekf"), ("gnss.csv", "radians")),
-    Case("lat-in-radians-sage-husa", lat_in_radians("sage-husa"), ("gnss.csv", "radians")),
+    Case("lat-in-radians-sage-husa", lat_in_radians("sage-husa"), ("gnss.csv", "radians"), slow=True),
     Case("identical-fixes", identical_fixes("ekf"), ("all 1501 fixes of gnss.csv are identical",)),
 ]
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+@pytest.mark.parametrize("case", params(CASES))
 def test_bad_input(case, tmp_path):
     run_case(case, tmp_path)

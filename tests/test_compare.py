@@ -161,7 +161,9 @@ def test_a_failing_filter_is_a_row_and_exit_1(log_copy: Path, tmp_path: Path):
     out = tmp_path / "cmp"
     res = invoke("compare", log_copy, "--filters", "ekf,rwckf", "--out", out, "-q")
     assert res.exit_code == 1
-    assert "1 of 2 runs failed: rwckf on" in one_line(res.stderr)
+    last = res.stderr.strip().splitlines()[-1]
+    assert "1 of 2 runs failed" in last and "rwckf on" in last and len(last) < 300, res.stderr
+    assert "warning: rwckf on" in one_line(res.stderr) and "diverged" in one_line(res.stderr)   # the reason
     assert "Traceback" not in res.output
     table = read_summary(out / "summary.csv")
     assert table[0]["status"] == "ok" and table[0]["horizontal_rmse"]
@@ -174,7 +176,9 @@ def test_an_unreadable_log_is_rows_and_the_others_run(sim_log_dir: Path, tmp_pat
     res = invoke("compare", missing, sim_log_dir, "--filters", "ekf,aekf", "--out", tmp_path / "c", "-q")
     assert res.exit_code == 1
     err = one_line(res.stderr)
-    assert "2 of 4 runs failed: ekf, aekf on" in err and "nowhere.mcap" in err and "Traceback" not in res.output
+    last = res.stderr.strip().splitlines()[-1]
+    assert "2 of 4 runs failed" in last and "ekf, aekf on nowhere.mcap" in last and len(last) < 300, res.stderr
+    assert "warning: ekf, aekf on" in err and "Traceback" not in res.output
     table = read_summary(tmp_path / "c" / "summary.csv")
     assert [t["status"] == "ok" for t in table] == [False, False, True, True]
     assert (tmp_path / "c" / "report.html").is_file()

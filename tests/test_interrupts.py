@@ -147,8 +147,8 @@ def _soak(tmp_path: Path, seed: int, n_process: int, n_compare: int) -> list[str
 
 
 def test_interrupts_fast(tmp_path: Path) -> None:
-    outcomes = _soak(tmp_path, seed=15, n_process=3, n_compare=2)
-    assert outcomes.count("interrupted") >= 3, outcomes      # the delays mostly fall inside the runs
+    outcomes = _soak(tmp_path, seed=15, n_process=2, n_compare=1)
+    assert outcomes.count("interrupted") >= 2, outcomes      # the delays mostly fall inside the runs
 
 
 @pytest.mark.slow

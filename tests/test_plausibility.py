@@ -19,9 +19,14 @@ NEW_WORDS = ("configured GNSS sigma", "GNSS noise", "radians", "identical", "swa
              "altitude leaves", "speed exceeds")
 
 
-@pytest.mark.parametrize("log", ["drive", "walk_0827"])
-@pytest.mark.parametrize("name", sorted(FILTERS))
-def test_clean_logs_pass_every_filter_without_new_warnings(log, name, tmp_path):
+#: the drive with the slower filters runs with the slow tests (the walk, real data, always runs)
+FAST_ON_DRIVE = ("ekf", "aekf", "sage-husa")
+
+
+@pytest.mark.parametrize(("name", "log"), [
+    pytest.param(n, log, id=f"{n}-{log}", marks=[pytest.mark.slow] if log == "drive" and n not in FAST_ON_DRIVE else [])
+    for log in ("drive", "walk_0827") for n in sorted(FILTERS)])
+def test_clean_logs_pass_every_filter_without_new_warnings(name, log, tmp_path):
     res = api.process(SAMPLE / log, filter_name=name, out_dir=tmp_path / "out")
     said = [w for w in res.warnings if any(word in w for word in NEW_WORDS)]
     assert said == [], said
