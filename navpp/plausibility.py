@@ -21,6 +21,10 @@ the fixes against ``[gnss] max_rejected_fraction``, as for the gate:
   at more than half the fixes (a consistent filter puts about ``1 - p`` of them there; real
   receivers' time-correlated fixes put up to a fifth there: the bundled RTK walk), i.e. the
   sigmas at least ``sqrt(chi2_3 median / chi2_3(1 - p))`` = 12x too large at the default p;
+  only when those differences look white (lag-1 correlation at most
+  :data:`WHITE_DIFFERENCE_CORRELATION`): a receiver's smoothed or time-correlated fixes also
+  move little from fix to fix with an honest sigma, and then the run only warns that it cannot
+  tell (a real 10 Hz car log: differences 63x smaller than its sigma, correlated +0.3 or so);
 - the solution's altitude beyond the fixes' altitude range by more than the 1-dof gate
   quantile of the fixes' and the solution's vertical sigma, its speed beyond the vehicle
   type's (:data:`MAX_SPEED_MPS`), a non-finite position or sigma.
@@ -41,6 +45,12 @@ from scipy.special import chdtri
 #: is below 150 m/s (540 km/h); with no vehicle model the speed of sound (no platform navpp's
 #: loosely coupled land/walk/robot aiding is meant for flies faster).
 MAX_SPEED_MPS = {"car": 150.0, "none": 343.0}
+
+#: The "sigma too large" test needs fix errors that are white from fix to fix: the consecutive
+#: differences of white errors correlate -0.5 at lag 1; of errors with fix-to-fix correlation rho,
+#: -(1 - rho) / 2.  Above this value (rho > 0.5: a receiver that smooths its fixes, multipath,
+#: atmosphere) small differences say nothing about the sigma, and the test only warns.
+WHITE_DIFFERENCE_CORRELATION = -0.25
 
 #: The gate probability the checks use when gating is off (``gate_probability = 0``).
 DEFAULT_GATE_PROBABILITY = 0.9999
@@ -112,6 +122,18 @@ def fix_suspect(source: str, lat_deg: np.ndarray, lon_deg: np.ndarray, alt: np.n
     return None
 
 
+def _difference_lag1_correlation(z: np.ndarray, index: np.ndarray) -> float:
+    """Lag-1 correlation of the normalised consecutive-innovation differences ``z`` (K, 3), pooled
+    over the axes from centred deviations; ``index`` (K,) their positions in the fix sequence
+    (only neighbours one fix apart are paired).  NaN-free; 0 when nothing pairs."""
+    z = z - z.mean(axis=0)
+    nb = np.flatnonzero(np.diff(index) == 1)
+    den = float(np.sum(z * z))
+    if nb.size < 10 or den <= 0.0:
+        return 0.0
+    return float(np.sum(z[nb] * z[nb + 1])) / den
+
+
 def gate_quantiles(gate_probability: float) -> tuple[float, float, float]:
     """(3-dof upper, 3-dof lower, 1-dof upper) chi-square quantiles at the gate probability."""
     p = gate_probability if 0.0 < gate_probability < 1.0 else DEFAULT_GATE_PROBABILITY
@@ -150,16 +172,23 @@ def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray
     low = int(np.count_nonzero(q_d < lo3))
     if n_d >= 20 and low > 0.5 * n_d:
         scale = math.sqrt(_CHI2_3_MEDIAN / max(float(np.median(q_d)), 1e-300))
-        what = (f"GNSS noise {scale:.3g}x smaller than {std_label} say ({share(low, n_d)} below "
-                f"the chi-square {100.0 * _tail(gate_probability):.2g}% bound)")
-        out.append(Finding(max_fraction < 1.0, what, "those sigmas are too large (cm read as m?)"))
+        r1 = _difference_lag1_correlation(d_nu / np.sqrt((var0[1:] + var0[:-1])[pair]), np.flatnonzero(pair))
+        if r1 <= WHITE_DIFFERENCE_CORRELATION:
+            what = (f"GNSS noise {scale:.3g}x smaller than {std_label} say ({share(low, n_d)} below "
+                    f"the chi-square {100.0 * _tail(gate_probability):.2g}% bound)")
+            out.append(Finding(max_fraction < 1.0, what, "those sigmas are too large (cm read as m?)"))
+        else:
+            out.append(Finding(False, f"the fixes move {scale:.3g}x less from one to the next than {std_label} "
+                                      f"say, but their errors are correlated from fix to fix (consecutive "
+                                      f"differences correlate {r1:+.2f}, white noise: -0.5): navpp cannot tell "
+                                      "whether those sigmas are too large or the receiver smooths its fixes"))
     nu, S, R_used, var0, acc = nu[ok], S[ok], R_used[ok], var0[ok], accepted[ok]
     # far beyond the prior R (what a learnt R or an inflated P let through)
     S0 = S - R_used + var0[:, :, None] * np.eye(3)
     try:
         nis0 = np.einsum("ki,ki->k", nu, np.linalg.solve(S0, nu[:, :, None])[:, :, 0])
     except np.linalg.LinAlgError:
-        nis0 = q_r
+        nis0 = np.zeros(m)                       # no judgement without a solvable prior S
     r_ratio = np.sqrt(np.diagonal(R_used, axis1=1, axis2=2) / var0).max(axis=1)
     beyond = int(np.count_nonzero(~(nis0 <= hi3)))
     grown = int(np.count_nonzero(r_ratio > math.sqrt(hi1)))

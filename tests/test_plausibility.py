@@ -4,6 +4,7 @@ synthetic innovations built to fail it (so the clean runs' silence means somethi
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ from navpp.filters import FILTERS
 SAMPLE = Path(__file__).resolve().parent.parent / "sample_data"
 #: words only the plausibility checks and the fix checks of issue 15 write
 NEW_WORDS = ("configured GNSS sigma", "GNSS noise", "radians", "identical", "swapped", "a jump no vehicle",
-             "altitude leaves", "speed exceeds")
+             "altitude leaves", "speed exceeds", "cannot tell whether those sigmas")
 
 
 #: the drive with the slower filters runs with the slow tests (the walk, real data, always runs)
@@ -57,6 +58,26 @@ def test_sigmas_far_too_large_are_refused_naming_them():
     t, nu, S, R, var0, acc = _white(scale=100.0)
     (f,) = pl.innovation_findings("ekf", "std", t, nu, S, R, var0, acc, 0.9999, 1.0)
     assert not f.fatal
+
+
+def test_fix_to_fix_correlated_errors_only_warn_that_navpp_cannot_tell():
+    """Oracle: the model's own numbers.  Errors of honest sigma but correlated 0.9999 from fix to fix
+    (a receiver that smooths; consecutive differences correlate -(1 - rho) / 2, about 0) move
+    ~70x less per fix than the sigma: the run is not refused, it says it cannot tell.  The same
+    small differences from white errors (rho = 0, differences correlate -0.5) are refused."""
+    t, nu, S, R, var0, acc = _white(m=2000)
+    rng = np.random.default_rng(7)
+    rho = 0.9999
+    e = np.zeros_like(nu)
+    w = rng.normal(size=nu.shape) * np.sqrt(var0) * np.sqrt(1.0 - rho ** 2)
+    e[0] = rng.normal(size=3) * np.sqrt(var0[0])
+    for k in range(1, e.shape[0]):
+        e[k] = rho * e[k - 1] + w[k]
+    (f,) = pl.innovation_findings("ekf", "std", t, e, S, R, var0, acc, 0.9999, 0.25)
+    assert not f.fatal and "cannot tell" in f.headline, f
+    small_white = rng.normal(size=nu.shape) * np.sqrt(var0) * math.sqrt(1.0 - rho ** 2) / math.sqrt(2.0)
+    (g,) = pl.innovation_findings("ekf", "std", t, small_white, S, R, var0, acc, 0.9999, 0.25)
+    assert g.fatal and "smaller than std say" in g.headline, g
 
 
 def test_a_learnt_r_hiding_large_innovations_is_a_divergence():
