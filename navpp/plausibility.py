@@ -52,6 +52,12 @@ MAX_SPEED_MPS = {"car": 150.0, "none": 343.0}
 #: atmosphere) small differences say nothing about the sigma, and the test only warns.
 WHITE_DIFFERENCE_CORRELATION = -0.25
 
+#: Altitude departures from the fixes' band below this, m, are left to the innovation checks and
+#: the consistency warnings: the bound is for gross failures (the issue's -15,865 m and
+#: 566,237 km), not for an overconfident filter a few metres off (the real walk with the preset's
+#: noise dips 3 m below its RTK fixes' band with a 1-sigma of a few cm).
+ALTITUDE_FLOOR_M = 100.0
+
 #: The gate probability the checks use when gating is off (``gate_probability = 0``).
 DEFAULT_GATE_PROBABILITY = 0.9999
 
@@ -200,10 +206,9 @@ def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray
     # a learnt R (or an inflated P) alone is no divergence: AEKF's R holds the prediction error by
     # design; it is one when the fixes it let through lie beyond the gate of the prior R
     if beyond > max_fraction * m and (grown > max_fraction * m or far > max_fraction * max(n_acc, 1)):
-        how = (f"its learnt R {float(np.median(r_ratio)):.3g}x that" if grown > max_fraction * m
-               else f"its solution beyond the gate of {share(far, n_acc)} it accepted")
-        out.append(Finding(True, f"{name} diverged: {share(beyond, m)} lie beyond the gate of the configured GNSS "
-                                 f"sigma ({how})"))
+        how = (f"learnt R {float(np.median(r_ratio)):.3g}x it" if grown > max_fraction * m
+               else f"solution off {share(far, n_acc)} it took")
+        out.append(Finding(True, f"{name} diverged: {share(beyond, m)} fail the configured GNSS sigma's gate ({how})"))
     return out
 
 
@@ -221,8 +226,9 @@ def solution_findings(name: str, vehicle_type: str, t: np.ndarray, alt: np.ndarr
                       gate_probability: float, fatal: bool = True) -> list[Finding]:
     """The solution's own bounds (O(n), vectorised), for gross failures the innovation checks
     may miss: finite; altitude within the fixes' altitude band widened on each side by the
-    band's own height plus the 1-dof gate quantile of the fixes' and the solution's vertical
-    sigma (an overconfident filter a few metres off is not this check's business); speed within
+    band's own height, :data:`ALTITUDE_FLOOR_M`, and the 1-dof gate quantile of the fixes' and
+    the solution's vertical sigma (an overconfident filter a few metres off is the consistency
+    warnings' business, not this check's); speed within
     the vehicle type's :data:`MAX_SPEED_MPS`.  t (N,) s; alt (N,) m; vel_enu (N, 3) m/s;
     std_enu (N, 3) m; fix_alt, fix_std_u (M,) m.  ``fatal`` False: findings are warnings
     (``[gnss] max_rejected_fraction = 1``: write anyway)."""
@@ -235,7 +241,8 @@ def solution_findings(name: str, vehicle_type: str, t: np.ndarray, alt: np.ndarr
     k = math.sqrt(gate_quantiles(gate_probability)[2])
     su = float(np.max(fix_std_u)) if np.all(np.isfinite(fix_std_u)) else 0.0
     band = float(np.max(fix_alt)) - float(np.min(fix_alt))
-    lo, hi = float(np.min(fix_alt)) - band - k * su, float(np.max(fix_alt)) + band + k * su
+    margin = band + k * su + ALTITUDE_FLOOR_M
+    lo, hi = float(np.min(fix_alt)) - margin, float(np.max(fix_alt)) + margin
     slack = k * std_enu[:, 2]
     out_alt = (alt < lo - slack) | (alt > hi + slack)
     if out_alt.any():
