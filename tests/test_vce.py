@@ -8,6 +8,7 @@ itself (adaptation off), and the existing ``process_noise`` of the INS model.
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,6 +20,9 @@ from navpp.filters import GaussianState, get_filter
 from navpp.filters.linear import LinearMeasurement, LinearModel
 from navpp.filters.vce import VCEOptions
 from navpp.ins.model import InsModel, NoiseModel
+
+
+DRIVE = Path(__file__).resolve().parent.parent / "sample_data" / "drive"
 
 
 def _vce(**options):
@@ -297,7 +301,7 @@ def test_ins_run_matches_the_ckf_and_learns_r():
     # near 1; the Q factors (on the groups' propagated shares of P) stay within their bounds
     out = {}
     for name in ("ckf", "vce-ckf"):
-        r = api.process("sample_data/drive", filter_name=name, write=False)
+        r = api.process(DRIVE, filter_name=name, write=False)
         out[name] = r
     h = {k: v.metrics["position_m"]["horizontal"]["rmse"] for k, v in out.items()}
     print(f"horizontal RMSE on sample_data/drive: ckf {h['ckf']:.3f} m, vce-ckf {h['vce-ckf']:.3f} m")
