@@ -97,25 +97,46 @@ def test_uniform_weights_are_the_ckf_on_the_ins():
     np.testing.assert_allclose(a.solution.std_enu, b.solution.std_enu, rtol=1e-9)
 
 
-def test_likelihood_selection_never_explains_the_fix_worse_than_the_ckf():
+def _update_with_weights(beta, posterior, model, interval, meas, monkeypatch):
+    """The predict and update of an RWCKF whose epoch weights are ``beta`` (None: uniform, the
+    CKF) from ``posterior``, through the public interface: its one draw returns ``beta``."""
+    if beta is None:
+        filt = get_filter("ckf")()
+        prior = filt.predict(posterior, model, interval)
+        return filt.update(prior, model, meas)
+    filt = _filter(select="none")
+    with monkeypatch.context() as mp:
+        mp.setattr(DirichletWeights, "draw", lambda self, rng, m_, size=None: np.array(beta, dtype=float))
+        prior = filt.predict(posterior, model, interval)
+        return filt.update(prior, model, meas)
+
+
+def _likelihood_score(inn):
+    """Paper 001's selection score of an update: ``nuᵀ S⁻¹ nu + ln det S``."""
+    return float(inn.nu @ np.linalg.solve(inn.S, inn.nu) + np.linalg.slogdet(inn.S)[1])
+
+
+def test_likelihood_selection_never_explains_the_fix_worse_than_the_ckf(monkeypatch):
     """The chosen candidate minimises the score over the candidates, which include the uniform
-    vector; every candidate re-scored one by one through the template path (the oracle for the
-    batched scoring)."""
+    vector; every candidate is replayed on its own (a filter whose only weights are that
+    candidate's, from the same posterior) as the oracle for the selection."""
     model, H, R, x0, P0, rng = _linear_problem(seed=5)
     filt = _filter(candidates=8, seed=2)
     twin = np.random.default_rng(2)                 # replays the filter's draws
     state = GaussianState(0.0, x0, P0)
     for k in range(1, 30):
-        state = filt.predict(state, model, (k - 1.0, float(k)))
+        interval = (k - 1.0, float(k))
         meas = LinearMeasurement(float(k), rng.normal(size=2) * 2, H, R)
         cands = [None, *DirichletWeights().draw(twin, 8, 8)]
-        one_by_one = np.array([filt._score_one(b, state, model, meas) for b in cands])
-        batched = filt._scores(state, model, meas, np.vstack([np.full(8, 1 / 8)] + cands[1:]))
-        np.testing.assert_allclose(batched, one_by_one, rtol=1e-10, atol=1e-10)
-        state, inn = filt.update(state, model, meas)
-        score = inn.nu @ np.linalg.solve(inn.S, inn.nu) + np.linalg.slogdet(inn.S)[1]
+        one_by_one = np.array([_likelihood_score(_update_with_weights(b, state, model, interval, meas,
+                                                                        monkeypatch)[1]) for b in cands])
+        state, inn = filt.update(filt.predict(state, model, interval), model, meas)
+        score = _likelihood_score(inn)
         assert score == pytest.approx(one_by_one.min(), rel=1e-9, abs=1e-9)
         assert score <= one_by_one[0] + 1e-9
+        chosen = filt.noise_report()["weights"]
+        best = cands[int(np.argmin(one_by_one))]
+        np.testing.assert_array_equal(chosen, np.full(8, 1 / 8) if best is None else best)
 
 
 def test_batched_scores_match_the_template_path_on_the_ins():
@@ -149,23 +170,18 @@ def test_batched_scores_match_the_template_path_on_the_ins():
         assert np.max(np.abs(batched - exact)) < 1e-6 * max(1.0, np.ptp(exact)), (batched, exact)
 
 
-def test_residual_selection_picks_the_smallest_innovation():
+def test_residual_selection_picks_the_smallest_innovation(monkeypatch):
     model, H, R, x0, P0, _ = _linear_problem(seed=6)
     filt = _filter(select="residual", candidates=6, seed=4)
-    state = GaussianState(0.0, x0, P0)
-    state = filt.predict(state, model, (0.0, 1.0))
-    z = np.array([2.0, -1.0])
-    # every candidate's innovation, recomputed with the same draws
-    clone = _filter(select="residual", candidates=6, seed=4)
-    clone_state = clone.predict(GaussianState(0.0, x0, P0), model, (0.0, 1.0))
+    start = GaussianState(0.0, x0, P0)
+    meas = LinearMeasurement(1.0, np.array([2.0, -1.0]), H, R)
+    # every candidate's innovation, each candidate replayed on its own with the same draws
     betas = [None, *DirichletWeights().draw(np.random.default_rng(4), 8, 6)]
-    norms = []
-    for beta in betas:
-        clone._beta = beta
-        pr = clone._prior_with(beta, clone_state, model)
-        norms.append(np.linalg.norm(clone.predict_measurement(pr, model, LinearMeasurement(1.0, z, H, R)).nu))
-    _, inn = filt.update(state, model, LinearMeasurement(1.0, z, H, R))
+    norms = [np.linalg.norm(_update_with_weights(b, start, model, (0.0, 1.0), meas, monkeypatch)[1].nu)
+             for b in betas]
+    _, inn = filt.update(filt.predict(start, model, (0.0, 1.0)), model, meas)
     assert np.linalg.norm(inn.nu) == pytest.approx(min(norms), rel=1e-12)
+    assert len(set(np.round(norms, 9))) == len(norms)          # the candidates do differ
 
 
 def test_runs_repeat_with_the_seed_and_differ_across_seeds():
