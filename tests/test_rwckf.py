@@ -1,6 +1,8 @@
 """RWCKF (paper 001 eqs 22-32): Dirichlet weights against the paper's own sampler, the
 epoch's weights against hand-computed moments, uniform weights against the CKF, selection."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -139,9 +141,13 @@ def test_likelihood_selection_never_explains_the_fix_worse_than_the_ckf(monkeypa
         np.testing.assert_array_equal(chosen, np.full(8, 1 / 8) if best is None else best)
 
 
-def test_batched_scores_match_the_template_path_on_the_ins():
-    """On the INS the batched scoring composes attitude errors to first order only: the
-    scores agree with the exact per-candidate path to well below their spread."""
+def test_batched_scores_match_the_template_path_on_the_ins(monkeypatch):
+    """On the INS the batched scoring composes attitude errors to first order only: the chosen
+    candidate is the best one by the exact score, to well below the candidates' spread. The
+    oracle replays every candidate of the filter's own draws through the public interface (a
+    ``select = "none"`` RWCKF whose one draw is that candidate, the CKF for the uniform one)
+    from the state before the last time update; the replay of the chosen candidate must give
+    the filter's own update (the replay is faithful)."""
     from navpp import engine
     from navpp.ins.model import GnssPosition
 
@@ -149,25 +155,45 @@ def test_batched_scores_match_the_template_path_on_the_ins():
     rec = sim.recording()
     cfg = config_from_dict({}, "test")
     filt = api.make_filter("rwckf", cfg)
-    captured = []
-    real_update = type(filt).update
+    draws, captured, last = [], [], {}
+    real_draw, real_predict, real_update = DirichletWeights.draw, filt.predict, filt.update
 
-    def spy(self, state, model, meas):
-        if len(captured) < 5 and isinstance(meas, GnssPosition) and self._pending is not None:
-            betas = np.vstack([np.full(30, 1 / 30), DirichletWeights().draw(np.random.default_rng(len(captured)), 30, 6)])
-            cands = [None, *betas[1:]]
-            captured.append((self._scores(state, model, meas, betas),
-                             np.array([self._score_one(b, state, model, meas) for b in cands])))
-        return real_update(self, state, model, meas)
+    def draw(self, rng, m, size=None):
+        out = real_draw(self, rng, m, size)
+        draws.append(out)
+        return out
 
-    type(filt).update = spy
-    try:
-        engine.run(rec, cfg, filt)
-    finally:
-        type(filt).update = real_update
+    def predict(state, model, interval):
+        out = real_predict(state, model, interval)
+        last.update(before=state, model=model, interval=interval, after=out)
+        return out
+
+    def update(state, model, meas):
+        post, inn = real_update(state, model, meas)
+        if len(captured) < 5 and isinstance(meas, GnssPosition) and state is last.get("after"):
+            captured.append((last["before"], last["model"], last["interval"], meas, draws[-1],
+                             filt.noise_report()["weights"], _likelihood_score(inn)))
+        return post, inn
+
+    monkeypatch.setattr(DirichletWeights, "draw", draw)
+    monkeypatch.setattr(filt, "predict", predict)
+    monkeypatch.setattr(filt, "update", update)
+    engine.run(rec, cfg, filt)
+    monkeypatch.setattr(DirichletWeights, "draw", real_draw)
     assert len(captured) == 5
-    for batched, exact in captured:
-        assert np.max(np.abs(batched - exact)) < 1e-6 * max(1.0, np.ptp(exact)), (batched, exact)
+    one = config_from_dict({"filter": {"rwckf": {"select": "none"}}}, "test")
+    for before, model, interval, meas, cands, chosen, score in captured:
+        model = replace(model, path=None)                 # the run's path is released: a scratch one
+        exact = []
+        for beta in [None, *cands]:
+            replay = api.make_filter("ckf" if beta is None else "rwckf", one)
+            with monkeypatch.context() as mp:
+                mp.setattr(DirichletWeights, "draw", lambda self, rng, m_, size=None, b=beta: np.array(b, dtype=float))
+                exact.append(_likelihood_score(replay.update(replay.predict(before, model, interval), model, meas)[1]))
+        exact = np.array(exact)
+        i = next(i for i, b in enumerate([np.full(chosen.size, 1 / chosen.size), *cands]) if np.array_equal(b, chosen))
+        assert exact[i] == pytest.approx(score, rel=1e-9, abs=1e-9)          # the replay is faithful
+        assert exact[i] - exact.min() < 1e-6 * max(1.0, np.ptp(exact)), (i, exact)
 
 
 def test_residual_selection_picks_the_smallest_innovation(monkeypatch):

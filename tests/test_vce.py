@@ -21,7 +21,6 @@ from navpp.filters.linear import LinearMeasurement, LinearModel
 from navpp.filters.vce import VCEOptions
 from navpp.ins.model import InsModel, NoiseModel
 
-
 DRIVE = Path(__file__).resolve().parent.parent / "sample_data" / "drive"
 
 
