@@ -50,7 +50,7 @@ def test_reported_sigma_is_consistent(drive):
     _, rec, res, _ = drive
     z = _normalised_errors(rec, res.solution)
     nrms = np.sqrt(np.mean(z ** 2, axis=0))
-    assert np.all(nrms < 2.0), nrms
+    assert np.all(nrms < 1.5), nrms
     assert np.all(nrms > 0.5), nrms          # not hiding behind a pessimistic sigma either
 
 
@@ -83,7 +83,7 @@ def test_biases_are_estimated_with_honest_sigma(drive):
 def test_consistency_over_rates_and_seeds(seed, imu_rate, gnss_rate):
     _, rec, res, m = _run(seed=seed, imu_rate=imu_rate, gnss_rate=gnss_rate, duration=600.0)
     nrms = np.sqrt(np.mean(_normalised_errors(rec, res.solution) ** 2, axis=0))
-    assert np.all(nrms < 2.0), nrms
+    assert np.all(nrms < 1.5), nrms
     assert m["position_m"]["horizontal"]["rmse"] < m["gnss_position_m"]["horizontal"]["rmse"]
 
 
@@ -157,7 +157,7 @@ def test_gnss_epochs_between_imu_samples():
     assert np.mean(frac > 1e-6) > 0.5
     assert m["position_m"]["horizontal"]["rmse"] <= 0.5 * m["gnss_position_m"]["horizontal"]["rmse"]
     nrms = np.sqrt(np.mean(_normalised_errors(rec, res.solution) ** 2, axis=0))
-    assert np.all(nrms < 2.0), nrms
+    assert np.all(nrms < 1.5), nrms
 
 
 def _csv_log(tmp_path, sim, imu_columns, imu_header):

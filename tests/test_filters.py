@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scenarios import linear_problem
 
-from navpp.errors import ConfigError
+from navpp.errors import ConfigError, FilterDivergedError
 from navpp.filters import FILTERS, GaussianState, get_filter
 from navpp.filters.linear import LinearMeasurement, LinearModel
 
@@ -115,5 +115,5 @@ def test_sigma_point_filter_repairs_a_slightly_indefinite_covariance():
     state = filt.predict(GaussianState(0.0, np.zeros(n), P), model, (0.0, 1.0))
     assert filt.repairs == 1
     assert np.all(np.linalg.eigvalsh(state.P) > 0)
-    with pytest.raises(Exception, match="not positive definite"):
+    with pytest.raises(FilterDivergedError, match=r"ckf: covariance is not finite at t=0\.000 s"):
         filt.predict(GaussianState(0.0, np.zeros(n), np.full((n, n), np.nan)), model, (0.0, 1.0))

@@ -444,11 +444,10 @@ def test_warns_beyond_leap_table_validity(tmp_path):
     assert any("leap-second table" in x for x in w)
 
 
-def test_many_lines_fast(tmp_path):
-    """36,000 epochs (1 h at 10 Hz) read well within a second."""
-    import time
-
-    n = 36_000
+def test_many_lines_read_in_order(tmp_path):
+    """2,000 epochs at 10 Hz: every line read, times from the file's GPST stamps (the reading
+    speed on an hour of lines is measured by benchmarks/bench_rtklib.py)."""
+    n = 2_000
     t = 1704067200 + np.arange(n) * 0.1
     lines = header("GPST", COLS_LLH + COLS_VEL)
     stamps = [np.datetime64(round(x * 1000), "ms").astype(str).replace("-", "/").replace("T", " ")
@@ -456,12 +455,9 @@ def test_many_lines_fast(tmp_path):
     vel = "    1.00000    2.00000   -0.50000   0.01000 0.02000 0.03000 0.00000 0.00000 0.00000"
     lines += [s + LLH_BODY + vel for s in stamps]
     p = write_pos(tmp_path, lines)
-    t_start = time.perf_counter()
     g, _, t0 = read_pos(p)
-    elapsed = time.perf_counter() - t_start
     assert len(g) == n and t0 == 1704067182 * NS
     np.testing.assert_allclose(g.t, np.arange(n) * 0.1, atol=1e-9)
-    assert elapsed < 2.0, elapsed
 
 
 def test_fast_path_takes_common_files(tmp_path, monkeypatch):

@@ -1,6 +1,8 @@
 """RWCKF (paper 001 eqs 22-32): Dirichlet weights against the paper's own sampler, the
 epoch's weights against hand-computed moments, uniform weights against the CKF, selection."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -97,30 +99,55 @@ def test_uniform_weights_are_the_ckf_on_the_ins():
     np.testing.assert_allclose(a.solution.std_enu, b.solution.std_enu, rtol=1e-9)
 
 
-def test_likelihood_selection_never_explains_the_fix_worse_than_the_ckf():
+def _update_with_weights(beta, posterior, model, interval, meas, monkeypatch):
+    """The predict and update of an RWCKF whose epoch weights are ``beta`` (None: uniform, the
+    CKF) from ``posterior``, through the public interface: its one draw returns ``beta``."""
+    if beta is None:
+        filt = get_filter("ckf")()
+        prior = filt.predict(posterior, model, interval)
+        return filt.update(prior, model, meas)
+    filt = _filter(select="none")
+    with monkeypatch.context() as mp:
+        mp.setattr(DirichletWeights, "draw", lambda self, rng, m_, size=None: np.array(beta, dtype=float))
+        prior = filt.predict(posterior, model, interval)
+        return filt.update(prior, model, meas)
+
+
+def _likelihood_score(inn):
+    """Paper 001's selection score of an update: ``nuᵀ S⁻¹ nu + ln det S``."""
+    return float(inn.nu @ np.linalg.solve(inn.S, inn.nu) + np.linalg.slogdet(inn.S)[1])
+
+
+def test_likelihood_selection_never_explains_the_fix_worse_than_the_ckf(monkeypatch):
     """The chosen candidate minimises the score over the candidates, which include the uniform
-    vector; every candidate re-scored one by one through the template path (the oracle for the
-    batched scoring)."""
+    vector; every candidate is replayed on its own (a filter whose only weights are that
+    candidate's, from the same posterior) as the oracle for the selection."""
     model, H, R, x0, P0, rng = _linear_problem(seed=5)
     filt = _filter(candidates=8, seed=2)
     twin = np.random.default_rng(2)                 # replays the filter's draws
     state = GaussianState(0.0, x0, P0)
     for k in range(1, 30):
-        state = filt.predict(state, model, (k - 1.0, float(k)))
+        interval = (k - 1.0, float(k))
         meas = LinearMeasurement(float(k), rng.normal(size=2) * 2, H, R)
         cands = [None, *DirichletWeights().draw(twin, 8, 8)]
-        one_by_one = np.array([filt._score_one(b, state, model, meas) for b in cands])
-        batched = filt._scores(state, model, meas, np.vstack([np.full(8, 1 / 8)] + cands[1:]))
-        np.testing.assert_allclose(batched, one_by_one, rtol=1e-10, atol=1e-10)
-        state, inn = filt.update(state, model, meas)
-        score = inn.nu @ np.linalg.solve(inn.S, inn.nu) + np.linalg.slogdet(inn.S)[1]
+        one_by_one = np.array([_likelihood_score(_update_with_weights(b, state, model, interval, meas,
+                                                                        monkeypatch)[1]) for b in cands])
+        state, inn = filt.update(filt.predict(state, model, interval), model, meas)
+        score = _likelihood_score(inn)
         assert score == pytest.approx(one_by_one.min(), rel=1e-9, abs=1e-9)
         assert score <= one_by_one[0] + 1e-9
+        chosen = filt.noise_report()["weights"]
+        best = cands[int(np.argmin(one_by_one))]
+        np.testing.assert_array_equal(chosen, np.full(8, 1 / 8) if best is None else best)
 
 
-def test_batched_scores_match_the_template_path_on_the_ins():
-    """On the INS the batched scoring composes attitude errors to first order only: the
-    scores agree with the exact per-candidate path to well below their spread."""
+def test_batched_scores_match_the_template_path_on_the_ins(monkeypatch):
+    """On the INS the batched scoring composes attitude errors to first order only: the chosen
+    candidate is the best one by the exact score, to well below the candidates' spread. The
+    oracle replays every candidate of the filter's own draws through the public interface (a
+    ``select = "none"`` RWCKF whose one draw is that candidate, the CKF for the uniform one)
+    from the state before the last time update; the replay of the chosen candidate must give
+    the filter's own update (the replay is faithful)."""
     from navpp import engine
     from navpp.ins.model import GnssPosition
 
@@ -128,44 +155,59 @@ def test_batched_scores_match_the_template_path_on_the_ins():
     rec = sim.recording()
     cfg = config_from_dict({}, "test")
     filt = api.make_filter("rwckf", cfg)
-    captured = []
-    real_update = type(filt).update
+    draws, captured, last = [], [], {}
+    real_draw, real_predict, real_update = DirichletWeights.draw, filt.predict, filt.update
 
-    def spy(self, state, model, meas):
-        if len(captured) < 5 and isinstance(meas, GnssPosition) and self._pending is not None:
-            betas = np.vstack([np.full(30, 1 / 30), DirichletWeights().draw(np.random.default_rng(len(captured)), 30, 6)])
-            cands = [None, *betas[1:]]
-            captured.append((self._scores(state, model, meas, betas),
-                             np.array([self._score_one(b, state, model, meas) for b in cands])))
-        return real_update(self, state, model, meas)
+    def draw(self, rng, m, size=None):
+        out = real_draw(self, rng, m, size)
+        draws.append(out)
+        return out
 
-    type(filt).update = spy
-    try:
-        engine.run(rec, cfg, filt)
-    finally:
-        type(filt).update = real_update
+    def predict(state, model, interval):
+        out = real_predict(state, model, interval)
+        last.update(before=state, model=model, interval=interval, after=out)
+        return out
+
+    def update(state, model, meas):
+        post, inn = real_update(state, model, meas)
+        if len(captured) < 5 and isinstance(meas, GnssPosition) and state is last.get("after"):
+            captured.append((last["before"], last["model"], last["interval"], meas, draws[-1],
+                             filt.noise_report()["weights"], _likelihood_score(inn)))
+        return post, inn
+
+    monkeypatch.setattr(DirichletWeights, "draw", draw)
+    monkeypatch.setattr(filt, "predict", predict)
+    monkeypatch.setattr(filt, "update", update)
+    engine.run(rec, cfg, filt)
+    monkeypatch.setattr(DirichletWeights, "draw", real_draw)
     assert len(captured) == 5
-    for batched, exact in captured:
-        assert np.max(np.abs(batched - exact)) < 1e-6 * max(1.0, np.ptp(exact)), (batched, exact)
+    one = config_from_dict({"filter": {"rwckf": {"select": "none"}}}, "test")
+    for before, model, interval, meas, cands, chosen, score in captured:
+        model = replace(model, path=None)                 # the run's path is released: a scratch one
+        exact = []
+        for beta in [None, *cands]:
+            replay = api.make_filter("ckf" if beta is None else "rwckf", one)
+            with monkeypatch.context() as mp:
+                mp.setattr(DirichletWeights, "draw", lambda self, rng, m_, size=None, b=beta: np.array(b, dtype=float))
+                exact.append(_likelihood_score(replay.update(replay.predict(before, model, interval), model, meas)[1]))
+        exact = np.array(exact)
+        i = next(i for i, b in enumerate([np.full(chosen.size, 1 / chosen.size), *cands]) if np.array_equal(b, chosen))
+        assert exact[i] == pytest.approx(score, rel=1e-9, abs=1e-9)          # the replay is faithful
+        assert exact[i] - exact.min() < 1e-6 * max(1.0, np.ptp(exact)), (i, exact)
 
 
-def test_residual_selection_picks_the_smallest_innovation():
+def test_residual_selection_picks_the_smallest_innovation(monkeypatch):
     model, H, R, x0, P0, _ = _linear_problem(seed=6)
     filt = _filter(select="residual", candidates=6, seed=4)
-    state = GaussianState(0.0, x0, P0)
-    state = filt.predict(state, model, (0.0, 1.0))
-    z = np.array([2.0, -1.0])
-    # every candidate's innovation, recomputed with the same draws
-    clone = _filter(select="residual", candidates=6, seed=4)
-    clone_state = clone.predict(GaussianState(0.0, x0, P0), model, (0.0, 1.0))
+    start = GaussianState(0.0, x0, P0)
+    meas = LinearMeasurement(1.0, np.array([2.0, -1.0]), H, R)
+    # every candidate's innovation, each candidate replayed on its own with the same draws
     betas = [None, *DirichletWeights().draw(np.random.default_rng(4), 8, 6)]
-    norms = []
-    for beta in betas:
-        clone._beta = beta
-        pr = clone._prior_with(beta, clone_state, model)
-        norms.append(np.linalg.norm(clone.predict_measurement(pr, model, LinearMeasurement(1.0, z, H, R)).nu))
-    _, inn = filt.update(state, model, LinearMeasurement(1.0, z, H, R))
+    norms = [np.linalg.norm(_update_with_weights(b, start, model, (0.0, 1.0), meas, monkeypatch)[1].nu)
+             for b in betas]
+    _, inn = filt.update(filt.predict(start, model, (0.0, 1.0)), model, meas)
     assert np.linalg.norm(inn.nu) == pytest.approx(min(norms), rel=1e-12)
+    assert len(set(np.round(norms, 9))) == len(norms)          # the candidates do differ
 
 
 def test_runs_repeat_with_the_seed_and_differ_across_seeds():

@@ -8,6 +8,7 @@ itself (adaptation off), and the existing ``process_noise`` of the INS model.
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,6 +20,8 @@ from navpp.filters import GaussianState, get_filter
 from navpp.filters.linear import LinearMeasurement, LinearModel
 from navpp.filters.vce import VCEOptions
 from navpp.ins.model import InsModel, NoiseModel
+
+DRIVE = Path(__file__).resolve().parent.parent / "sample_data" / "drive"
 
 
 def _vce(**options):
@@ -172,16 +175,25 @@ def _two_sensor_run(seed: int, n_epochs: int = 2000, q: float = 3.0, r=(2.0, 1.0
     return out
 
 
+@pytest.mark.slow
 def test_factors_converge_to_the_truth_on_an_identifiable_model():
-    # Q at 3x and R at 4x the truth (paper 003's bearing-only setting), default options
-    # (window 50). Two sensors on the same position make Q and R separable (a scalar or
-    # single-sensor measurement does not: see the test above). The mean factor over the last
-    # 1000 of 2000 epochs is within 30 % of the truth: over seeds 0-19, 19 runs pass, the worst
-    # errors are q 26 %, R 19/14/31/23 % (seed 11: 31 %); the median q is 11 % high. A
-    # factor from one window of 50 epochs alone is noisier (up to 35-60 % off).
-    runs = np.array([_two_sensor_run(seed)[1000:].mean(axis=0) for seed in range(4)])
-    assert np.all(np.abs(runs - 1.0) < 0.3), runs
-    assert np.all(np.abs(runs.mean(axis=0) - 1.0) < 0.15), runs
+    """Q at 3x and R at 4x the truth (paper 003's bearing-only setting), default options
+    (window 50), seeds 0-19 (all of them, none chosen). Two sensors on the same position make
+    Q and R separable (a scalar or single-sensor measurement does not: see the test above).
+
+    Per run the factor is the mean over the last 1000 of 2000 epochs. The R factors: their
+    mean over the 20 runs within 3 standard errors (s/√20, s the spread across runs) of the
+    truth, i.e. unbiased. Every factor: at least 90 % of the runs within ±30 % of the truth
+    (a Helmert factor from 1000 epochs spreads by 7-13 % per run here, so ±30 % is beyond
+    2.3 σ: about 2 % of runs outside if unbiased). The q factor is biased high (measured mean
+    1.11, standard error 0.017 over these seeds): it is held to its median within 15 %.
+    """
+    runs = np.array([_two_sensor_run(seed)[1000:].mean(axis=0) for seed in range(20)])
+    mean, se = runs.mean(axis=0), runs.std(axis=0, ddof=1) / np.sqrt(len(runs))
+    print("factor / truth: mean", mean.round(3), "standard error", se.round(3))
+    assert np.all(np.abs(mean[1:] - 1.0) < 3.0 * se[1:]), (mean, se)
+    assert np.all(np.mean(np.abs(runs - 1.0) < 0.3, axis=0) >= 0.9), runs
+    assert abs(np.median(runs[:, 0]) - 1.0) < 0.15, runs[:, 0]
 
 
 @pytest.mark.parametrize("floor, ceiling", [(0.1, 10.0), (0.5, 2.0)])
@@ -297,7 +309,7 @@ def test_ins_run_matches_the_ckf_and_learns_r():
     # near 1; the Q factors (on the groups' propagated shares of P) stay within their bounds
     out = {}
     for name in ("ckf", "vce-ckf"):
-        r = api.process("sample_data/drive", filter_name=name, write=False)
+        r = api.process(DRIVE, filter_name=name, write=False)
         out[name] = r
     h = {k: v.metrics["position_m"]["horizontal"]["rmse"] for k, v in out.items()}
     print(f"horizontal RMSE on sample_data/drive: ckf {h['ckf']:.3f} m, vce-ckf {h['vce-ckf']:.3f} m")
