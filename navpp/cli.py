@@ -232,7 +232,7 @@ def _print_summary(res, quiet: bool) -> None:
             tab.add_column(col, justify="right")
         rows = [("east", m["position_m"]["east"]), ("north", m["position_m"]["north"]), ("up", m["position_m"]["up"]),
                 ("horizontal", m["position_m"]["horizontal"]), ("3-D", m["position_m"]["3d"])]
-        if "gnss_position_m" in m:
+        if "horizontal" in m.get("gnss_position_m", {}):     # absent: no fix inside the reference's span
             rows.append(("raw GNSS horiz.", m["gnss_position_m"]["horizontal"]))
             rows.append(("raw GNSS up", m["gnss_position_m"]["up"]))
         for name, s in rows:

@@ -607,7 +607,8 @@ def _run_series(rec, sol, diag, filt) -> RunSeries:
     if rec.reference is not None:
         ref = rec.reference
         ref_ok = np.isfinite(ref.lat_deg) & np.isfinite(ref.lon_deg) & np.isfinite(ref.alt)
-        assoc = associate(np.asarray(sol.t, dtype=float), np.where(ref_ok, np.asarray(ref.t, dtype=float), np.nan))
+        assoc = associate(np.asarray(sol.t, dtype=float), np.where(ref_ok, np.asarray(ref.t, dtype=float), np.nan),
+                          skip_holes=True)
         if assoc.idx_ref.size:
             i = assoc.idx_ref
             est = interpolate_solution(sol, assoc.t)

@@ -59,13 +59,14 @@ class Association(NamedTuple):
     t: np.ndarray
 
 
-def associate(t_est: np.ndarray, t_ref: np.ndarray) -> Association:
+def associate(t_est: np.ndarray, t_ref: np.ndarray, skip_holes: bool = False) -> Association:
     """Reference epochs at which the estimate can be interpolated.
 
     Keeps the reference epochs with ``t_est[0] <= t_ref <= t_est[-1]`` (the span's ends
-    included: the estimate is known there without extrapolation), except those inside a hole of
-    the estimate (an interval longer than the INS bridges, 10.5 s, and than 3 of its median
-    intervals: the gap between two segments of a run); non-finite reference times are dropped.
+    included: the estimate is known there without extrapolation); with ``skip_holes``, not those
+    inside a hole of the estimate (an interval longer than the INS bridges, 10.5 s, and than 3
+    of its median intervals: the gap between two segments of a run, navpp.engine.imu_segments);
+    non-finite reference times are dropped.
 
     Parameters
     ----------
@@ -82,7 +83,7 @@ def associate(t_est: np.ndarray, t_ref: np.ndarray) -> Association:
         idx = np.empty(0, dtype=np.int64)
         return Association(idx, t_ref[idx])
     inside = np.isfinite(t_ref) & (t_ref >= t_est[0]) & (t_ref <= t_est[-1])
-    if t_est.size > 2:
+    if skip_holes and t_est.size > 2:
         # a hole in the estimate (the IMU gap between two segments of a run, navpp.engine.imu_segments)
         # is not interpolated across: longer than the INS bridges and 3 of the estimate's own intervals
         from .ins.model import max_bridgeable_gap_s
@@ -427,7 +428,7 @@ def compute_metrics(sol: Solution, ref: ReferenceData, *, filter_name: str, log:
     t_ref = np.asarray(ref.t, dtype=float)
     # reference rows without a position cannot be compared: drop them (time -> NaN)
     ref_ok = np.isfinite(ref.lat_deg) & np.isfinite(ref.lon_deg) & np.isfinite(ref.alt)
-    assoc = associate(t_sol, np.where(ref_ok, t_ref, np.nan))
+    assoc = associate(t_sol, np.where(ref_ok, t_ref, np.nan), skip_holes=True)
     if assoc.idx_ref.size == 0:
         sol_span = f"[{t_sol[0]:.3f}, {t_sol[-1]:.3f}] s" if t_sol.size else "empty"
         ref_span = f"[{np.nanmin(t_ref):.3f}, {np.nanmax(t_ref):.3f}] s" if t_ref.size else "empty"

@@ -653,3 +653,23 @@ def test_split_ros1_recording_as_a_directory(sim_log_dir: Path, tmp_path: Path) 
     b = invoke("process", whole, "--config", cfg, "--out", tmp_path / "b", "-q")
     assert a.exit_code == 0 and b.exit_code == 0, (a.output, b.output)
     assert (tmp_path / "a" / "trajectory.csv").read_bytes() == (tmp_path / "b" / "trajectory.csv").read_bytes()
+
+
+def test_the_bundled_real_walk_processes_and_prints_its_raw_fix_row(tmp_path: Path):
+    """The README's real log end to end through the command line: the summary once indexed a
+    raw-GNSS row the metrics may lack and crashed after writing (exit 1 with a traceback)."""
+    walk = Path(__file__).resolve().parent.parent / "sample_data" / "walk_0827"
+    res = invoke("process", walk, "--out", tmp_path / "out")
+    assert res.exit_code == 0, res.output
+    assert "raw GNSS horiz." in res.stdout
+    m = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert m["gnss_position_m"]["epochs"] > 0 and "horizontal" in m["gnss_position_m"]
+
+
+def test_metrics_interpolate_across_holes_unless_asked_not_to():
+    from navpp.metrics import associate
+
+    t_est = np.r_[np.arange(0.0, 10.0, 0.1), np.arange(60.0, 70.0, 0.1)]     # a 50 s hole
+    t_ref = np.array([5.0, 30.0, 65.0])
+    assert associate(t_est, t_ref).idx_ref.tolist() == [0, 1, 2]
+    assert associate(t_est, t_ref, skip_holes=True).idx_ref.tolist() == [0, 2]
