@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path

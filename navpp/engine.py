@@ -14,8 +14,8 @@ from __future__ import annotations
 import math
 import time
 from array import array
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Callable
 
 import numpy as np
 from numba import njit
@@ -32,9 +32,9 @@ from .ins.model import (
     ATT,
     BA,
     BG,
-    VEL,
     LONG_GAP_PERIODS,
     POS,
+    VEL,
     GnssPosition,
     InsModel,
     NoiseModel,
@@ -918,7 +918,8 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     try:
         return _run_body(recording, config, filt, progress, cov_step_s, smooth, notes, warnings)
     except NavppError as exc:
-        raise exc.with_context(notes, warnings)
+        exc.with_context(notes, warnings)
+        raise
 
 
 def _run_body(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
@@ -1331,4 +1332,4 @@ def solution_from_path(t: np.ndarray, path: np.ndarray, std_enu: np.ndarray, t0_
                     vel_enu=path[:, 4:7], rph_deg=path[:, 0:3], std_enu=std_enu, t0_ns=t0_ns)
 
 
-__all__ = ["Diagnostics", "RunResult", "SmoothedRun", "run", "solution_from_path", "mounting_matrix"]
+__all__ = ["Diagnostics", "RunResult", "SmoothedRun", "mounting_matrix", "run", "solution_from_path"]

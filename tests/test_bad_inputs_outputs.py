@@ -15,8 +15,8 @@ import time
 from pathlib import Path
 
 import pytest
+from badinputs import ROOT, SAMPLE, Case, copy_drive, edit_csv, params, run_case, run_navpp, snapshot
 
-from badinputs import ROOT, SAMPLE, Case, copy_drive, edit_csv, run_case, run_navpp, snapshot, params
 from navpp.outdir import LOCK_NAME, MANIFEST_NAME
 
 
@@ -118,10 +118,10 @@ def test_second_run_into_a_busy_out_fails_at_once(tmp_path: Path) -> None:
             assert first.poll() is None, first.communicate()
             assert time.monotonic() < deadline
             time.sleep(0.05)
-        code, stdout, stderr, wall = run_navpp(["process", str(log), "--out", str(out), "-q"])
+        code, _stdout, stderr, wall = run_navpp(["process", str(log), "--out", str(out), "-q"])
         still_running = first.poll() is None
     finally:
-        f_out, f_err = first.communicate(timeout=120)
+        _f_out, f_err = first.communicate(timeout=120)
     assert still_running, "the first run ended before the second started: the test proves nothing"
     lines = [ln for ln in stderr.splitlines() if ln.strip()]
     assert code == 1 and len(lines) == 1, stderr
@@ -216,7 +216,7 @@ def test_unwritable_numba_cache_dir_falls_back(tmp_path: Path) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("")
     env = {"NUMBA_CACHE_DIR": str(blocker / "cache"), "TMPDIR": str(tmp_path)}
-    code, stdout, stderr, _ = run_navpp(["filters"], env=env)
+    code, _stdout, stderr, _ = run_navpp(["filters"], env=env)
     assert code == 0, stderr
     assert stderr.startswith(f"note: NUMBA_CACHE_DIR {blocker / 'cache'} is not writable: compiled kernels are "
                              f"cached in {tmp_path}/navpp-numba-cache-{os.getuid()}")

@@ -15,8 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from badinputs import DRIVE, Case, copy_drive, edit_csv, run_case, run_navpp, params
+from badinputs import DRIVE, Case, copy_drive, edit_csv, params, run_case, run_navpp
 
 IMU_ROWS = 37501       # data rows of sample_data/drive/imu.csv (header = line 1)
 

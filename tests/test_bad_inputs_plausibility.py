@@ -9,8 +9,7 @@ from __future__ import annotations
 import math
 
 import pytest
-
-from badinputs import Case, copy_drive, edit_csv, run_case, params
+from badinputs import Case, copy_drive, edit_csv, params, run_case
 
 
 def _cols(edit):

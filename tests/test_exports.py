@@ -22,13 +22,13 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from navpp.outdir import MANIFEST_NAME as MANIFEST
 import navpp
 from navpp import api, geodesy
 from navpp.cli import app
 from navpp.config import Config, OutputConfig
 from navpp.errors import ConfigError, InputError
 from navpp.io import exports, frames, writers
+from navpp.outdir import MANIFEST_NAME as MANIFEST
 from navpp.recording import GnssData, ImuData, Recording, Solution
 
 T0_NS = 1_700_000_000_123_456_789          # a unix stamp with a fraction: exercises the time digits
@@ -429,7 +429,7 @@ def test_format_errors_come_before_reading(sim_log_dir: Path, tmp_path: Path, mo
     monkeypatch.setattr(api, "read_log", read_log)
     with pytest.raises(ConfigError, match=r"formats: unknown format 'gpx'; valid formats: 'csv', 'mcap'"):
         api.process(sim_log_dir, out_dir=tmp_path / "o", formats="csv,gpx")
-    with pytest.raises(ConfigError, match="--embed-input .* add mcap"):
+    with pytest.raises(ConfigError, match=r"--embed-input .* add mcap"):
         api.process(sim_log_dir, out_dir=tmp_path / "o", formats="csv", embed_input=True)
     with pytest.raises(ConfigError, match=r"\[output\] formats is csv"):
         api.process(sim_log_dir, out_dir=tmp_path / "o", embed_input=True)

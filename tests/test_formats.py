@@ -27,11 +27,11 @@ import numpy as np
 import pytest
 from test_cli import assert_one_line_error, flat, invoke
 
-from navpp.outdir import MANIFEST_NAME as MANIFEST
 from navpp import api
 from navpp.config import config_from_dict
 from navpp.io import roswrite
 from navpp.io.csv import read_csv_log
+from navpp.outdir import MANIFEST_NAME as MANIFEST
 from navpp.simulate import SimulationSpec, simulate, write_csv_log
 
 SPEC = SimulationSpec(duration_s=120, still_s=30, seed=3, lever_arm_m=(0.3, 0.0, 1.2))

@@ -480,8 +480,10 @@ def test_packers_match_rosbags_serializer(encoding, frame):
     a = rng.standard_normal((2, 12)) * 1e3
     a[1, :3] = [np.nan, -0.0, np.inf]
     child = frame[::-1] + "x"
-    V = lambda v: T["geometry_msgs/msg/Vector3"](*v)
-    Q = lambda v: T["geometry_msgs/msg/Quaternion"](*v)
+    def V(v):
+        return T["geometry_msgs/msg/Vector3"](*v)
+    def Q(v):
+        return T["geometry_msgs/msg/Quaternion"](*v)
     pose_var = np.abs(a[:, 6:12])
     twist_var = np.arange(6.0)
     odo = rw.pack_odometry(stamps, a[:, :3], a[:, 3:7], a[:, 7:10], a[:, [10, 11, 0]], encoding=encoding,

@@ -149,7 +149,7 @@ class RWCKF(SigmaPointFilter):
         random_cov = self.options.covariance == "random"
         pending = self._pending
         if pending is not None and pending[0] is state:
-            _, x_ref, dY, Q, wc = pending
+            _, x_ref, dY, Q, _wc = pending
             M = betas @ dY                                            # (C, n) candidate means about x_ref
             if random_cov:
                 dev = dY[None, :, :] - M[:, None, :]

@@ -23,8 +23,8 @@ import numpy as np
 
 from .. import geodesy
 from ..errors import InputError
-from .attitude import dcm_to_quat, rph_to_dcm
 from .aids.standstill import quiet_blocks
+from .attitude import dcm_to_quat, rph_to_dcm
 from .model import ATT, BA, BG, N_ERR, POS, VEL
 from .strapdown import NOMINAL_BA, NOMINAL_BG, NOMINAL_SIZE
 

@@ -66,7 +66,7 @@ def quat_to_rotvec(q):
     if w < 0.0:
         w, x, y, z = -w, -x, -y, -z
     n = np.sqrt(x * x + y * y + z * z)
-    if n < 1e-8:
+    if n < 1e-8:  # noqa: SIM108  (the series and the exact form, each with its own line)
         k = 2.0 / w * (1.0 - n * n / (3.0 * w * w))  # 2*atan(n/w)/n to second order
     else:
         k = 2.0 * np.arctan2(n, w) / n
