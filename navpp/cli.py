@@ -89,8 +89,9 @@ class _Progress:
         if not self.quiet and console.is_terminal:
             from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-            self.bar = Progress(TextColumn("{task.description:<10}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
-                                TimeElapsedColumn(), console=console, transient=True)
+            self.bar = Progress(TextColumn("{task.description:<10}"), BarColumn(),
+                                TextColumn("{task.percentage:>3.0f}%"), TimeElapsedColumn(), console=console,
+                                transient=True)
             self.bar.__enter__()
         return self
 
@@ -152,7 +153,8 @@ def process(
                                                    "else the automotive preset.")] = None,
     reference: Annotated[Path | None, typer.Option(help="Reference CSV (t, lat, lon, alt[, ve, vn, vu, roll, "
                                                       "pitch, heading]); overrides reference.csv.")] = None,
-    imu_topic: Annotated[str | None, typer.Option(help="IMU topic (sensor_msgs/Imu) when a ROS log has several.")] = None,
+    imu_topic: Annotated[str | None, typer.Option(
+        help="IMU topic (sensor_msgs/Imu) when a ROS log has several.")] = None,
     gnss_topic: Annotated[str | None, typer.Option(
         help="GNSS topic (sensor_msgs/NavSatFix) when a ROS log has several.")] = None,
     reference_topic: Annotated[str | None, typer.Option(
@@ -219,7 +221,8 @@ def _print_summary(res, quiet: bool) -> None:
         _note(err, f"compiled navpp's kernels in {compile_s:.1f} s (first run only; cached for next time)")
     con = Console(highlight=False, soft_wrap=True)
     run = res.run
-    con.print(f"{escape(res.recording.source)}: {len(res.recording.imu)} IMU samples at {res.recording.imu.rate_hz:.1f} Hz, "
+    con.print(f"{escape(res.recording.source)}: {len(res.recording.imu)} IMU samples at "
+              f"{res.recording.imu.rate_hz:.1f} Hz, "
               f"{run.gnss_epochs} GNSS epochs used ({run.gnss_rejected} rejected by the gate), "
               f"filter [bold]{res.filter_name}[/] ran in {run.runtime_s:.2f} s")
     aids = {k: v for k, v in (getattr(run, "updates", None) or {}).items() if k != "gnss_position"}
@@ -389,7 +392,8 @@ def compare(
         from rich.markup import escape
 
         Console(stderr=True, highlight=False, soft_wrap=True).print(
-            f"[bold red]navpp: error:[/] {escape(f'CI gate failed: {len(verdict.failures)} of {verdict.checks} checks')}"
+            "[bold red]navpp: error:[/] "
+            f"{escape(f'CI gate failed: {len(verdict.failures)} of {verdict.checks} checks')}"
             " (listed above)")
         raise typer.Exit(3)
 
@@ -550,12 +554,13 @@ def simulate(
     ctx: typer.Context,
     out: Annotated[Path, typer.Argument(metavar="OUT", help="Output directory for the CSV log (imu.csv, gnss.csv, "
                                         "reference.csv, navpp.toml).")],
-    duration: Annotated[float, typer.Option(help="Drive length, s, >= 30 (includes the initial still period).",
-                                            callback=_require(_finite(30.0), "a finite number of seconds >= 30"))] = 900.0,
-    imu_rate: Annotated[float, typer.Option(help="IMU rate, Hz.",
-                                            callback=_require(_finite(0.0, strict=True), "a finite number of Hz > 0"))] = 125.0,
-    gnss_rate: Annotated[float, typer.Option(help="GNSS rate, Hz (1-10).",
-                                             callback=_require(_finite(1.0, 10.0), "a number of Hz within 1-10"))] = 5.0,
+    duration: Annotated[float, typer.Option(
+        help="Drive length, s, >= 30 (includes the initial still period).",
+        callback=_require(_finite(30.0), "a finite number of seconds >= 30"))] = 900.0,
+    imu_rate: Annotated[float, typer.Option(
+        help="IMU rate, Hz.", callback=_require(_finite(0.0, strict=True), "a finite number of Hz > 0"))] = 125.0,
+    gnss_rate: Annotated[float, typer.Option(
+        help="GNSS rate, Hz (1-10).", callback=_require(_finite(1.0, 10.0), "a number of Hz within 1-10"))] = 5.0,
     preset: Annotated[str, typer.Option(help=f"IMU grade: {', '.join(PRESETS)}.",
                                         callback=_require(lambda v: v in PRESETS, f"one of {', '.join(PRESETS)}"))]
         = "automotive",
@@ -631,7 +636,8 @@ def simulate(
     if not spec.start_in_motion and spec.still_effective_s < spec.still_s:
         _note(Console(stderr=True, highlight=False, soft_wrap=True),
               f"still period shortened to {spec.still_effective_s:g} s: "
-              + (f"--still {spec.still_s:g} s" if "still_s" in kwargs else f"the {realism} still period {spec.still_s:g} s")
+              + (f"--still {spec.still_s:g} s" if "still_s" in kwargs
+                 else f"the {realism} still period {spec.still_s:g} s")
               + f" is more than half of --duration {duration:g} s")
     typer.echo(f"wrote {path}/imu.csv, gnss.csv, reference.csv, navpp.toml"
                + (", realism.json" if spec.realistic else ""))

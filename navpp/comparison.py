@@ -284,7 +284,8 @@ class _Watchdog:
         import signal
         import threading
 
-        if self.seconds > 0.0 and hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread():
+        on_main = threading.current_thread() is threading.main_thread()
+        if self.seconds > 0.0 and hasattr(signal, "setitimer") and on_main:
             def expired(signum, frame):
                 raise _WatchdogExpired(self.seconds)
 

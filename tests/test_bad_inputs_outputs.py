@@ -169,12 +169,13 @@ def _read_only_install(tmp_path: Path) -> tuple[Path, Path, list[str]]:
         return ro, tmp, []
     if shutil.which("unshare") is None:
         pytest.skip("root without unshare: cannot make a read-only install")
-    probe = subprocess.run(["unshare", "-m", "sh", "-c", f"mount --bind {ro} {ro} && mount -o remount,ro,bind {ro} {ro}"],
+    probe = subprocess.run(["unshare", "-m", "sh", "-c",
+                            f"mount --bind {ro} {ro} && mount -o remount,ro,bind {ro} {ro}"],
                            capture_output=True)
     if probe.returncode != 0:
         pytest.skip(f"cannot bind-mount read-only: {probe.stderr.decode()[:200]}")
-    return ro, tmp, ["unshare", "-m", "sh", "-c", f'mount --bind {ro} {ro} && mount -o remount,ro,bind {ro} && exec "$@"',
-                     "sh"]
+    return ro, tmp, ["unshare", "-m", "sh", "-c",
+                     f'mount --bind {ro} {ro} && mount -o remount,ro,bind {ro} && exec "$@"', "sh"]
 
 
 def _run_read_only(tmp_path: Path, argv: list[str]) -> tuple[int, str, str, Path]:
@@ -192,7 +193,8 @@ def test_read_only_install_lists_the_filters(tmp_path: Path) -> None:
     assert "Traceback" not in stderr and "no locator" not in stderr
     assert stdout.splitlines()[3].startswith("ekf ")
     cache = tmp / f"navpp-numba-cache-{os.getuid()}"
-    assert stderr.strip() == (f"note: neither navpp's install directory nor {tmp_path}/ro/home/.cache/numba is writable: "
+    assert stderr.strip() == (f"note: neither navpp's install directory nor {tmp_path}/ro/home/.cache/numba "
+                              "is writable: "
                               f"compiled kernels are cached in {cache} (kept between runs); "
                               "set NUMBA_CACHE_DIR to choose")
     assert cache.is_dir() and cache.stat().st_mode & 0o777 == 0o700

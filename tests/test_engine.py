@@ -342,7 +342,8 @@ def test_sigma_point_filters_on_the_ins_match_the_ekf(name):
         res = engine.run(rec, cfg, api.make_filter(f, cfg))
         m = compute_metrics(res.solution, rec.reference, filter_name=f, log="sim", reference="truth", runtime_s=0.0,
                             imu_samples=len(rec.imu), gnss_epochs=res.gnss_epochs, gnss_rejected=res.gnss_rejected)
-        out[f] = (m["position_m"]["horizontal"]["rmse"], np.sqrt(np.mean(_normalised_errors(rec, res.solution) ** 2, axis=0)))
+        out[f] = (m["position_m"]["horizontal"]["rmse"],
+                  np.sqrt(np.mean(_normalised_errors(rec, res.solution) ** 2, axis=0)))
     assert out[name][0] <= 1.15 * out["ekf"][0], out
     assert np.all(out[name][1] < 2.0), out
 

@@ -156,7 +156,7 @@ class RWCKF(SigmaPointFilter):
                 P = np.einsum("ci,cij,cik->cjk", betas, dev, dev) + Q
             else:                                                     # the CKF covariance, whatever the mean
                 P = np.broadcast_to(state.P, (C, n, n))
-        else:                                                         # no kept time update: weights on the measurement only
+        else:                                         # no kept time update: weights on the measurement only
             x_ref, M = state.x, np.zeros((C, n))
             P = np.broadcast_to(state.P, (C, n, n))
         S = np.linalg.cholesky(0.5 * (P + np.swapaxes(P, 1, 2)))       # (C, n, n)
