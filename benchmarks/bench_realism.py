@@ -59,7 +59,7 @@ def run_case(case: str, seed: int, filt: str = "ekf") -> dict:
     t0 = time.perf_counter()
     try:
         res = engine.run(rec_in, cfg, api.make_filter(filt, cfg), smooth=(case == "car"))
-    except Exception as exc:  # noqa: BLE001                   (a stop is a result here)
+    except Exception as exc:  # noqa: BLE001  (a stop is a result here)
         return {"case": case, "seed": seed, "failed": str(exc).splitlines()[0][:160]}
     out = {"case": case, "seed": seed, "failed": None, "s": time.perf_counter() - t0,
            "warnings": len(res.warnings), "rejected": int(res.gnss_rejected)}
