@@ -25,7 +25,6 @@ import math
 
 import numpy as np
 
-
 #: ``[auto]`` keys turned off (``--auto-off``)
 AUTO: dict[str, bool] = {}
 

@@ -70,7 +70,7 @@ def main() -> None:
         if failed[(n, c)] == len(seeds):
             return "diverged"
         hv, uv = np.mean(h[(n, c)]), np.mean(u[(n, c)])
-        ref = np.mean(h[("ekf", c)]) if ("ekf", c) in h and h[("ekf", c)] else np.nan
+        ref = np.mean(h[("ekf", c)]) if h.get(("ekf", c)) else np.nan
         tag = f" ({failed[(n, c)]} div.)" if failed[(n, c)] else ""
         return f"{hv:.3f}/{uv:.3f} x{hv / ref:.2f}{tag}"
 

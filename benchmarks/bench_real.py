@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -74,7 +73,8 @@ def held_fix_rmse(gnss_csv: Path, ref_csv: Path) -> float:
     def enu(lat, lon):
         return geodesy.geodetic_to_enu(np.radians(lat), np.radians(lon), np.zeros(len(lat)), lat0, lon0, 0.0)
 
-    e = enu(g["lat"].to_numpy()[k[ok]], g["lon"].to_numpy()[k[ok]]) - enu(r["lat"].to_numpy()[ok], r["lon"].to_numpy()[ok])
+    e = (enu(g["lat"].to_numpy()[k[ok]], g["lon"].to_numpy()[k[ok]])
+         - enu(r["lat"].to_numpy()[ok], r["lon"].to_numpy()[ok]))
     return math.sqrt(float(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2)))
 
 

@@ -59,7 +59,7 @@ def run_case(case: str, seed: int, filt: str = "ekf") -> dict:
     t0 = time.perf_counter()
     try:
         res = engine.run(rec_in, cfg, api.make_filter(filt, cfg), smooth=(case == "car"))
-    except Exception as exc:                                   # a stop is a result here
+    except Exception as exc:  # noqa: BLE001  (a stop is a result here)
         return {"case": case, "seed": seed, "failed": str(exc).splitlines()[0][:160]}
     out = {"case": case, "seed": seed, "failed": None, "s": time.perf_counter() - t0,
            "warnings": len(res.warnings), "rejected": int(res.gnss_rejected)}
@@ -85,9 +85,10 @@ def _row(r: dict) -> str:
         return f"{r['case']:6s} seed {r['seed']:2d}  STOPPED: {r['failed']}"
     if r["case"] == "car":
         return (f"{r['case']:6s} seed {r['seed']:2d}  15-s outages H RMSE forward {r['fwd_outage_h']:.2f} m, smoothed "
-                f"{r['smooth_outage_h']:.2f} m; whole drive forward {r['fwd_h']:.2f} m; {r['rejected']} fixes rejected, "
-                f"{r['s']:.1f} s")
-    return (f"{r['case']:6s} seed {r['seed']:2d}  H RMSE {r['fwd_h']:.2f} m (raw fixes {r['raw_h']:.2f}), U {r['fwd_u']:.2f} m "
+                f"{r['smooth_outage_h']:.2f} m; whole drive forward {r['fwd_h']:.2f} m; {r['rejected']} fixes "
+                f"rejected, {r['s']:.1f} s")
+    return (f"{r['case']:6s} seed {r['seed']:2d}  H RMSE {r['fwd_h']:.2f} m (raw fixes {r['raw_h']:.2f}), "
+            f"U {r['fwd_u']:.2f} m "
             f"(raw {r['raw_u']:.2f}); {r['rejected']} rejected, {r['warnings']} warnings, {r['s']:.1f} s")
 
 
@@ -111,7 +112,8 @@ def main(argv: list[str] | None = None) -> int:
                   f"(max {max(sm):.2f}; target 0.4)")
         elif ok:
             worse = [r for r in ok if r["fwd_h"] > r["raw_h"] or r["fwd_u"] > r["raw_u"]]
-            print(f"{case:6s} summary: {len(rows) - len(ok)} of {len(rows)} stopped; {len(worse)} of {len(ok)} worse than "
+            print(f"{case:6s} summary: {len(rows) - len(ok)} of {len(rows)} stopped; "
+                  f"{len(worse)} of {len(ok)} worse than "
                   f"the raw fixes (H or U); H RMSE / raw median {np.median([r['fwd_h'] / r['raw_h'] for r in ok]):.2f}")
     return 0
 

@@ -22,8 +22,8 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from navpp.io.writers import TRAJECTORY_COLUMNS, write_trajectory_csv  # noqa: E402
-from navpp.recording import Solution  # noqa: E402
+from navpp.io.writers import TRAJECTORY_COLUMNS, write_trajectory_csv
+from navpp.recording import Solution
 
 
 def realistic_solution(n: int, seed: int = 0) -> Solution:

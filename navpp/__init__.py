@@ -50,7 +50,7 @@ from typing import Any
 __version__ = "0.1.0"
 __all__ = ["__version__", "compare", "process", "simulate_log"]
 
-from .jitcache import configure as _configure_jit_cache  # noqa: E402  (before any module imports numba)
+from .jitcache import configure as _configure_jit_cache  # before any module imports numba
 
 _configure_jit_cache()
 

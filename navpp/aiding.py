@@ -23,8 +23,8 @@ import numpy as np
 
 from .config import Config
 from .ins.aids import GnssVelocity, NonHolonomic, ZeroRate, ZeroVelocity
-from .ins.attitude import rpy_matrix
 from .ins.aids.standstill import StandstillSettings, speed_allows, still_mask
+from .ins.attitude import rpy_matrix
 from .ins.model import VEL
 
 #: Aid kinds in the order they are reported (the GNSS position first).
@@ -51,7 +51,7 @@ class AidCounts:
     rejected: dict[str, int]
 
     @classmethod
-    def empty(cls) -> "AidCounts":
+    def empty(cls) -> AidCounts:
         return cls({k: 0 for k in KINDS}, {k: 0 for k in KINDS})
 
     def add(self, kind: str, accepted: bool) -> None:

@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Annotated, Callable, Optional
+from typing import Annotated
 
 import typer
 
@@ -88,8 +89,9 @@ class _Progress:
         if not self.quiet and console.is_terminal:
             from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-            self.bar = Progress(TextColumn("{task.description:<10}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
-                                TimeElapsedColumn(), console=console, transient=True)
+            self.bar = Progress(TextColumn("{task.description:<10}"), BarColumn(),
+                                TextColumn("{task.percentage:>3.0f}%"), TimeElapsedColumn(), console=console,
+                                transient=True)
             self.bar.__enter__()
         return self
 
@@ -147,20 +149,21 @@ def process(
     log: Annotated[Path, typer.Argument(metavar="LOG", help="Log: an MCAP file, a ROS 1 bag, a ROS 2 bag directory, "
                                         "or a directory with imu.csv and gnss.csv (reference.csv optional).")],
     filter: Annotated[str, typer.Option("--filter", "-f", help="Filter name (see `navpp filters`).")] = "ekf",
-    config: Annotated[Optional[Path], typer.Option(help="TOML config; default: navpp.toml in the log directory, "
+    config: Annotated[Path | None, typer.Option(help="TOML config; default: navpp.toml in the log directory, "
                                                    "else the automotive preset.")] = None,
-    reference: Annotated[Optional[Path], typer.Option(help="Reference CSV (t, lat, lon, alt[, ve, vn, vu, roll, "
+    reference: Annotated[Path | None, typer.Option(help="Reference CSV (t, lat, lon, alt[, ve, vn, vu, roll, "
                                                       "pitch, heading]); overrides reference.csv.")] = None,
-    imu_topic: Annotated[Optional[str], typer.Option(help="IMU topic (sensor_msgs/Imu) when a ROS log has several.")] = None,
-    gnss_topic: Annotated[Optional[str], typer.Option(
+    imu_topic: Annotated[str | None, typer.Option(
+        help="IMU topic (sensor_msgs/Imu) when a ROS log has several.")] = None,
+    gnss_topic: Annotated[str | None, typer.Option(
         help="GNSS topic (sensor_msgs/NavSatFix) when a ROS log has several.")] = None,
-    reference_topic: Annotated[Optional[str], typer.Option(
+    reference_topic: Annotated[str | None, typer.Option(
         help="A NavSatFix topic of the log to use as the reference (e.g. a DGPS receiver).")] = None,
-    gnss: Annotated[Optional[Path], typer.Option(
+    gnss: Annotated[Path | None, typer.Option(
         "--gnss", help="RTKLIB solution file (.pos) replacing or supplying the log's GNSS.")] = None,
-    out: Annotated[Optional[Path], typer.Option(
+    out: Annotated[Path | None, typer.Option(
         help="Output directory, created if needed.  [default: navpp-out/<log>-<filter>]")] = None,
-    output_rate: Annotated[Optional[float], typer.Option(
+    output_rate: Annotated[float | None, typer.Option(
         help="Trajectory rate in Hz, at most the IMU rate.  [default: every IMU sample]",
         callback=_require(_finite(0.0, strict=True), "a finite number of Hz > 0"))] = None,
     formats: Annotated[str | None, typer.Option(
@@ -169,11 +172,11 @@ def process(
              "diagnostics.csv is always written.  [default: [output] formats of the config, else csv]")] = None,
     embed_input: Annotated[bool, typer.Option(
         "--embed-input", help="Copy the input log's messages into trajectory.mcap (needs mcap in --format).")] = False,
-    gnss_outage: Annotated[Optional[list[str]], typer.Option(
+    gnss_outage: Annotated[list[str] | None, typer.Option(
         "--gnss-outage", metavar="START:DUR", callback=_gnss_outages,
         help="Simulate a GNSS outage: drop the fixes from START for DUR seconds (s from the log start, the "
              "first IMU sample); repeatable.  The metrics report each window.  [default: [gnss] outages]")] = None,
-    smooth: Annotated[Optional[bool], typer.Option(
+    smooth: Annotated[bool | None, typer.Option(
         "--smooth/--no-smooth", help="Smooth the forward run backwards (Rauch-Tung-Striebel): trajectory.csv is the "
         "smoothed trajectory, trajectory_forward.csv the forward one, the metrics show both.  "
         "[default: [output] smooth, else off]", show_default=False)] = None,
@@ -218,7 +221,8 @@ def _print_summary(res, quiet: bool) -> None:
         _note(err, f"compiled navpp's kernels in {compile_s:.1f} s (first run only; cached for next time)")
     con = Console(highlight=False, soft_wrap=True)
     run = res.run
-    con.print(f"{escape(res.recording.source)}: {len(res.recording.imu)} IMU samples at {res.recording.imu.rate_hz:.1f} Hz, "
+    con.print(f"{escape(res.recording.source)}: {len(res.recording.imu)} IMU samples at "
+              f"{res.recording.imu.rate_hz:.1f} Hz, "
               f"{run.gnss_epochs} GNSS epochs used ({run.gnss_rejected} rejected by the gate), "
               f"filter [bold]{res.filter_name}[/] ran in {run.runtime_s:.2f} s")
     aids = {k: v for k, v in (getattr(run, "updates", None) or {}).items() if k != "gnss_position"}
@@ -388,7 +392,8 @@ def compare(
         from rich.markup import escape
 
         Console(stderr=True, highlight=False, soft_wrap=True).print(
-            f"[bold red]navpp: error:[/] {escape(f'CI gate failed: {len(verdict.failures)} of {verdict.checks} checks')}"
+            "[bold red]navpp: error:[/] "
+            f"{escape(f'CI gate failed: {len(verdict.failures)} of {verdict.checks} checks')}"
             " (listed above)")
         raise typer.Exit(3)
 
@@ -478,12 +483,12 @@ def _print_gate(verdict) -> None:
 
 @app.command()
 def bench(
-    name: Annotated[Optional[str], typer.Argument(metavar="NAME", help="Benchmark name; omit to list them.")] = None,
-    runs: Annotated[Optional[int], typer.Option(help="Monte Carlo runs  [default: the paper's]",
+    name: Annotated[str | None, typer.Argument(metavar="NAME", help="Benchmark name; omit to list them.")] = None,
+    runs: Annotated[int | None, typer.Option(help="Monte Carlo runs  [default: the paper's]",
                                                 callback=_require(lambda v: v >= 1, "an integer >= 1"))] = None,
     seed: Annotated[int, typer.Option(help="Seed of the simulated truth and of random filters.",
                                       callback=_require(lambda v: v >= 0, "an integer >= 0"))] = 0,
-    filters: Annotated[Optional[str], typer.Option(help="Comma-separated filters  [default: the paper's "
+    filters: Annotated[str | None, typer.Option(help="Comma-separated filters  [default: the paper's "
                                                    "comparison]")] = None,
 ) -> None:
     """Run one of the papers' benchmarks and print our figures next to the paper's.
@@ -517,7 +522,7 @@ def bench(
 PRESETS = ("consumer", "automotive", "tactical", "navigation", "ideal")
 
 
-def _triplet(value: Optional[str], names: str, unit: str, option: str) -> Optional[tuple[float, float, float]]:
+def _triplet(value: str | None, names: str, unit: str, option: str) -> tuple[float, float, float] | None:
     """Three finite numbers written ``a,b,c`` (None stays None); else one line naming the option."""
     if value is None:
         return None
@@ -530,11 +535,11 @@ def _triplet(value: Optional[str], names: str, unit: str, option: str) -> Option
     return v  # type: ignore[return-value]
 
 
-def _lever_arm(value: Optional[str]) -> Optional[tuple[float, float, float]]:
+def _lever_arm(value: str | None) -> tuple[float, float, float] | None:
     return _triplet(value, "x,y,z", "m", "'--lever-arm'")
 
 
-def _mounting(value: Optional[str]) -> Optional[tuple[float, float, float]]:
+def _mounting(value: str | None) -> tuple[float, float, float] | None:
     return _triplet(value, "roll,pitch,yaw", "deg", "'--mounting'")
 
 
@@ -549,12 +554,13 @@ def simulate(
     ctx: typer.Context,
     out: Annotated[Path, typer.Argument(metavar="OUT", help="Output directory for the CSV log (imu.csv, gnss.csv, "
                                         "reference.csv, navpp.toml).")],
-    duration: Annotated[float, typer.Option(help="Drive length, s, >= 30 (includes the initial still period).",
-                                            callback=_require(_finite(30.0), "a finite number of seconds >= 30"))] = 900.0,
-    imu_rate: Annotated[float, typer.Option(help="IMU rate, Hz.",
-                                            callback=_require(_finite(0.0, strict=True), "a finite number of Hz > 0"))] = 125.0,
-    gnss_rate: Annotated[float, typer.Option(help="GNSS rate, Hz (1-10).",
-                                             callback=_require(_finite(1.0, 10.0), "a number of Hz within 1-10"))] = 5.0,
+    duration: Annotated[float, typer.Option(
+        help="Drive length, s, >= 30 (includes the initial still period).",
+        callback=_require(_finite(30.0), "a finite number of seconds >= 30"))] = 900.0,
+    imu_rate: Annotated[float, typer.Option(
+        help="IMU rate, Hz.", callback=_require(_finite(0.0, strict=True), "a finite number of Hz > 0"))] = 125.0,
+    gnss_rate: Annotated[float, typer.Option(
+        help="GNSS rate, Hz (1-10).", callback=_require(_finite(1.0, 10.0), "a number of Hz within 1-10"))] = 5.0,
     preset: Annotated[str, typer.Option(help=f"IMU grade: {', '.join(PRESETS)}.",
                                         callback=_require(lambda v: v in PRESETS, f"one of {', '.join(PRESETS)}"))]
         = "automotive",
@@ -567,24 +573,24 @@ def simulate(
     gnss_error: Annotated[str, typer.Option(help="GNSS error model: white or correlated.",
                                             callback=_require(lambda v: v in ("white", "correlated"),
                                                               "'white' or 'correlated'"))] = "white",
-    lever_arm: Annotated[Optional[str], typer.Option(
+    lever_arm: Annotated[str | None, typer.Option(
         help="Antenna lever arm in body FLU, m: 'x,y,z'.  [default: 0,0,0]")] = None,
     still: Annotated[float, typer.Option(help="Initial still period, s (at most half of --duration).",
                                          callback=_require(_finite(0.0), "a finite number of seconds >= 0"))] = 60.0,
-    realism: Annotated[Optional[str], typer.Option(
+    realism: Annotated[str | None, typer.Option(
         help="Real-world effects of a consumer car log at once (vibration, large turn-on biases, scale factors, "
              "non-orthogonality, stale rows, a 10 ms IMU clock offset, a GNSS gap; IMU 100 Hz, GNSS 4 Hz at 5 cm, "
              "still 35 s, preset consumer unless given); the truth goes to realism.json.",
         callback=_require(lambda v: v in REALISM, f"one of {', '.join(REALISM)}"))] = None,
-    mounting: Annotated[Optional[str], typer.Option(
+    mounting: Annotated[str | None, typer.Option(
         help="IMU mounting against the vehicle, deg: 'roll,pitch,yaw' (as [imu] mounting_rpy_deg; '90,0,0': y up).  "
              "[default: none]")] = None,
     start_in_motion: Annotated[bool, typer.Option("--start-in-motion", help="Start while driving (8 m/s, no "
                                                   "still period).")] = False,
-    gnss_gap: Annotated[Optional[float], typer.Option(
+    gnss_gap: Annotated[float | None, typer.Option(
         help="GNSS gap, s, in the first turn at least 20 s into the log (0: none).  [default: none; 15 with "
              "--realism]", callback=_require(_finite(0.0), "a finite number of seconds >= 0"))] = None,
-    gnss_gap_start: Annotated[Optional[float], typer.Option(
+    gnss_gap_start: Annotated[float | None, typer.Option(
         help="Start of the GNSS gap, s after the first sample.  [default: the first turn]",
         callback=_require(_finite(0.0), "a finite number of seconds >= 0"))] = None,
 ) -> None:
@@ -630,7 +636,8 @@ def simulate(
     if not spec.start_in_motion and spec.still_effective_s < spec.still_s:
         _note(Console(stderr=True, highlight=False, soft_wrap=True),
               f"still period shortened to {spec.still_effective_s:g} s: "
-              + (f"--still {spec.still_s:g} s" if "still_s" in kwargs else f"the {realism} still period {spec.still_s:g} s")
+              + (f"--still {spec.still_s:g} s" if "still_s" in kwargs
+                 else f"the {realism} still period {spec.still_s:g} s")
               + f" is more than half of --duration {duration:g} s")
     typer.echo(f"wrote {path}/imu.csv, gnss.csv, reference.csv, navpp.toml"
                + (", realism.json" if spec.realistic else ""))
@@ -695,7 +702,7 @@ def main() -> None:
         app(prog_name="navpp")
     except BaseException as exc:
         signum = interrupts.received()
-        if signum is None or isinstance(exc, SystemExit) and interrupts.committed():
+        if signum is None or (isinstance(exc, SystemExit) and interrupts.committed()):
             if isinstance(exc, SystemExit):
                 interrupts.ignore_from_now()      # the run is over: a late signal changes nothing
             raise

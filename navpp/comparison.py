@@ -43,7 +43,7 @@ import os
 import sys
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -284,7 +284,8 @@ class _Watchdog:
         import signal
         import threading
 
-        if self.seconds > 0.0 and hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread():
+        on_main = threading.current_thread() is threading.main_thread()
+        if self.seconds > 0.0 and hasattr(signal, "setitimer") and on_main:
             def expired(signum, frame):
                 raise _WatchdogExpired(self.seconds)
 
@@ -478,10 +479,8 @@ def _stop_workers(ex: Any) -> None:
     """Stop the pool's worker processes now (SIGTERM), not after their current task: the
     comparison was interrupted or failed, and nothing will read their results."""
     for proc in list((getattr(ex, "_processes", None) or {}).values()):
-        try:
+        with suppress(OSError, ValueError, AttributeError):
             proc.terminate()
-        except (OSError, ValueError, AttributeError):
-            pass
     ex.shutdown(wait=False, cancel_futures=True)
 
 

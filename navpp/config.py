@@ -467,7 +467,8 @@ class GnssConfig:
         _set(self, "outages", check_outages(self.outages))
         _set(self, "lever_arm_m", _as_vector("gnss", "lever_arm_m", self.lever_arm_m, 3))
         if math.hypot(*self.lever_arm_m) > MAX_LEVER_ARM_M:
-            raise ConfigError(f"[gnss] lever_arm_m = {list(self.lever_arm_m)!r} is {math.hypot(*self.lever_arm_m):.0f} m "
+            raise ConfigError(f"[gnss] lever_arm_m = {list(self.lever_arm_m)!r} is "
+                              f"{math.hypot(*self.lever_arm_m):.0f} m "
                               f"long (more than {MAX_LEVER_ARM_M:.0f} m): it must be in metres (millimetres?)")
         _fix_float(self, "gnss", "max_rejected_fraction", minimum=0.0, maximum=1.0, strict_min=True)
         _set(self, "default_std_m", _std_triplet(self.default_std_m))

@@ -14,8 +14,8 @@ from __future__ import annotations
 import math
 import time
 from array import array
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Callable
 
 import numpy as np
 from numba import njit
@@ -32,9 +32,9 @@ from .ins.model import (
     ATT,
     BA,
     BG,
-    VEL,
     LONG_GAP_PERIODS,
     POS,
+    VEL,
     GnssPosition,
     InsModel,
     NoiseModel,
@@ -437,8 +437,8 @@ def _run_segments(recording: Recording, segments: list[tuple[int, int]], config:
     shown = ", ".join(f"{g:.4g} s after t = {a:.3f} s" for a, g in gaps[:3]) + (
         f" and {len(gaps) - 3} more" if len(gaps) > 3 else "")
     head = (f"{recording.source}: IMU gap{'s' if len(gaps) > 1 else ''} of {shown}: longer than the INS can "
-            f"bridge ({max_bridgeable_gap_s():.3g} s, the unseen motion leaves the attitude unknown): the log is processed as "
-            f"{len(segments)} segments, each aligned afresh; no trajectory inside the gaps")
+            f"bridge ({max_bridgeable_gap_s():.3g} s, the unseen motion leaves the attitude unknown): "
+            f"the log is processed as {len(segments)} segments, each aligned afresh; no trajectory inside the gaps")
     results: list[RunResult] = []
     spans: list[tuple[float, float]] = []
     skipped: list[str] = []
@@ -644,7 +644,8 @@ def _likely_cause(recording: Recording, config: Config, noticed: list[str]) -> t
         if any(key in w for w in noticed):
             return f"check {cause}", [_causes(config)]
     imu = "the IMU's units and axes ([imu] mounting_rpy_deg)"
-    return f"check {imu}", [_causes(config).replace("check the IMU units and axes ([imu] mounting_rpy_deg), ", "check ")]
+    causes = _causes(config).replace("check the IMU units and axes ([imu] mounting_rpy_deg), ", "check ")
+    return f"check {imu}", [causes]
 
 
 def _refusal(recording: Recording, config: Config, headline: str, notes: list[str], warnings: list[str],
@@ -853,8 +854,9 @@ def timing_fixes(recording: Recording, config: Config,
             keep = ~stale.mask
             imu = ImuData(imu.t[keep], imu.gyro[keep], imu.accel[keep])
             recording = dc_replace(recording, imu=imu)
-            warnings.append(f"{src}: IMU: {stale.count} stale rows ({100.0 * stale.fraction:.1f} %) repeat the previous "
-                            f"row's six values under a new stamp (a logger polling faster than the sensor): dropped; "
+            warnings.append(f"{src}: IMU: {stale.count} stale rows ({100.0 * stale.fraction:.1f} %) repeat the "
+                            f"previous row's six values under a new stamp (a logger polling faster than the sensor): "
+                            f"dropped; "
                             f"fresh samples at {stale.fresh_rate_hz:.1f} Hz ([auto] stale_rows = false keeps them)")
         elif stale.n_repeats:
             notes.append(f"IMU: {stale.n_repeats} rows repeat the previous row's values, no more than chance: kept "
@@ -889,7 +891,8 @@ def timing_fixes(recording: Recording, config: Config,
                     f"{est.correlation:.2f}, {est.turn_deg:.0f} deg of turns)")
             applied = bool(sure and abs(est.offset_s) > 0.5 * est.sigma_s)
             if info is not None:
-                info["clock_offset"] = {"imu_late_s": round(float(est.offset_s), 4), "sigma_s": round(float(est.sigma_s), 4),
+                info["clock_offset"] = {"imu_late_s": round(float(est.offset_s), 4),
+                                        "sigma_s": round(float(est.sigma_s), 4),
                                         "correlation": round(float(est.correlation), 3),
                                         "turn_deg": round(float(est.turn_deg), 1), "confident": bool(est.confident),
                                         "applied": applied}
@@ -918,7 +921,8 @@ def _run(recording: Recording, config: Config, filt: Filter, progress: ProgressF
     try:
         return _run_body(recording, config, filt, progress, cov_step_s, smooth, notes, warnings)
     except NavppError as exc:
-        raise exc.with_context(notes, warnings)
+        exc.with_context(notes, warnings)
+        raise
 
 
 def _run_body(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
@@ -1192,9 +1196,9 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
 
 
 def _plausibility_checks(recording: Recording, config: Config, name: str, solution: Solution,
-                         smoothed: SmoothedRun | None, tg: np.ndarray, nu: np.ndarray, s_used: np.ndarray, r_used: np.ndarray,
-                         var0: np.ndarray, accepted: np.ndarray, fix_alt: np.ndarray, notes: list[str],
-                         warnings: list[str]) -> list[str]:
+                         smoothed: SmoothedRun | None, tg: np.ndarray, nu: np.ndarray, s_used: np.ndarray,
+                         r_used: np.ndarray, var0: np.ndarray, accepted: np.ndarray, fix_alt: np.ndarray,
+                         notes: list[str], warnings: list[str]) -> list[str]:
     """Every filter's finished solution judged against the prior GNSS sigma and the vehicle
     (:mod:`navpp.plausibility`), before anything is written: FilterDivergedError (one short
     line) for a run that is wrong, warnings for a doubtful one."""
@@ -1331,4 +1335,4 @@ def solution_from_path(t: np.ndarray, path: np.ndarray, std_enu: np.ndarray, t0_
                     vel_enu=path[:, 4:7], rph_deg=path[:, 0:3], std_enu=std_enu, t0_ns=t0_ns)
 
 
-__all__ = ["Diagnostics", "RunResult", "SmoothedRun", "run", "solution_from_path", "mounting_matrix"]
+__all__ = ["Diagnostics", "RunResult", "SmoothedRun", "mounting_matrix", "run", "solution_from_path"]

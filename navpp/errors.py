@@ -17,7 +17,7 @@ class NavppError(Exception):
     notes: tuple[str, ...] = ()
     warnings: tuple[str, ...] = ()
 
-    def with_context(self, notes, warnings) -> "NavppError":
+    def with_context(self, notes, warnings) -> NavppError:
         """Attach the run's notes and warnings (kept when already set by an inner run)."""
         if not self.notes and not self.warnings:
             self.notes = tuple(notes)

@@ -99,4 +99,4 @@ def _km(dist_m: float) -> str:
     return f"{dist_m / 1000.0:,.0f} km" if dist_m >= 10_000.0 else f"{dist_m:.0f} m"
 
 
-__all__ = ["MAX_SPEED_MPS", "JUMP_SIGMAS", "check_gnss_jumps"]
+__all__ = ["JUMP_SIGMAS", "MAX_SPEED_MPS", "check_gnss_jumps"]

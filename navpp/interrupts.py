@@ -25,7 +25,7 @@ from __future__ import annotations
 import os
 import signal
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 
 _received: int | None = None
 _installed = False
@@ -165,10 +165,8 @@ def exit_interrupted(signum: int) -> None:
         name = signal.Signals(signum).name
     except ValueError:
         name = f"signal {signum}"
-    try:
+    with suppress(Exception):  # a closed pipe: nothing more to say there
         sys.stdout.flush()
-    except Exception:  # noqa: BLE001  (a closed pipe: nothing more to say there)
-        pass
     where = (f"; nothing was written to {_guarded[0]} (earlier results there are unchanged)"
              if len(_guarded) == 1 and not _committing else "")
     sys.stderr.write(f"navpp: interrupted by {name}{where}\n")

@@ -109,7 +109,7 @@ class _Bracket(NamedTuple):
     w: np.ndarray
 
     @classmethod
-    def of(cls, t_src: np.ndarray, t: np.ndarray) -> "_Bracket":
+    def of(cls, t_src: np.ndarray, t: np.ndarray) -> _Bracket:
         n = t_src.shape[0]
         i1 = np.clip(np.searchsorted(t_src, t, side="right"), 1, max(n - 1, 1))
         i0 = i1 - 1

@@ -23,6 +23,7 @@ The rules, used by :func:`navpp.api.process` and :func:`navpp.comparison.compare
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import os
@@ -57,7 +58,7 @@ class OutDirLock:
         self.extra_leftovers = tuple(extra_leftovers)
         self.fd: int | None = None
 
-    def __enter__(self) -> "OutDirLock":
+    def __enter__(self) -> OutDirLock:
         self.acquire()
         return self
 
@@ -113,10 +114,8 @@ class OutDirLock:
 
 
 def _unlink_quietly(path: Path) -> None:
-    try:
+    with contextlib.suppress(OSError):
         os.unlink(path)
-    except OSError:
-        pass
 
 
 def _read_pid(fd: int) -> int | None:

@@ -151,8 +151,8 @@ def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray
                         max_fraction: float) -> list[Finding]:
     """The innovation checks against the prior R (module docstring).
 
-    t : (M,) s, the fixes' times; nu : (M, 3) innovations, ENU m (NaN rows: no update); S : (M, 3, 3) their covariance as the
-    filter computed it; R_used : (M, 3, 3) the R it used; var0 : (M, 3) the prior R's
+    t : (M,) s, the fixes' times; nu : (M, 3) innovations, ENU m (NaN rows: no update); S : (M, 3, 3) their
+    covariance as the filter computed it; R_used : (M, 3, 3) the R it used; var0 : (M, 3) the prior R's
     diagonal, m^2; accepted : (M,) bool.  M fixes; nothing is checked below 20.
     """
     ok = np.all(np.isfinite(nu), axis=1) & np.all(np.isfinite(S), axis=(1, 2)) & np.all(var0 > 0.0, axis=1)

@@ -13,8 +13,9 @@ the gate rejected and the filter's run time (s).  Then, one figure set per log:
   the AUKF fading factor; dimensionless, 1 = as configured) versus time.
 
 A log without a reference has status, rejected fixes and run time only, and no error plots
-(the trajectories, and the adaptive noise, need no reference); the report says so.  Figures are drawn with matplotlib's object API (``Figure`` + Agg),
-so the caller's pyplot backend is never touched; matplotlib is imported when a report is made.
+(the trajectories, and the adaptive noise, need no reference); the report says so.  Figures are
+drawn with matplotlib's object API (``Figure`` + Agg), so the caller's pyplot backend is never
+touched; matplotlib is imported when a report is made.
 The HTML embeds every PNG as a base64 data URI and its CSS inline: no external resource.
 """
 

@@ -114,9 +114,10 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from functools import cached_property
-from collections.abc import Iterable, Iterator
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -124,7 +125,7 @@ from scipy.integrate import solve_ivp
 from scipy.signal import lfilter
 
 from navpp.errors import ConfigError
-from navpp.geodesy import A, E2, OMEGA_E, gravity, radii
+from navpp.geodesy import E2, OMEGA_E, A, gravity, radii
 from navpp.ins.attitude import rph_to_dcm, rpy_matrix
 from navpp.recording import GnssData, ImuData, Recording, ReferenceData
 
@@ -645,7 +646,7 @@ class Trajectory:
         edges = np.unique(np.concatenate([[0.0], bp[(bp > 0.0) & (bp < self.t_end)], [self.t_end]]))
         y = np.array([self.lat0, self.lon0, self.h0])
         pieces: list = []
-        for ta, tb in zip(edges[:-1], edges[1:]):
+        for ta, tb in pairwise(edges):
             tm = 0.5 * (ta + tb)
             sp = self.controls.speed.piece(tm)
             if sp[1] == 0.0 and sp[0] == 0.0:  # standing still

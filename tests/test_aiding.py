@@ -136,7 +136,8 @@ def test_gnss_velocity_is_used_when_present_and_improves_the_solution(drive):
     _, m_p = _run(rec, gnss={"use_velocity": False})
     assert m_v["updates"]["gnss_velocity"]["applied"] == with_v.gnss_epochs
     assert "gnss_velocity" not in m_p["updates"]
-    h = lambda m: m["position_m"]["horizontal"]["rmse"]
+    def h(m):
+        return m["position_m"]["horizontal"]["rmse"]
     assert h(m_v) < 0.5 * h(m_p), (h(m_v), h(m_p))
     assert m_v["velocity_mps"]["horizontal"]["rmse"] < 0.3 * m_p["velocity_mps"]["horizontal"]["rmse"]
     d = with_v.diagnostics

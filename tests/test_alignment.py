@@ -61,7 +61,8 @@ def _settings(sim, **kw):
 
 @pytest.mark.parametrize("heading0", [30.0, 300.0])
 def test_heading_from_gnss_course_with_automotive_gyro(heading0):
-    sim = simulate(SimulationSpec(duration_s=200.0, still_s=40.0, seed=5, heading0_deg=heading0, lever_arm_m=(0.2, 0.1, 1.0)))
+    sim = simulate(SimulationSpec(duration_s=200.0, still_s=40.0, seed=5, heading0_deg=heading0,
+                                  lever_arm_m=(0.2, 0.1, 1.0)))
     al = align(sim.imu.t, sim.imu.gyro, sim.imu.accel, sim.gnss, _settings(sim))
     assert any("GNSS track" in line for line in al.lines)
     assert al.still[0] == 0.0 and 38.0 <= al.still[1] <= 42.0
@@ -79,7 +80,8 @@ def test_heading_from_gnss_course_with_automotive_gyro(heading0):
 
 def test_heading_from_config():
     sim = simulate(SimulationSpec(duration_s=60.0, still_s=20.0, seed=6))
-    al = align(sim.imu.t, sim.imu.gyro, sim.imu.accel, sim.gnss, _settings(sim, heading=math.radians(123.0), method="config"))
+    al = align(sim.imu.t, sim.imu.gyro, sim.imu.accel, sim.gnss,
+               _settings(sim, heading=math.radians(123.0), method="config"))
     assert math.degrees(sim_rph(al.x)[2]) == pytest.approx(123.0, abs=1e-9)
     assert any("(config)" in line for line in al.lines)
 

@@ -6,7 +6,16 @@ import pytest
 
 from navpp.errors import InputError
 from navpp.io.assemble import recording_from_log
-from navpp.io.ros import FIX_TYPE, IMU_TYPE, TWIST_COV_TYPE, FixMessages, ImuMessages, LogContents, TopicInfo, TwistMessages
+from navpp.io.ros import (
+    FIX_TYPE,
+    IMU_TYPE,
+    TWIST_COV_TYPE,
+    FixMessages,
+    ImuMessages,
+    LogContents,
+    TopicInfo,
+    TwistMessages,
+)
 from navpp.simulate import SimulationSpec, simulate
 
 

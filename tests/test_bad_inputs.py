@@ -5,8 +5,7 @@ Rows by area live in ``tests/test_bad_inputs_*.py``; this file checks the harnes
 from __future__ import annotations
 
 import pytest
-
-from badinputs import Case, copy_drive, edit_csv, run_case, params
+from badinputs import Case, copy_drive, edit_csv, params, run_case
 
 
 def _missing_gnss_column(work):

@@ -15,8 +15,8 @@ import time
 from pathlib import Path
 
 import pytest
+from badinputs import ROOT, SAMPLE, Case, copy_drive, edit_csv, params, run_case, run_navpp, snapshot
 
-from badinputs import ROOT, SAMPLE, Case, copy_drive, edit_csv, run_case, run_navpp, snapshot, params
 from navpp.outdir import LOCK_NAME, MANIFEST_NAME
 
 
@@ -118,10 +118,10 @@ def test_second_run_into_a_busy_out_fails_at_once(tmp_path: Path) -> None:
             assert first.poll() is None, first.communicate()
             assert time.monotonic() < deadline
             time.sleep(0.05)
-        code, stdout, stderr, wall = run_navpp(["process", str(log), "--out", str(out), "-q"])
+        code, _stdout, stderr, wall = run_navpp(["process", str(log), "--out", str(out), "-q"])
         still_running = first.poll() is None
     finally:
-        f_out, f_err = first.communicate(timeout=120)
+        _f_out, f_err = first.communicate(timeout=120)
     assert still_running, "the first run ended before the second started: the test proves nothing"
     lines = [ln for ln in stderr.splitlines() if ln.strip()]
     assert code == 1 and len(lines) == 1, stderr
@@ -169,12 +169,13 @@ def _read_only_install(tmp_path: Path) -> tuple[Path, Path, list[str]]:
         return ro, tmp, []
     if shutil.which("unshare") is None:
         pytest.skip("root without unshare: cannot make a read-only install")
-    probe = subprocess.run(["unshare", "-m", "sh", "-c", f"mount --bind {ro} {ro} && mount -o remount,ro,bind {ro} {ro}"],
+    probe = subprocess.run(["unshare", "-m", "sh", "-c",
+                            f"mount --bind {ro} {ro} && mount -o remount,ro,bind {ro} {ro}"],
                            capture_output=True)
     if probe.returncode != 0:
         pytest.skip(f"cannot bind-mount read-only: {probe.stderr.decode()[:200]}")
-    return ro, tmp, ["unshare", "-m", "sh", "-c", f'mount --bind {ro} {ro} && mount -o remount,ro,bind {ro} && exec "$@"',
-                     "sh"]
+    return ro, tmp, ["unshare", "-m", "sh", "-c",
+                     f'mount --bind {ro} {ro} && mount -o remount,ro,bind {ro} && exec "$@"', "sh"]
 
 
 def _run_read_only(tmp_path: Path, argv: list[str]) -> tuple[int, str, str, Path]:
@@ -192,7 +193,8 @@ def test_read_only_install_lists_the_filters(tmp_path: Path) -> None:
     assert "Traceback" not in stderr and "no locator" not in stderr
     assert stdout.splitlines()[3].startswith("ekf ")
     cache = tmp / f"navpp-numba-cache-{os.getuid()}"
-    assert stderr.strip() == (f"note: neither navpp's install directory nor {tmp_path}/ro/home/.cache/numba is writable: "
+    assert stderr.strip() == (f"note: neither navpp's install directory nor {tmp_path}/ro/home/.cache/numba "
+                              "is writable: "
                               f"compiled kernels are cached in {cache} (kept between runs); "
                               "set NUMBA_CACHE_DIR to choose")
     assert cache.is_dir() and cache.stat().st_mode & 0o777 == 0o700
@@ -216,7 +218,7 @@ def test_unwritable_numba_cache_dir_falls_back(tmp_path: Path) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("")
     env = {"NUMBA_CACHE_DIR": str(blocker / "cache"), "TMPDIR": str(tmp_path)}
-    code, stdout, stderr, _ = run_navpp(["filters"], env=env)
+    code, _stdout, stderr, _ = run_navpp(["filters"], env=env)
     assert code == 0, stderr
     assert stderr.startswith(f"note: NUMBA_CACHE_DIR {blocker / 'cache'} is not writable: compiled kernels are "
                              f"cached in {tmp_path}/navpp-numba-cache-{os.getuid()}")

@@ -15,8 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from badinputs import DRIVE, Case, copy_drive, edit_csv, run_case, run_navpp, params
+from badinputs import DRIVE, Case, copy_drive, edit_csv, params, run_case, run_navpp
 
 IMU_ROWS = 37501       # data rows of sample_data/drive/imu.csv (header = line 1)
 
@@ -194,8 +193,8 @@ def plain_outputs(tmp_path_factory):
     return _outputs(work, copy_drive(work))
 
 
-@pytest.mark.parametrize("form", [pytest.param(f, marks=[] if f == "e-notation" else [pytest.mark.slow]) for f in FORMS],
-                         ids=list(FORMS))
+@pytest.mark.parametrize("form", [pytest.param(f, marks=[] if f == "e-notation" else [pytest.mark.slow])
+                                  for f in FORMS], ids=list(FORMS))
 def test_stamp_forms_give_the_plain_results(form, plain_outputs, tmp_path):
     """Oracle: the same log with t written plainly; the results must be byte-identical (the
     e-notation log gave 4.25 m instead of 0.60 m: its stamps were rounded to whole seconds)."""

@@ -9,8 +9,7 @@ from __future__ import annotations
 import math
 
 import pytest
-
-from badinputs import Case, copy_drive, edit_csv, run_case, params
+from badinputs import Case, copy_drive, edit_csv, params, run_case
 
 
 def _cols(edit):
@@ -151,7 +150,8 @@ CASES = [
     Case("std-x100-sage-husa", std_x100("sage-husa"), ("std_e, std_n, std_u of gnss.csv", "too large"), slow=True),
     Case("frd-as-flu", frd_as_flu("ekf"), ("-z", "forward-left-up", "mounting_rpy_deg = [180, 0, 0]")),
     Case("zero-noise", zero_noise("ekf"), ("navpp.toml", "gyro_arw_deg_per_sqrt_h = 0")),
-    Case("zero-accel-noise", zero_noise("ekf", ("accel_vrw_mps_per_sqrt_h",)), ("navpp.toml", "accel_vrw_mps_per_sqrt_h"), slow=True),
+    Case("zero-accel-noise", zero_noise("ekf", ("accel_vrw_mps_per_sqrt_h",)),
+         ("navpp.toml", "accel_vrw_mps_per_sqrt_h"), slow=True),
     Case("lat-in-radians", lat_in_radians("ekf"), ("gnss.csv", "radians")),
     Case("lat-in-radians-sage-husa", lat_in_radians("sage-husa"), ("gnss.csv", "radians"), slow=True),
     Case("identical-fixes", identical_fixes("ekf"), ("all 1501 fixes of gnss.csv are identical",)),

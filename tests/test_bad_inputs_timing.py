@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from badinputs import DRIVE, Case, copy_drive, edit_csv, params, run_case, run_navpp
 
-from badinputs import DRIVE, Case, copy_drive, edit_csv, run_case, run_navpp, params
 from navpp.recording import lone_stamp
 
 T0 = 1_700_000_000.0
@@ -200,7 +200,7 @@ def test_the_bridgeable_gap_follows_the_unseen_motion_model():
 
     T = model.max_bridgeable_gap_s()
     att = min(model.GAP_ANG_ACCEL * T, model.GAP_RATE) * T
-    assert att == pytest.approx(model.GAP_MAX_ATT_STD) and T == pytest.approx(10.47, abs=0.01)
+    assert att == pytest.approx(model.GAP_MAX_ATT_STD) and pytest.approx(10.47, abs=0.01) == T
 
 
 def _recording_with_gap(gap_s: float):

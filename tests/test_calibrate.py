@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from navpp import api, engine
-from navpp.config import AutoConfig, config_from_dict
+from navpp.config import config_from_dict
 from navpp.errors import FilterDivergedError, InputError
-from navpp.ins.calibrate import calibrate, gross_mounting, matrix_to_rpy_deg, noise_profile
 from navpp.ins.attitude import rpy_matrix
+from navpp.ins.calibrate import calibrate, gross_mounting, matrix_to_rpy_deg, noise_profile
 from navpp.metrics import compute_metrics
 from navpp.recording import ImuData
 from navpp.simulate import SimulationSpec, simulate

@@ -88,7 +88,7 @@ def test_consistency_over_rates_and_seeds(seed, imu_rate, gnss_rate):
 
 
 def test_navigation_grade_gyrocompasses():
-    sim, rec, res, m = _run(preset="navigation", duration=300.0)
+    sim, _rec, res, _m = _run(preset="navigation", duration=300.0)
     assert any("gyrocompassing (" in line for line in res.alignment.lines)
     heading0 = np.degrees(np.angle(np.exp(1j * np.radians(res.solution.rph_deg[0, 2] - sim.reference.rph_deg[0, 2]))))
     assert abs(heading0) < 0.5
@@ -137,7 +137,7 @@ def test_gnss_jump_is_absorbed_without_ringing():
         lon[step] += np.degrees(20.0 / (6.39e6 * np.cos(np.radians(lat[step]))))   # 20 m east
         return GnssData(g.t, lat, lon, g.alt.copy(), std_enu=g.std_enu)
 
-    sim, rec, res = _modified_run(jump)
+    _sim, rec, res = _modified_run(jump)
     assert res.diagnostics.forced.sum() >= 1
     sol = res.solution
     ref = rec.reference
@@ -342,7 +342,8 @@ def test_sigma_point_filters_on_the_ins_match_the_ekf(name):
         res = engine.run(rec, cfg, api.make_filter(f, cfg))
         m = compute_metrics(res.solution, rec.reference, filter_name=f, log="sim", reference="truth", runtime_s=0.0,
                             imu_samples=len(rec.imu), gnss_epochs=res.gnss_epochs, gnss_rejected=res.gnss_rejected)
-        out[f] = (m["position_m"]["horizontal"]["rmse"], np.sqrt(np.mean(_normalised_errors(rec, res.solution) ** 2, axis=0)))
+        out[f] = (m["position_m"]["horizontal"]["rmse"],
+                  np.sqrt(np.mean(_normalised_errors(rec, res.solution) ** 2, axis=0)))
     assert out[name][0] <= 1.15 * out["ekf"][0], out
     assert np.all(out[name][1] < 2.0), out
 

@@ -22,13 +22,13 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from navpp.outdir import MANIFEST_NAME as MANIFEST
 import navpp
 from navpp import api, geodesy
 from navpp.cli import app
 from navpp.config import Config, OutputConfig
 from navpp.errors import ConfigError, InputError
 from navpp.io import exports, frames, writers
+from navpp.outdir import MANIFEST_NAME as MANIFEST
 from navpp.recording import GnssData, ImuData, Recording, Solution
 
 T0_NS = 1_700_000_000_123_456_789          # a unix stamp with a fraction: exercises the time digits
@@ -325,7 +325,7 @@ def test_process_writes_every_asked_format(every_format) -> None:
     res, out = every_format
     names = ["trajectory.csv", "diagnostics.csv", "metrics.json", "metrics.md", *ALL]
     assert [p.name for p in res.files] == names
-    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == sorted(names)        # no staging directory left
+    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == sorted(names)  # no staging directory left
     assert csv_t_strings(out / "trajectory.csv") == [
         line.split(" ", 1)[0] for line in (out / "trajectory.tum").read_text().splitlines() if line[0] != "#"]
     props = json.loads((out / "trajectory.geojson").read_text())["features"][0]["properties"]
@@ -429,7 +429,7 @@ def test_format_errors_come_before_reading(sim_log_dir: Path, tmp_path: Path, mo
     monkeypatch.setattr(api, "read_log", read_log)
     with pytest.raises(ConfigError, match=r"formats: unknown format 'gpx'; valid formats: 'csv', 'mcap'"):
         api.process(sim_log_dir, out_dir=tmp_path / "o", formats="csv,gpx")
-    with pytest.raises(ConfigError, match="--embed-input .* add mcap"):
+    with pytest.raises(ConfigError, match=r"--embed-input .* add mcap"):
         api.process(sim_log_dir, out_dir=tmp_path / "o", formats="csv", embed_input=True)
     with pytest.raises(ConfigError, match=r"\[output\] formats is csv"):
         api.process(sim_log_dir, out_dir=tmp_path / "o", embed_input=True)
@@ -473,8 +473,8 @@ def test_cli_format_combination(sim_log_dir: Path, tmp_path: Path) -> None:
     out = tmp_path / "out"
     res = invoke("process", sim_log_dir, "--out", out, "--output-rate", "5", "--format", "tum, kml,tum", "-q")
     assert res.exit_code == 0, res.output
-    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == ["diagnostics.csv", "metrics.json", "metrics.md",
-                                                     "trajectory.kml", "trajectory.tum"]
+    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == [
+        "diagnostics.csv", "metrics.json", "metrics.md", "trajectory.kml", "trajectory.tum"]
 
 
 def test_cli_format_overrides_the_config(log_copy: Path, tmp_path: Path) -> None:
@@ -517,8 +517,8 @@ def test_mcap_format_writes_a_readable_mcap(sim_log_dir: Path, tmp_path: Path) -
     out = tmp_path / "out"
     res = api.process(sim_log_dir, out_dir=out, output_rate_hz=5.0, formats="csv,mcap")
     assert [p.name for p in res.files][-1] == "trajectory.mcap"
-    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == ["diagnostics.csv", "metrics.json", "metrics.md",
-                                                     "trajectory.csv", "trajectory.mcap"]
+    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == [
+        "diagnostics.csv", "metrics.json", "metrics.md", "trajectory.csv", "trajectory.mcap"]
     with open(out / "trajectory.mcap", "rb") as f:
         summary = make_reader(f).get_summary()
     topics = {c.topic for c in summary.channels.values()}

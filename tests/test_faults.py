@@ -157,7 +157,8 @@ def test_order_samples_policy():
     assert len(w) == 3
     assert w[0] == "imu.csv: 1 sample out of stamp order, sorted (first: sample 3 at 1700000000.020000000 s)"
     assert "1 exact duplicate" in w[1] and "1700000000.040000000 s" in w[1]
-    assert "1 conflicting duplicate" in w[2] and "different values" in w[2] and "first sample of each stamp kept" in w[2]
+    assert "1 conflicting duplicate" in w[2] and "different values" in w[2]
+    assert "first sample of each stamp kept" in w[2]
     # deterministic: the same log gives the same answer
     np.testing.assert_array_equal(order_samples(ns, vals, "imu.csv", []), idx)
     ns_jump = ns.copy()

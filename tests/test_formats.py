@@ -27,11 +27,11 @@ import numpy as np
 import pytest
 from test_cli import assert_one_line_error, flat, invoke
 
-from navpp.outdir import MANIFEST_NAME as MANIFEST
 from navpp import api
 from navpp.config import config_from_dict
 from navpp.io import roswrite
 from navpp.io.csv import read_csv_log
+from navpp.outdir import MANIFEST_NAME as MANIFEST
 from navpp.simulate import SimulationSpec, simulate, write_csv_log
 
 SPEC = SimulationSpec(duration_s=120, still_s=30, seed=3, lever_arm_m=(0.3, 0.0, 1.2))
@@ -210,7 +210,8 @@ def test_process_mcap_writes_trajectory(logs: Logs, tmp_path: Path) -> None:
     assert lines[0].startswith("t,lat,lon,alt,")
     assert len(lines) == 1 + N_IMU
     assert lines[1].startswith("1700000000.000000,") and lines[-1].startswith("1700000120.000000,")
-    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == ["diagnostics.csv", "trajectory.csv"]  # no reference, no metrics
+    # no reference, no metrics
+    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == ["diagnostics.csv", "trajectory.csv"]
 
 
 @pytest.mark.parametrize("kind", ROS_KINDS)
@@ -271,7 +272,8 @@ def test_gnss_topic_and_reference_topic(logs: Logs, tmp_path: Path) -> None:
                  "--out", out, "-q")
     ok(res)
     assert res.stderr.strip() == ""  # no warning (e.g. about the reference's unknown covariance)
-    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == ["diagnostics.csv", "metrics.json", "metrics.md", "trajectory.csv"]
+    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == [
+        "diagnostics.csv", "metrics.json", "metrics.md", "trajectory.csv"]
     m = json.loads((out / "metrics.json").read_text())
     assert m["reference"] == f"{path}:/reference/fix"
     assert m["epochs"] == 1201  # the 10 Hz reference over 120 s
@@ -290,8 +292,8 @@ def test_empty_file(tmp_path: Path, name: str) -> None:
     path = tmp_path / name
     path.write_bytes(b"")
     for command in ("process", "inspect"):
-        line = assert_one_line_error(invoke(command, path, *(["--out", tmp_path / "o"] if command == "process" else [])),
-                                     tmp_path / "o")
+        extra = ["--out", tmp_path / "o"] if command == "process" else []
+        line = assert_one_line_error(invoke(command, path, *extra), tmp_path / "o")
         assert line == f"navpp: error: {path}: empty file"
 
 

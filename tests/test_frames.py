@@ -3,8 +3,8 @@
 import numpy as np
 
 from navpp import geodesy
-from navpp.io import frames
 from navpp.ins.attitude import rph_to_dcm
+from navpp.io import frames
 from navpp.recording import Solution
 
 

@@ -28,7 +28,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-
 from badinputs import DRIVE, ROOT, snapshot
 
 OLD = {"trajectory.csv": "t,lat,lon\n1,2,3\n", "diagnostics.csv": "old\n", "metrics.json": "{}\n",

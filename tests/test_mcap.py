@@ -22,10 +22,10 @@ from mcap_ros1.writer import Writer as Ros1Writer
 from mcap_ros2._dynamic import serialize_dynamic
 from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
+from ros_oracles import expected_from_objects, fill_genpy, ros2_name
 from rosbags.typesys import Stores, get_typestore
 
 from navpp.errors import InputError
-from ros_oracles import expected_from_objects, fill_genpy, ros2_name
 from navpp.io.mcap import list_topics, read_mcap
 from navpp.io.ros import (
     FIX_TYPE,
@@ -218,7 +218,7 @@ def assert_matches_library(path: Path) -> None:
     for contents in (fast, slow):
         got = decoded(contents)
         assert set(got) == set(expected)
-        for topic, (msgtype, arrays) in expected.items():
+        for topic, (_msgtype, arrays) in expected.items():
             assert_same_arrays(got[topic], arrays, f"{path.name} {topic}")
         infos = {i.topic: (i.count, i.first_ns, i.last_ns) for i in contents.topics}
         assert infos == spans

@@ -122,7 +122,8 @@ def test_read_back_with_mcap_ros2(processed, trajectory):
     pcov = np.array([o.pose.covariance for o in odo]).reshape(n, 6, 6)
     tcov = np.array([o.twist.covariance for o in odo]).reshape(n, 6, 6)
     big = mcap_out.NOT_ESTIMATED_VARIANCE
-    assert np.array_equal(np.diagonal(pcov, axis1=1, axis2=2), np.column_stack([sol.std_enu ** 2, np.full((n, 3), big)]))
+    assert np.array_equal(np.diagonal(pcov, axis1=1, axis2=2),
+                          np.column_stack([sol.std_enu ** 2, np.full((n, 3), big)]))
     assert np.array_equal(tcov, np.broadcast_to(np.eye(6) * big, tcov.shape))
     assert np.count_nonzero(pcov) == 6 * n
 
@@ -398,7 +399,8 @@ def test_container_variants_read_back(processed, tmp_path, compression, chunk_si
     with open(path, "rb") as f:
         summary = make_reader(f).get_summary()
         f.seek(0)
-        streamed = [(c.topic, m.log_time, m.data) for _, c, m in NonSeekingReader(f, validate_crcs=True).iter_messages()]
+        streamed = [(c.topic, m.log_time, m.data)
+                    for _, c, m in NonSeekingReader(f, validate_crcs=True).iter_messages()]
         f.seek(0)
         indexed = [(c.topic, m.log_time, m.data) for _, c, m in
                    make_reader(f, validate_crcs=True).iter_messages(log_time_order=True)]
@@ -480,8 +482,10 @@ def test_packers_match_rosbags_serializer(encoding, frame):
     a = rng.standard_normal((2, 12)) * 1e3
     a[1, :3] = [np.nan, -0.0, np.inf]
     child = frame[::-1] + "x"
-    V = lambda v: T["geometry_msgs/msg/Vector3"](*v)
-    Q = lambda v: T["geometry_msgs/msg/Quaternion"](*v)
+    def V(v):
+        return T["geometry_msgs/msg/Vector3"](*v)
+    def Q(v):
+        return T["geometry_msgs/msg/Quaternion"](*v)
     pose_var = np.abs(a[:, 6:12])
     twist_var = np.arange(6.0)
     odo = rw.pack_odometry(stamps, a[:, :3], a[:, 3:7], a[:, 7:10], a[:, [10, 11, 0]], encoding=encoding,

@@ -19,10 +19,10 @@ from mcap_ros1._vendor.genpy.dynamic import generate_dynamic
 from mcap_ros1.decoder import DecoderFactory as Ros1DecoderFactory
 from mcap_ros2._dynamic import serialize_dynamic
 from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
+from ros_oracles import expected_from_objects, fill_genpy, ros2_name
 from rosbags.typesys import Stores, get_typestore
 
 from navpp.errors import InputError
-from ros_oracles import expected_from_objects, fill_genpy, ros2_name
 from navpp.io.messages import (
     TopicDecoder,
     build_messages,

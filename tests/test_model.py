@@ -79,7 +79,7 @@ def test_transition_matches_finite_difference_jacobian(drive, ta, length):
 
 
 def test_phi_qd_match_van_loan_for_frozen_dynamics(drive):
-    sim, t, gyro, accel = drive
+    sim, _t, _gyro, _accel = drive
     x = _truth_state(sim, 78.0)
     fn = np.array([0.8, -2.0, 9.81])
     F = M.error_dynamics(x, fn, 1.0 / 300.0, 1.0 / 300.0)

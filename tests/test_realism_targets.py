@@ -87,8 +87,8 @@ def test_the_consumer_car_smoothed_outages_meet_the_target():
         inside |= (rec.reference.t >= t0) & (rec.reference.t < t0 + d)
     tr = rec.reference.t[inside]
     lat0, lon0 = math.radians(float(rec.reference.lat_deg[0])), math.radians(float(rec.reference.lon_deg[0]))
-    e = (geodesy.geodetic_to_enu(np.radians(np.interp(tr, sol.t, sol.lat_deg)), np.radians(np.interp(tr, sol.t, sol.lon_deg)),
-                                 np.zeros(tr.size), lat0, lon0, 0.0)
+    e = (geodesy.geodetic_to_enu(np.radians(np.interp(tr, sol.t, sol.lat_deg)),
+                                 np.radians(np.interp(tr, sol.t, sol.lon_deg)), np.zeros(tr.size), lat0, lon0, 0.0)
          - geodesy.geodetic_to_enu(np.radians(rec.reference.lat_deg[inside]), np.radians(rec.reference.lon_deg[inside]),
                                    np.zeros(tr.size), lat0, lon0, 0.0))
     s = np.stack([np.interp(tr, sol.t, sol.std_enu[:, 0]), np.interp(tr, sol.t, sol.std_enu[:, 1])], axis=1)
@@ -119,8 +119,8 @@ def test_the_bundled_real_walk_beats_holding_the_last_fix_with_honest_sigmas():
     sol = res.solution
     t = ref["t"].to_numpy() - res.recording.t0_ns * 1e-9
     lat0, lon0 = math.radians(float(ref["lat"][0])), math.radians(float(ref["lon"][0]))
-    a = geodesy.geodetic_to_enu(np.radians(np.interp(t, sol.t, sol.lat_deg)), np.radians(np.interp(t, sol.t, sol.lon_deg)),
-                                np.zeros(t.size), lat0, lon0, 0.0)
+    a = geodesy.geodetic_to_enu(np.radians(np.interp(t, sol.t, sol.lat_deg)),
+                                np.radians(np.interp(t, sol.t, sol.lon_deg)), np.zeros(t.size), lat0, lon0, 0.0)
     b = geodesy.geodetic_to_enu(np.radians(ref["lat"].to_numpy()), np.radians(ref["lon"].to_numpy()), np.zeros(t.size),
                                 lat0, lon0, 0.0)
     s = np.stack([np.interp(t, sol.t, sol.std_enu[:, 0]), np.interp(t, sol.t, sol.std_enu[:, 1])], axis=1)

@@ -46,7 +46,8 @@ def md_table(text: str) -> tuple[list[str], list[list[str]]]:
 def test_files_and_stale_figures(report_dir: Path):
     names = sorted(p.name for p in report_dir.iterdir())
     assert names == ["drive_adaptive.png", "drive_error_cdf.png", "drive_error_time.png", "drive_trajectory.png",
-                     "noref_adaptive.png", "noref_trajectory.png", "notes.txt", "report.html", "report.md", "summary.csv"]
+                     "noref_adaptive.png", "noref_trajectory.png", "notes.txt", "report.html", "report.md",
+                     "summary.csv"]
     assert not list(report_dir.glob(".*.tmp"))
 
 

@@ -57,7 +57,8 @@ def _library_messages(encoding: str, frame: str, stamps, g, a):
     def header(i):
         sec, nsec = divmod(int(stamps[i]), 10**9)
         stamp = T["builtin_interfaces/msg/Time"](sec, nsec)
-        return T["std_msgs/msg/Header"](stamp, frame) if encoding == "cdr" else T["std_msgs/msg/Header"](i, stamp, frame)
+        header = T["std_msgs/msg/Header"]
+        return header(stamp, frame) if encoding == "cdr" else header(i, stamp, frame)
 
     out = {"imu": [], "fix": [], "twistcov": [], "twist": []}
     for i in range(len(stamps)):

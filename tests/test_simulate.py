@@ -141,7 +141,7 @@ def test_ideal_imu_on_the_move_matches_mechanisation_identity(trajectory, moving
     """Feed the ideal IMU back through the ENU velocity equation: v_dot = C f - (2w_ie+w_en) x v + g."""
     t = moving_times
     s = trajectory.state(t)
-    gyro, accel = trajectory.ideal_imu(t)
+    _gyro, accel = trajectory.ideal_imu(t)
     c = _mat(s)
     lat, h, v = s["lat"], s["h"], s["vel_enu"]
     rm, rn = radii(lat)

@@ -68,7 +68,8 @@ def test_smoothing_bridges_the_outage(drive300):
     _, e_s, _ = _errors(sm, sm.solution)
     h_f, h_s = np.hypot(e_f[:, 0], e_f[:, 1]), np.hypot(e_s[:, 0], e_s[:, 1])
     w = (t >= 150.0) & (t <= 180.0)
-    rms = lambda a: float(np.sqrt(np.mean(a * a)))
+    def rms(a):
+        return float(np.sqrt(np.mean(a * a)))
     assert rms(h_s[w]) <= 0.3 * rms(h_f[w]), (rms(h_s[w]), rms(h_f[w]))
     assert rms(h_s) < 0.8 * rms(h_f)
     assert rms(e_s[:, 2]) < rms(e_f[:, 2])

@@ -307,7 +307,7 @@ def test_clock_offset_halves_disagree_not_confident() -> None:
     # the fit is some compromise: reported not consistent, not confident (the engine's
     # 2.5-sigma rule would otherwise apply it)
     t_imu, gz, t_g, e, n = _drive(0.0, 41, duration=300.0)
-    t1, gz1, _, _, _ = _drive(0.3, 41, duration=300.0)
+    _t1, gz1, _, _, _ = _drive(0.3, 41, duration=300.0)
     half = t_imu > 150.0
     gz = np.where(half, gz1, gz)
     res = estimate_clock_offset(t_imu, gz, t_g, velocity_from_positions(t_g, e, n))

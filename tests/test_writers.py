@@ -94,7 +94,7 @@ def test_trajectory_csv_reads_back(tmp_path):
     write_trajectory_csv(path, sol, t0_s=t0_s)
     with open(path) as f:
         assert f.readline().rstrip("\n") == HEADER
-    assert HEADER == ",".join(TRAJECTORY_COLUMNS)
+    assert ",".join(TRAJECTORY_COLUMNS) == HEADER
     df = pd.read_csv(path)
     assert list(df.columns) == list(TRAJECTORY_COLUMNS)
     assert len(df) == len(sol)
@@ -225,8 +225,8 @@ def test_metrics_md_contains_the_numbers(tmp_path):
         for row, stats in m[section].items():
             if not isinstance(stats, dict):
                 continue
-            line = next(l for l in text[text.index(_TITLES[section]):].splitlines()
-                        if l.startswith(f"| {row} |"))
+            line = next(ln for ln in text[text.index(_TITLES[section]):].splitlines()
+                        if ln.startswith(f"| {row} |"))
             for key in ("mae", "rmse", "max", "p95"):
                 assert f"{stats[key]:.4f}" in line, (section, row, key)
     assert "| north | 0.6543 | 0.2346 | 1.5000 | 0.9000 |" in text

@@ -3,7 +3,7 @@
 ``FILTERS`` maps registry names (the CLI's ``--filter`` choices) to filter classes.
 """
 
-from .base import FILTERS, Filter, GaussianState, Innovation, get_filter, register
 from . import aekf, aukf, ckf, ekf, rwckf, sif, ukf, vce_ckf  # noqa: F401  (register the filters)
+from .base import FILTERS, Filter, GaussianState, Innovation, get_filter, register
 
 __all__ = ["FILTERS", "Filter", "GaussianState", "Innovation", "get_filter", "register"]

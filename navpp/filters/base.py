@@ -18,8 +18,9 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, ClassVar, Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 from numba import njit
@@ -77,7 +78,7 @@ class NoOptions:
     """A filter without options of its own."""
 
 
-FILTERS: dict[str, type["Filter"]] = {}
+FILTERS: dict[str, type[Filter]] = {}
 
 
 def register(name: str):
@@ -89,7 +90,7 @@ def register(name: str):
     return deco
 
 
-def get_filter(name: str) -> type["Filter"]:
+def get_filter(name: str) -> type[Filter]:
     """The filter class registered as ``name``; ConfigError listing the choices otherwise."""
     try:
         return FILTERS[name]
@@ -326,10 +327,7 @@ class Filter:
         """Shared correction: ``x ⊞ K nu``; Joseph form when linearised, else ``P - K S K^T``."""
         self.last_prior = state
         x = model.plus(state.x, K @ pred.nu)
-        if pred.H is not None:
-            P = _joseph(state.P, K, pred.H, R)
-        else:
-            P = _sigma_posterior(state.P, K, S)
+        P = _joseph(state.P, K, pred.H, R) if pred.H is not None else _sigma_posterior(state.P, K, S)
         if not (np.isfinite(x.sum()) and np.isfinite(P.sum())):
             raise FilterDivergedError(f"{self.name}: state became non-finite at t={state.t:.3f} s")
         return GaussianState(state.t, x, P)

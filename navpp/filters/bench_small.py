@@ -100,7 +100,8 @@ def run_filter(filt, case: Case) -> Track:
         return Track(xs, Ps, _stack_reports(reports, N), time.perf_counter() - t0, str(exc))
     seconds = time.perf_counter() - t0
     pooled = getattr(getattr(filt, "adapter", None), "pooled_redundancy", None)    # read-only diagnostic
-    diagnostics = {f"redundancy_{k}": np.asarray(v, dtype=float) for k, v in pooled().items()} if callable(pooled) else {}
+    diagnostics = ({f"redundancy_{k}": np.asarray(v, dtype=float) for k, v in pooled().items()}
+                   if callable(pooled) else {})
     return Track(xs, Ps, _stack_reports(reports, N), seconds, None, diagnostics)
 
 
@@ -303,7 +304,8 @@ def run_tracking(runs: int, seed: int, filters: Sequence[str]) -> BenchResult:
         s = collect(cases, tracks[name])
         base = name.split("[")[0]                 # "rwckf[covariance=random]" -> the paper's rwckf
         lo_hi = PAPER001_RMSE.get(base)
-        compare.append(f"{name} {rmse(s.err, (0, 2)):.2f} m" + (f" (paper {lo_hi[0]:.2f}-{lo_hi[1]:.2f})" if lo_hi else ""))
+        compare.append(f"{name} {rmse(s.err, (0, 2)):.2f} m"
+                       + (f" (paper {lo_hi[0]:.2f}-{lo_hi[1]:.2f})" if lo_hi else ""))
         note = f"paper {lo_hi[0]:.2f}-{lo_hi[1]:.2f} m, midpoint shown" if lo_hi else "no paper figure"
         rows.append(Row("position RMSE", name, rmse(s.err, (0, 2)), None if lo_hi is None else 0.5 * sum(lo_hi),
                         "m", "; ".join(x for x in (note, _diverged_note(s, valid)) if x)))
@@ -666,8 +668,8 @@ def run_turn(runs: int, seed: int, filters: Sequence[str]) -> BenchResult:
         ("Process-noise redundancy (paper 003 eq 39, ALGORITHMS.md): r_g = tr(Q_g A Pxz S^-1 Pxz' A), about "
          "tr(Q_g H' S^-1 H). Range and bearing do not depend on the turn rate, so q2's redundancy is 0 at "
          "every epoch and VCE cannot estimate it from single-epoch residuals; q1's is small because "
-         "the filter's q1 M block (0.1 m^2 in position per step) is tiny against S (range 300 m^2). The measurement factors carry "
-         "the adaptation."),
+         "the filter's q1 M block (0.1 m^2 in position per step) is tiny against S (range 300 m^2). "
+         "The measurement factors carry the adaptation."),
         *vce_notes,
     ]
     return BenchResult("paper003-turn", "Paper 003: 5-state coordinated turn, Q and R at 3x truth",

@@ -53,7 +53,7 @@ class SageHusaAdapter:
         self.r: np.ndarray | None = None
         self.k = int(options.prior_epochs)
         self.kept = 0
-        self._pending: np.ndarray | None = None              # epochs where the standard update lost positive definiteness
+        self._pending: np.ndarray | None = None  # epochs where the standard update lost positive definiteness
 
     def weight(self) -> float:
         b = self.o.forgetting_factor

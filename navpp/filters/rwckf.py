@@ -149,14 +149,14 @@ class RWCKF(SigmaPointFilter):
         random_cov = self.options.covariance == "random"
         pending = self._pending
         if pending is not None and pending[0] is state:
-            _, x_ref, dY, Q, wc = pending
+            _, x_ref, dY, Q, _wc = pending
             M = betas @ dY                                            # (C, n) candidate means about x_ref
             if random_cov:
                 dev = dY[None, :, :] - M[:, None, :]
                 P = np.einsum("ci,cij,cik->cjk", betas, dev, dev) + Q
             else:                                                     # the CKF covariance, whatever the mean
                 P = np.broadcast_to(state.P, (C, n, n))
-        else:                                                         # no kept time update: weights on the measurement only
+        else:                                         # no kept time update: weights on the measurement only
             x_ref, M = state.x, np.zeros((C, n))
             P = np.broadcast_to(state.P, (C, n, n))
         S = np.linalg.cholesky(0.5 * (P + np.swapaxes(P, 1, 2)))       # (C, n, n)

@@ -20,8 +20,8 @@ means "every moment known to 1 % of its standard deviations".  The default ``tol
 stops as soon as the moments agree to 0.1 % of a standard deviation: on a linear model (the rule
 is exact) and on the INS between GNSS epochs (0.2 s of propagation: the iterations differ by
 about 1e-6 sd) that is after ``min_iter`` = 2 iterations, 2.8x faster than always running 10
-on a 1-hour log with the same trajectory; ``tol = 0`` always runs ``max_iter`` iterations.  The draws for all ``max_iter``
-iterations are taken from the Generator up front (one compiled call), so the random stream
+on a 1-hour log with the same trajectory; ``tol = 0`` always runs ``max_iter`` iterations.  The draws for all
+``max_iter`` iterations are taken from the Generator up front (one compiled call), so the random stream
 advances by the same amount per integral whatever ``tol`` stops at.
 
 Centred covariances (ALGORITHMS.md preamble).  Per iteration the rule gives first and second

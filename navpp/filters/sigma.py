@@ -17,7 +17,7 @@ from ..errors import FilterDivergedError
 from .base import Filter, GaussianState, MeasurementPrediction, symmetrise
 
 
-def _factor(P: np.ndarray, t: float, name: str, filt: "SigmaPointFilter | None" = None) -> np.ndarray:
+def _factor(P: np.ndarray, t: float, name: str, filt: SigmaPointFilter | None = None) -> np.ndarray:
     """Lower Cholesky factor of P; a P that lost positive definiteness (random weights can do
     that) is repaired by clipping its eigenvalues, and the repair is counted on ``filt``."""
     P = symmetrise(P)

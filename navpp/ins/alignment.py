@@ -23,8 +23,8 @@ import numpy as np
 
 from .. import geodesy
 from ..errors import InputError
-from .attitude import dcm_to_quat, rph_to_dcm
 from .aids.standstill import quiet_blocks
+from .attitude import dcm_to_quat, rph_to_dcm
 from .model import ATT, BA, BG, N_ERR, POS, VEL
 from .strapdown import NOMINAL_BA, NOMINAL_BG, NOMINAL_SIZE
 
@@ -167,8 +167,8 @@ def _not_still(t, accel, gnss, i0: int, i1: int, window_s: float = 1.0, max_chan
     near = (gnss.t >= t0 - 0.5) & (gnss.t <= t1 + 0.5)
     f_mean = accel[i0:i1].mean(axis=0)
     if near.any():
-        lat, lon, h = (math.radians(float(np.mean(gnss.lat_deg[near]))), math.radians(float(np.mean(gnss.lon_deg[near]))),
-                       float(np.mean(gnss.alt[near])))
+        lat, lon, h = (math.radians(float(np.mean(gnss.lat_deg[near]))),
+                       math.radians(float(np.mean(gnss.lon_deg[near]))), float(np.mean(gnss.alt[near])))
     else:
         lat, lon, h = math.radians(float(gnss.lat_deg[0])), 0.0, 0.0
     f_norm = float(np.linalg.norm(f_mean))
@@ -283,8 +283,9 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
         start = i0
         moving = False
         if max(abs(roll), abs(pitch)) > math.radians(TILT_WARN_DEG):
-            warnings.append(f"the IMU is tilted by roll {math.degrees(roll):+.1f} deg, pitch {math.degrees(pitch):+.1f} "
-                            "deg at rest: if its axes are not forward-left-up (e.g. FRD), set [imu] mounting_rpy_deg")
+            warnings.append(f"the IMU is tilted by roll {math.degrees(roll):+.1f} deg, "
+                            f"pitch {math.degrees(pitch):+.1f} deg at rest: "
+                            "if its axes are not forward-left-up (e.g. FRD), set [imu] mounting_rpy_deg")
     else:
         start = min(int(np.searchsorted(t, first_fix)), len(t) - 1)
         if settings.up_b is not None:
@@ -360,7 +361,8 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
                                 "heading is clockwise from north, not a ROS yaw")
     elif method == "config":
         raise InputError("[init] method = 'config' needs heading_deg")
-    elif not moving and (method == "gyrocompass" or (method == "auto" and gc_std < settings.gyrocompass_max_heading_std)):
+    elif not moving and (method == "gyrocompass"
+                         or (method == "auto" and gc_std < settings.gyrocompass_max_heading_std)):
         heading = gyrocompass(w_mean, roll, pitch)
         head_std = max(gc_std, math.radians(0.1))
         head_how = f"gyrocompassing (predicted 1-sigma {math.degrees(gc_std):.2f} deg)"
@@ -370,7 +372,8 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
                          f"{math.degrees(gc_std):.1f} deg): heading from the GNSS track")
         heading, head_std, t_course = track_heading(use_velocity=gnss.vel_enu is not None)
         head_how = (f"GNSS track of the first motion up to t = {t_course:.2f} s, gyro bias removed"
-                    if settings.first_motion else f"GNSS track up to t = {t_course:.2f} s, turns taken out with the gyro")
+                    if settings.first_motion
+                    else f"GNSS track up to t = {t_course:.2f} s, turns taken out with the gyro")
         if gnss.vel_enu is not None:
             # the velocity columns are easy to get wrong (NED, swapped, sign): check them against
             # the positions, which cannot be
@@ -448,8 +451,8 @@ def _rotated_track(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h
     Displacements come from GNSS velocity x dt when the log has it and ``use_velocity`` (zero
     below ``min_speed``), else from positions, the still position as the origin.  Returns a dict:
     ``tg`` (K,) fix times, ``dt`` (K,) s since the previous fix (or the still end), ``d`` (K, 2)
-    E/N displacements m, ``t_mid`` (K,) s their middles, ``rot`` (K,) rad turned (counter-clockwise) at each displacement's
-    middle, ``moving`` (K,) bool, ``step_noise`` (K,) m per displacement from velocity (None
+    E/N displacements m, ``t_mid`` (K,) s their middles, ``rot`` (K,) rad turned (counter-clockwise) at each
+    displacement's middle, ``moving`` (K,) bool, ``step_noise`` (K,) m per displacement from velocity (None
     from positions: their sum telescopes, only the end's noise remains, the start being the
     mean of the still fixes)."""
     C = rph_to_dcm(roll, pitch, 0.0)

@@ -13,8 +13,9 @@ two compare.  Everything here is plain numpy over blocks of the IMU stream, in o
   floor.  Where GNSS covers the block its speed must be small; a block whose GNSS speed says
   still may be as shaky as halfway (geometrically) between the quietest and the median block
   (a hand-held rest with tremor, an idling engine).  Inside a run of quiet blocks the block
-  means must agree (a slow turn or a crawl is smooth, but its mean rate or force changes).  A block is still when it and both neighbours are quiet (stops are confirmed
-  from both sides).  No time rule: a still stretch may be anywhere in the log.
+  means must agree (a slow turn or a crawl is smooth, but its mean rate or force changes).  A block
+  is still when it and both neighbours are quiet (stops are confirmed from both sides).  No time
+  rule: a still stretch may be anywhere in the log.
 - **Noise for Q.**  Per second of log, the white-noise density the data show: the quieter of
   two bands, the second differences of 0.1-s means (``NOISE_TAU_S``; a mount's fast shaking,
   which the strapdown integrates to an oscillation rather than a drift, averages out) and each
@@ -525,14 +526,16 @@ def calibrate(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, *, gyro_
                  f"{' '.join(f'{v:.3f}' for v in np.degrees(gyro_bias_std))}; accel bias along up "
                  f"{float(accel_bias @ up) / 9.80665e-3:+.1f} mg")
     if np.any(np.abs(gyro_bias) > PRIOR_CONFLICT * np.hypot(gyro_bias_sigma, gyro_bias_std)) and bias_from != "none":
-        notes.append(f"the gyro biases are beyond the configured turn-on 1-sigma ({math.degrees(gyro_bias_sigma) * 3600:.3g} "
-                     "deg/h): the IMU is of a lower grade than the preset says; the bias prior is widened")
+        notes.append("the gyro biases are beyond the configured turn-on 1-sigma "
+                     f"({math.degrees(gyro_bias_sigma) * 3600:.3g} deg/h): "
+                     "the IMU is of a lower grade than the preset says; the bias prior is widened")
     mp = profile
     notes.append(f"IMU noise for Q from the data (quietest band of each second of log): gyro median "
                  f"{math.degrees(float(np.median(mp.gyro_arw))) * 60:.3g}, 90 % "
                  f"{math.degrees(float(np.percentile(mp.gyro_arw, 90))) * 60:.3g} deg/sqrt(h); accel median "
                  f"{float(np.median(mp.accel_vrw)) * 60:.3g}, 90 % {float(np.percentile(mp.accel_vrw, 90)) * 60:.3g} "
-                 f"m/s/sqrt(h) (configured {math.degrees(gyro_arw) * 60:.3g} and {accel_vrw * 60:.3g}: the larger is used)")
+                 f"m/s/sqrt(h) (configured {math.degrees(gyro_arw) * 60:.3g} and {accel_vrw * 60:.3g}: "
+                 "the larger is used)")
     if tilt > 1.0:
         notes.append(f"gravity in body axes ({up_from}): ({up[0]:+.3f}, {up[1]:+.3f}, {up[2]:+.3f}), "
                      f"{tilt:.1f} deg from +z")

@@ -149,7 +149,7 @@ def error_dynamics(x, fn, inv_tau_g, inv_tau_a):
     F = np.zeros((15, 15))
     vel = x[4:7]
     lat, h = x[7], x[9]
-    wie, wen, g, rm, rn = _nav_rates(lat, h, vel)
+    wie, wen, _g, rm, rn = _nav_rates(lat, h, vel)
     win = wie + wen
     C = quat_to_dcm(x[0:4])
     mv = np.zeros((3, 3))

@@ -26,12 +26,12 @@ import numpy as np
 from scipy import interpolate, optimize, stats
 
 __all__ = [
-    "StaleRows",
-    "find_stale_rows",
     "ClockOffset",
-    "estimate_clock_offset",
-    "velocity_from_positions",
+    "StaleRows",
     "YawScale",
+    "estimate_clock_offset",
+    "find_stale_rows",
+    "velocity_from_positions",
     "yaw_scale_from_track",
 ]
 

@@ -391,10 +391,7 @@ def decode_with_library(msgtype: str, encoding: str, payloads: Sequence[Any], *,
 
 def _as_readonly_u8(buffer: Any) -> np.ndarray:
     """A read-only uint8 view of ``buffer`` (one numba specialisation for every caller)."""
-    if isinstance(buffer, np.ndarray):
-        arr = buffer.reshape(-1).view(np.uint8)
-    else:
-        arr = np.frombuffer(buffer, dtype=np.uint8)
+    arr = buffer.reshape(-1).view(np.uint8) if isinstance(buffer, np.ndarray) else np.frombuffer(buffer, dtype=np.uint8)
     if arr.flags.writeable:
         arr = arr.view()
         arr.flags.writeable = False

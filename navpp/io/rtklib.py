@@ -34,7 +34,7 @@ Mapping to :class:`~navpp.recording.GnssData`
 - time: converted from the file's time system to ``time_base`` (``"unix"`` or ``"gpst"``, see
   :mod:`navpp.timebase`) exactly in integer nanoseconds with the leap-second table; ``t`` is
   float seconds relative to ``t0_ns`` (given, or the first epoch's stamp, returned).
-"""
+"""  # noqa: E501  (RTKLIB's column header above, quoted as rtkpost writes it)
 
 from __future__ import annotations
 

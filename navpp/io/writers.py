@@ -16,6 +16,7 @@ precisely than ``format(t0_s + t, ".6f")`` would (see :func:`write_trajectory_cs
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -105,10 +106,8 @@ def atomic_write(path: str | os.PathLike[str], writer: Callable[[IO[Any]], None]
         os.chmod(tmp_name, target_mode)
         os.replace(tmp_name, path)
     except BaseException:
-        try:
+        with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp_name)
-        except FileNotFoundError:
-            pass
         raise
     _fsync_directory(directory)
 
