@@ -21,7 +21,8 @@ HEADER = [
     "% obs start : 2024/01/01 00:00:00.0 GPST (week2295  86400.0s)",
     "% (lat/lon/height=WGS84/ellipsoidal,Q=1:fix,2:float,3:sbas,4:dgps,5:single,6:ppp,ns=# of satellites)",
     ("%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)  sdne(m)"
-     "  sdeu(m)  sdun(m) age(s)  ratio    vn(m/s)    ve(m/s)    vu(m/s)      sdvn    sdve    sdvu   sdvne   sdveu   sdvun"),
+     "  sdeu(m)  sdun(m) age(s)  ratio    vn(m/s)    ve(m/s)    vu(m/s)      sdvn    sdve    sdvu   sdvne   sdveu"
+     "   sdvun"),
 ]
 BODY = ("   35.123456789  139.123456789    50.1234   1   8   0.0030   0.0040   0.0090   0.0010   0.0000  -0.0020"
         "   0.00    0.0    1.00000    2.00000   -0.50000   0.01000 0.02000 0.03000 0.00000 0.00000 0.00000")

@@ -211,7 +211,8 @@ def _check_figures(name, rows):
     spreads by about 15 % (tracking) to 40 % (bearing-only, turn: few effective samples along
     the line of sight), so ±25 % / ±50 % (about 2.5 σ of a 2-run mean); ANEES ±0.4 (2 runs ×
     100 steps × n = 4 is about 800 degrees of freedom before correlation, a few tenths after).
-    VCE R factors: truth 1/4 or 1/3, per-run relative σ up to 0.43 (test_vce_on_turn_moves_r_factors_from_1_toward_one_third), so
+    VCE R factors: truth 1/4 or 1/3, per-run relative σ up to 0.43
+    (test_vce_on_turn_moves_r_factors_from_1_toward_one_third), so
     [0.1, 0.6]; the Q factors of the turn cannot move (zero or sub-threshold redundancy).
     """
     def near(key, doc, rel):

@@ -103,7 +103,7 @@ def test_divergence_is_reported_not_propagated():
     model = LinearModel(np.eye(n), Q)
     filt = get_filter("ekf")()
     state = filt.predict(GaussianState(0.0, np.zeros(n), np.eye(n)), model, (0.0, 1.0))
-    with pytest.raises(FilterDivergedError, match="t=1.000"):
+    with pytest.raises(FilterDivergedError, match=r"t=1\.000"):
         filt.update(state, model, LinearMeasurement(1.0, np.ones(n), np.eye(n), np.eye(n)))
 
 

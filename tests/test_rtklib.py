@@ -41,7 +41,7 @@ LEGEND = ("% (lat/lon/height=WGS84/ellipsoidal,Q=1:fix,2:float,3:sbas,4:dgps,5:s
 COLS_LLH = ("latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)  sdne(m)"
             "  sdeu(m)  sdun(m) age(s)  ratio")
 COLS_VEL = "    vn(m/s)    ve(m/s)    vu(m/s)      sdvn    sdve    sdvu   sdvne   sdveu   sdvun"
-LLH_BODY = "   35.123456789  139.123456789    50.1234   1   8   0.0030   0.0040   0.0090   0.0010   0.0000  -0.0020   0.00    0.0"
+LLH_BODY = "   35.123456789  139.123456789    50.1234   1   8   0.0030   0.0040   0.0090   0.0010   0.0000  -0.0020   0.00    0.0"  # noqa: E501 (an RTKLIB line as written)
 
 
 def write_pos(tmp_path: Path, lines: list[str], name: str = "sol.pos") -> Path:
@@ -329,7 +329,9 @@ def test_xyz_covariance_cross_terms(tmp_path):
     c_enu = np.array([[0.04, 0.01, 0.0], [0.01, 0.09, -0.02], [0.0, -0.02, 0.25]])
     m = mat_enu_from_ecef(lat, lon)
     c = m.T @ c_enu @ m
-    sq = lambda v: np.sign(v) * np.sqrt(abs(v))  # RTKLIB's sqvar
+    def sq(v):  # RTKLIB's sqvar
+        return np.sign(v) * np.sqrt(abs(v))
+
     line = (f"2024/01/01 00:00:00.000 {xyz[0]:.4f} {xyz[1]:.4f} {xyz[2]:.4f} 1 12 "
             f"{np.sqrt(c[0, 0]):.8f} {np.sqrt(c[1, 1]):.8f} {np.sqrt(c[2, 2]):.8f} "
             f"{sq(c[0, 1]):.8f} {sq(c[1, 2]):.8f} {sq(c[2, 0]):.8f} 0.0 0.0")

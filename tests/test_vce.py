@@ -92,7 +92,7 @@ def test_redundancies_and_residuals_equal_the_closed_form(steps):
     state = GaussianState(0.0, np.zeros(n), 2.0 * np.eye(n))
     names, Us = model.noise_groups(state.x, (0.0, 1.0))
     t = 0.0
-    for k in range(12):
+    for _round in range(12):
         f = filt.adapter.q_factor.copy() if filt.adapter.q_group_names else np.ones(len(names))
         for _ in range(steps):
             state = filt.predict(state, model, (t, t + 1.0 / steps))
@@ -224,7 +224,8 @@ def test_rejected_and_forced_updates_are_not_learnt():
     accepted, forced = [], []
     for k in (2, 3, 4):
         state = filt.predict(state, model, (k - 1.0, float(k)))
-        state, inn = filt.update(state, model, LinearMeasurement(float(k), np.array([100.0, 0.0]), np.eye(n), np.eye(n)))
+        meas = LinearMeasurement(float(k), np.array([100.0, 0.0]), np.eye(n), np.eye(n))
+        state, inn = filt.update(state, model, meas)
         accepted.append(inn.accepted)
         forced.append(inn.forced)
     assert accepted == [False, False, True] and forced == [False, False, True]
