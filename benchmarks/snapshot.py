@@ -47,8 +47,8 @@ What is normalised (everything else is hashed byte for byte):
   ``(Rauch-Tung-Striebel, N nodes, X s)``, in report.md the cells of a table column headed
   ``time s``; HTML: the ``<td>`` cells of a column headed ``time s`` (report.html);
 * stdout of the benchmarks: the time in the header ``(R runs, seed S, X s)``, the rows whose
-  label starts with ``run time`` are dropped, and in the scripts' stdout every number followed by a time unit (``s``, ``ms``, ``us``, ``µs``) and every
-  ``x`` speed ratio becomes ``<time>``;
+  label starts with ``run time`` are dropped, and in the scripts' stdout every number followed
+  by a time unit (``s``, ``ms``, ``us``, ``µs``) and every ``x`` speed ratio becomes ``<time>``;
 * stderr: lines about compiling kernels (numba's cache state, not behaviour) are dropped.
 
 numba caches navpp's compiled kernels keyed on the source file of each kernel: a constant of
@@ -409,7 +409,10 @@ def _largest(a: dict[str, float], b: dict[str, float]) -> tuple[str, float] | No
     worst = None
     for k in a.keys() & b.keys():
         x, y = a[k], b[k]
-        d = abs(x - y) if math.isfinite(x) and math.isfinite(y) else (0.0 if (x == y or (math.isnan(x) and math.isnan(y))) else math.inf)
+        if math.isfinite(x) and math.isfinite(y):
+            d = abs(x - y)
+        else:
+            d = 0.0 if (x == y or (math.isnan(x) and math.isnan(y))) else math.inf
         if d > 0 and (worst is None or d > worst[1]):
             worst = (k, d)
     return worst
