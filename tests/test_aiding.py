@@ -163,7 +163,12 @@ def test_nhc_and_zupt_bridge_outages():
     assert ratio <= 0.4, ends
 
 
-@pytest.mark.parametrize("name", sorted(FILTERS))
+#: the three slowest filters run with the slow tests (the default run's CPU budget); the others always
+SLOW_FILTERS = ("rwckf", "sif", "vce-ckf")
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=[pytest.mark.slow] if n in SLOW_FILTERS else [])
+                                  for n in sorted(FILTERS)])
 def test_every_filter_applies_every_aid(drive, name):
     rec = drive.recording()
     res, m = _run(rec, name, vehicle={"type": "car"})

@@ -179,6 +179,7 @@ def test_cli_smooth(sim_log_dir, tmp_path):
     assert (tmp_path / "o" / "trajectory_forward.csv").is_file()
 
 
+@pytest.mark.slow     # compare --smooth in worker processes; test_written_files covers the smoothed files
 def test_compare_smooth_rows(sim_log_dir, tmp_path):
     res = compare([sim_log_dir], ["ekf", "ckf"], smooth=True, out_dir=tmp_path)
     assert [r.filter for r in res.rows] == ["ekf", "ekf+rts", "ckf", "ckf+rts"]
