@@ -413,13 +413,6 @@ def _concat(parts: list, cls):
     return cls(**out)
 
 
-def _unique(items) -> tuple[str, ...]:
-    seen: dict[str, None] = {}
-    for x in items:
-        seen.setdefault(x, None)
-    return tuple(seen)
-
-
 def _run_segments(recording: Recording, segments: list[tuple[int, int]], config: Config, filt: Filter,
                   progress: ProgressFn | None, cov_step_s: float, smooth: bool) -> RunResult:
     """Process each IMU segment (:func:`imu_segments`) as a log of its own and join the results in
@@ -490,7 +483,7 @@ def _run_segments(recording: Recording, segments: list[tuple[int, int]], config:
         gnss_epochs=sum(r.gnss_epochs for r in results),
         gnss_rejected=sum(r.gnss_rejected for r in results),
         runtime_s=sum(r.runtime_s for r in results),
-        warnings=_unique([head, *skipped, *(w for r in results for w in r.warnings)]),
+        warnings=tuple(dict.fromkeys([head, *skipped, *(w for r in results for w in r.warnings)])),
         smoothed=smoothed,
         notes=tuple(notes),
         updates=updates,

@@ -53,90 +53,73 @@ def _argv(work, log, *extra):
     return ["process", str(log), "--out", str(work / "out"), *extra]
 
 
-def gyro_x10(filt):
+def _drive(filt, edit):
+    """A row's build step: a copy of the sample drive changed by ``edit(log_dir)``, processed
+    with the filter ``filt``."""
     def build(work):
         log = copy_drive(work)
-        edit_csv(log / "imu.csv", _cols(_scale(("gx", "gy", "gz"), 10.0)))
+        edit(log)
         return _argv(work, log, "--filter", filt)
     return build
+
+
+def _csv(name, fn):
+    """An ``edit(log_dir)`` that rewrites the log's CSV file ``name`` through ``fn(lines)``."""
+    def edit(log):
+        edit_csv(log / name, fn)
+    return edit
+
+
+def gyro_x10(filt):
+    return _drive(filt, _csv("imu.csv", _cols(_scale(("gx", "gy", "gz"), 10.0))))
 
 
 def imu_xy_swapped(filt):
-    def build(work):
-        log = copy_drive(work)
-        edit_csv(log / "imu.csv", _cols(_chain(_swap("gx", "gy"), _swap("ax", "ay"))))
-        return _argv(work, log, "--filter", filt)
-    return build
+    return _drive(filt, _csv("imu.csv", _cols(_chain(_swap("gx", "gy"), _swap("ax", "ay")))))
 
 
 def latlon_swapped(filt):
-    def build(work):
-        log = copy_drive(work)
-        edit_csv(log / "gnss.csv", _cols(_swap("lat", "lon")))
-        return _argv(work, log, "--filter", filt)
-    return build
+    return _drive(filt, _csv("gnss.csv", _cols(_swap("lat", "lon"))))
 
 
 def lat_in_radians(filt):
-    def build(work):
-        log = copy_drive(work)
-        edit_csv(log / "gnss.csv", _cols(_scale(("lat", "lon"), math.pi / 180.0)))
-        return _argv(work, log, "--filter", filt)
-    return build
+    return _drive(filt, _csv("gnss.csv", _cols(_scale(("lat", "lon"), math.pi / 180.0))))
 
 
 def first_fix_elsewhere(filt):
-    def build(work):
-        log = copy_drive(work)
-
-        def fn(lines):
-            v = lines[1].split(",")
-            v[1], v[2] = "-33.9", "151.2"        # Sydney, for a drive near Turin
-            return [lines[0], ",".join(v), *lines[2:]]
-        edit_csv(log / "gnss.csv", fn)
-        return _argv(work, log, "--filter", filt)
-    return build
+    def fn(lines):
+        v = lines[1].split(",")
+        v[1], v[2] = "-33.9", "151.2"        # Sydney, for a drive near Turin
+        return [lines[0], ",".join(v), *lines[2:]]
+    return _drive(filt, _csv("gnss.csv", fn))
 
 
 def std_x100(filt):
-    def build(work):
-        log = copy_drive(work)
-        edit_csv(log / "gnss.csv", _cols(_scale(("std_e", "std_n", "std_u"), 100.0)))
-        return _argv(work, log, "--filter", filt)
-    return build
+    return _drive(filt, _csv("gnss.csv", _cols(_scale(("std_e", "std_n", "std_u"), 100.0))))
 
 
 def frd_as_flu(filt):
     """Forward-right-down samples declared forward-left-up, with ``[auto] mounting`` off (on, the
     run rotates the IMU itself and says so: tests/test_calibrate.py)."""
-    def build(work):
-        log = copy_drive(work)
+    def edit(log):
         edit_csv(log / "imu.csv", _cols(_scale(("gy", "gz", "ay", "az"), -1.0)))
         with open(log / "navpp.toml", "a") as f:
             f.write("\n[auto]\nmounting = false\n")
-        return _argv(work, log, "--filter", filt)
-    return build
+    return _drive(filt, edit)
 
 
 def zero_noise(filt, keys=("gyro_arw_deg_per_sqrt_h", "accel_vrw_mps_per_sqrt_h")):
-    def build(work):
-        log = copy_drive(work)
+    def edit(log):
         text = (log / "navpp.toml").read_text().replace("[imu]\n", "[imu]\n" + "".join(f"{k} = 0\n" for k in keys))
         (log / "navpp.toml").write_text(text)
-        return _argv(work, log, "--filter", filt)
-    return build
+    return _drive(filt, edit)
 
 
 def identical_fixes(filt):
-    def build(work):
-        log = copy_drive(work)
-
-        def fn(lines):
-            first = lines[1].split(",")
-            return [lines[0]] + [",".join([ln.split(",")[0], *first[1:]]) for ln in lines[1:] if ln.strip()]
-        edit_csv(log / "gnss.csv", fn)
-        return _argv(work, log, "--filter", filt)
-    return build
+    def fn(lines):
+        first = lines[1].split(",")
+        return [lines[0]] + [",".join([ln.split(",")[0], *first[1:]]) for ln in lines[1:] if ln.strip()]
+    return _drive(filt, _csv("gnss.csv", fn))
 
 
 CASES = [
