@@ -995,9 +995,10 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
 
     def predicted(interval: tuple[float, float]) -> None:
         nonlocal state
-        state = filt.predict(state, model, interval)
+        pred = filt.predict(state, model, interval)
+        state = pred.state
         if store is not None:
-            store.predicted(state, filt.last_cross, filt.last_x_ref)
+            store.predicted(pred)
 
     def coast_to(t_end: float) -> None:
         while t_end - state.t > 1.5 * KNOT_S:
@@ -1037,13 +1038,13 @@ def _run_body(recording: Recording, config: Config, filt: Filter, progress: Prog
 
         def apply(meas, t_e: float):
             nonlocal state, used_prior, reset, applied
-            filt.last_prior = None
-            state, inn = filt.update(state, model, meas)
+            up = filt.update(state, model, meas)
+            state, inn = up.state, up.innovation
             checked(t_e)                            # the update
             aiding.counts.add(meas.kind, inn.accepted)
             if inn.accepted:
                 if not applied:
-                    used_prior = filt.last_prior
+                    used_prior = up.prior_used
                 applied = True
                 reset |= inn.forced
             return inn
