@@ -43,6 +43,7 @@ from ..ins.attitude import dcm_to_quat, rph_to_dcm
 from ..ins.model import POS, VEL, InsModel, NoiseModel, _gnss_innovation, minus, plus
 from .base import GaussianState
 from .benchmarks import BenchResult, Row, make_bench_filter, register_benchmark
+from .protocols import MeasurementBase
 
 AXES = ("E", "N", "U")
 
@@ -203,7 +204,7 @@ def gps_times(sc: Paper002Scenario) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class GnssPositionVelocity:
+class GnssPositionVelocity(MeasurementBase):
     """GNSS position and velocity fix (antenna at the IMU) as a measurement of the 15-state model.
 
     Residual (6,): position fix minus INS position in local ENU metres about the nominal

@@ -20,7 +20,7 @@ import time
 import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -28,6 +28,7 @@ from ..errors import ConfigError, FilterDivergedError
 from .base import GaussianState
 from .benchmarks import BenchResult, Row, make_bench_filter, register_benchmark
 from .linear import LinearMeasurement, LinearModel, VectorSpace
+from .protocols import MeasurementBase
 
 
 def wrap_angle(a: np.ndarray | float) -> np.ndarray:
@@ -387,7 +388,7 @@ BEARING_R_SCALE = 4.0
 
 
 @dataclass(frozen=True)
-class BearingMeasurement:
+class BearingMeasurement(MeasurementBase):
     """Bearing (rad) from ``sensor`` (2,) to the position ``(x[0], x[1])``:
     ``z = atan2(x1 - sy, x0 - sx) + v`` (paper 003 eq 41, four-quadrant); R (1, 1).
     Innovations and point differences are wrapped into (-pi, pi]."""
@@ -522,6 +523,7 @@ class CoordinatedTurnModel(VectorSpace):
 
     q1: float
     q2: float
+    noise_share: ClassVar[str] = "step"       # VCE measures the groups per step (filters.protocols)
 
     @staticmethod
     def f(X: np.ndarray, T: float) -> np.ndarray:
@@ -547,8 +549,8 @@ class CoordinatedTurnModel(VectorSpace):
             [0.0, 0.0, 0.0, 0.0, 1.0],
         ])
 
-    def noise_groups(self, x: np.ndarray, interval) -> tuple[list[str], np.ndarray]:
-        """``(["q1", "q2"], Qs (2, 5, 5))``, summing to :meth:`process_noise`."""
+    def noise_groups(self, x: np.ndarray, interval, per: str = "") -> tuple[list[str], np.ndarray]:
+        """``(["q1", "q2"], Qs (2, 5, 5))``, summing to :meth:`process_noise` (``per`` ignored)."""
         T = float(interval[1] - interval[0])
         M = np.array([[T ** 3 / 3, T ** 2 / 2], [T ** 2 / 2, T]])
         Qs = np.zeros((2, 5, 5))
@@ -570,7 +572,7 @@ class CoordinatedTurnModel(VectorSpace):
 
 
 @dataclass(frozen=True)
-class RangeBearingMeasurement:
+class RangeBearingMeasurement(MeasurementBase):
     """Range (m) and bearing (rad) of ``(x[0], x[2])`` from the origin (paper 003 eq 43, bearing
     four-quadrant); z (2,), R (2, 2).  Bearing differences wrapped into (-pi, pi]."""
 

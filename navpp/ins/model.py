@@ -510,6 +510,8 @@ class InsModel:
 
     #: the smoother's mean recursion, compiled (:func:`rts_means`)
     rts_means = staticmethod(rts_means)
+    #: VCE's process-noise groups reach the fixes through many time updates (filters.protocols)
+    noise_share: ClassVar[str] = "propagated"
 
     # ⊞ / ⊟ -----------------------------------------------------------------------------------
     @staticmethod
@@ -611,6 +613,8 @@ class GnssPosition:
     reopen_std: np.ndarray | None = None
     axes: ClassVar[tuple[str, ...]] = ("e", "n", "u")     # names of the measurement's elements
     kind: ClassVar[str] = "gnss_position"
+    adaptive: ClassVar[bool] = True       # adaptive filters learn their noise from it
+    forceable: ClassVar[bool] = True      # forced in after a run of gate rejections (re-anchored)
 
     def innovation_at(self, x: np.ndarray) -> np.ndarray:
         return _gnss_innovation(x, self.lat, self.lon, self.h, self.lever_arm_b)

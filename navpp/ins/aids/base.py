@@ -10,6 +10,8 @@ from typing import ClassVar
 import numpy as np
 from numba import njit
 
+from ...filters.protocols import MeasurementBase
+
 
 @njit(cache=True, inline="always")
 def skew(a):
@@ -18,14 +20,15 @@ def skew(a):
 
 
 @dataclass(frozen=True)
-class Aid:
+class Aid(MeasurementBase):
     """An aiding measurement at time ``t`` (s): value ``z`` (k,), covariance ``R`` (k, k), and
     the parameters ``p`` its model needs (documented per aid).
 
     Class attributes: ``kind`` (name in counts and diagnostics), ``axes`` (names of the
     elements), ``adaptive = False`` (adaptive filters learn their noise from the GNSS position
     only and use an aid's ``R`` as given), ``forceable = False`` (an aid the gate rejects is
-    dropped, never forced in after a run of rejections as a GNSS fix is).
+    dropped, never forced in after a run of rejections as a GNSS fix is); no re-anchoring
+    (:class:`~navpp.filters.protocols.MeasurementBase`).
     """
 
     t: float
