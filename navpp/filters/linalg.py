@@ -23,7 +23,8 @@ def compiled(fn: F) -> F:
 
 def symmetrise(P: np.ndarray) -> np.ndarray:
     """``(P + P^T) / 2``."""
-    return 0.5 * (P + P.T)
+    out: np.ndarray = 0.5 * (P + P.T)
+    return out
 
 
 @compiled
@@ -82,11 +83,13 @@ def joseph(P: np.ndarray, K: np.ndarray, H: np.ndarray, R: np.ndarray) -> np.nda
     """Joseph-form posterior ``(I - K H) P (I - K H)^T + K R K^T``, symmetrised."""
     I_KH = np.eye(P.shape[0]) - K @ H
     Pn = I_KH @ P @ I_KH.T + K @ R @ K.T
-    return 0.5 * (Pn + Pn.T)
+    out: np.ndarray = 0.5 * (Pn + Pn.T)
+    return out
 
 
 @compiled
 def sigma_posterior(P: np.ndarray, K: np.ndarray, S: np.ndarray) -> np.ndarray:
     """Posterior ``P - K S K^T`` of a filter without a Jacobian, symmetrised."""
     Pn = P - K @ S @ K.T
-    return 0.5 * (Pn + Pn.T)
+    out: np.ndarray = 0.5 * (Pn + Pn.T)
+    return out

@@ -20,11 +20,13 @@ class VectorSpace:
 
     @staticmethod
     def plus(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
-        return x + dx
+        out: np.ndarray = x + dx
+        return out
 
     @staticmethod
     def minus(x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
-        return x1 - x0
+        out: np.ndarray = x1 - x0
+        return out
 
     @staticmethod
     def rts_means(x_post: np.ndarray, x_prior: np.ndarray, gains: np.ndarray, reset: np.ndarray) -> np.ndarray:
@@ -100,10 +102,12 @@ class LinearMeasurement(MeasurementBase):
     R: np.ndarray
 
     def innovation_at(self, x: np.ndarray) -> np.ndarray:
-        return self.z - self.H @ x
+        nu: np.ndarray = self.z - self.H @ x
+        return nu
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         return self.H
 
     def predict_points(self, x: np.ndarray, dX: np.ndarray) -> np.ndarray:
-        return dX @ self.H.T
+        Z: np.ndarray = dX @ self.H.T
+        return Z

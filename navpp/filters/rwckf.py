@@ -226,7 +226,7 @@ class RWCKF(SigmaPointFilter):
             x_ref, M = p.x_ref, betas @ p.dY                          # (C, n) candidate means about x_ref
         else:                                         # no kept time update: weights on the measurement only
             x_ref, M = state.x, np.zeros((C, state.P.shape[0]))
-        points = []
+        points: list[np.ndarray] = []
         for c in range(C):
             if p is not None and self.options.covariance == "random":
                 P = combine_points(model, state.t, x_ref, p.dY, betas[c], betas[c], p.Q).P

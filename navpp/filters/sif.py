@@ -52,6 +52,7 @@ ALGORITHMS.md "Paper 001's comparison filters (AUKF, SIF)".
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -103,7 +104,8 @@ def _scaled_error(se: list[np.ndarray], scales: list[np.ndarray]) -> float:
 
 
 def _sd(P_diag: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.maximum(P_diag, 0.0))
+    sd: np.ndarray = np.sqrt(np.maximum(P_diag, 0.0))
+    return sd
 
 
 @register("sif")
@@ -133,8 +135,8 @@ class SIF(Filter):
         """Iterations of the last time and measurement updates (constant when ``tol = 0``)."""
         return {"si_iterations": self.iterations.copy()}
 
-    def _done(self, acc: IterationAverage, scales) -> bool:
-        o = self.options
+    def _done(self, acc: IterationAverage, scales: Callable[[], list[np.ndarray]]) -> bool:
+        o: SIFOptions = self.options
         if acc.count >= o.max_iter:
             return True
         return o.tol > 0.0 and acc.count >= o.min_iter and _scaled_error(acc.standard_error(), scales()) <= o.tol
@@ -143,9 +145,9 @@ class SIF(Filter):
         S = factor(state.P, state.t, self.name, self)
         n = S.shape[0]
         acc = IterationAverage()
-        x_ref = None
+        x_ref = state.x
 
-        def scales():
+        def scales() -> list[np.ndarray]:
             sd = _sd(np.diagonal(acc.mean[1]))
             return [sd, np.outer(sd, sd)]
 
@@ -172,7 +174,7 @@ class SIF(Filter):
         sd_x = _sd(np.diagonal(state.P))
         acc = IterationAverage()
 
-        def scales():
+        def scales() -> list[np.ndarray]:
             sd_z = _sd(np.diagonal(acc.mean[1]))
             return [sd_z, np.outer(sd_z, sd_z), sd_x, np.outer(sd_x, sd_z)]
 

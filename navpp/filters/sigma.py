@@ -50,7 +50,8 @@ def factor(P: np.ndarray, t: float, name: str, filt: RepairCounter | None = None
 
 def weighted_cov(wc: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """``sum_i wc_i A_i B_i^T`` for centred deviation rows ``A`` (p, k), ``B`` (p, l)."""
-    return (A * wc[:, None]).T @ B
+    out: np.ndarray = (A * wc[:, None]).T @ B
+    return out
 
 
 def combine_points(model: Model, t: float, x_ref: np.ndarray, dY: np.ndarray, wm: np.ndarray, wc: np.ndarray,

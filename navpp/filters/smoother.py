@@ -31,6 +31,7 @@ hour of 5 Hz GNSS with 1 s coast knots on the 15-state INS: about 120 MB).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -58,7 +59,7 @@ class ForwardStore:
 
     def __init__(self, n_err: int, n_x: int) -> None:
         self.n_err, self.n_x = int(n_err), int(n_x)
-        self._nodes: dict[str, list] = {name: [] for name in self.FIELDS}
+        self._nodes: dict[str, list[Any]] = {name: [] for name in self.FIELDS}
 
     @property
     def n(self) -> int:

@@ -219,7 +219,7 @@ class HelmertVCE(Adaptation):
         """Process noise (n, n) for a time update over ``interval``: ``Σ_g f_g U_g`` when Q is
         adapted, else the model's own; the groups are accumulated until the next update."""
         if not self.o.adapt_q:
-            Q = np.asarray(model.process_noise(x, interval), dtype=float)
+            Q: np.ndarray = np.asarray(model.process_noise(x, interval), dtype=float)
             self._Q_total = Q.copy() if self._Q_total is None else self._Q_total + Q
             return Q
         names, Us = self._groups(model, x, interval)
