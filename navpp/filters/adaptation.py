@@ -15,6 +15,7 @@ go to :meth:`Adaptation.corrected`, so nothing is parked between steps.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import ClassVar
 
 import numpy as np
 
@@ -27,7 +28,13 @@ Predictor = Callable[[GaussianState], MeasurementPrediction]
 
 class Adaptation:
     """No adaptation: the model's Q and the measurement's R as given.  Subclasses override the
-    steps they adapt; a measurement whose ``adaptive`` is False is always used as given."""
+    steps they adapt; a measurement whose ``adaptive`` is False is always used as given.
+
+    ``adapts_noise``: the adaptation chooses the noise (R, or Q and R) the filter uses, as
+    opposed to adjusting the prior or the weights.
+    """
+
+    adapts_noise: ClassVar[bool] = False
 
     def process_noise(self, model: Model, x: np.ndarray, interval: Interval) -> np.ndarray:
         """Qd (n, n) for a sigma-point time update over ``interval`` about nominal ``x``."""

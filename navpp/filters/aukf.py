@@ -40,15 +40,14 @@ filters"):
 - ``detect_probability`` (default 0.999; 0 is ALGORITHMS.md's rule as written): with p > 0 the
   filter fades only when the unfaded NIS exceeds the chi-square quantile p (a fault-detection test before
   adapting, as in Hajiyev and Soken's adaptive filters as we understand them; their papers
-  are not at hand).  On the INS the rule as written fades on about 20 % of GNSS epochs,
-  because one epoch's ``nu^T nu`` scatters by several ``tr R`` when R dominates the
-  innovation: every fade multiplies the attitude and bias covariance too, which the position
-  fixes observe weakly (heading not at all while still), so those covariances ratchet up
-  until the sigma points span tens of degrees and the filter diverges (sample drive: heading
-  RMSE ~100 deg).  Tried and not enough: ``max_fading = 2``, a smoothed innovation covariance
-  (forgetting 0.95 / 0.99), no fading while still.  A detection test at p = 0.999 prevents it
-  (p = 0.99 does not), hence navpp's default; the rule as written stays one option away and
-  is reported next to it in the paper 001 benchmark.
+  are not at hand).  On the INS the rule as written fades on many GNSS epochs, because one
+  epoch's ``nu^T nu`` scatters by several ``tr R`` when R dominates the innovation: every
+  fade multiplies the attitude and bias covariance too, which the position fixes observe
+  weakly (heading not at all while still), so those covariances ratchet up until the sigma
+  points span tens of degrees and the filter diverges.  A detection test at p = 0.999 keeps
+  the fading to the innovations that are inconsistent with the UKF's prediction, hence
+  navpp's default; the rule as written stays one option away and is reported next to it in
+  the paper 001 benchmark (docs/papers.md gives the figures).
 
 ``noise_report()`` gives ``{"fading": array([lambda_k])}``: the factor applied at the last
 measurement update (1 when not fading, rejected or ``adapt = false``).

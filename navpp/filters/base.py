@@ -128,6 +128,11 @@ class Filter:
         raise NotImplementedError
 
     # reports --------------------------------------------------------------------------------
+    @property
+    def adapts_noise(self) -> bool:
+        """Whether the filter chooses its noise (R, or Q and R) as it runs."""
+        return self.adapter.adapts_noise
+
     def noise_report(self) -> dict[str, np.ndarray]:
         """What an adaptive filter has decided so far (e.g. VCE group factors), recorded by the
         engine after every GNSS epoch: name -> 1-D array, fixed length per name.  The R used is

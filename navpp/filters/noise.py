@@ -59,6 +59,8 @@ class SageHusaAdapter(Adaptation):
     kept : epochs where the standard update lost positive definiteness and the previous R was kept.
     """
 
+    adapts_noise = True
+
     def __init__(self, options: SageHusaOptions, improved: bool) -> None:
         self.o = options
         self.improved = improved

@@ -45,8 +45,8 @@ sum restarts after every accepted (or forced) update; forced updates are not lea
 
 Propagated shares (``q_share = "propagated"``, the default on the INS): a group's noise reaches
 an innovation mostly through what it has added to ``P⁻`` over many time updates, not through the
-last step's ``U_g`` (on the INS at 5 Hz the step redundancy is about 1e-8, so the step form never
-moves Q).  Each group's share of the covariance, ``P_g``, is carried along like ``P`` itself:
+last step's ``U_g`` (on the INS at the GNSS rate the step redundancy is tiny, so the step form
+never moves Q).  Each group's share of the covariance, ``P_g``, is carried along like ``P`` itself:
 ``P_g ← Φ P_g Φᵀ + f_g U_g`` at every time update (``Φ = Cᵀ P⁻¹``, the statistically linearised
 transition from the update's cross-covariance) and ``P_g ← L P_g Lᵀ`` at every applied update
 (``L = I − Pxz S⁻¹ Pxzᵀ A``, aids included; a forced update restarts the shares).  Then
@@ -58,18 +58,15 @@ benchmarks, where every step's noise reaches the measurement, keep it).
 Pooling (paper 003 cites Wang 2009 for it): a single epoch's estimate is one squared residual,
 far too noisy to use raw.
 
-Identifiability (measured, see tests/test_vce.py): on one epoch VCE sees only the innovation
-``d``, so it tells the groups apart only through the different *shapes* their noise gives ``S``.
-With a scalar measurement every group's correction is the same ``d²/S`` (tested), so VCE can
-only rescale Q and R together until the innovations are consistent; along the curve of
-consistent (Q, R) nothing pulls it to the truth.  In a 2-D constant-velocity simulation with
-the position measured (each axis scalar), Q started at 3x and R at 4x the truth went to the
-ceiling (Q) and to about 0.65 (R).  Measuring position and velocity separates them only weakly
-(from 3x/4x: q about 2.5x, velocity R about 0.55x); two sensors on the same position separate
-them well (factors within about 30 % of the truth, the convergence test).  On the INS at 5 Hz
-the process-noise groups have a redundancy of about 1e-8 per epoch (a 0.2 s step's noise barely
-reaches the position innovation directly), so ``min_redundancy`` keeps Q at its prior and only
-R is learnt.
+Identifiability (tests/test_vce.py): on one epoch VCE sees only the innovation ``d``, so it
+tells the groups apart only through the different *shapes* their noise gives ``S``.  With a
+scalar measurement every group's correction is the same ``d²/S`` (tested), so VCE can only
+rescale Q and R together until the innovations are consistent; along the curve of consistent
+(Q, R) nothing pulls it to the truth.  Measuring position and velocity separates them only
+weakly; two sensors on the same position separate them well (the convergence test).  On the
+INS at the GNSS rate the process-noise groups have a tiny redundancy per epoch (a short step's
+noise barely reaches the position innovation directly), so ``min_redundancy`` keeps Q at its
+prior and only R is learnt (docs/papers.md gives the measured figures).
 
 References: paper 003 eqs 6-18 and 35-39; ALGORITHMS.md; Wang (2009) as cited by paper 003.
 """
@@ -182,6 +179,8 @@ class HelmertVCE(Adaptation):
     skipped : epochs not learnt from because ``P⁻`` or ``S`` was not positive definite.
     r_axes : names of the measurement elements of the last adaptive measurement.
     """
+
+    adapts_noise = True
 
     def __init__(self, options: VCEOptions) -> None:
         self.o = options
