@@ -93,3 +93,24 @@ def sigma_posterior(P: np.ndarray, K: np.ndarray, S: np.ndarray) -> np.ndarray:
     Pn = P - K @ S @ K.T
     out: np.ndarray = 0.5 * (Pn + Pn.T)
     return out
+
+
+@compiled
+def nis_and_logdet(S: np.ndarray, nu: np.ndarray) -> tuple[float, float, bool]:
+    """``nu^T S^-1 nu`` and ``log det S`` by a Cholesky factor of ``S`` (m, m); ``ok`` is False
+    when S is not positive definite (both values are then inf)."""
+    L, ok = cholesky(S)
+    if not ok:
+        return np.inf, np.inf, False
+    m = nu.shape[0]
+    w = np.empty(m)
+    nis = 0.0
+    logdet = 0.0
+    for i in range(m):
+        s = nu[i]
+        for j in range(i):
+            s -= L[i, j] * w[j]
+        w[i] = s / L[i, i]
+        nis += w[i] * w[i]
+        logdet += 2.0 * np.log(L[i, i])
+    return nis, logdet, True

@@ -47,7 +47,7 @@ import numpy as np
 
 from .adaptation import Adaptation
 from .base import register
-from .linalg import symmetrise
+from .linalg import nis_and_logdet, symmetrise
 from .protocols import Interval, Measurement, Model
 from .rules import CubatureRule, DirichletWeights
 from .sigma import PropagatedPoints, SigmaPointFilter, combine_points, factor, measurement_moments
@@ -207,9 +207,10 @@ class RWCKF(SigmaPointFilter):
         """Selection score: ``|nu|^2`` (residual) or ``nu' S^-1 nu + log det S`` (likelihood)."""
         if self.options.select == "residual":
             return float(pred.nu @ pred.nu)
-        L = np.linalg.cholesky(symmetrise(pred.Pzz + R))
-        w = np.linalg.solve(L, pred.nu)
-        return float(w @ w + 2.0 * np.log(np.diagonal(L)).sum())
+        nis, logdet, ok = nis_and_logdet(symmetrise(pred.Pzz + R), pred.nu)
+        if not ok:
+            raise np.linalg.LinAlgError("the candidate's innovation covariance is not positive definite")
+        return nis + logdet
 
     def _scores(self, state: GaussianState, model: Model, meas: Measurement, betas: np.ndarray) -> np.ndarray:
         """Selection score of every candidate weight vector (rows of ``betas``, (C, 2n)), with
