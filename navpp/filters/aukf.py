@@ -1,7 +1,7 @@
 """Adaptive fading UKF (AUKF): the UKF whose prior is inflated when the innovation is too large.
 
 After the unscented measurement prediction (``nu``, ``Pzz`` *without* R as in
-:class:`~navpp.filters.base.MeasurementPrediction`, ``Pxz``), the fading factor is
+:class:`~navpp.filters.states.MeasurementPrediction`, ``Pxz``), the fading factor is
 
     ``lambda_k = min(max_fading, max(1, (nu^T nu - tr R) / tr(Pzz)))``
 

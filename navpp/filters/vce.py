@@ -1,11 +1,11 @@
 """Helmert variance component estimation (VCE) of the process and measurement noise.
 
-A noise adapter in the sense of :mod:`navpp.filters.noise`: a separate piece that a filter
-plugs into its ``process_noise``, ``measurement_noise`` and ``after_update`` hooks (the
-VCE-CKF, :mod:`navpp.filters.vce_ckf`).  It relies on nothing but the model's
-``noise_groups(x, interval)`` (or, lacking it, ``process_noise``) and the
-:class:`~navpp.filters.base.Innovation` record, so the same code runs on the INS and on the
-papers' small benchmark models.
+A filter's adaptation (:class:`~navpp.filters.adaptation.Adaptation`; the VCE-CKF,
+:mod:`navpp.filters.vce_ckf`): it chooses the process noise of every time update and the R of
+every adaptive measurement, and learns after every applied update.  It relies on nothing but
+the model's noise groups (:class:`~navpp.filters.protocols.GroupedNoiseModel`; a model without
+them is one group, its ``process_noise``) and the :class:`~navpp.filters.states.Innovation`
+record, so the same code runs on the INS and on the papers' small benchmark models.
 
 Per accepted epoch (paper 003 eqs 37-39; ALGORITHMS.md "Helmert variance component
 estimation"), with the prior covariance ``P⁻`` (n, n), ``A = (P⁻)⁻¹`` (Cholesky solves),
