@@ -264,10 +264,10 @@ def _poisoned_update(monkeypatch, after_s, poison):
     original = cls.update
 
     def update(self, state, model, meas):
-        new, inn = original(self, state, model, meas)
+        up = original(self, state, model, meas)
         if meas.t >= after_s:
-            new = poison(new)
-        return new, inn
+            up = replace(up, state=poison(up.state))
+        return up
     monkeypatch.setattr(cls, "update", update)
 
 
