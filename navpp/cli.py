@@ -332,7 +332,51 @@ def compare(
     failed; the regressions are listed on stderr.  Exit 2: bad arguments.
     """
     from . import comparison as cmp
-    from .errors import ConfigError, NavppError
+    from .errors import NavppError
+
+    tol, base_rows, limits = _gate_options(tolerance, max_rmse, baseline, scheduler, executor)
+    try:
+        from .outfiles import prepare_out_dir, remove_created_dirs
+
+        names = cmp.parse_filters(filters)
+        created = prepare_out_dir(out, "--out")
+        try:
+            with _Progress(quiet or json_out) as prog:
+                result = cmp.compare(logs, names, config=config, reference=reference, imu_topic=imu_topic,
+                                     gnss_topic=gnss_topic, reference_topic=reference_topic, jobs=jobs,
+                                     out_dir=out, progress=prog, smooth=smooth, executor=executor,
+                                     scheduler=scheduler, time_limit_s=time_limit)
+        except BaseException:
+            remove_created_dirs(created)
+            raise
+    except NavppError as exc:
+        _fail(str(exc))
+        return
+    verdict = None
+    if base_rows is not None or limits is not None:
+        verdict = result.gate(baseline=base_rows, tolerance_pct=tol, max_rmse=limits)
+    failed = result.failed
+    code = 1 if failed else 3 if verdict is not None and not verdict.passed else 0
+    _print_comparison(result, json_out, verdict, code)
+    if failed:
+        _fail_runs(failed, len(result.rows))
+    if code == 3:
+        from rich.console import Console
+        from rich.markup import escape
+
+        Console(stderr=True, highlight=False, soft_wrap=True).print(
+            "[bold red]navpp: error:[/] "
+            f"{escape(f'CI gate failed: {len(verdict.failures)} of {verdict.checks} checks')}"
+            " (listed above)")
+        raise typer.Exit(3)
+
+
+def _gate_options(tolerance: str | None, max_rmse: str | None, baseline: Path | None, scheduler: str | None,
+                  executor: str) -> tuple[float, list | None, dict[str, float] | None]:
+    """``compare``'s gate options checked: (tolerance %, baseline rows or None, RMSE limits (m) or
+    None); a bad one (or --scheduler without Dask) is a usage error (exit 2)."""
+    from . import comparison as cmp
+    from .errors import ConfigError
 
     tol, base_rows, limits = cmp.DEFAULT_TOLERANCE_PCT, None, None
     try:
@@ -348,54 +392,26 @@ def compare(
             raise ConfigError("--scheduler names a Dask scheduler: add --executor dask")
     except ConfigError as exc:
         raise typer.BadParameter(str(exc)) from None
-    try:
-        from . import api
+    return tol, base_rows, limits
 
-        names = cmp.parse_filters(filters)
-        created = api.prepare_out_dir(out, "--out")
-        try:
-            with _Progress(quiet or json_out) as prog:
-                result = cmp.compare(logs, names, config=config, reference=reference, imu_topic=imu_topic,
-                                     gnss_topic=gnss_topic, reference_topic=reference_topic, jobs=jobs,
-                                     out_dir=out, progress=prog, smooth=smooth, executor=executor,
-                                     scheduler=scheduler, time_limit_s=time_limit)
-        except BaseException:
-            api.remove_created_dirs(created)
-            raise
-    except NavppError as exc:
-        _fail(str(exc))
-        return
-    verdict = None
-    if base_rows is not None or limits is not None:
-        verdict = result.gate(baseline=base_rows, tolerance_pct=tol, max_rmse=limits)
-    failed = result.failed
-    code = 1 if failed else 3 if verdict is not None and not verdict.passed else 0
-    _print_comparison(result, json_out, verdict, code)
-    if failed:
-        groups: dict[tuple[str, str], list[str]] = {}
-        for r in failed:
-            groups.setdefault((r.log, r.status), []).append(r.filter)
-        # each failure's reason on a warning line of its own; the error line stays short
-        reasons = [f"{', '.join(f)} on {log}: {status}" for (log, status), f in groups.items()]
-        head = f"{len(failed)} of {len(result.rows)} runs failed (reasons above, and in summary.csv): "
-        names = [f"{', '.join(f)} on {Path(log).name or log}" for (log, _), f in groups.items()]
-        shown = ""
-        for k, name in enumerate(names):
-            more = f"; and {len(names) - k} more" if k else ""
-            if len(head) + len(shown) + len(name) + 20 > 280:
-                shown += more or name[:200]
-                break
-            shown += ("; " if k else "") + name
-        _fail(head + shown, SimpleNamespace(warnings=reasons, notes=()))
-    if code == 3:
-        from rich.console import Console
-        from rich.markup import escape
 
-        Console(stderr=True, highlight=False, soft_wrap=True).print(
-            "[bold red]navpp: error:[/] "
-            f"{escape(f'CI gate failed: {len(verdict.failures)} of {verdict.checks} checks')}"
-            " (listed above)")
-        raise typer.Exit(3)
+def _fail_runs(failed: list, n_runs: int) -> None:
+    """Exit 1 for the failed runs of a comparison: each reason on a warning line of its own, and
+    one short error line naming the failed runs."""
+    groups: dict[tuple[str, str], list[str]] = {}
+    for r in failed:
+        groups.setdefault((r.log, r.status), []).append(r.filter)
+    reasons = [f"{', '.join(f)} on {log}: {status}" for (log, status), f in groups.items()]
+    head = f"{len(failed)} of {n_runs} runs failed (reasons above, and in summary.csv): "
+    names = [f"{', '.join(f)} on {Path(log).name or log}" for (log, _), f in groups.items()]
+    shown = ""
+    for k, name in enumerate(names):
+        more = f"; and {len(names) - k} more" if k else ""
+        if len(head) + len(shown) + len(name) + 20 > 280:
+            shown += more or name[:200]
+            break
+        shown += ("; " if k else "") + name
+    _fail(head + shown, SimpleNamespace(warnings=reasons, notes=()))
 
 
 def _print_comparison(result, json_out: bool, verdict=None, exit_code: int = 0) -> None:
@@ -408,7 +424,7 @@ def _print_comparison(result, json_out: bool, verdict=None, exit_code: int = 0) 
     from rich.markup import escape
     from rich.table import Table
 
-    from .report import best_cells
+    from .comparison.report import best_cells
 
     rows = result.rows
     err = Console(stderr=True, highlight=False, soft_wrap=True)
