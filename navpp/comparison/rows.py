@@ -20,11 +20,12 @@ from ..outfiles import write_text_file
 if TYPE_CHECKING:
     import pandas as pd
 
+#: Columns of ``summary.csv``, in file order: position errors in metres (MAE, RMSE, 95th
+#: percentile and maximum; ENU, horizontal, 3-D), counts, ``runtime_s`` (s), the reference's
+#: source.  Readers index them by name; new columns go at the end.
 SUMMARY_COLUMNS = ("log", "filter", "status", "epochs", "east_mae", "east_rmse", "north_mae", "north_rmse",
                    "up_mae", "up_rmse", "horizontal_mae", "horizontal_rmse", "horizontal_p95", "3d_rmse",
-                   "gnss_epochs", "gnss_rejected", "runtime_s",
-                   # added for the report; appended so readers of the first columns keep working
-                   "horizontal_max", "up_max", "imu_samples", "reference")
+                   "gnss_epochs", "gnss_rejected", "runtime_s", "horizontal_max", "up_max", "imu_samples", "reference")
 
 #: Position-error columns of ``summary.csv`` (m); the report highlights the minimum of each per log.
 ERROR_COLUMNS = ("east_mae", "east_rmse", "north_mae", "north_rmse", "up_mae", "up_rmse",
