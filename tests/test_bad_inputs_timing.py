@@ -148,7 +148,7 @@ def test_the_compare_watchdog_stops_a_hung_run_and_the_rest_go_on(tmp_path, monk
         raise InputError(f"{rec.source}: reached the filter")
 
     monkeypatch.setattr(engine, "run", fake_run)
-    monkeypatch.setattr(comparison, "WATCHDOG_MIN_S", 1.0)
+    monkeypatch.setattr(comparison.watchdog, "WATCHDOG_MIN_S", 1.0)
     t = time.monotonic()
     res = comparison.compare([hung, fine], ["ekf"], time_limit_s=1e-6, report=False)
     assert time.monotonic() - t < 30.0
