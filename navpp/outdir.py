@@ -132,7 +132,7 @@ def remove_leftovers(out: Path, names: Iterable[str] = ()) -> None:
     (``.<name>.<8 characters>.tmp``) for a navpp file name: one of ``names``, or ending in one
     of them when it starts with ``*`` (``"*_trajectory.png"``).  Only call it while holding
     ``out``'s lock: a live run makes these only while it holds the lock.  (Not the write
-    probes of :func:`navpp.api.prepare_out_dir`: a run makes one before it takes the lock.)
+    probes of :func:`navpp.outfiles.prepare_out_dir`: a run makes one before it takes the lock.)
     Best effort."""
     exact = {n for n in names if not n.startswith("*")} | {MANIFEST_NAME}
     endings = tuple(n[1:] for n in names if n.startswith("*"))
