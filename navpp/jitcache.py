@@ -4,7 +4,7 @@ navpp's kernels are compiled with ``cache=True``.  numba stores the machine code
 sources (``__pycache__``) or in the user's cache directory (``$XDG_CACHE_HOME/numba`` or
 ``~/.cache/numba``), or in ``$NUMBA_CACHE_DIR`` when set; if none of these can be written
 (a read-only install, a service account without a writable home) it raises ``RuntimeError:
-cannot cache function ...: no locator available`` at import, so even ``navpp filters`` failed.
+cannot cache function ...: no locator available`` at import, which would stop even ``navpp filters``.
 
 :func:`configure` (called when :mod:`navpp` is imported, before numba is) checks those places
 the way numba does (creating the directory and a temporary file in it) and, when none is

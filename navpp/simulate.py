@@ -58,7 +58,7 @@ leaves the other two streams as they were.
 
 Real-world effects (consumer car logs)
 --------------------------------------
-All off by default: a spec without them writes the same files as before they existed.
+All off by default; with every one off the third stream is not drawn from.
 ``realism="consumer-car"`` turns on the bundle :data:`REALISM_BUNDLES` at once; a field given
 explicitly overrides the bundle's value (0 turns an effect off).  ``imu_rate_hz``,
 ``gnss_rate_hz``, ``preset``, ``still_s``, ``gnss_std_h_m`` and ``gnss_std_u_m`` default to None:
@@ -83,9 +83,8 @@ the bundle's value with one, else 125 Hz, 5 Hz, automotive, 60 s, 1.8 m, 2.5 m.
   :data:`VIBRATION_DAMPING`), whose integral stays bounded (the mount's angle and velocity
   oscillate, they do not wander); the rest is white (broadband shaking aliased into the
   samples), an angle random walk of ``sqrt(share) * std * sqrt(dt)``: about 9 deg/sqrt(h) at
-  16 m/s for the consumer-car bundle at 100 Hz, near the ~10 deg/sqrt(h) that a real car log of
-  that vibration needed (issue 14).  The oscillation's frequency is physical; at a low IMU rate it
-  aliases.
+  16 m/s for the consumer-car bundle at 100 Hz.  The oscillation's frequency is physical; at a
+  low IMU rate it aliases.
 - Stale rows ``stale_fraction``: each IMU row after the first is, independently with this
   probability, a copy of the previous row's six values under its own (new) stamp.
 - Clock offset ``imu_time_offset_s`` (s): the IMU row's written stamp = true sample time +
@@ -860,7 +859,7 @@ def simulate(spec: SimulationSpec) -> Simulation:
     Simulation
     """
     traj = Trajectory.from_spec(spec)
-    streams = np.random.SeedSequence(spec.seed).spawn(3)  # the first two as ever: spawn keys (0,), (1,)
+    streams = np.random.SeedSequence(spec.seed).spawn(3)  # IMU (0,), GNSS (1,), real-world effects (2,)
     imu_rng, gnss_rng = (np.random.default_rng(s) for s in streams[:2])
 
     # IMU ---------------------------------------------------------------------------------

@@ -611,7 +611,7 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
     size = max(path.stat().st_size, 1)
     try:
         # Chunked parsing keeps the peak memory near the size of the data itself (a one-shot
-        # read_csv holds ~4x the table in parser buffers for a 450k-row file).
+        # read_csv holds several times the table in parser buffers).
         with open(path, "rb") as fh:
             reader = pd.read_csv(
                 fh,

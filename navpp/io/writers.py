@@ -6,8 +6,8 @@ when complete, so a failed or interrupted run never leaves a half-written file t
 finished.
 
 ``trajectory.csv`` is formatted by a vectorised fixed-point formatter (:func:`format_fixed_columns`)
-rather than ``pandas.to_csv`` or ``numpy.savetxt``: 450 000 rows take a fraction of a second
-instead of several seconds.  Its text is identical to Python's ``format(x, ".Nf")`` for every
+rather than ``pandas.to_csv`` or ``numpy.savetxt``, which format value by value (README, "Speed",
+has the times).  Its text is identical to Python's ``format(x, ".Nf")`` for every
 value (correct rounding of the exact binary value, ties to even, ``"nan"``, ``"inf"``,
 ``"-inf"``, and ``"-0.0000"`` for negative values that round to zero, as C's ``printf`` and
 pandas also write them).  The one exception is the ``t`` column, which is computed more
