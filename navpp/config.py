@@ -582,7 +582,7 @@ class VehicleConfig:
         _as_choice("vehicle", "type", self.type, VEHICLE_TYPES)
         for key in ("nhc", "zupt", "zaru"):
             _as_bool("vehicle", key, getattr(self, key))
-        std = self.nhc_std_mps
+        std: object = self.nhc_std_mps
         if _is_number(std):
             std = (std, std)
         _set(self, "nhc_std_mps", _as_vector("vehicle", "nhc_std_mps", std, 2))

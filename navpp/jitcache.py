@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import sys
+from typing import Any
 
 #: One line saying where the cache went and why, when :func:`configure` moved it; else empty.
 NOTE: list[str] = []
@@ -100,7 +101,7 @@ def configure() -> None:
                         "set NUMBA_CACHE_DIR to a writable directory")
             return
     os.environ["NUMBA_CACHE_DIR"] = where
-    numba_config = sys.modules.get("numba.core.config")
+    numba_config: Any = sys.modules.get("numba.core.config")
     if numba_config is not None:          # numba already imported: its config read the variable already
         numba_config.CACHE_DIR = where
     NOTE.append(f"{why}: compiled kernels are cached in {where} ({kept}); set NUMBA_CACHE_DIR to choose")

@@ -101,7 +101,7 @@ class OutDirLock:
         os.write(fd, f"{os.getpid()}\n".encode())
         remove_leftovers(self.out, self.extra_leftovers)
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.release()
 
     def release(self) -> None:
@@ -180,7 +180,7 @@ def write_manifest(out: Path, names: Iterable[str]) -> None:
 # ----------------------------------------------------------------------------------- inputs
 
 
-def input_files(*paths: str | os.PathLike | None, not_in_dirs: Iterable[str] = ()) -> set[tuple[int, int]]:
+def input_files(*paths: str | os.PathLike[str] | None, not_in_dirs: Iterable[str] = ()) -> set[tuple[int, int]]:
     """(device, inode) of every input file: each path given, and for a directory (a CSV log, a
     ROS 2 bag) the files directly inside it except those named in ``not_in_dirs`` (navpp's own
     output names: a log directory may also be the output directory).  Missing paths are skipped."""
