@@ -450,6 +450,7 @@ class _Channel:
         return (self.base + before + amp * f, amp * d1 / t_scale, amp * d2 / (t_scale * t_scale))
 
     def breakpoints(self) -> np.ndarray:
+        """Start and end times (s) of every event, unsorted."""
         return np.concatenate([self.start, self.start + self.length])
 
     def piece(self, t_mid: float) -> tuple[float, float, float, float, bool]:
@@ -548,6 +549,7 @@ class DriveControls:
                     theta=theta, theta_dot=theta_dot, phi=phi, phi_dot=phi_dot)
 
     def breakpoints(self) -> np.ndarray:
+        """Sorted times (s) where any control's event starts or ends: between two, all are analytic."""
         return np.unique(np.concatenate([c.breakpoints() for c in (self.speed, self.heading, self.pitch)]))
 
 

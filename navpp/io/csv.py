@@ -347,12 +347,15 @@ class _Table:
 
     @property
     def n(self) -> int:
+        """Number of rows."""
         return int(self.lines.shape[0])
 
     def col(self, name: str) -> np.ndarray:
+        """(n,) C-contiguous column ``name``."""
         return np.ascontiguousarray(self.data[name])
 
     def block(self, names: Sequence[str]) -> np.ndarray:
+        """(n, len(names)) array of the columns."""
         return np.column_stack([self.data[c] for c in names])
 
     def vectors(self, names: Sequence[str], scale: float = 1.0) -> np.ndarray:
@@ -363,6 +366,7 @@ class _Table:
         return out
 
     def take(self, keep: np.ndarray) -> _Table:
+        """The rows selected by ``keep`` (a boolean mask or indices)."""
         return _Table(self.path, {k: v[keep] for k, v in self.data.items()}, self.lines[keep])
 
 
