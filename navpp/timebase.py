@@ -67,13 +67,13 @@ NS = 1_000_000_000
 SECONDS_PER_DAY = 86_400
 SECONDS_PER_WEEK = 604_800
 GPS_EPOCH_UNIX = 315_964_800
-"""Unix time of the GPS epoch 1980-01-06 00:00:00 UTC (GPS-UTC was 0 then)."""
+"""Unix time of the GPS epoch 1980-01-06 00:00:00 UTC (where GPS-UTC = 0)."""
 
 # --------------------------------------------------------------------------------------------
 # GPS-UTC leap-second table.
 #
 # Source: IERS Bulletin C / the IERS leap-second history (hpiers.obspm.fr/iers/bul/bulc/
-# Leap_Second.dat; also the IANA tz "leap-seconds.list"), where TAI-UTC was 19 s at the GPS
+# Leap_Second.dat; also the IANA tz "leap-seconds.list"), where TAI-UTC = 19 s at the GPS
 # epoch and GPS-UTC = (TAI-UTC) - 19 s.  Each row is the UTC date at whose 00:00:00 the new
 # GPS-UTC value starts (the leap second was inserted as 23:59:60 of the day before) and that
 # value.  Checked against the IERS list updated through Bulletin C of July 2025, which announced
