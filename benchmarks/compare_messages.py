@@ -50,7 +50,7 @@ def _mcap_description(path: Path) -> dict[str, Any]:
         metadata = [(m.name, dict(m.metadata)) for m in reader.iter_metadata()]
     if summary is None:
         raise SystemExit(f"{path}: no summary section")
-    channels = {}
+    channels: dict[str, list] = {}
     for ch in summary.channels.values():
         schema = summary.schemas.get(ch.schema_id)
         channels.setdefault(ch.topic, []).append(

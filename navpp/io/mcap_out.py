@@ -366,19 +366,20 @@ def _mcap_input_streams(path: Path, recording: Recording) -> list[_Stream]:
     contents = read_mcap(path, imu_cands + fix_cands) if imu_cands or fix_cands else None
 
     imu_topic = None
-    want = roswrite.stamps_ns(recording, recording.imu.t)
-    for topic in imu_cands:
-        msgs = contents.imu[topic]
-        if _contains_all(msgs.stamp_ns, want) or _contains_all(msgs.log_ns, want):
-            imu_topic = topic
-            break
     gnss_topic = None
     g = recording.gnss
-    for topic in fix_cands:
-        msgs = contents.fix[topic]
-        if _contains_all(msgs.lat_deg, g.lat_deg) and _contains_all(msgs.lon_deg, g.lon_deg):
-            gnss_topic = topic
-            break
+    if contents is not None:
+        want = roswrite.stamps_ns(recording, recording.imu.t)
+        for topic in imu_cands:
+            imu = contents.imu[topic]
+            if _contains_all(imu.stamp_ns, want) or _contains_all(imu.log_ns, want):
+                imu_topic = topic
+                break
+        for topic in fix_cands:
+            fix = contents.fix[topic]
+            if _contains_all(fix.lat_deg, g.lat_deg) and _contains_all(fix.lon_deg, g.lon_deg):
+                gnss_topic = topic
+                break
     vel_topic = None
     twists = [t for t in infos if t.msgtype in (TWIST_COV_TYPE, TWIST_TYPE)]
     if gnss_topic is not None and g.vel_enu is not None and len(twists) == 1 and twists[0].encoding == "cdr":
@@ -388,7 +389,7 @@ def _mcap_input_streams(path: Path, recording: Recording) -> list[_Stream]:
     streams = _copy_topics(path, copied) if copied else []
     # a cut-off file: the reader may have decoded messages a copy cannot take whole; encode instead
     expected = {t.topic: t.count for t in infos}
-    short = {t for t in copied if sum(len(s) for s in streams if s.topic == t) != expected[t]}
+    short: set[str | None] = {t for t in copied if sum(len(s) for s in streams if s.topic == t) != expected[t]}
     if gnss_topic in short:
         short.add(vel_topic)
     streams = [s for s in streams if s.topic not in short]
