@@ -62,9 +62,9 @@ Every message's log time = publish time = header stamp: integer ns on the log's 
 
 Embedded input (``embed_input=True``): the IMU and GNSS that navpp processed, in the same file,
 so one file replays everything.  From an MCAP input whose IMU / GNSS topics are CDR encoded,
-the raw Message records of those topics are copied (payload, log and publish time, sequence;
-bytes identical) with their schemas, topics and channel metadata (e.g. rosbag2's QoS
-profiles); a GNSS velocity topic goes with the GNSS when the recording used one.  Anything
+the Message records of those topics are copied (read with ``mcap``'s stream reader: payload,
+log and publish time, sequence; bytes identical) with their schemas, topics and channel metadata
+(e.g. rosbag2's QoS profiles); a GNSS velocity topic goes with the GNSS when the recording used one.  Anything
 else (CSV, ROS 1 bag, ROS 2 bag, a ROS 1 encoded MCAP, or an MCAP whose topic does not hold the
 recording's data, e.g. GNSS replaced by ``--gnss FILE.pos``) is encoded from the Recording:
 ``sensor_msgs/msg/Imu`` on ``/imu/data`` (frame ``imu_link``), ``sensor_msgs/msg/NavSatFix``
@@ -83,9 +83,8 @@ embedded input first, then the topics above, at equal times) in zstd chunks of a
 :data:`CHUNK_SIZE` bytes, each followed by its message indexes; the summary holds the schemas,
 channels, statistics, chunk and metadata indexes and the summary offsets, with CRCs.  The
 payloads are serialised in bulk by numpy (:mod:`navpp.io.roswrite`'s ``pack_*``, one structured
-array per block of about a chunk), so no Python object is built per message but the
-``mcap.records.Message`` the Writer makes.  The file is written atomically
-(:func:`navpp.io.writers.atomic_write`).
+array per stream and block of about a chunk), then handed to the Writer as one ``bytes`` per
+message.  The file is written atomically (:func:`navpp.io.writers.atomic_write`).
 """
 
 from __future__ import annotations
