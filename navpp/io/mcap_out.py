@@ -515,7 +515,7 @@ def _write_container(f: IO[bytes], streams: Sequence[_Stream], metadata: dict[st
     ``i``) in log-time order, with ``mcap``'s Writer."""
     from mcap.writer import Writer
 
-    from navpp import __version__
+    from navpp.version import __version__
 
     timeline = _Timeline(streams, chunk_size)
     writer = Writer(f, chunk_size=max(int(chunk_size), 1), compression=_compression_type(compression))
