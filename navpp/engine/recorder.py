@@ -65,9 +65,8 @@ class RunRecorder:
         self.adaptive: dict[str, np.ndarray] = {}
         self.bias = np.empty((m, 6))
         self.bias_var = np.empty((m, 6))
-        self.vel_nu = np.full((m, 3), np.nan) if velocity else None
-        self.vel_nis = np.full(m, np.nan) if velocity else None
-        self.vel_accepted = np.full(m, np.nan) if velocity else None
+        # GNSS velocity: innovation (M, 3) m/s, NIS (M,), applied (M,: 1, 0, NaN without one)
+        self.vel = (np.full((m, 3), np.nan), np.full(m, np.nan), np.full(m, np.nan)) if velocity else None
         self.noise_report = noise_report
         self.t = start.t            # time of the last state the loop made, s
         # covariance knots for the output's 1-sigma: flat (t, prior E/N/U variance, posterior E/N/U
@@ -111,8 +110,8 @@ class RunRecorder:
                 if name not in self.adaptive:
                     self.adaptive[name] = np.full((len(self.nis), np.size(value)), np.nan)
                 self.adaptive[name][k] = value
-        elif meas.kind == "gnss_velocity" and self.vel_nu is not None:
-            self.vel_nu[k], self.vel_nis[k], self.vel_accepted[k] = inn.nu, inn.nis, float(inn.accepted)
+        elif meas.kind == "gnss_velocity" and self.vel is not None:
+            self.vel[0][k], self.vel[1][k], self.vel[2][k] = inn.nu, inn.nis, float(inn.accepted)
 
     def epoch_done(self, epoch: Epoch, outcome: EpochOutcome) -> None:
         state = outcome.state
@@ -148,8 +147,9 @@ class RunRecorder:
                 named.update({f"{key}_{name}": values[:, [i]] for i, name in enumerate(lab)})
             else:
                 named[key] = values
-        return Diagnostics(t, self.nu, self.nis, self.accepted, self.forced, self.r_std, named, self.vel_nu,
-                           self.vel_nis, self.vel_accepted)
+        vel_nu, vel_nis, vel_accepted = self.vel if self.vel is not None else (None, None, None)
+        return Diagnostics(t, self.nu, self.nis, self.accepted, self.forced, self.r_std, named, vel_nu, vel_nis,
+                           vel_accepted)
 
     def bias_history(self, t: np.ndarray) -> BiasHistory:
         """The biases after each fix at the fix times ``t`` (s), with their 1-sigma."""

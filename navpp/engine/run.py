@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -76,7 +77,7 @@ class Prepared:
     recording: Recording
     model: InsModel
     path: np.ndarray
-    cal: object | None
+    cal: Any
     calibration: dict
     alignment: Alignment
     fixes: GnssFixes

@@ -77,7 +77,7 @@ def concat(parts: list, cls: type) -> Any:
     """One ``cls`` dataclass from ``parts`` of it, row-wise: array fields concatenated (a field
     None in some parts and not in others is filled with NaN rows there), dict-of-array fields
     concatenated per key, other fields taken from the first part."""
-    out = {}
+    out: dict[str, Any] = {}
     for f in fields(cls):
         vals = [getattr(p, f.name) for p in parts]
         ref = next((v for v in vals if v is not None), None)

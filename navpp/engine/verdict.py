@@ -156,7 +156,7 @@ def plausibility_checks(recording: Recording, config: Config, name: str, solutio
     out: list[Finding] = []
     for f in found:
         if f.fatal:
-            raise refusal(recording, config, f.headline, notes, warnings + out, f.cause)
+            raise refusal(recording, config, f.headline, notes, [*warnings, *out], f.cause)
         line = f"{src}: {f.headline}: {f.cause}" if f.cause else f"{src}: {f.headline}"
         out.append(Finding("solution-doubtful", line))
     return out
