@@ -54,8 +54,9 @@ def _run(filt, model, x0, P0, zs, H, R):
     state = GaussianState(0.0, x0, P0)
     out = []
     for k, z in enumerate(zs, start=1):
-        state = filt.predict(state, model, (k - 1.0, float(k)))
-        state, inn = filt.update(state, model, LinearMeasurement(float(k), z, H, R))
+        state = filt.predict(state, model, (k - 1.0, float(k))).state
+        up = filt.update(state, model, LinearMeasurement(float(k), z, H, R))
+        state, inn = up.state, up.innovation
         out.append((state, inn))
     return out
 
@@ -101,8 +102,9 @@ def test_aukf_update_equals_hand_computed_fading(predictions):
     filt = AUKF()
     state = GaussianState(0.0, x0, P0)
     for k in range(predictions):
-        state = filt.predict(state, model, (float(k), k + 1.0))
-    new, inn = filt.update(state, model, LinearMeasurement(float(predictions), z, H, R))
+        state = filt.predict(state, model, (float(k), k + 1.0)).state
+    up = filt.update(state, model, LinearMeasurement(float(predictions), z, H, R))
+    new, inn = up.state, up.innovation
     # hand computation
     x, P = x0, P0
     for _ in range(predictions):
@@ -118,7 +120,7 @@ def test_aukf_update_equals_hand_computed_fading(predictions):
     np.testing.assert_allclose(new.x, x_ref, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(new.P, P_ref, rtol=1e-8, atol=1e-10)
     # the record of Q restarts after an applied update
-    state = filt.predict(new, model, (float(predictions), predictions + 1.0))
+    state = filt.predict(new, model, (float(predictions), predictions + 1.0)).state
     assert filt._Q_since_update is not None
     np.testing.assert_array_equal(filt._Q_since_update, Q)
 
@@ -127,9 +129,10 @@ def test_aukf_gate_sees_the_unfaded_innovation():
     Phi, Q, H, R, x0, P0, _ = _problem(seed=4)
     model = LinearModel(Phi, Q)
     filt = AUKF(gate_probability=0.999, reanchor_after_s=100.0)
-    state = filt.predict(GaussianState(0.0, x0, P0), model, (0.0, 1.0))
+    state = filt.predict(GaussianState(0.0, x0, P0), model, (0.0, 1.0)).state
     outlier = LinearMeasurement(1.0, H @ state.x + 300.0, H, R)
-    after, inn = filt.update(state, model, outlier)
+    up = filt.update(state, model, outlier)
+    after, inn = up.state, up.innovation
     assert not inn.accepted                               # fading first would have let it in
     assert filt.noise_report()["fading"][0] == 1.0
     np.testing.assert_array_equal(after.P, state.P)
@@ -141,7 +144,7 @@ def test_aukf_detection_option_fades_only_inconsistent_innovations():
     state0 = GaussianState(0.0, x0, P0)
     for detect, faded in ((0.0, True), (0.9999, False)):
         filt = AUKF(AUKFOptions(detect_probability=detect))
-        state = filt.predict(state0, model, (0.0, 1.0))
+        state = filt.predict(state0, model, (0.0, 1.0)).state
         S = H @ state.P @ H.T + R
         nu = np.linalg.cholesky(S) @ np.array([2.5, 0.0])   # NIS 6.25: above 2, below chi2(2, 0.9999)
         filt.update(state, model, LinearMeasurement(1.0, H @ state.x + nu, H, R))
@@ -182,8 +185,8 @@ def _manoeuvre_errors(filt, seed):
         if k == 60:
             truth[3] += 4.0                                  # unmodelled manoeuvre (north velocity)
         z = H @ truth + rng.normal(size=2)
-        state = filt.predict(state, model, (k - 1.0, float(k)))
-        state, _ = filt.update(state, model, LinearMeasurement(float(k), z, H, R))
+        state = filt.predict(state, model, (k - 1.0, float(k))).state
+        state = filt.update(state, model, LinearMeasurement(float(k), z, H, R)).state
         err.append(np.linalg.norm(H @ (state.x - truth)))
     return np.array(err)
 
@@ -324,9 +327,9 @@ def _nonlinear_run(filt, steps=15):
     state = GaussianState(0.0, np.array([0.8, 0.0]), np.diag([0.3, 0.2]))
     rng = np.random.default_rng(0)
     for k in range(1, steps + 1):
-        state = filt.predict(state, model, (k - 1.0, float(k)))
+        state = filt.predict(state, model, (k - 1.0, float(k))).state
         z = np.array([1.2 + 0.1 * rng.normal()])
-        state, _ = filt.update(state, model, _Range(z, np.array([[0.01]])))
+        state = filt.update(state, model, _Range(z, np.array([[0.01]]))).state
     return state
 
 

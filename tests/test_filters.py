@@ -34,8 +34,9 @@ def test_every_filter_equals_kalman_on_linear_model(name):
     state = GaussianState(0.0, x0, P0)
     x_ref, P_ref = x0, P0
     for k, z in enumerate(zs, start=1):
-        state = filt.predict(state, model, (k - 1.0, float(k)))
-        state, inn = filt.update(state, model, LinearMeasurement(float(k), z, H, R))
+        state = filt.predict(state, model, (k - 1.0, float(k))).state
+        up = filt.update(state, model, LinearMeasurement(float(k), z, H, R))
+        state, inn = up.state, up.innovation
         assert inn.accepted
         x_ref, P_ref = _kalman_reference(x_ref, P_ref, Phi, Q, z, H, R)
         np.testing.assert_allclose(state.x, x_ref, rtol=1e-9, atol=1e-9)
@@ -47,8 +48,8 @@ def test_innovation_record_and_nis():
     Phi, Q, H, R, x0, P0, zs = _problem()
     filt = get_filter("ekf")()
     model = LinearModel(Phi, Q)
-    state = filt.predict(GaussianState(0.0, x0, P0), model, (0.0, 1.0))
-    _, inn = filt.update(state, model, LinearMeasurement(1.0, zs[0], H, R))
+    state = filt.predict(GaussianState(0.0, x0, P0), model, (0.0, 1.0)).state
+    inn = filt.update(state, model, LinearMeasurement(1.0, zs[0], H, R)).innovation
     nu = zs[0] - H @ state.x
     S = H @ state.P @ H.T + R
     np.testing.assert_allclose(inn.nu, nu)
@@ -66,9 +67,10 @@ def test_gate_rejects_outlier_then_forces_acceptance():
     outlier = LinearMeasurement(1.0, np.array([100.0, 0.0]), H, R)
     results = []
     for k in range(3):
-        state = filt.predict(state, model, (float(k), k + 1.0))
+        state = filt.predict(state, model, (float(k), k + 1.0)).state
         before = state.x.copy()
-        state, inn = filt.update(state, model, outlier)
+        up = filt.update(state, model, outlier)
+        state, inn = up.state, up.innovation
         results.append(inn.accepted)
         if not inn.accepted:
             np.testing.assert_array_equal(state.x, before)   # a rejected fix changes nothing
@@ -102,7 +104,7 @@ def test_divergence_is_reported_not_propagated():
     Q[0, 1] = Q[1, 0] = np.nan
     model = LinearModel(np.eye(n), Q)
     filt = get_filter("ekf")()
-    state = filt.predict(GaussianState(0.0, np.zeros(n), np.eye(n)), model, (0.0, 1.0))
+    state = filt.predict(GaussianState(0.0, np.zeros(n), np.eye(n)), model, (0.0, 1.0)).state
     with pytest.raises(FilterDivergedError, match=r"t=1\.000"):
         filt.update(state, model, LinearMeasurement(1.0, np.ones(n), np.eye(n), np.eye(n)))
 
@@ -112,7 +114,7 @@ def test_sigma_point_filter_repairs_a_slightly_indefinite_covariance():
     model = LinearModel(np.eye(n), 1e-3 * np.eye(n))
     P = np.diag([1.0, 1.0, -1e-9])                       # lost definiteness by round-off
     filt = get_filter("ckf")()
-    state = filt.predict(GaussianState(0.0, np.zeros(n), P), model, (0.0, 1.0))
+    state = filt.predict(GaussianState(0.0, np.zeros(n), P), model, (0.0, 1.0)).state
     assert filt.repairs == 1
     assert np.all(np.linalg.eigvalsh(state.P) > 0)
     with pytest.raises(FilterDivergedError, match=r"ckf: covariance is not finite at t=0\.000 s"):

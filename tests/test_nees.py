@@ -82,8 +82,8 @@ def _nees_runs(name: str, runs: int, steps: int = 40, seed: int = 0) -> np.ndarr
         for k in range(steps):
             truth = model.Phi @ truth + Lq @ rng.normal(size=4)
             z = RangeBearing.h(truth) + np.sqrt(np.diag(R)) * rng.normal(size=2)
-            state = filt.predict(state, model, (k * DT, (k + 1) * DT))
-            state, _ = filt.update(state, model, RangeBearing((k + 1) * DT, z, R))
+            state = filt.predict(state, model, (k * DT, (k + 1) * DT)).state
+            state = filt.update(state, model, RangeBearing((k + 1) * DT, z, R)).state
             e = truth - state.x
             out[run, k] = e @ np.linalg.solve(state.P, e)
     return out
@@ -118,8 +118,8 @@ def test_a_wrong_filter_fails_the_nees_band():
         for k in range(steps):
             truth = model.Phi @ truth + np.linalg.cholesky(model.Q) @ rng.normal(size=4)
             z = RangeBearing.h(truth) + np.sqrt(np.diag(R_true)) * rng.normal(size=2)
-            state = filt.predict(state, model, (k * DT, (k + 1) * DT))
-            state, _ = filt.update(state, model, RangeBearing((k + 1) * DT, z, R_true / 9.0))
+            state = filt.predict(state, model, (k * DT, (k + 1) * DT)).state
+            state = filt.update(state, model, RangeBearing((k + 1) * DT, z, R_true / 9.0)).state
             e = truth - state.x
             nees[run, k] = e @ np.linalg.solve(state.P, e)
     hi = stats.chi2.ppf(0.995, runs * N_STATE) / runs

@@ -63,9 +63,10 @@ def test_epoch_weights_give_the_papers_moments(covariance, monkeypatch):
     monkeypatch.setattr(DirichletWeights, "draw", lambda self, rng, m_, size=None: beta.copy())
     filt = _filter(select="none", covariance=covariance)
     state = GaussianState(0.0, x0, P0)
-    prior = filt.predict(state, model, (0.0, 1.0))
+    prior = filt.predict(state, model, (0.0, 1.0)).state
     z = np.array([0.3, -0.2])
-    post, inn = filt.update(prior, model, LinearMeasurement(1.0, z, H, R))
+    up = filt.update(prior, model, LinearMeasurement(1.0, z, H, R))
+    post, inn = up.state, up.innovation
 
     uni = np.full(m, 1 / m)
     wc = beta if covariance == "random" else uni         # the covariance weights and their centre
@@ -104,12 +105,12 @@ def _update_with_weights(beta, posterior, model, interval, meas, monkeypatch):
     CKF) from ``posterior``, through the public interface: its one draw returns ``beta``."""
     if beta is None:
         filt = get_filter("ckf")()
-        prior = filt.predict(posterior, model, interval)
+        prior = filt.predict(posterior, model, interval).state
         return filt.update(prior, model, meas)
     filt = _filter(select="none")
     with monkeypatch.context() as mp:
         mp.setattr(DirichletWeights, "draw", lambda self, rng, m_, size=None: np.array(beta, dtype=float))
-        prior = filt.predict(posterior, model, interval)
+        prior = filt.predict(posterior, model, interval).state
         return filt.update(prior, model, meas)
 
 
@@ -131,8 +132,9 @@ def test_likelihood_selection_never_explains_the_fix_worse_than_the_ckf(monkeypa
         meas = LinearMeasurement(float(k), rng.normal(size=2) * 2, H, R)
         cands = [None, *DirichletWeights().draw(twin, 8, 8)]
         one_by_one = np.array([_likelihood_score(_update_with_weights(b, state, model, interval, meas,
-                                                                        monkeypatch)[1]) for b in cands])
-        state, inn = filt.update(filt.predict(state, model, interval), model, meas)
+                                                                        monkeypatch).innovation) for b in cands])
+        up = filt.update(filt.predict(state, model, interval).state, model, meas)
+        state, inn = up.state, up.innovation
         score = _likelihood_score(inn)
         assert score == pytest.approx(one_by_one.min(), rel=1e-9, abs=1e-9)
         assert score <= one_by_one[0] + 1e-9
@@ -165,15 +167,16 @@ def test_batched_scores_match_the_template_path_on_the_ins(monkeypatch):
 
     def predict(state, model, interval):
         out = real_predict(state, model, interval)
-        last.update(before=state, model=model, interval=interval, after=out)
+        last.update(before=state, model=model, interval=interval, after=out.state)
         return out
 
     def update(state, model, meas):
-        post, inn = real_update(state, model, meas)
+        out = real_update(state, model, meas)
+        inn = out.innovation
         if len(captured) < 5 and isinstance(meas, GnssPosition) and state is last.get("after"):
             captured.append((last["before"], last["model"], last["interval"], meas, draws[-1],
                              filt.noise_report()["weights"], _likelihood_score(inn)))
-        return post, inn
+        return out
 
     monkeypatch.setattr(DirichletWeights, "draw", draw)
     monkeypatch.setattr(filt, "predict", predict)
@@ -189,7 +192,8 @@ def test_batched_scores_match_the_template_path_on_the_ins(monkeypatch):
             replay = api.make_filter("ckf" if beta is None else "rwckf", one)
             with monkeypatch.context() as mp:
                 mp.setattr(DirichletWeights, "draw", lambda self, rng, m_, size=None, b=beta: np.array(b, dtype=float))
-                exact.append(_likelihood_score(replay.update(replay.predict(before, model, interval), model, meas)[1]))
+                prior = replay.predict(before, model, interval).state
+                exact.append(_likelihood_score(replay.update(prior, model, meas).innovation))
         exact = np.array(exact)
         i = next(i for i, b in enumerate([np.full(chosen.size, 1 / chosen.size), *cands]) if np.array_equal(b, chosen))
         assert exact[i] == pytest.approx(score, rel=1e-9, abs=1e-9)          # the replay is faithful
@@ -203,9 +207,9 @@ def test_residual_selection_picks_the_smallest_innovation(monkeypatch):
     meas = LinearMeasurement(1.0, np.array([2.0, -1.0]), H, R)
     # every candidate's innovation, each candidate replayed on its own with the same draws
     betas = [None, *DirichletWeights().draw(np.random.default_rng(4), 8, 6)]
-    norms = [np.linalg.norm(_update_with_weights(b, start, model, (0.0, 1.0), meas, monkeypatch)[1].nu)
+    norms = [np.linalg.norm(_update_with_weights(b, start, model, (0.0, 1.0), meas, monkeypatch).innovation.nu)
              for b in betas]
-    _, inn = filt.update(filt.predict(start, model, (0.0, 1.0)), model, meas)
+    inn = filt.update(filt.predict(start, model, (0.0, 1.0)).state, model, meas).innovation
     assert np.linalg.norm(inn.nu) == pytest.approx(min(norms), rel=1e-12)
     assert len(set(np.round(norms, 9))) == len(norms)          # the candidates do differ
 
@@ -218,8 +222,8 @@ def test_runs_repeat_with_the_seed_and_differ_across_seeds():
         filt = _filter(seed=seed)
         state = GaussianState(0.0, x0, P0)
         for k, z in enumerate(zs, start=1):
-            state = filt.predict(state, model, (k - 1.0, float(k)))
-            state, _ = filt.update(state, model, LinearMeasurement(float(k), z, H, R))
+            state = filt.predict(state, model, (k - 1.0, float(k))).state
+            state = filt.update(state, model, LinearMeasurement(float(k), z, H, R)).state
         return state.x
 
     np.testing.assert_array_equal(run(1), run(1))
@@ -232,8 +236,8 @@ def test_time_updates_between_fixes_use_uniform_weights():
     rw, ckf = _filter(select="none", seed=3), get_filter("ckf")()
     a = b = GaussianState(0.0, x0, P0)
     for k in range(1, 5):
-        a = rw.predict(a, model, (k - 1.0, float(k)))
-        b = ckf.predict(b, model, (k - 1.0, float(k)))
+        a = rw.predict(a, model, (k - 1.0, float(k))).state
+        b = ckf.predict(b, model, (k - 1.0, float(k))).state
         np.testing.assert_allclose(a.x, b.x, atol=1e-12)
         np.testing.assert_allclose(a.P, b.P, atol=1e-12)
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scenarios import linear_problem
 
-from navpp.filters import FILTERS, GaussianState
+from navpp.filters import FILTERS, GaussianState, Prediction
 from navpp.filters.linear import LinearMeasurement, LinearModel
 from navpp.filters.smoother import ForwardStore, rts_smooth, smooth_arrays
 
@@ -44,13 +44,14 @@ def _navpp_forward(filt, model, x0, P0, zs, H, R, skip=()):
     store.start(state)
     innovations = []
     for k, z in enumerate(zs, start=1):
-        state = filt.predict(state, model, (k - 1.0, float(k)))
-        store.predicted(state, filt.last_cross, filt.last_x_ref)
+        pred = filt.predict(state, model, (k - 1.0, float(k)))
+        state = pred.state
+        store.predicted(pred)
         if k - 1 in skip:
             continue
-        filt.last_prior = None
-        state, inn = filt.update(state, model, LinearMeasurement(float(k), z, H, R))
-        store.updated(filt.last_prior if inn.accepted else None, state, inn.forced)
+        up = filt.update(state, model, LinearMeasurement(float(k), z, H, R))
+        state, inn = up.state, up.innovation
+        store.updated(up.prior_used, state, inn.forced)
         innovations.append(inn)
     return store, innovations
 
@@ -117,11 +118,11 @@ def test_no_information_is_carried_back_across_a_reanchored_fix():
     np.testing.assert_array_equal(sm.gains[7], 0.0)
 
 
-def test_store_refuses_a_filter_that_does_not_report_its_cross_covariance():
+def test_store_refuses_a_cross_covariance_of_the_wrong_shape():
     store = ForwardStore(2, 2)
     store.start(GaussianState(0.0, np.zeros(2), np.eye(2)))
-    with pytest.raises(ValueError, match="last_cross"):
-        store.predicted(GaussianState(1.0, np.zeros(2), np.eye(2)), None, None)
+    with pytest.raises(ValueError, match="cross_cov has shape"):
+        store.predicted(Prediction(GaussianState(1.0, np.zeros(2), np.eye(2)), np.zeros((3, 3)), np.zeros(2)))
 
 
 def test_node_corrections_move_the_path_by_the_interpolated_error():

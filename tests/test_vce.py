@@ -54,10 +54,11 @@ def test_adapt_none_is_the_ckf_exactly():
     a = b = GaussianState(0.0, rng.normal(size=n), 5.0 * np.eye(n))
     for k in range(1, 30):
         z = rng.normal(size=m) * 4.0
-        a = ckf.predict(a, model, (k - 1.0, float(k)))
-        b = vce.predict(b, model, (k - 1.0, float(k)))
-        a, _ = ckf.update(a, model, LinearMeasurement(float(k), z, H, R))
-        b, inn = vce.update(b, model, LinearMeasurement(float(k), z, H, R))
+        a = ckf.predict(a, model, (k - 1.0, float(k))).state
+        b = vce.predict(b, model, (k - 1.0, float(k))).state
+        a = ckf.update(a, model, LinearMeasurement(float(k), z, H, R)).state
+        up = vce.update(b, model, LinearMeasurement(float(k), z, H, R))
+        b, inn = up.state, up.innovation
         np.testing.assert_array_equal(b.x, a.x)
         np.testing.assert_array_equal(b.P, a.P)
         np.testing.assert_array_equal(inn.R, R)
@@ -95,11 +96,12 @@ def test_redundancies_and_residuals_equal_the_closed_form(steps):
     for _round in range(12):
         f = filt.adapter.q_factor.copy() if filt.adapter.q_group_names else np.ones(len(names))
         for _ in range(steps):
-            state = filt.predict(state, model, (t, t + 1.0 / steps))
+            state = filt.predict(state, model, (t, t + 1.0 / steps)).state
             t += 1.0 / steps
         P = state.P
         z = H @ rng.normal(size=n) * 3.0 + rng.normal(size=m)
-        state, inn = filt.update(state, model, LinearMeasurement(t, z, H, R))
+        up = filt.update(state, model, LinearMeasurement(t, z, H, R))
+        state, inn = up.state, up.innovation
         e = filt.adapter.last
         Qg = steps * f[:, None, None] * Us                      # the noise used since the last update
         S = H @ P @ H.T + inn.R
@@ -134,8 +136,9 @@ def test_scalar_measurement_gives_every_group_the_same_correction():
     for k in range(1, 15):
         fq = filt.adapter.q_factor.copy() if filt.adapter.q_group_names else np.ones(2)
         fr = filt.adapter.r_factor.copy() if filt.adapter.r_factor is not None else np.ones(1)
-        state = filt.predict(state, model, (k - 1.0, float(k)))
-        state, inn = filt.update(state, model, LinearMeasurement(float(k), rng.normal(size=1) * 2, H, np.eye(1)))
+        state = filt.predict(state, model, (k - 1.0, float(k))).state
+        up = filt.update(state, model, LinearMeasurement(float(k), rng.normal(size=1) * 2, H, np.eye(1)))
+        state, inn = up.state, up.innovation
         e = filt.adapter.last
         c = float(inn.nu[0] ** 2 / inn.S[0, 0])
         np.testing.assert_allclose(e.q_num / (fq * e.r_g), c, rtol=1e-8)
@@ -167,8 +170,8 @@ def _two_sensor_run(seed: int, n_epochs: int = 2000, q: float = 3.0, r=(2.0, 1.0
     for k in range(1, n_epochs + 1):
         x = Phi @ x + Lq @ rng.normal(size=4)
         z = H @ x + Lr @ rng.normal(size=4)
-        state = filt.predict(state, model, (k - 1.0, float(k)))
-        state, _ = filt.update(state, model, LinearMeasurement(float(k), z, H, r_scale * R))
+        state = filt.predict(state, model, (k - 1.0, float(k))).state
+        state = filt.update(state, model, LinearMeasurement(float(k), z, H, r_scale * R)).state
         rep = filt.noise_report()
         out[k - 1, 0] = q_scale * rep["q_factor"][0]
         out[k - 1, 1:] = r_scale * rep["r_factor"]
@@ -217,15 +220,17 @@ def test_rejected_and_forced_updates_are_not_learnt():
     model = LinearModel(np.eye(n), 1e-2 * np.eye(n))
     filt = _vce(gate_probability=0.999, reanchor=1.5, min_redundancy=0.0)
     state = GaussianState(0.0, np.zeros(n), np.eye(n))
-    state = filt.predict(state, model, (0.0, 1.0))
-    state, inn = filt.update(state, model, LinearMeasurement(1.0, np.array([0.5, -0.5]), np.eye(n), np.eye(n)))
+    state = filt.predict(state, model, (0.0, 1.0)).state
+    up = filt.update(state, model, LinearMeasurement(1.0, np.array([0.5, -0.5]), np.eye(n), np.eye(n)))
+    state, inn = up.state, up.innovation
     assert inn.accepted
     before = (filt.adapter.q_factor.copy(), filt.adapter.r_factor.copy(), filt.adapter._k)
     accepted, forced = [], []
     for k in (2, 3, 4):
-        state = filt.predict(state, model, (k - 1.0, float(k)))
+        state = filt.predict(state, model, (k - 1.0, float(k))).state
         meas = LinearMeasurement(float(k), np.array([100.0, 0.0]), np.eye(n), np.eye(n))
-        state, inn = filt.update(state, model, meas)
+        up = filt.update(state, model, meas)
+        state, inn = up.state, up.innovation
         accepted.append(inn.accepted)
         forced.append(inn.forced)
     assert accepted == [False, False, True] and forced == [False, False, True]

@@ -74,6 +74,36 @@ class MeasurementPrediction:
 
 
 @dataclass(frozen=True)
+class Prediction:
+    """What a time update produced.
+
+    state : the prior at the interval's end; cross_cov : (n, n) cross-covariance
+    ``E[dx_start dx_end^T]`` of the errors at the interval's start (the input state) and end
+    (the prior), for RTS smoothing (:mod:`navpp.filters.smoother`); x_ref : the nominal state
+    the model propagated over the interval (the path it recorded).
+    """
+
+    state: GaussianState
+    cross_cov: np.ndarray
+    x_ref: np.ndarray
+
+
+@dataclass(frozen=True)
+class Update:
+    """What a measurement update produced.
+
+    state : the posterior (the input state when the measurement was rejected); innovation :
+    what the update saw and did; prior_used : the prior the correction was applied to (an
+    adaptive filter may have changed it after the time update, a forced fix re-anchors it),
+    None when the measurement was rejected.
+    """
+
+    state: GaussianState
+    innovation: Innovation
+    prior_used: GaussianState | None
+
+
+@dataclass(frozen=True)
 class NoOptions:
     """A filter without options of its own."""
 
@@ -186,14 +216,6 @@ class Filter:
     #: options under which the filter is the plain Kalman filter (adaptation off): the oracle
     #: tests run every registered filter with these against the closed-form update
     oracle_options: ClassVar[dict[str, Any]] = {}
-    #: what the last :meth:`predict` saw, for RTS smoothing (:mod:`navpp.filters.smoother`):
-    #: ``last_cross`` (n, n), the cross-covariance ``E[dx_start dx_end^T]`` of the errors at the
-    #: interval's start (the input state) and end (the prior); ``last_x_ref``, the nominal the
-    #: model propagated (the path it recorded).  ``last_prior``: the prior the last
-    #: :meth:`correct` corrected (an adaptive filter may have changed it after the time update).
-    last_cross: np.ndarray | None = None
-    last_x_ref: np.ndarray | None = None
-    last_prior: GaussianState | None = None
 
     def __init__(self, options: Any = None, *, gate_probability: float = 0.0,
                  reanchor_after_s: float = 10.0, rng: np.random.Generator | None = None) -> None:
@@ -222,7 +244,7 @@ class Filter:
             raise ConfigError(f"{source}: [filter.{cls.name}]: {exc}") from None
 
     # hooks -------------------------------------------------------------------------------
-    def predict(self, state: GaussianState, model: Any, interval: tuple[float, float]) -> GaussianState:
+    def predict(self, state: GaussianState, model: Any, interval: tuple[float, float]) -> Prediction:
         raise NotImplementedError
 
     def predict_measurement(self, state: GaussianState, model: Any, meas: Any) -> MeasurementPrediction:
@@ -264,7 +286,7 @@ class Filter:
             thr = self._gate_cache[m] = float(chdtri(m, 1.0 - self.gate_probability))  # chi2 quantile
         return thr
 
-    def update(self, state: GaussianState, model: Any, meas: Any) -> tuple[GaussianState, Innovation]:
+    def update(self, state: GaussianState, model: Any, meas: Any) -> Update:
         """Gate and apply one measurement.
 
         Measurement attributes the template honours (defaults for the GNSS position):
@@ -297,12 +319,12 @@ class Filter:
         if not accepted:
             self._rejecting_since.setdefault(kind, state.t)
             self.rejected += 1
-            return state, innovation
+            return Update(state, innovation, None)
         self._rejecting_since.pop(kind, None)
-        new = self.correct(state, model, pred, K, S, R)
+        new, prior_used = self.correct(state, model, pred, K, S, R)
         if adaptive:
             self.after_update(innovation, pred)
-        return new, innovation
+        return Update(new, innovation, prior_used)
 
     def _moments(self, state: GaussianState, pred: MeasurementPrediction, R: np.ndarray):
         S = symmetrise(pred.Pzz + R)
@@ -323,11 +345,11 @@ class Filter:
         return state.P * max(1.0, nis / self.gate_threshold(pred.nu.shape[0]))
 
     def correct(self, state: GaussianState, model: Any, pred: MeasurementPrediction,
-                K: np.ndarray, S: np.ndarray, R: np.ndarray) -> GaussianState:
-        """Shared correction: ``x ⊞ K nu``; Joseph form when linearised, else ``P - K S K^T``."""
-        self.last_prior = state
+                K: np.ndarray, S: np.ndarray, R: np.ndarray) -> tuple[GaussianState, GaussianState]:
+        """Shared correction: ``x ⊞ K nu``; Joseph form when linearised, else ``P - K S K^T``.
+        Returns the posterior and the prior it was corrected from."""
         x = model.plus(state.x, K @ pred.nu)
         P = _joseph(state.P, K, pred.H, R) if pred.H is not None else _sigma_posterior(state.P, K, S)
         if not (np.isfinite(x.sum()) and np.isfinite(P.sum())):
             raise FilterDivergedError(f"{self.name}: state became non-finite at t={state.t:.3f} s")
-        return GaussianState(state.t, x, P)
+        return GaussianState(state.t, x, P), state

@@ -341,8 +341,9 @@ def run_filter(name: str, sc: Paper002Scenario, sim: SinsRun, seed: int = 0) -> 
         tk = float(sim.t_gps[k])
         meas = GnssPositionVelocity(tk, *sim.z_pos[k], sim.z_vel[k], R)
         try:
-            state = filt.predict(state, model, (state.t, tk))
-            state, inn = filt.update(state, model, meas)
+            state = filt.predict(state, model, (state.t, tk)).state
+            up = filt.update(state, model, meas)
+            state, inn = up.state, up.innovation
         except FilterDivergedError as exc:
             return FilterRun(err, std, r_std, r_last, str(exc))
         dx = minus(sim.truth[k], state.x)

@@ -92,8 +92,8 @@ def run_filter(filt, case: Case) -> Track:
     t0 = time.perf_counter()
     try:
         for k, meas in enumerate(case.measurements):
-            state = filt.predict(state, case.model, (state.t, float(case.times[k + 1])))
-            state, _ = filt.update(state, case.model, meas)
+            state = filt.predict(state, case.model, (state.t, float(case.times[k + 1]))).state
+            state = filt.update(state, case.model, meas).state
             xs[k], Ps[k] = state.x, state.P
             reports.append({key: np.array(v, dtype=float).ravel() for key, v in filt.noise_report().items()})
     except FilterDivergedError as exc:

@@ -9,7 +9,7 @@ Groves (2013) ch. 14.
 
 from __future__ import annotations
 
-from .base import Filter, GaussianState, MeasurementPrediction, register, symmetrise
+from .base import Filter, GaussianState, MeasurementPrediction, Prediction, register, symmetrise
 
 
 @register("ekf")
@@ -17,12 +17,12 @@ class EKF(Filter):
     paper = "paper 002 section 2, eqs 1-3"
     summary = "Closed-loop error-state extended Kalman filter (the reference filter)."
 
-    def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> GaussianState:
+    def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> Prediction:
         x, Phi, Qd = model.transition(state.x, interval)
         PPhit = state.P @ Phi.T
         P = Phi @ PPhit + Qd                  # P- = Phi P Phi^T + Qd
-        self.last_cross, self.last_x_ref = PPhit, x     # E[dx_k dx_k+1^T] = P Phi^T (smoother)
-        return GaussianState(interval[1], x, symmetrise(P))
+        # E[dx_k dx_k+1^T] = P Phi^T (smoother)
+        return Prediction(GaussianState(interval[1], x, symmetrise(P)), PPhit, x)
 
     def predict_measurement(self, state: GaussianState, model, meas) -> MeasurementPrediction:
         H = meas.jacobian(state.x)

@@ -43,7 +43,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .base import GaussianState, MeasurementPrediction, register, symmetrise
+from .base import GaussianState, MeasurementPrediction, Update, register, symmetrise
 from .rules import CubatureRule, DirichletWeights
 from .sigma import SigmaPointFilter, combine_points
 
@@ -176,7 +176,7 @@ class RWCKF(SigmaPointFilter):
         w = np.linalg.solve(L, nu[:, :, None])[:, :, 0]
         return np.einsum("cp,cp->c", w, w) + 2.0 * np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1)
 
-    def update(self, state: GaussianState, model, meas):
+    def update(self, state: GaussianState, model, meas) -> Update:
         m = 2 * state.P.shape[0]
         cands = self._candidates(m)
         best = cands[0]

@@ -57,7 +57,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .base import GaussianState, MeasurementPrediction, register, symmetrise
+from .base import GaussianState, MeasurementPrediction, Prediction, register, symmetrise
 from .sigma import SigmaPointFilter, _factor
 from .stochastic import IterationAverage, StochasticIntegrationRule
 
@@ -132,7 +132,7 @@ class SIF(SigmaPointFilter):
             return True
         return o.tol > 0.0 and acc.count >= o.min_iter and _scaled_error(acc.standard_error(), scales()) <= o.tol
 
-    def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> GaussianState:
+    def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> Prediction:
         S = _factor(state.P, state.t, self.name, self)
         n = S.shape[0]
         acc = IterationAverage()
@@ -155,9 +155,9 @@ class SIF(SigmaPointFilter):
                 break
         mean, second, x_mean, cross = acc.mean
         self.iterations[0] = acc.count
-        self.last_cross, self.last_x_ref = cross - np.outer(x_mean, mean), x_ref
         P = second - np.outer(mean, mean) + self.process_noise(model, state.x, interval)
-        return GaussianState(interval[1], model.plus(x_ref, mean), symmetrise(P))
+        return Prediction(GaussianState(interval[1], model.plus(x_ref, mean), symmetrise(P)),
+                          cross - np.outer(x_mean, mean), x_ref)
 
     def predict_measurement(self, state: GaussianState, model, meas) -> MeasurementPrediction:
         S = _factor(state.P, state.t, self.name, self)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import FilterDivergedError
-from .base import Filter, GaussianState, MeasurementPrediction, symmetrise
+from .base import Filter, GaussianState, MeasurementPrediction, Prediction, symmetrise
 
 
 def _factor(P: np.ndarray, t: float, name: str, filt: SigmaPointFilter | None = None) -> np.ndarray:
@@ -67,7 +67,7 @@ class SigmaPointFilter(Filter):
         weights (every rule here); RWCKF with CKF covariances centres them on the CKF mean."""
         return wm
 
-    def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> GaussianState:
+    def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> Prediction:
         S = _factor(state.P, state.t, self.name, self)
         dX, wm, wc = self.rule().points(S)
         wm, wc = self.weights_for(wm, wc, measurement=False)
@@ -75,10 +75,9 @@ class SigmaPointFilter(Filter):
         Q = self.process_noise(model, state.x, interval)
         out = combine_points(model, interval[1], x_ref, dY, wm, wc, Q)
         # for the smoother: E[dx_k dx_k+1^T] from the centred deviations of the points and images
-        self.last_cross = _weighted_cov(wc, dX - wm @ dX, dY - wm @ dY)
-        self.last_x_ref = x_ref
+        cross = _weighted_cov(wc, dX - wm @ dX, dY - wm @ dY)
         self.after_predict(out, x_ref, dY, Q, wc)
-        return out
+        return Prediction(out, cross, x_ref)
 
     def after_predict(self, prior: GaussianState, x_ref: np.ndarray, dY: np.ndarray, Q: np.ndarray,
                       wc: np.ndarray) -> None:

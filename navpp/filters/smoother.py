@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import FilterDivergedError
-from .base import GaussianState, _chol_solve, _cholesky
+from .base import GaussianState, Prediction, _chol_solve, _cholesky
 
 
 class ForwardStore:
@@ -81,16 +81,16 @@ class ForwardStore:
         nd["x_ref"].append(x_ref)
         nd["reset"].append(False)
 
-    def predicted(self, prior: GaussianState, cross: np.ndarray | None, x_ref: np.ndarray | None) -> None:
-        """A time update ended at ``prior.t``: a new node whose posterior is the prior until
-        :meth:`updated` says otherwise.  ``cross`` and ``x_ref`` are the filter's
-        ``last_cross`` / ``last_x_ref`` of that time update."""
+    def predicted(self, prediction: Prediction) -> None:
+        """A time update ended at ``prediction.state.t``: a new node whose posterior is the
+        prior until :meth:`updated` says otherwise, with the update's cross-covariance and
+        propagated nominal."""
         if self.n == 0:
             raise ValueError("ForwardStore.predicted: call start() first")
-        if cross is None or x_ref is None:
-            raise ValueError("ForwardStore.predicted: the filter did not report its time-update "
-                             "cross-covariance (last_cross / last_x_ref)")
-        self._append(prior, cross, x_ref)
+        if prediction.cross_cov.shape != (self.n_err, self.n_err):
+            raise ValueError(f"ForwardStore.predicted: cross_cov has shape {prediction.cross_cov.shape}, "
+                             f"expected ({self.n_err}, {self.n_err})")
+        self._append(prediction.state, prediction.cross_cov, prediction.x_ref)
 
     def updated(self, used_prior: GaussianState | None, posterior: GaussianState, reset: bool = False) -> None:
         """The last node's measurement update: the prior it corrected (None: the time update's

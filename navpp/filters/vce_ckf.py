@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .base import GaussianState, Innovation, MeasurementPrediction, register
+from .base import GaussianState, Innovation, MeasurementPrediction, Prediction, Update, register
 from .rules import CubatureRule
 from .sigma import SigmaPointFilter
 from .vce import HelmertVCE, VCEOptions
@@ -50,16 +50,17 @@ class VCECKF(SigmaPointFilter):
     def process_noise(self, model, x: np.ndarray, interval: tuple[float, float]) -> np.ndarray:
         return self.adapter.process_noise(model, x, interval)
 
-    def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> GaussianState:
+    def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> Prediction:
         out = super().predict(state, model, interval)
-        self.adapter.propagate(state.P, self.last_cross)
+        self.adapter.propagate(state.P, out.cross_cov)
         return out
 
-    def update(self, state: GaussianState, model, meas):
-        new, inn = super().update(state, model, meas)
+    def update(self, state: GaussianState, model, meas) -> Update:
+        out = super().update(state, model, meas)
+        inn = out.innovation
         if inn.accepted:                      # every applied update shrinks the groups' shares
             self.adapter.corrected(state.P, inn.Pxz, inn.S, reset=inn.forced)
-        return new, inn
+        return out
 
     def predict_measurement(self, state: GaussianState, model, meas) -> MeasurementPrediction:
         self._prior_P = state.P               # P⁻ of this update, for A = (P⁻)⁻¹
