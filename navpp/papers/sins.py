@@ -32,17 +32,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .. import geodesy
-from ..config import (
-    DEG_PER_H_TO_RAD_PER_S,
-    DEG_PER_SQRT_H_TO_RAD_PER_SQRT_S,
-    DEG_TO_RAD,
-    STANDARD_GRAVITY,
-)
 from ..errors import ConfigError, FilterDivergedError
+from ..filters import GaussianState
 from ..ins.attitude import dcm_to_quat, rph_to_dcm
 from ..ins.model import POS, VEL, InsModel, NoiseModel, _gnss_innovation, minus, plus
-from .base import GaussianState
-from .benchmarks import BenchResult, Row, make_bench_filter, register_benchmark
+from .filter_spec import make_bench_filter
+from .registry import BenchResult, Row, register_benchmark
 
 AXES = ("E", "N", "U")
 
@@ -53,8 +48,15 @@ PAPER_POS_RMS = {"ekf": (9.8577, 8.3439, 24.2267), "aekf": (6.2181, 8.1796, 6.75
 TITLE = "Paper 002 SINS/GPS simulation (400 s, 200 m/s east, GPS 6.5 m / 0.46 m/s): EKF vs improved AEKF"
 
 STEADY_AFTER_S = 100.0   #: start of the "steady state" figures in the notes, s
-_ARCMIN = DEG_TO_RAD / 60.0
-_UG_PER_SQRT_HZ = STANDARD_GRAVITY * 1e-6     # ug/sqrt(Hz) -> m/s^2/sqrt(Hz) = m/s/sqrt(s)
+
+# Unit factors, the values of navpp.config's (this package does not import the application's
+# configuration).
+STANDARD_GRAVITY = 9.80665                     #: g0, m/s^2 (the paper's "g")
+DEG_TO_RAD = math.pi / 180.0                   #: deg -> rad
+DEG_PER_H_TO_RAD_PER_S = DEG_TO_RAD / 3600.0   #: gyro bias, deg/h -> rad/s
+DEG_PER_SQRT_H_TO_RAD_PER_SQRT_S = DEG_TO_RAD / 60.0   #: angle random walk, deg/sqrt(h) -> rad/sqrt(s)
+ARCMIN_TO_RAD = DEG_TO_RAD / 60.0              #: arcmin -> rad
+UG_PER_SQRT_HZ_TO_MPS_PER_SQRT_S = STANDARD_GRAVITY * 1e-6   #: VRW, ug/sqrt(Hz) -> m/s^2/sqrt(Hz) = m/s/sqrt(s)
 
 
 @dataclass(frozen=True)
@@ -139,7 +141,7 @@ class Paper002Scenario:
     @property
     def accel_vrw(self) -> float:
         """m/s/sqrt(s)."""
-        return self.accel_vrw_ug_per_sqrt_hz * _UG_PER_SQRT_HZ
+        return self.accel_vrw_ug_per_sqrt_hz * UG_PER_SQRT_HZ_TO_MPS_PER_SQRT_S
 
     def noise_model(self) -> NoiseModel:
         """The filter's continuous noise: the true white-noise densities, constant biases."""
@@ -147,7 +149,7 @@ class Paper002Scenario:
 
     def p0_std(self) -> np.ndarray:
         """(15,) initial 1-sigma in the error-state order of :mod:`navpp.ins.model`."""
-        return np.concatenate([np.asarray(self.init_att_std_arcmin, dtype=float) * _ARCMIN,
+        return np.concatenate([np.asarray(self.init_att_std_arcmin, dtype=float) * ARCMIN_TO_RAD,
                                np.full(3, self.init_vel_std_mps), np.full(3, self.init_pos_std_m),
                                np.full(3, self.gyro_bias_sigma), np.full(3, self.accel_bias_sigma)])
 
