@@ -20,9 +20,12 @@ from typing import Any
 
 import numpy as np
 
+from ..engine.loop import EpochOutcome, run_epochs
+from ..engine.schedule import Epoch
 from ..errors import ConfigError, FilterDivergedError
 from ..filters import Filter, GaussianState
 from .filter_spec import make_bench_filter
+from .simulated import OneMeasurementPerEpoch, Recorder, measurement_epochs
 
 
 @dataclass
@@ -70,26 +73,37 @@ def truth_rng(seed: int, run: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(run,)))
 
 
+class TrackRecorder(Recorder):
+    """Keeps what a :class:`Track` holds: the posterior mean (N, n) and covariance (N, n, n) at
+    each measurement epoch and the filter's ``noise_report()`` after it."""
+
+    def __init__(self, filt: Filter, n: int, N: int) -> None:
+        self.filt = filt
+        self.x, self.P = np.full((N, n), np.nan), np.full((N, n, n), np.nan)
+        self.reports: list[dict[str, np.ndarray]] = []
+
+    def epoch_done(self, epoch: Epoch, outcome: EpochOutcome) -> None:
+        self.x[epoch.index], self.P[epoch.index] = outcome.state.x, outcome.state.P
+        self.reports.append({key: np.array(v, dtype=float).ravel() for key, v in self.filt.noise_report().items()})
+
+
 def run_filter(filt: Filter, case: Case) -> Track:
-    """Run ``filt`` over ``case``: predict to each measurement time, update, record."""
-    n, N = case.x0.shape[0], len(case.measurements)
-    xs, Ps = np.full((N, n), np.nan), np.full((N, n, n), np.nan)
-    reports: list[dict[str, np.ndarray]] = []
+    """Run ``filt`` over ``case`` on the engine's loop (predict to each measurement time,
+    update) and record its :class:`Track`; a divergence ends the track with its message."""
+    N = len(case.measurements)
+    rec = TrackRecorder(filt, case.x0.shape[0], N)
     state = GaussianState(float(case.times[0]), np.array(case.x0, dtype=float), np.array(case.P0, dtype=float))
     t0 = time.perf_counter()
     try:
-        for k, meas in enumerate(case.measurements):
-            state = filt.predict(state, case.model, (state.t, float(case.times[k + 1]))).state
-            state = filt.update(state, case.model, meas).state
-            xs[k], Ps[k] = state.x, state.P
-            reports.append({key: np.array(v, dtype=float).ravel() for key, v in filt.noise_report().items()})
+        run_epochs(filt, case.model, state, measurement_epochs(case.times[1:]),
+                   OneMeasurementPerEpoch(case.measurements), rec)
     except FilterDivergedError as exc:
-        return Track(xs, Ps, _stack_reports(reports, N), time.perf_counter() - t0, str(exc))
+        return Track(rec.x, rec.P, _stack_reports(rec.reports, N), time.perf_counter() - t0, str(exc))
     seconds = time.perf_counter() - t0
     pooled = getattr(getattr(filt, "adapter", None), "pooled_redundancy", None)    # read-only diagnostic
     diagnostics = ({f"redundancy_{k}": np.asarray(v, dtype=float) for k, v in pooled().items()}
                    if callable(pooled) else {})
-    return Track(xs, Ps, _stack_reports(reports, N), seconds, None, diagnostics)
+    return Track(rec.x, rec.P, _stack_reports(rec.reports, N), seconds, None, diagnostics)
 
 
 def _stack_reports(reports: list[dict[str, np.ndarray]], N: int) -> dict[str, np.ndarray]:

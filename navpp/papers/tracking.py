@@ -11,6 +11,8 @@ benchmarks: readings") are stated in the result's notes: ``g`` is taken at the p
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import partial
+from typing import Any
 
 import numpy as np
 
@@ -182,9 +184,10 @@ def run_tracking(runs: int, seed: int, filters: Sequence[str]) -> BenchResult:
 def _tracking_reading_rows(runs: int, seed: int) -> list[Row]:
     """The Kalman filter's position RMSE under the other readings of eqs 38-39 (same draws)."""
     rows = []
-    for label, kw in (("g(x_k) implicit", {"g_at": "current"}),
-                      ("truth Q = 2 Q0", {"truth_lambda": TRACK_LAMBDA})):
-        cases, tracks = monte_carlo(lambda rng, kw=kw: tracking_case(rng, **kw), runs, seed, ("ekf",))
+    readings: tuple[tuple[str, dict[str, Any]], ...] = (("g(x_k) implicit", {"g_at": "current"}),
+                                                        ("truth Q = 2 Q0", {"truth_lambda": TRACK_LAMBDA}))
+    for label, kw in readings:
+        cases, tracks = monte_carlo(partial(tracking_case, **kw), runs, seed, ("ekf",))
         s = collect(cases, tracks["ekf"])
         bad = sum(c.runaway for c in cases)
         if bad < runs:
