@@ -18,13 +18,13 @@ the fixes against ``[gnss] max_rejected_fraction``, as for the gate:
 - GNSS noise far SMALLER than the prior R says (standard deviations in cm read as m): the
   difference of consecutive innovations (the INS's drift cancels, the fixes' noise stays),
   normalised by the two fixes' prior R, below the lower chi-square quantile ``chi2_3(1 - p)``
-  at more than half the fixes (a consistent filter puts about ``1 - p`` of them there; real
-  receivers' time-correlated fixes put up to a fifth there: the bundled RTK walk), i.e. the
+  at more than half the fixes (a consistent filter puts about ``1 - p`` of them there; a
+  real receiver's time-correlated fixes put more, but far from half), i.e. the
   sigmas at least ``sqrt(chi2_3 median / chi2_3(1 - p))`` = 12x too large at the default p;
   only when those differences look white (lag-1 correlation at most
   :data:`WHITE_DIFFERENCE_CORRELATION`): a receiver's smoothed or time-correlated fixes also
   move little from fix to fix with an honest sigma, and then the run only warns that it cannot
-  tell (a real 10 Hz car log: differences 63x smaller than its sigma, correlated +0.3 or so);
+  tell;
 - the solution's altitude beyond the fixes' altitude range by more than the 1-dof gate
   quantile of the fixes' and the solution's vertical sigma, its speed beyond the vehicle
   type's (:data:`MAX_SPEED_MPS`), a non-finite position or sigma.
@@ -53,9 +53,8 @@ MAX_SPEED_MPS = {"car": 150.0, "none": 343.0}
 WHITE_DIFFERENCE_CORRELATION = -0.25
 
 #: Altitude departures from the fixes' band below this, m, are left to the innovation checks and
-#: the consistency warnings: the bound is for gross failures (the issue's -15,865 m and
-#: 566,237 km), not for an overconfident filter a few metres off (the real walk with the preset's
-#: noise dips 3 m below its RTK fixes' band with a 1-sigma of a few cm).
+#: the consistency warnings: the bound is for gross failures (an altitude kilometres or more off),
+#: not for an overconfident filter a few metres off the fixes' band.
 ALTITUDE_FLOOR_M = 100.0
 
 #: The gate probability the checks use when gating is off (``gate_probability = 0``).

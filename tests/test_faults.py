@@ -264,10 +264,8 @@ def _poisoned_update(monkeypatch, after_s, poison):
     original = cls.update
 
     def update(self, state, model, meas):
-        new, inn = original(self, state, model, meas)
-        if meas.t >= after_s:
-            new = poison(new)
-        return new, inn
+        up = original(self, state, model, meas)
+        return replace(up, state=poison(up.state)) if meas.t >= after_s else up
     monkeypatch.setattr(cls, "update", update)
 
 
