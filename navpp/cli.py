@@ -354,10 +354,9 @@ def bench(
     from .errors import ConfigError, NavppError
 
     try:
-        from .filters import benchmarks
+        from . import papers as benchmarks
 
         if name is None:
-            benchmarks._load()
             for key, b in sorted(benchmarks.BENCHMARKS.items()):
                 typer.echo(f"{key:<20} {b.title}  [{b.default_runs} runs; {', '.join(b.filters)}]")
             return
