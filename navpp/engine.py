@@ -27,7 +27,7 @@ from .filters.base import Filter, GaussianState
 from .filters.smoother import ForwardStore, smooth_arrays
 from .gnss_jumps import check_gnss_jumps
 from .ins.alignment import Alignment, AlignmentSettings, align
-from .ins.attitude import rpy_matrix
+from .ins.attitude import rpy_deg_to_dcm
 from .ins.model import (
     ATT,
     BA,
@@ -128,7 +128,7 @@ class RunResult:
 
 def mounting_matrix(rpy_deg: tuple[float, float, float]) -> np.ndarray:
     """Sensor -> body rotation from the mounting roll/pitch/yaw (deg, about x, y, z; ROS rpy)."""
-    return rpy_matrix(rpy_deg)
+    return rpy_deg_to_dcm(rpy_deg)
 
 
 def alignment_settings(config: Config, noise=None, cal=None) -> AlignmentSettings:

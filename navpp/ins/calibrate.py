@@ -48,6 +48,7 @@ from functools import cached_property
 import numpy as np
 
 from .. import geodesy
+from .attitude import rpy_to_dcm
 
 BLOCK_S = 0.5            #: standstill block, s
 SUB_S = 0.05             #: sub-block for the low-passed spread, s
@@ -577,11 +578,7 @@ def gross_mounting(up_b: np.ndarray) -> np.ndarray | None:
     phi = math.atan2(up[1], up[2])
     r = math.hypot(up[1], up[2])
     theta = math.atan2(-up[0], r)
-    c, s = math.cos(phi), math.sin(phi)
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-    c, s = math.cos(theta), math.sin(theta)
-    ry = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-    return ry @ rx
+    return rpy_to_dcm(phi, theta, 0.0)          # Ry(theta) Rx(phi)
 
 
 def matrix_to_rpy_deg(mat: np.ndarray) -> tuple[float, float, float]:
