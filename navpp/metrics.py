@@ -64,8 +64,9 @@ def associate(t_est: np.ndarray, t_ref: np.ndarray, skip_holes: bool = False) ->
 
     Keeps the reference epochs with ``t_est[0] <= t_ref <= t_est[-1]`` (the span's ends
     included: the estimate is known there without extrapolation); with ``skip_holes``, not those
-    inside a hole of the estimate (an interval longer than the INS bridges, 10.5 s, and than 3
-    of its median intervals: the gap between two segments of a run, navpp.engine.imu_segments);
+    inside a hole of the estimate (an interval longer than the INS bridges,
+    :func:`navpp.ins.model.max_bridgeable_gap_s`, and than 3 of its median intervals: the gap
+    between two segments of a run, navpp.engine.imu_segments);
     non-finite reference times are dropped.
 
     Parameters
