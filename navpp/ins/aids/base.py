@@ -55,8 +55,8 @@ def points_kernel(model: Dispatcher[ModelKernel]) -> Dispatcher[PointsKernel]:
     gets its own copy of :func:`_points_template` whose global ``_model`` is that aid's ``h``.
     numba caches a kernel beside the file it names and checks that file's time stamp: the copy
     names the aid's source file (and a name of its own there), so editing the aid's ``h``
-    recompiles its images, and editing the template changes the copy's bytecode, which numba's
-    cache key includes.
+    recompiles its images.  After editing the template (or :func:`navpp.ins.model.plus`), clear
+    numba's cache, as after editing any function a cached kernel calls.
     """
     py_h = cast(types.FunctionType, model.py_func)
     name = f"{py_h.__name__}_points"
