@@ -65,7 +65,7 @@ explicitly overrides the bundle's value (0 turns an effect off).  ``imu_rate_hz`
 the bundle's value with one, else 125 Hz, 5 Hz, automotive, 60 s, 1.8 m, 2.5 m.
 
 - Mounting ``mounting_rpy_deg`` (deg, roll/pitch/yaw about x, y, z, ROS rpy): the IMU is rotated
-  against the body (vehicle, FLU); with ``C_bs = rpy_matrix(mounting_rpy_deg)`` (sensor -> body,
+  against the body (vehicle, FLU); with ``C_bs = rpy_deg_to_dcm(mounting_rpy_deg)`` (sensor -> body,
   the convention of navpp's ``[imu] mounting_rpy_deg``) it reads ``w_s = C_bs^T w_b`` and
   ``f_s = C_bs^T f_b``, so ``[imu] mounting_rpy_deg`` = the same angles undoes it exactly.  Roll
   90 deg: the IMU's +y is up.  All sensor errors below are in the sensor axes.
@@ -126,7 +126,7 @@ from scipy.signal import lfilter
 
 from navpp.errors import ConfigError
 from navpp.geodesy import E2, OMEGA_E, A, gravity, radii
-from navpp.ins.attitude import rph_to_dcm, rpy_matrix
+from navpp.ins.attitude import rph_to_dcm, rpy_deg_to_dcm
 from navpp.recording import GnssData, ImuData, Recording, ReferenceData
 
 G0 = 9.80665  #: standard gravity, m/s^2 (mg conversion and the roll lean law)
@@ -909,7 +909,7 @@ def _simulate_imu(spec: SimulationSpec, traj: Trajectory, imu_rng: np.random.Gen
     gyro_in, accel_in = gyro_true, accel_true
     mount = None
     if spec.mounting_rpy_deg is not None:
-        mount = rpy_matrix(spec.mounting_rpy_deg)  # sensor -> body, as navpp's [imu] mounting_rpy_deg
+        mount = rpy_deg_to_dcm(spec.mounting_rpy_deg)  # sensor -> body, as navpp's [imu] mounting_rpy_deg
         gyro_in, accel_in = gyro_true @ mount, accel_true @ mount  # rows: C_bs^T w_b, C_bs^T f_b
     grade = IMU_GRADES[_resolved(spec.preset)] if spec.errors else IMU_GRADES["ideal"]
     err = draw_imu_errors(imu_rng, t_imu.size, dt, grade)

@@ -21,13 +21,11 @@ ALLOWED_EDGES: set[tuple[str, str]] = set()
 
 #: (importer, imported module, private name) still owned by other issue-16 work.
 ALLOWED_PRIVATE = {
-    ("navpp.papers.sins", "navpp.ins.model", "_gnss_innovation"),
     ("navpp.filters.smoother", "navpp.filters.base", "_chol_solve"),
     ("navpp.filters.smoother", "navpp.filters.base", "_cholesky"),
     ("navpp.filters.vce", "navpp.filters.base", "_chol_solve"),
     ("navpp.filters.vce", "navpp.filters.base", "_cholesky"),
     ("navpp.filters.sif", "navpp.filters.sigma", "_factor"),
-    ("navpp.ins.model", "navpp.ins.strapdown", "_nav_rates"),
 }
 
 

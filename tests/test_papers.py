@@ -40,7 +40,7 @@ def test_papers_import_no_application_layer_and_no_private_name(path):
         assert mod not in ("navpp.api", "navpp.config", "navpp.cli"), (path.name, mod)
         # the package's own modules: no private name; elsewhere: only the listed leftover
         private = [n for n in names if n.startswith("_") and n != "__future__"]
-        allowed = {("navpp.ins.model", "_gnss_innovation")}    # made public by the ins branch
+        allowed: set[tuple[str, str]] = set()
         assert all((mod, n) in allowed for n in private), (path.name, mod, private)
 
 

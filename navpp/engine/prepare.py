@@ -15,7 +15,7 @@ import numpy as np
 from ..config import DEG_PER_H_TO_RAD_PER_S, MG_TO_MPS2, PRESETS, Config
 from ..findings import Finding
 from ..ins.alignment import AlignmentSettings
-from ..ins.attitude import rpy_matrix
+from ..ins.attitude import rpy_deg_to_dcm
 from ..ins.model import NoiseModel
 from ..recording import Recording
 from .checks import check_gyro_scale
@@ -23,7 +23,7 @@ from .checks import check_gyro_scale
 
 def mounting_matrix(rpy_deg: tuple[float, float, float]) -> np.ndarray:
     """Sensor -> body rotation from the mounting roll/pitch/yaw (deg, about x, y, z; ROS rpy)."""
-    return rpy_matrix(rpy_deg)
+    return rpy_deg_to_dcm(rpy_deg)
 
 
 def alignment_settings(config: Config, noise=None, cal=None) -> AlignmentSettings:

@@ -38,7 +38,7 @@ from ..engine.schedule import Epoch
 from ..errors import ConfigError, FilterDivergedError
 from ..filters import GaussianState, Update
 from ..ins.attitude import dcm_to_quat, rph_to_dcm
-from ..ins.model import POS, VEL, InsModel, NoiseModel, _gnss_innovation, minus, plus
+from ..ins.model import POS, VEL, InsModel, NoiseModel, gnss_innovation, minus, plus
 from .filter_spec import make_bench_filter
 from .registry import BenchResult, Row, register_benchmark
 from .simulated import OneMeasurementPerEpoch, Recorder, measurement_epochs
@@ -226,7 +226,7 @@ class GnssPositionVelocity:
 
     def innovation_at(self, x: np.ndarray) -> np.ndarray:
         d = np.empty(6)
-        d[0:3] = _gnss_innovation(x, self.lat, self.lon, self.h, np.zeros(3))
+        d[0:3] = gnss_innovation(x, self.lat, self.lon, self.h, np.zeros(3))
         d[3:6] = self.vel_enu - x[4:7]
         return d
 
