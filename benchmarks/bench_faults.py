@@ -1,4 +1,4 @@
-"""GNSS faults on simulated drives: outliers against the innovation gate, and outages (issue 6).
+"""GNSS faults on simulated drives: outliers against the innovation gate, and outages.
 
 Usage::
 

@@ -47,7 +47,8 @@ What is normalised (everything else is hashed byte for byte):
   ``(Rauch-Tung-Striebel, N nodes, X s)``, in report.md the cells of a table column headed
   ``time s``; HTML: the ``<td>`` cells of a column headed ``time s`` (report.html);
 * stdout of the benchmarks: the time in the header ``(R runs, seed S, X s)``, the rows whose
-  label starts with ``run time`` are dropped, and in the scripts' stdout every number followed
+  label starts with ``run time`` are dropped (and runs of blanks collapsed: a table's column
+  width follows its widest cell, which can be a dropped run-time row), and in the scripts' stdout every number followed
   by a time unit (``s``, ``ms``, ``us``, ``µs``) and every ``x`` speed ratio becomes ``<time>``;
 * stderr: lines about compiling kernels (numba's cache state, not behaviour) are dropped.
 
@@ -358,6 +359,7 @@ def normalise_stream(text: str, root: Path, case: Case, stream: str) -> str:
     if case.argv[:1] == ["bench"] or case.script:
         text = "\n".join(ln for ln in text.splitlines() if not ln.lower().startswith("run time"))
         text = _BENCH_HEADER_TIME.sub(r"\1<time> s)", text)
+        text = "\n".join(" ".join(ln.split()) for ln in text.splitlines())   # column widths follow the dropped rows
     if case.script:
         text = _SPEED_RATIO.sub("<time>", _TIME_UNIT.sub("<time>", text))
     return text

@@ -47,10 +47,10 @@ from __future__ import annotations
 
 from typing import Any
 
-__version__ = "0.1.0"
 __all__ = ["__version__", "compare", "process", "simulate_log"]
 
 from .jitcache import configure as _configure_jit_cache  # before any module imports numba
+from .version import __version__
 
 _configure_jit_cache()
 

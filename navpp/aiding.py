@@ -24,7 +24,7 @@ import numpy as np
 from .config import Config
 from .ins.aids import GnssVelocity, NonHolonomic, ZeroRate, ZeroVelocity
 from .ins.aids.standstill import StandstillSettings, speed_allows, still_mask
-from .ins.attitude import rpy_matrix
+from .ins.attitude import rpy_deg_to_dcm
 from .ins.model import VEL
 
 #: Aid kinds in the order they are reported (the GNSS position first).
@@ -40,7 +40,7 @@ def vehicle_matrix(rpy_deg: tuple[float, float, float]) -> np.ndarray:
     """Body -> vehicle rotation ``C_vb`` for the vehicle frame's roll, pitch, yaw (deg) relative to
     the body: the vehicle axes are the body axes rotated by ``R = Rz Ry Rx``, so a body vector has
     vehicle coordinates ``R^T v``."""
-    return rpy_matrix(rpy_deg).T
+    return rpy_deg_to_dcm(rpy_deg).T
 
 
 @dataclass

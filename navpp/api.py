@@ -1,5 +1,12 @@
 """What the CLI and Python users call: :func:`process` and :func:`simulate_log`.
 
+:func:`process` reads a log, runs one filter and writes the trajectory, the per-GNSS-epoch
+diagnostics and, with a reference, the metrics; the helpers it is made of (filter
+construction, output rate, output files, metrics of a run, warnings after a run) are public
+for ``navpp compare`` and the benchmarks.  Reading a log is :mod:`navpp.reading`, simulated
+outages :mod:`navpp.outages`, ``navpp inspect`` :mod:`navpp.inspection`; their entry points
+are importable from here too.
+
 These functions return result objects and raise :class:`navpp.errors.NavppError` subclasses
 with one-line messages; they never print or exit.
 """
@@ -11,6 +18,7 @@ import os
 import shutil
 import tempfile
 from collections.abc import Callable, Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -18,12 +26,21 @@ from typing import Any
 
 import numpy as np
 
-from .config import Config, check_outages, load_config, parse_formats
+from .config import Config, check_outages, parse_formats
 from .errors import ConfigError, InputError, NavppError
-from .outdir import OutDirLock, input_files, refuse_overwriting_inputs
+from .findings import with_code
+from .inspection import StreamSummary, inspect
+from .outages import apply_outages
+from .outdir import input_files, refuse_overwriting_inputs
+from .outfiles import claimed_out_dir, os_reason
+from .reading import CONFIG_IN_LOG_DIR, companion, read_log, resolve_config
 from .recording import Recording, Solution
 
-CONFIG_IN_LOG_DIR = "navpp.toml"
+__all__ = ["CONFIG_IN_LOG_DIR", "FORMAT_FILES", "OUTPUT_FILES", "ProcessResult", "StreamSummary", "apply_outages",
+           "check_formats", "check_output_rate", "companion", "default_out_dir", "forced_fix_warnings", "inspect",
+           "make_filter", "mcap_writer", "process", "read_log", "reference_checks", "resample_solution",
+           "resolve_config", "run_inputs", "run_metrics", "simulate_log", "smoothing_metrics", "write_outputs"]
+
 #: Files navpp writes into an output directory.  After a successful run, any of these that the
 #: run did not write (e.g. metrics from an earlier run with a reference, or a trajectory.kml
 #: from a run with ``--format kml``) are removed, so the directory never mixes results of
@@ -114,104 +131,6 @@ class ProcessResult:
 
         return diagnostics_frame(self.run.diagnostics, self.recording.t0_ns)
 
-
-def companion(log: Path, name: str) -> Path | None:
-    """A file that goes with a log: ``name`` inside a log directory; else ``<stem>.<name>``
-    beside the log; else ``name`` in the log's directory (shared by the logs there)."""
-    candidates = [log / name] if log.is_dir() else []
-    candidates += [log.parent / f"{log.stem if log.is_file() else log.name}.{name}", log.parent / name]
-    return next((c for c in candidates if c.is_file()), None)
-
-
-def resolve_config(log: Path, config_path: str | Path | None) -> Config:
-    """Explicit ``--config``; else the log's ``navpp.toml`` (:func:`companion`); else defaults."""
-    if config_path is not None:
-        return load_config(config_path)
-    found = companion(log, CONFIG_IN_LOG_DIR)
-    return load_config(found)
-
-
-def read_log(log: str | Path, config: Config, *, reference: str | Path | None = None,
-             progress: Callable[[float], None] | None = None, imu_topic: str | None = None,
-             gnss_topic: str | None = None, reference_topic: str | None = None,
-             gnss_file: str | Path | None = None) -> Recording:
-    """Read any supported log into a validated :class:`Recording`.
-
-    CSV log directories, MCAP files (ROS 2 or ROS 1 encoded), ROS 1 bags and ROS 2 bag
-    directories; the reader is chosen by content.  ``gnss_file`` (an RTKLIB .pos) replaces or
-    supplies the log's GNSS; ``reference`` (a CSV) or ``reference_topic`` gives the reference.
-    """
-    from dataclasses import replace
-
-    from .io import csv as csv_io
-    from .io.detect import log_kind
-
-    path = Path(log)
-    kind, where = log_kind(path)
-    if kind == "csv":
-        if imu_topic or gnss_topic or reference_topic:
-            raise ConfigError(f"{path}: --imu-topic, --gnss-topic and --reference-topic apply to ROS logs, "
-                              "not to a CSV log")
-        rec = csv_io.read_csv_log(where, reference=reference, time_base=config.time.base,
-                                  gyro_units=config.imu.gyro_units, accel_units=config.imu.accel_units,
-                                  time_offset_s=config.gnss.time_offset_s, progress=progress)
-    else:
-        rec = _read_ros_log(kind, where, config, imu_topic, gnss_topic, reference_topic, gnss_file is not None)
-        if reference is None and reference_topic is None:
-            reference = companion(path, csv_io.REFERENCE_FILE)       # e.g. drive.reference.csv
-        if reference is not None:
-            rec = replace(rec, reference=csv_io.read_reference_csv(reference, rec.t0_ns))
-    if gnss_file is not None:
-        from .io.rtklib import read_pos
-
-        gnss, warnings, _ = read_pos(gnss_file, time_base=config.time.base, t0_ns=rec.t0_ns)
-        if config.gnss.time_offset_s:
-            gnss = replace(gnss, t=gnss.t + config.gnss.time_offset_s)
-        rec = replace(rec, gnss=gnss, warnings=tuple(rec.warnings) + tuple(warnings))
-    return rec
-
-
-def _read_ros_log(kind: str, path: Path, config: Config, imu_topic: str | None, gnss_topic: str | None,
-                  reference_topic: str | None, gnss_from_file: bool) -> Recording:
-    from .io.assemble import choose_topic, recording_from_log
-    from .io.detect import list_topics, read_topics
-    from .io.ros import FIX_TYPE, IMU_TYPE, TWIST_COV_TYPE, TWIST_TYPE, LogContents
-
-    topics = list_topics(kind, path)
-    index = LogContents(str(path), topics)
-    wanted = [choose_topic(index, IMU_TYPE, "IMU", "--imu-topic", imu_topic)]
-    if not gnss_from_file:
-        wanted.append(choose_topic(index, FIX_TYPE, "GNSS", "--gnss-topic", gnss_topic,
-                                   (reference_topic,) if reference_topic else ()))
-        twists = [t.topic for t in topics if t.msgtype in (TWIST_COV_TYPE, TWIST_TYPE)]
-        if len(twists) == 1:
-            wanted.append(twists[0])
-    if reference_topic:
-        wanted.append(choose_topic(index, FIX_TYPE, "reference", "--reference-topic", reference_topic))
-    contents = read_topics(kind, path, [w for w in wanted if w])
-    if gnss_from_file and not any(t.msgtype == FIX_TYPE for t in contents.topics):
-        contents = _with_placeholder_fix(contents)
-    return recording_from_log(contents, imu_topic=imu_topic, gnss_topic=gnss_topic, reference_topic=reference_topic,
-                              time_source=config.time.source, time_base=config.time.base,
-                              default_std_m=config.gnss.default_std_m, gyro_scale=config.imu.gyro_scale,
-                              accel_scale=config.imu.accel_scale, time_offset_s=config.gnss.time_offset_s)
-
-
-def _with_placeholder_fix(contents):
-    """A log without GNSS whose GNSS comes from --gnss: give the assembler one IMU-timed fix
-    so it can build the Recording; the engine then uses the file's fixes."""
-    import numpy as np
-
-    from .io.ros import FIX_TYPE, FixMessages, TopicInfo
-
-    imu = next(iter(contents.imu.values()))
-    ns = imu.stamp_ns[:1]
-    fix = FixMessages("(--gnss)", ns, ns, np.zeros(1, np.int8), np.zeros(1), np.zeros(1), np.zeros(1),
-                      np.zeros((1, 9)), np.zeros(1, np.uint8))
-    return type(contents)(contents.source, contents.topics + (TopicInfo("(--gnss)", FIX_TYPE, 1),),
-                          contents.imu, {"(--gnss)": fix}, contents.twist, contents.warnings)
-
-
 def make_filter(name: str, config: Config, *, seed: int | None = None):
     """Instantiate a registered filter with its ``[filter.<name>]`` options and the GNSS gate."""
     from .filters import FILTERS, get_filter
@@ -294,58 +213,11 @@ def default_out_dir(log: Path, filter_name: str) -> Path:
     stem = log.name if log.is_dir() else log.stem
     return Path("navpp-out") / f"{stem}-{filter_name}"
 
-
-def _os_reason(exc: OSError) -> str:
-    """An OSError as a short lower-case reason ("permission denied"), without the path."""
-    return (exc.strerror or str(exc) or type(exc).__name__).lower()
-
-
-def _first_non_directory(path: Path) -> Path | None:
-    """``path`` or its nearest ancestor that exists but is not a directory, if any."""
-    for p in (path, *path.parents):
-        if p.exists() or p.is_symlink():
-            return None if p.is_dir() else p
-    return None
-
-
-def prepare_out_dir(out: Path, label: str) -> list[Path]:
-    """Create ``out`` (with parents) and prove it is writable by creating and removing a file.
-
-    Returns the directories this call created (outermost first), so that a run that fails
-    later can remove them again.  Raises :class:`InputError` ``"<label> <out>: cannot write
-    there (<reason>)"``.
-    """
-    missing = [p for p in (out, *out.parents) if not (p.exists() or p.is_symlink())][::-1]
-    try:
-        blocker = _first_non_directory(out)
-        if blocker is not None:
-            what = "it is" if blocker == out else f"{blocker} is"
-            kind = "a broken symbolic link" if not blocker.exists() else "a file, not a directory"
-            raise InputError(f"{label} {out}: cannot write there ({what} {kind})")
-        out.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(dir=out, prefix=".navpp-write-test-")
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as exc:
-        remove_created_dirs(missing)
-        raise InputError(f"{label} {out}: cannot write there ({_os_reason(exc)})") from None
-    return missing
-
-
-def remove_created_dirs(created: list[Path]) -> None:
-    """Remove the (still empty) directories :func:`prepare_out_dir` created, innermost first."""
-    for d in reversed(created):
-        try:
-            d.rmdir()
-        except OSError:
-            break
-
-
 def _write_file(path: Path, write: Callable[[], None]) -> Path:
     try:
         write()
     except OSError as exc:
-        raise InputError(f"{path}: cannot write ({_os_reason(exc)})") from None
+        raise InputError(f"{path}: cannot write ({os_reason(exc)})") from None
     return path
 
 
@@ -375,7 +247,7 @@ def write_outputs(out: Path, outputs: Sequence[tuple[str, Callable[[Path], None]
     try:
         staging = Path(tempfile.mkdtemp(dir=out, prefix=outdir.STAGING_PREFIX))
     except OSError as exc:
-        raise InputError(f"{out}: cannot write there ({_os_reason(exc)})") from None
+        raise InputError(f"{out}: cannot write there ({os_reason(exc)})") from None
     written: list[Path] = []
     try:
         for name, write in outputs:
@@ -388,7 +260,7 @@ def write_outputs(out: Path, outputs: Sequence[tuple[str, Callable[[Path], None]
                         os.chmod(staged, target.stat().st_mode & 0o7777)
                     os.replace(staged, target)
                 except OSError as exc:
-                    raise InputError(f"{target}: cannot write ({_os_reason(exc)})") from None
+                    raise InputError(f"{target}: cannot write ({os_reason(exc)})") from None
                 written.append(target)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
@@ -401,11 +273,11 @@ def write_outputs(out: Path, outputs: Sequence[tuple[str, Callable[[Path], None]
                 stale.unlink()
             except OSError as exc:
                 raise InputError(f"{stale}: cannot remove this output of an earlier run "
-                                 f"({_os_reason(exc)})") from None
+                                 f"({os_reason(exc)})") from None
     try:
         outdir.write_manifest(out, {p.name for p in written} | {n for n in ours if (out / n).exists()})
     except OSError as exc:
-        raise InputError(f"{out / outdir.MANIFEST_NAME}: cannot write ({_os_reason(exc)})") from None
+        raise InputError(f"{out / outdir.MANIFEST_NAME}: cannot write ({os_reason(exc)})") from None
     return written
 
 
@@ -424,7 +296,7 @@ def check_formats(formats: str | Sequence[str] | None, embed_input: bool, cfg: C
     return chosen
 
 
-def _mcap_writer() -> Callable[..., None]:
+def mcap_writer() -> Callable[..., None]:
     try:
         from .io.mcap_out import write_trajectory_mcap
     except ImportError as exc:
@@ -496,9 +368,51 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         without ``mcap``), InputError for unreadable input or unwritable output,
         FilterDivergedError when the filter diverges; each with a one-line message.
     """
-    from . import engine
+    plan = _plan(Path(log), filter_name=filter_name, config=config, reference=reference, out_dir=out_dir,
+                 output_rate_hz=output_rate_hz, write=write, gnss_file=gnss_file, formats=formats,
+                 embed_input=embed_input, gnss_outages=gnss_outages, smooth=smooth,
+                 topics=(imu_topic, gnss_topic, reference_topic))
+    with claimed_out_dir(plan.out, plan.out_label, OUTPUT_FILES) if write else nullcontext():
+        return _run(plan, progress)
 
-    log = Path(log)
+
+@dataclass(frozen=True)
+class _Plan:
+    """A :func:`process` run with every option checked, before anything is read or created.
+
+    ``rate_hz`` the output rate (Hz, None: every IMU sample) and ``rate_what`` where it came
+    from (for messages); ``windows`` the simulated GNSS outages ``(start_s, duration_s)``;
+    ``out_label`` how the output directory is named in messages; ``inputs`` the (device,
+    inode) of every file the run reads (empty without ``write``); ``topics`` the IMU, GNSS and
+    reference topic choices.
+    """
+
+    log: Path
+    cfg: Config
+    config_arg: str | Path | Config | None
+    filter_name: str
+    filt: Any
+    reference: str | Path | None
+    gnss_file: str | Path | None
+    topics: tuple[str | None, str | None, str | None]
+    rate_hz: float | None
+    rate_what: str
+    formats: tuple[str, ...]
+    embed_input: bool
+    windows: tuple[tuple[float, float], ...]
+    smooth: bool
+    write: bool
+    out: Path
+    out_label: str
+    inputs: set[tuple[int, int]]
+
+
+def _plan(log: Path, *, filter_name: str, config: str | Path | Config | None, reference: str | Path | None,
+          out_dir: str | Path | None, output_rate_hz: float | None, write: bool, gnss_file: str | Path | None,
+          formats: str | Sequence[str] | None, embed_input: bool, gnss_outages: Sequence[tuple[float, float]] | None,
+          smooth: bool | None, topics: tuple[str | None, str | None, str | None]) -> _Plan:
+    """Check every option of :func:`process` (in this order: config, output rate, formats,
+    outages, filter, output directory against the inputs); the first problem raises."""
     cfg = config if isinstance(config, Config) else resolve_config(log, config)
     if output_rate_hz is not None:
         rate, rate_what = check_output_rate(output_rate_hz), "--output-rate"
@@ -508,7 +422,7 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
             rate = check_output_rate(rate, rate_what)
     chosen_formats = check_formats(formats, embed_input, cfg)
     if write and "mcap" in chosen_formats:
-        _mcap_writer()                # before the run: not available is a ConfigError now, not after it
+        mcap_writer()                 # before the run: not available is a ConfigError now, not after it
     windows = (check_outages(gnss_outages, "gnss_outages") if gnss_outages is not None
                else cfg.gnss.outages)
     smooth = cfg.output.smooth if smooth is None else bool(smooth)
@@ -520,71 +434,79 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         inputs = run_inputs(log, config, reference, gnss_file)
         refuse_overwriting_inputs(out, [FORMAT_FILES[f] for f in chosen_formats] + list(OUTPUT_FILES[1:5]),
                                   inputs, label)
-    created = prepare_out_dir(out, label) if write else []
-    lock = OutDirLock(out, label, extra_leftovers=OUTPUT_FILES) if write else None
+    return _Plan(log, cfg, config, filter_name, filt, reference, gnss_file, topics, rate, rate_what,
+                 tuple(chosen_formats), embed_input, tuple(windows), smooth, write, out, label, inputs)
+
+
+def _read(plan: _Plan, progress: Callable[[str, float], None] | None) -> tuple[Recording, list[dict]]:
+    """The log as the run uses it: read, its simulated outages removed, its IMU rate checked
+    against the output rate.  Returns the recording and one dict per outage window."""
+    if progress:
+        progress("reading", 0.0)
+    imu_topic, gnss_topic, reference_topic = plan.topics
+    rec = read_log(plan.log, plan.cfg, reference=plan.reference,
+                   progress=(lambda f: progress("reading", f)) if progress else None, imu_topic=imu_topic,
+                   gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=plan.gnss_file)
+    if progress:
+        progress("reading", 1.0)
+    rec, outages = apply_outages(rec, plan.windows, str(plan.log))
+    imu_rate = rec.imu.rate_hz
+    # 0.1 % slack: the IMU rate is a median of stamp differences (jitter, stamp rounding)
+    if plan.rate_hz is not None and plan.rate_hz > imu_rate * 1.001:
+        raise ConfigError(f"{plan.rate_what} {plan.rate_hz:g} Hz is above the IMU rate of {plan.log} "
+                          f"({imu_rate:.1f} Hz); the trajectory cannot be finer than the IMU")
+    return rec, outages
+
+
+def _filter(plan: _Plan, rec: Recording, progress: Callable[[str, float], None] | None) -> Any:
+    """The engine run (``engine.RunResult``); a failure on a log the reader found cut off
+    names the cut in its one line (the likely reason)."""
+    from . import engine
+
     try:
-        if lock is not None:          # held until the files are written: a second run into out fails at once
-            lock.acquire()
-        if progress:
-            progress("reading", 0.0)
-        rec = read_log(log, cfg, reference=reference,
-                       progress=(lambda f: progress("reading", f)) if progress else None, imu_topic=imu_topic,
-                       gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss_file)
-        if progress:
-            progress("reading", 1.0)
-        rec, outages = apply_outages(rec, windows, str(log))
-        imu_rate = rec.imu.rate_hz
-        # 0.1 % slack: the IMU rate is a median of stamp differences (jitter, stamp rounding)
-        if rate is not None and rate > imu_rate * 1.001:
-            raise ConfigError(f"{rate_what} {rate:g} Hz is above the IMU rate of {log} ({imu_rate:.1f} Hz); "
-                              "the trajectory cannot be finer than the IMU")
-        try:
-            result = engine.run(rec, cfg, filt, progress=(lambda f: progress("filtering", f)) if progress else None,
-                                smooth=smooth)
-        except NavppError as exc:
-            cut = [w for w in rec.warnings if "the recording is cut off" in w]
-            if cut:       # the likely reason: say it in the one line
-                raise type(exc)(f"{exc} ({cut[0]})") from None
-            raise
-        runtime = result.runtime_s        # without the one-off kernel compilation of a first run
-        sol = result.smoothed.solution if smooth else result.solution
-        sol_out = resample_solution(sol, rate) if rate is not None else sol
-        fwd_out = None
-        if smooth:
-            fwd_out = resample_solution(result.solution, rate) if rate is not None else result.solution
-
-        removed = [o["gnss_removed"] for o in outages]
-        metrics = run_metrics(rec, cfg, result, sol, filter_name=filter_name, log=str(log), runtime_s=runtime,
-                              windows=windows, removed=removed)
-        if metrics is not None and result.calibration:
-            metrics["calibration"] = result.calibration
-        if metrics is not None and smooth:
-            forward = run_metrics(rec, cfg, result, result.solution, filter_name=filter_name, log=str(log),
-                                  runtime_s=result.forward_runtime_s, windows=windows, removed=removed)
-            metrics = smoothing_metrics(metrics, forward, result.smoothed)
-
-        files: list[Path] = []
-        if write:
-            outputs = _outputs(chosen_formats, log=log, rec=rec, sol_out=sol_out, result=result, metrics=metrics,
-                               filter_name=filter_name, embed_input=embed_input, forward_out=fwd_out)
-            files = write_outputs(out, outputs, inputs)
-    except BaseException:
-        if lock is not None:
-            lock.release()
-        remove_created_dirs(created)
+        return engine.run(rec, plan.cfg, plan.filt,
+                          progress=(lambda f: progress("filtering", f)) if progress else None, smooth=plan.smooth)
+    except NavppError as exc:
+        cut = with_code(rec.warnings, "recording-cut-off")
+        if cut:
+            raise type(exc)(f"{exc} ({cut[0]})") from None
         raise
-    if lock is not None:
-        lock.release()
+
+
+def _run(plan: _Plan, progress: Callable[[str, float], None] | None) -> ProcessResult:
+    """Read, filter, measure and (with ``plan.write``) write: the body of :func:`process`."""
+    rec, outages = _read(plan, progress)
+    result = _filter(plan, rec, progress)
+    runtime = result.runtime_s        # without the one-off kernel compilation of a first run
+    sol = result.smoothed.solution if plan.smooth else result.solution
+    sol_out = resample_solution(sol, plan.rate_hz) if plan.rate_hz is not None else sol
+    fwd_out = None
+    if plan.smooth:
+        fwd_out = resample_solution(result.solution, plan.rate_hz) if plan.rate_hz is not None else result.solution
+    removed = [o["gnss_removed"] for o in outages]
+    named = {"filter_name": plan.filter_name, "log": str(plan.log), "windows": plan.windows, "removed": removed}
+    metrics = run_metrics(rec, plan.cfg, result, sol, runtime_s=runtime, **named)
+    if metrics is not None and result.calibration:
+        metrics["calibration"] = result.calibration
+    if metrics is not None and plan.smooth:
+        forward = run_metrics(rec, plan.cfg, result, result.solution, runtime_s=result.forward_runtime_s, **named)
+        metrics = smoothing_metrics(metrics, forward, result.smoothed)
+    files: list[Path] = []
+    if plan.write:
+        outputs = _outputs(plan.formats, log=plan.log, rec=rec, sol_out=sol_out, result=result, metrics=metrics,
+                           filter_name=plan.filter_name, embed_input=plan.embed_input, forward_out=fwd_out)
+        files = write_outputs(plan.out, outputs, plan.inputs)
+    cfg = plan.cfg
     notes = tuple(cfg.notes) + tuple(result.notes) + tuple(result.alignment.lines) + tuple(
         f"GNSS outage {o['start_s']:g}-{o['end_s']:g} s ({o['duration_s']:g} s from the log start): "
         f"{o['gnss_removed']} fixes removed, the INS coasts" for o in outages)
     warnings = (tuple(rec.warnings) + tuple(result.warnings) + tuple(forced_fix_warnings(rec, cfg, result))
                 + tuple(reference_checks(rec, cfg, metrics)))
-    if smooth:
+    if plan.smooth:
         notes += (f"smoothed backwards (Rauch-Tung-Striebel) over {result.smoothed.nodes} forward nodes in "
                   f"{result.smoothed.runtime_s:.2f} s; trajectory_forward.csv holds the forward solution",)
-    return ProcessResult(filter_name, rec, sol_out, result, metrics, out, tuple(files), cfg, notes, warnings,
-                         tuple(outages), fwd_out)
+    return ProcessResult(plan.filter_name, rec, sol_out, result, metrics, plan.out, tuple(files), cfg, notes,
+                         warnings, tuple(outages), fwd_out)
 
 
 def run_metrics(rec: Recording, cfg: Config, result: Any, solution: Solution, *, filter_name: str, log: str,
@@ -618,60 +540,6 @@ def smoothing_metrics(smoothed: dict, forward: dict, run: Any) -> dict:
     out["smoother_nodes"] = int(run.nodes)
     out["forward"] = {k: forward[k] for k in FORWARD_METRIC_KEYS if k in forward}
     return out
-
-
-def apply_outages(rec: Recording, windows: Sequence[tuple[float, float]],
-                  label: str) -> tuple[Recording, list[dict]]:
-    """Remove the GNSS fixes inside simulated outage windows.
-
-    Parameters
-    ----------
-    rec : the recording; its times are s from the log start (the first IMU sample).
-    windows : validated ``(start_s, duration_s)`` pairs (:func:`navpp.config.check_outages`).
-    label : how the log is named in error messages.
-
-    Returns
-    -------
-    The recording without the fixes at ``start <= t <= start + duration`` of any window (its
-    IMU and reference untouched), and one dict per window: ``start_s``, ``duration_s``,
-    ``end_s``, ``gnss_removed`` (fixes inside that window; overlapping windows count a fix in each).
-
-    Raises
-    ------
-    InputError
-        A window that does not lie inside the log's IMU span: one starting after the log's end,
-        or one running past it (not clipped: the outage metrics are read as the error after
-        ``duration`` s without GNSS; the message gives the longest window that fits).
-    """
-    from dataclasses import fields, replace
-
-    if not windows:
-        return rec, []
-    t_end = float(rec.imu.t[-1]) if len(rec.imu) else 0.0
-    t = np.asarray(rec.gnss.t, dtype=float)
-    drop = np.zeros(t.shape, bool)
-    info = []
-    for start, dur in windows:
-        end = start + dur
-        if start >= t_end:
-            raise InputError(f"{label}: GNSS outage {start:g}:{dur:g} ({start:g}-{end:g} s) starts after the log "
-                             f"ends: it spans 0-{t_end:.3f} s from its first IMU sample")
-        if end > t_end + 1e-9:
-            # not clipped: the outage metrics are read as "error after DUR s without GNSS"
-            raise InputError(f"{label}: GNSS outage {start:g}:{dur:g} ({start:g}-{end:g} s) runs past the end of "
-                             f"the log at {t_end:.3f} s (from its first IMU sample); the longest outage from "
-                             f"{start:g} s is {start:g}:{math.floor((t_end - start) * 1000) / 1000:g}")
-        inside = (t >= start) & (t <= end)
-        drop |= inside
-        info.append({"start_s": float(start), "duration_s": float(dur), "end_s": float(end),
-                     "gnss_removed": int(np.count_nonzero(inside))})
-    if drop.any():
-        keep = ~drop
-        g = rec.gnss
-        cut = {f.name: np.asarray(getattr(g, f.name))[keep] for f in fields(g)
-               if isinstance(getattr(g, f.name), np.ndarray) and getattr(g, f.name).shape[:1] == t.shape}
-        rec = replace(rec, gnss=replace(g, **cut))
-    return rec, info
 
 
 #: At most this many times are named in the forced-fix warning.
@@ -728,7 +596,7 @@ def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solu
             outputs.append((FORMAT_FILES[fmt], lambda p: exports.write_kml(p, sol_out, rec, metrics=metrics,
                                                                           **named)))
         elif fmt == "mcap":
-            outputs.append((FORMAT_FILES[fmt], lambda p: _mcap_writer()(
+            outputs.append((FORMAT_FILES[fmt], lambda p: mcap_writer()(
                 p, solution=sol_out, recording=rec, diagnostics=result.diagnostics, biases=biases,
                 embed_input=embed_input, input_log=log, filter_name=filter_name,
                 **({"forward": forward_out} if forward_out is not None else {}))))
@@ -747,96 +615,3 @@ def simulate_log(out: str | Path, **spec: Any) -> Path:
     sim = simulate(SimulationSpec(**spec))
     write_csv_log(sim, out)
     return Path(out)
-
-
-@dataclass(frozen=True)
-class StreamSummary:
-    """One row of ``navpp inspect``: a topic (ROS logs) or a file (CSV logs)."""
-
-    name: str
-    msgtype: str
-    count: int
-    rate_hz: float | None
-    first_s: float | None            # absolute stamps, s on the log's time base
-    last_s: float | None
-    gaps: int                        # intervals longer than 3 nominal periods
-    largest_gap_s: float | None
-    duplicates: int                  # repeated stamps
-    role: str
-
-
-def _stream_stats(stamps_ns) -> tuple[float | None, float | None, float | None, int, float | None, int]:
-    import numpy as np
-
-    t = np.asarray(stamps_ns, dtype=np.int64)
-    if t.size == 0:
-        return None, None, None, 0, None, 0
-    first, last = t[0] * 1e-9, t[-1] * 1e-9
-    if t.size < 2:
-        return None, first, last, 0, None, 0
-    d = np.diff(t) * 1e-9
-    dup = int(np.count_nonzero(d == 0))
-    pos = d[d > 0]
-    if pos.size == 0:
-        return None, first, last, 0, None, dup
-    nominal = float(np.median(pos))
-    gaps = d > 3.0 * nominal
-    return (1.0 / nominal, first, last, int(np.count_nonzero(gaps)),
-            float(d[gaps].max()) if gaps.any() else None, dup)
-
-
-def inspect(log: str | Path, *, config: str | Path | Config | None = None
-            ) -> tuple[str, list[StreamSummary], tuple[str, ...]]:
-    """What a log holds and the role navpp would give each stream: (kind, rows, reader warnings)."""
-    import numpy as np
-    import pandas as pd
-
-    from .io.detect import list_topics, log_kind, read_topics
-    from .io.ros import FIX_TYPE, IMU_TYPE, SUPPORTED_TYPES, TWIST_COV_TYPE, TWIST_TYPE
-
-    path = Path(log)
-    kind, where = log_kind(path)
-    rows: list[StreamSummary] = []
-    if kind == "csv":
-        roles = {"imu.csv": "IMU", "gnss.csv": "GNSS", "reference.csv": "reference"}
-        for name, role in roles.items():
-            f = where / name
-            if not f.is_file():
-                continue
-            from .io.csv import prescan
-            prescan(f)      # NUL bytes, overlong lines: refused before pandas holds them in memory
-            try:
-                t = pd.read_csv(f, usecols=["t"], dtype={"t": float}, engine="c")["t"].to_numpy()
-                ns = np.round(t * 1e9).astype(np.int64)
-            except (ValueError, KeyError) as exc:
-                raise InputError(f"{f}: cannot read column 't': {exc}") from None
-            columns = ", ".join(pd.read_csv(f, nrows=0).columns)
-            rate, first, last, gaps, largest, dup = _stream_stats(ns)
-            rows.append(StreamSummary(name, columns, int(ns.size), rate, first, last, gaps, largest, dup, role))
-        return kind, rows, ()
-    topics = list_topics(kind, where)
-    wanted = [t.topic for t in topics if t.msgtype in SUPPORTED_TYPES]
-    contents = read_topics(kind, where, wanted)
-    n_imu = sum(t.msgtype == IMU_TYPE for t in topics)
-    n_fix = sum(t.msgtype == FIX_TYPE for t in topics)
-    n_twist = sum(t.msgtype in (TWIST_COV_TYPE, TWIST_TYPE) for t in topics)
-    for t in topics:
-        msgs = contents.imu.get(t.topic) or contents.fix.get(t.topic) or contents.twist.get(t.topic)
-        if msgs is not None:
-            rate, first, last, gaps, largest, dup = _stream_stats(msgs.stamp_ns)
-        else:
-            rate = (t.count - 1) / ((t.last_ns - t.first_ns) * 1e-9) if (t.first_ns is not None and t.last_ns
-                                                                          and t.last_ns > t.first_ns) else None
-            first = t.first_ns * 1e-9 if t.first_ns is not None else None
-            last = t.last_ns * 1e-9 if t.last_ns is not None else None
-            gaps, largest, dup = 0, None, 0
-        if t.msgtype == IMU_TYPE:
-            role = "IMU" if n_imu == 1 else "IMU? (choose with --imu-topic)"
-        elif t.msgtype == FIX_TYPE:
-            role = "GNSS" if n_fix == 1 else "GNSS or reference? (--gnss-topic / --reference-topic)"
-        elif t.msgtype in (TWIST_COV_TYPE, TWIST_TYPE):
-            role = "GNSS velocity" if n_twist == 1 else "not used (several velocity topics)"
-        else:
-            role = ""
-        rows.append(StreamSummary(t.topic, t.msgtype, t.count, rate, first, last, gaps, largest, dup, role))
-    return kind, rows, tuple(contents.warnings)

@@ -449,7 +449,7 @@ class GnssConfig:
     outages : ((start_s, duration_s), ...). Simulated GNSS outages: the fixes inside each
         window (s from the log start, the first IMU sample) are removed before filtering and
         the metrics report each window separately; ``navpp process --gnss-outage`` replaces them.
-        Applied by ``navpp process`` / :func:`navpp.api.process` (not yet by ``navpp compare``).
+        Applied by ``navpp process`` / :func:`navpp.api.process` and by ``navpp compare``.
     """
 
     lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -582,7 +582,7 @@ class VehicleConfig:
         _as_choice("vehicle", "type", self.type, VEHICLE_TYPES)
         for key in ("nhc", "zupt", "zaru"):
             _as_bool("vehicle", key, getattr(self, key))
-        std = self.nhc_std_mps
+        std: object = self.nhc_std_mps
         if _is_number(std):
             std = (std, std)
         _set(self, "nhc_std_mps", _as_vector("vehicle", "nhc_std_mps", std, 2))
@@ -601,7 +601,7 @@ class VehicleConfig:
 class AutoConfig:
     """``[auto]``: what navpp measures from the log itself (:mod:`navpp.ins.calibrate`).
     Every step is on by default; with one off, the configured value (a preset, a ``[vehicle]``
-    threshold) is used as before, so its effect can be measured.
+    threshold) is used instead, so a step's effect can be measured by turning it off.
 
     Attributes
     ----------

@@ -34,4 +34,23 @@ class ConfigError(NavppError):
 
 
 class FilterDivergedError(NavppError):
-    """The filter's covariance or state became non-finite or lost positive definiteness."""
+    """The filter's covariance or state became non-finite or lost positive definiteness.
+
+    ``why`` is what went wrong without the name of the filter that saw it ("" when the raiser
+    did not say it apart from the message); :meth:`in_filter` builds both."""
+
+    why: str = ""
+
+    @classmethod
+    def in_filter(cls, filter_name: str, why: str) -> FilterDivergedError:
+        """The error a filter raises: message ``"<filter_name>: <why>"``, ``why`` kept apart."""
+        exc = cls(f"{filter_name}: {why}")
+        exc.why = why
+        return exc
+
+
+class RunRefused(FilterDivergedError):
+    """A run the engine stops: the filter diverged, or its finished solution is not plausible.
+
+    The message is one line (the source, what was seen, the likely cause); ``warnings`` end with
+    the other causes to check."""

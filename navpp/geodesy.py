@@ -12,7 +12,13 @@ gravity, Somigliana) and the free-air height correction used by KF-GINS and pyin
 
 from __future__ import annotations
 
+from typing import TypeVar
+
 import numpy as np
+from numpy.typing import ArrayLike
+
+#: a latitude, height, ... given as a float or an array: the result has the same kind
+FloatOrArray = TypeVar("FloatOrArray", float, np.ndarray)
 
 A = 6378137.0  #: semi-major axis, m
 F = 1.0 / 298.257223563  #: flattening
@@ -21,15 +27,17 @@ B = A * (1.0 - F)  #: semi-minor axis, m
 OMEGA_E = 7.2921151467e-5  #: Earth rotation rate, rad/s
 GM = 3.986004418e14  #: m^3/s^2
 
-# Somigliana normal gravity on the ellipsoid and a second-order free-air height correction.
-_G_EQ = 9.7803253359
-_K_SOM = 0.00193185265241
-_H1 = 3.0877e-6
-_H1_LAT = 4.4e-9
-_H2 = 7.2e-14
+# Somigliana normal gravity on the ellipsoid and a second-order free-air height correction:
+# g(lat, h) = G_EQ (1 + K_SOMIGLIANA sin^2 lat) / sqrt(1 - E2 sin^2 lat)
+#             - (GRAVITY_H1 - GRAVITY_H1_LAT sin^2 lat) h + GRAVITY_H2 h^2
+G_EQ = 9.7803253359  #: normal gravity on the equator, m/s^2
+K_SOMIGLIANA = 0.00193185265241  #: Somigliana's constant
+GRAVITY_H1 = 3.0877e-6  #: free-air gradient, 1/s^2
+GRAVITY_H1_LAT = 4.4e-9  #: its latitude term, 1/s^2
+GRAVITY_H2 = 7.2e-14  #: second-order height term, 1/(m s^2)
 
 
-def radii(lat):
+def radii(lat: FloatOrArray) -> tuple[FloatOrArray, FloatOrArray]:
     """Meridian (north-south) and prime-vertical (east-west) radii of curvature, m.
 
     Parameters
@@ -48,7 +56,7 @@ def radii(lat):
     return rm, rn
 
 
-def gravity(lat, h):
+def gravity(lat: FloatOrArray, h: FloatOrArray) -> FloatOrArray:
     """Magnitude of normal gravity (gravitation + centrifugal), m/s^2, along -up.
 
     Parameters
@@ -56,16 +64,17 @@ def gravity(lat, h):
     lat : rad; h : m above the ellipsoid (scalars or equal-shape arrays).
     """
     s2 = np.sin(lat) ** 2
-    g0 = _G_EQ * (1.0 + _K_SOM * s2) / np.sqrt(1.0 - E2 * s2)
-    return g0 - (_H1 - _H1_LAT * s2) * h + _H2 * h * h
+    g0 = G_EQ * (1.0 + K_SOMIGLIANA * s2) / np.sqrt(1.0 - E2 * s2)
+    g: FloatOrArray = g0 - (GRAVITY_H1 - GRAVITY_H1_LAT * s2) * h + GRAVITY_H2 * h * h
+    return g
 
 
-def earth_rate_enu(lat):
+def earth_rate_enu(lat: float) -> np.ndarray:
     """Earth rotation rate resolved in ENU at latitude ``lat`` (rad), rad/s, shape (3,)."""
     return np.array([0.0, OMEGA_E * np.cos(lat), OMEGA_E * np.sin(lat)])
 
 
-def transport_rate_enu(lat, h, vel_enu):
+def transport_rate_enu(lat: float, h: float, vel_enu: np.ndarray) -> np.ndarray:
     """Rotation rate of the ENU frame w.r.t. the Earth for velocity ``vel_enu`` (m/s), rad/s."""
     rm, rn = radii(lat)
     return np.array([
@@ -75,7 +84,7 @@ def transport_rate_enu(lat, h, vel_enu):
     ])
 
 
-def geodetic_to_ecef(lat, lon, h):
+def geodetic_to_ecef(lat: ArrayLike, lon: ArrayLike, h: ArrayLike) -> np.ndarray:
     """Geodetic (rad, rad, m) -> ECEF (m); vectorised, returns (..., 3)."""
     lat = np.asarray(lat, dtype=float)
     lon = np.asarray(lon, dtype=float)
@@ -88,7 +97,7 @@ def geodetic_to_ecef(lat, lon, h):
     return np.stack([x, y, z], axis=-1)
 
 
-def ecef_to_geodetic(xyz):
+def ecef_to_geodetic(xyz: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ECEF (..., 3) m -> geodetic (lat rad, lon rad, h m).
 
     Bowring's closed form followed by two Newton refinements: sub-millimetre everywhere
@@ -117,7 +126,7 @@ def ecef_to_geodetic(xyz):
     return lat, lon, h
 
 
-def mat_enu_from_ecef(lat, lon):
+def mat_enu_from_ecef(lat: ArrayLike, lon: ArrayLike) -> np.ndarray:
     """Rotation matrix projecting ECEF vectors into ENU at (lat, lon) rad; (..., 3, 3)."""
     lat = np.asarray(lat, dtype=float)
     lon = np.asarray(lon, dtype=float)
@@ -131,7 +140,8 @@ def mat_enu_from_ecef(lat, lon):
     ], axis=-2)
 
 
-def geodetic_to_enu(lat, lon, h, lat0, lon0, h0):
+def geodetic_to_enu(lat: ArrayLike, lon: ArrayLike, h: ArrayLike, lat0: ArrayLike, lon0: ArrayLike,
+                    h0: ArrayLike) -> np.ndarray:
     """Position(s) (rad, rad, m) in local ENU metres about the origin(s) (lat0, lon0, h0).
 
     Exact (through ECEF). Origins may be scalars or arrays broadcastable to the positions,
@@ -139,10 +149,12 @@ def geodetic_to_enu(lat, lon, h, lat0, lon0, h0):
     """
     d = geodetic_to_ecef(lat, lon, h) - geodetic_to_ecef(lat0, lon0, h0)
     m = mat_enu_from_ecef(lat0, lon0)
-    return np.einsum("...ij,...j->...i", m, d)
+    enu: np.ndarray = np.einsum("...ij,...j->...i", m, d)
+    return enu
 
 
-def enu_to_geodetic(enu, lat0, lon0, h0):
+def enu_to_geodetic(enu: ArrayLike, lat0: ArrayLike, lon0: ArrayLike, h0: ArrayLike
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Local ENU metres (..., 3) about (lat0, lon0, h0) -> geodetic (lat, lon, h)."""
     m = mat_enu_from_ecef(lat0, lon0)
     d = np.einsum("...ji,...j->...i", m, np.asarray(enu, dtype=float))

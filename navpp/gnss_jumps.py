@@ -10,7 +10,7 @@ decides what it is:
 
 - the fixes come back (a later fix within ``[gnss] reanchor_after_s`` of the jump is consistent
   with the fix before it): an outlier or a short burst, which the innovation gate rejects
-  fix by fix, as before;
+  fix by fix;
 - they stay displaced for longer than that: the gate would give way and re-anchor the filter on
   the displaced fixes (the path jumps across the globe and ends with a small sigma), so the log
   is inconsistent and the run is refused, naming the first fix of the jump.
@@ -65,8 +65,7 @@ def check_gnss_jumps(recording: Recording, vehicle_type: str, default_std_m, rea
     ok = step <= vmax * np.diff(t) + JUMP_SIGMAS * np.hypot(s[:-1], s[1:])
     jumps = np.nonzero(~ok)[0]
     resolved_to = -1                       # fixes up to this index are explained already
-    for k in jumps:
-        k = int(k)
+    for k in (int(j) for j in jumps):
         if k < resolved_to:
             continue
         if t[k] - t[0] <= reanchor_after_s and _leading_run(p, t, s, k, vmax, reanchor_after_s):

@@ -26,6 +26,7 @@ import os
 import signal
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
+from types import FrameType
 
 _received: int | None = None
 _installed = False
@@ -57,7 +58,7 @@ _RETRY_S = 0.05
 _retrying = False
 
 
-def _fragile(frame) -> bool:
+def _fragile(frame: FrameType | None) -> bool:
     """Whether the signal came while Python runs code that must not raise (see above): the
     current frame and up to 60 callers."""
     for _ in range(60):
@@ -79,7 +80,7 @@ def _redeliver(signum: int) -> None:
     timer.start()
 
 
-def _handler(signum: int, frame) -> None:
+def _handler(signum: int, frame: FrameType | None) -> None:
     global _received, _retrying
     if _received is None:
         _received = signum

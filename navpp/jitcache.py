@@ -4,7 +4,7 @@ navpp's kernels are compiled with ``cache=True``.  numba stores the machine code
 sources (``__pycache__``) or in the user's cache directory (``$XDG_CACHE_HOME/numba`` or
 ``~/.cache/numba``), or in ``$NUMBA_CACHE_DIR`` when set; if none of these can be written
 (a read-only install, a service account without a writable home) it raises ``RuntimeError:
-cannot cache function ...: no locator available`` at import, so even ``navpp filters`` failed.
+cannot cache function ...: no locator available`` at import, which would stop even ``navpp filters``.
 
 :func:`configure` (called when :mod:`navpp` is imported, before numba is) checks those places
 the way numba does (creating the directory and a temporary file in it) and, when none is
@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import sys
+from typing import Any
 
 #: One line saying where the cache went and why, when :func:`configure` moved it; else empty.
 NOTE: list[str] = []
@@ -100,7 +101,7 @@ def configure() -> None:
                         "set NUMBA_CACHE_DIR to a writable directory")
             return
     os.environ["NUMBA_CACHE_DIR"] = where
-    numba_config = sys.modules.get("numba.core.config")
+    numba_config: Any = sys.modules.get("numba.core.config")
     if numba_config is not None:          # numba already imported: its config read the variable already
         numba_config.CACHE_DIR = where
     NOTE.append(f"{why}: compiled kernels are cached in {where} ({kept}); set NUMBA_CACHE_DIR to choose")

@@ -28,6 +28,7 @@ import numpy as np
 
 from navpp import geodesy
 from navpp.errors import InputError
+from navpp.ins.attitude import rph_deg_to_dcm
 from navpp.recording import GnssData, ReferenceData, Solution
 
 __all__ = [
@@ -36,7 +37,6 @@ __all__ = [
     "compute_metrics",
     "error_stats",
     "interpolate_solution",
-    "mat_nb_from_rph",
     "outage_metrics",
     "position_errors_enu",
     "wrap_deg",
@@ -64,8 +64,9 @@ def associate(t_est: np.ndarray, t_ref: np.ndarray, skip_holes: bool = False) ->
 
     Keeps the reference epochs with ``t_est[0] <= t_ref <= t_est[-1]`` (the span's ends
     included: the estimate is known there without extrapolation); with ``skip_holes``, not those
-    inside a hole of the estimate (an interval longer than the INS bridges, 10.5 s, and than 3
-    of its median intervals: the gap between two segments of a run, navpp.engine.imu_segments);
+    inside a hole of the estimate (an interval longer than the INS bridges,
+    :func:`navpp.ins.model.max_bridgeable_gap_s`, and than 3 of its median intervals: the gap
+    between two segments of a run, navpp.engine.imu_segments);
     non-finite reference times are dropped.
 
     Parameters
@@ -248,41 +249,6 @@ def error_stats(err: np.ndarray) -> dict[str, dict[str, float]]:
     }
 
 
-def _rx(a: np.ndarray) -> np.ndarray:
-    c, s, o, z = np.cos(a), np.sin(a), np.ones_like(a), np.zeros_like(a)
-    return np.stack([np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)], -2)
-
-
-def _ry(a: np.ndarray) -> np.ndarray:
-    c, s, o, z = np.cos(a), np.sin(a), np.ones_like(a), np.zeros_like(a)
-    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
-
-
-def _rz(a: np.ndarray) -> np.ndarray:
-    c, s, o, z = np.cos(a), np.sin(a), np.ones_like(a), np.zeros_like(a)
-    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
-
-
-def mat_nb_from_rph(rph_deg: np.ndarray) -> np.ndarray:
-    """Rotation body FLU -> navigation ENU from roll, pitch, heading (deg, navigation convention).
-
-    ``C_b^n = Rz(pi/2 - heading) @ Ry(-pitch) @ Rx(roll)`` with right-handed elementary
-    rotations: roll right side down positive, pitch nose up positive, heading clockwise from
-    north.  At zero roll and pitch the body x axis (forward) points to
-    ``(sin heading, cos heading, 0)`` in ENU.
-
-    Parameters
-    ----------
-    rph_deg : (..., 3) deg.
-
-    Returns
-    -------
-    (..., 3, 3) rotation matrices.
-    """
-    rph = np.radians(np.asarray(rph_deg, dtype=float))
-    return _rz(np.pi / 2 - rph[..., 2]) @ _ry(-rph[..., 1]) @ _rx(rph[..., 0])
-
-
 def _heading_from_velocity(vel_enu: np.ndarray) -> np.ndarray | None:
     """Heading (deg) of the horizontal velocity, held across slow epochs; None if never moving."""
     speed = np.hypot(vel_enu[:, 0], vel_enu[:, 1])
@@ -313,7 +279,7 @@ def _gnss_position_metrics(gnss: GnssData, ref: ReferenceData,
     note = None
     if np.any(lever != 0.0):
         if "rph_deg" in r:
-            mat_nb = mat_nb_from_rph(r["rph_deg"])
+            mat_nb = rph_deg_to_dcm(r["rph_deg"])
         else:
             heading = _heading_from_velocity(r["vel_enu"]) if "vel_enu" in r else None
             if heading is None:
@@ -323,8 +289,8 @@ def _gnss_position_metrics(gnss: GnssData, ref: ReferenceData,
                 note = ("only the vertical part of the lever arm applied: the reference has no attitude and "
                         "no velocity to take a heading from")
             else:
-                mat_nb = mat_nb_from_rph(np.stack([np.zeros_like(heading), np.zeros_like(heading),
-                                                   heading], axis=-1))
+                mat_nb = rph_deg_to_dcm(np.stack([np.zeros_like(heading), np.zeros_like(heading),
+                                                  heading], axis=-1))
                 note = ("lever arm rotated with the heading of the reference velocity "
                         "(roll and pitch taken as zero): the reference has no attitude")
         if mat_nb is not None:

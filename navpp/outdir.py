@@ -12,7 +12,7 @@ The rules, used by :func:`navpp.api.process` and :func:`navpp.comparison.compare
 - **Manifest** (``<out>/.navpp-manifest.json``): the names of the files navpp wrote there.
   A run removes an earlier result it did not write again (e.g. ``metrics.json`` of a run with a
   reference) only if the manifest lists it, so a file the user put there under a navpp name is
-  never deleted.  Directories written by a navpp version without a manifest keep such files.
+  never deleted; in a directory without a manifest no such file is removed.
 - **Inputs** (:func:`input_files`): a file that is an input of the current run (same device
   and inode) is never removed or replaced; a run whose output would replace one of its inputs
   is refused before it starts (:func:`refuse_overwriting_inputs`).
@@ -81,7 +81,7 @@ class OutDirLock:
                     raise InputError(f"{self.label} {self.out}: {who} is writing there; wait for it to end "
                                      f"or choose another {self.label}") from None
                 if exc.errno in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL):
-                    _unlink_quietly(self.path)      # a file system without flock: run unguarded, as before
+                    _unlink_quietly(self.path)      # a file system without flock: run unguarded
                     return
                 raise InputError(f"{self.label} {self.out}: cannot lock it ({_reason(exc)})") from None
             try:
@@ -101,7 +101,7 @@ class OutDirLock:
         os.write(fd, f"{os.getpid()}\n".encode())
         remove_leftovers(self.out, self.extra_leftovers)
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.release()
 
     def release(self) -> None:
@@ -132,7 +132,7 @@ def remove_leftovers(out: Path, names: Iterable[str] = ()) -> None:
     (``.<name>.<8 characters>.tmp``) for a navpp file name: one of ``names``, or ending in one
     of them when it starts with ``*`` (``"*_trajectory.png"``).  Only call it while holding
     ``out``'s lock: a live run makes these only while it holds the lock.  (Not the write
-    probes of :func:`navpp.api.prepare_out_dir`: a run makes one before it takes the lock.)
+    probes of :func:`navpp.outfiles.prepare_out_dir`: a run makes one before it takes the lock.)
     Best effort."""
     exact = {n for n in names if not n.startswith("*")} | {MANIFEST_NAME}
     endings = tuple(n[1:] for n in names if n.startswith("*"))
@@ -180,7 +180,7 @@ def write_manifest(out: Path, names: Iterable[str]) -> None:
 # ----------------------------------------------------------------------------------- inputs
 
 
-def input_files(*paths: str | os.PathLike | None, not_in_dirs: Iterable[str] = ()) -> set[tuple[int, int]]:
+def input_files(*paths: str | os.PathLike[str] | None, not_in_dirs: Iterable[str] = ()) -> set[tuple[int, int]]:
     """(device, inode) of every input file: each path given, and for a directory (a CSV log, a
     ROS 2 bag) the files directly inside it except those named in ``not_in_dirs`` (navpp's own
     output names: a log directory may also be the output directory).  Missing paths are skipped."""

@@ -18,13 +18,13 @@ the fixes against ``[gnss] max_rejected_fraction``, as for the gate:
 - GNSS noise far SMALLER than the prior R says (standard deviations in cm read as m): the
   difference of consecutive innovations (the INS's drift cancels, the fixes' noise stays),
   normalised by the two fixes' prior R, below the lower chi-square quantile ``chi2_3(1 - p)``
-  at more than half the fixes (a consistent filter puts about ``1 - p`` of them there; real
-  receivers' time-correlated fixes put up to a fifth there: the bundled RTK walk), i.e. the
+  at more than half the fixes (a consistent filter puts about ``1 - p`` of them there; a
+  real receiver's time-correlated fixes put more, but far from half), i.e. the
   sigmas at least ``sqrt(chi2_3 median / chi2_3(1 - p))`` = 12x too large at the default p;
   only when those differences look white (lag-1 correlation at most
   :data:`WHITE_DIFFERENCE_CORRELATION`): a receiver's smoothed or time-correlated fixes also
   move little from fix to fix with an honest sigma, and then the run only warns that it cannot
-  tell (a real 10 Hz car log: differences 63x smaller than its sigma, correlated +0.3 or so);
+  tell;
 - the solution's altitude beyond the fixes' altitude range by more than the 1-dof gate
   quantile of the fixes' and the solution's vertical sigma, its speed beyond the vehicle
   type's (:data:`MAX_SPEED_MPS`), a non-finite position or sigma.
@@ -53,9 +53,8 @@ MAX_SPEED_MPS = {"car": 150.0, "none": 343.0}
 WHITE_DIFFERENCE_CORRELATION = -0.25
 
 #: Altitude departures from the fixes' band below this, m, are left to the innovation checks and
-#: the consistency warnings: the bound is for gross failures (the issue's -15,865 m and
-#: 566,237 km), not for an overconfident filter a few metres off (the real walk with the preset's
-#: noise dips 3 m below its RTK fixes' band with a 1-sigma of a few cm).
+#: the consistency warnings: the bound is for gross failures (an altitude kilometres or more off),
+#: not for an overconfident filter a few metres off the fixes' band.
 ALTITUDE_FLOOR_M = 100.0
 
 #: The gate probability the checks use when gating is off (``gate_probability = 0``).
@@ -63,7 +62,7 @@ DEFAULT_GATE_PROBABILITY = 0.9999
 
 
 @dataclass(frozen=True)
-class Finding:
+class Verdict:
     """One thing wrong with a run: ``fatal`` refuses the run; ``headline`` is what was seen
     (short, for the one error line); ``cause`` the single most likely cause with its setting
     (or None: the caller ranks the usual ones)."""
@@ -148,7 +147,7 @@ def gate_quantiles(gate_probability: float) -> tuple[float, float, float]:
 
 def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray, S: np.ndarray,
                         R_used: np.ndarray, var0: np.ndarray, accepted: np.ndarray, gate_probability: float,
-                        max_fraction: float) -> list[Finding]:
+                        max_fraction: float) -> list[Verdict]:
     """The innovation checks against the prior R (module docstring).
 
     t : (M,) s, the fixes' times; nu : (M, 3) innovations, ENU m (NaN rows: no update); S : (M, 3, 3) their
@@ -160,7 +159,7 @@ def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray
     if m < 20:
         return []
     hi3, lo3, hi1 = gate_quantiles(gate_probability)
-    out: list[Finding] = []
+    out: list[Verdict] = []
 
     def share(n: int, of: int) -> str:
         return f"{n} of {of} fixes ({100.0 * n / max(of, 1):.0f}%)"
@@ -182,9 +181,9 @@ def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray
         if r1 <= WHITE_DIFFERENCE_CORRELATION:
             what = (f"GNSS noise {scale:.3g}x smaller than {std_label} say ({share(low, n_d)} below "
                     f"the chi-square {100.0 * _tail(gate_probability):.2g}% bound)")
-            out.append(Finding(max_fraction < 1.0, what, "those sigmas are too large (cm read as m?)"))
+            out.append(Verdict(max_fraction < 1.0, what, "those sigmas are too large (cm read as m?)"))
         else:
-            out.append(Finding(False, f"the fixes move {scale:.3g}x less from one to the next than {std_label} "
+            out.append(Verdict(False, f"the fixes move {scale:.3g}x less from one to the next than {std_label} "
                                       f"say, but their errors are correlated from fix to fix (consecutive "
                                       f"differences correlate {r1:+.2f}, white noise: -0.5): navpp cannot tell "
                                       "whether those sigmas are too large or the receiver smooths its fixes"))
@@ -208,7 +207,7 @@ def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray
     if beyond > max_fraction * m and (grown > max_fraction * m or far > max_fraction * max(n_acc, 1)):
         how = (f"learnt R {float(np.median(r_ratio)):.3g}x it" if grown > max_fraction * m
                else f"solution off {share(far, n_acc)} it took")
-        out.append(Finding(True, f"{name} diverged: {share(beyond, m)} fail the configured GNSS sigma's gate ({how})"))
+        out.append(Verdict(True, f"{name} diverged: {share(beyond, m)} fail the configured GNSS sigma's gate ({how})"))
     return out
 
 
@@ -223,7 +222,7 @@ _CHI2_3_MEDIAN = 2.365973884375338     # median of the chi-square distribution w
 
 def solution_findings(name: str, vehicle_type: str, t: np.ndarray, alt: np.ndarray, vel_enu: np.ndarray,
                       std_enu: np.ndarray, fix_alt: np.ndarray, fix_std_u: np.ndarray,
-                      gate_probability: float, fatal: bool = True) -> list[Finding]:
+                      gate_probability: float, fatal: bool = True) -> list[Verdict]:
     """The solution's own bounds (O(n), vectorised), for gross failures the innovation checks
     may miss: finite; altitude within the fixes' altitude band widened on each side by the
     band's own height, :data:`ALTITUDE_FLOOR_M`, and the 1-dof gate quantile of the fixes' and
@@ -237,7 +236,7 @@ def solution_findings(name: str, vehicle_type: str, t: np.ndarray, alt: np.ndarr
     bad = ~(np.isfinite(alt) & np.isfinite(std_enu).all(axis=1))
     if bad.any():
         i = int(np.argmax(bad))
-        return [Finding(fatal, f"{name} diverged: its solution is not finite from t = {float(t[i]):.3f} s")]
+        return [Verdict(fatal, f"{name} diverged: its solution is not finite from t = {float(t[i]):.3f} s")]
     k = math.sqrt(gate_quantiles(gate_probability)[2])
     su = float(np.max(fix_std_u)) if np.all(np.isfinite(fix_std_u)) else 0.0
     band = float(np.max(fix_alt)) - float(np.min(fix_alt))
@@ -248,7 +247,7 @@ def solution_findings(name: str, vehicle_type: str, t: np.ndarray, alt: np.ndarr
     if out_alt.any():
         i = int(np.argmax(out_alt))
         j = int(np.argmax(np.abs(alt - 0.5 * (lo + hi))))
-        return [Finding(fatal, f"{name} diverged: its altitude leaves the fixes' {lo:.0f} .. {hi:.0f} m at "
+        return [Verdict(fatal, f"{name} diverged: its altitude leaves the fixes' {lo:.0f} .. {hi:.0f} m at "
                               f"t = {float(t[i]):.1f} s (reaching {float(alt[j]):.4g} m)")]
     vmax = MAX_SPEED_MPS.get(vehicle_type, MAX_SPEED_MPS["none"])
     speed2 = np.einsum("ij,ij->i", vel_enu, vel_enu)
@@ -256,7 +255,7 @@ def solution_findings(name: str, vehicle_type: str, t: np.ndarray, alt: np.ndarr
     if fast.any():
         i = int(np.argmax(fast))
         j = int(np.argmax(speed2))
-        return [Finding(fatal, f"{name} diverged: its speed exceeds {vmax:.0f} m/s (the most a [vehicle] type = "
+        return [Verdict(fatal, f"{name} diverged: its speed exceeds {vmax:.0f} m/s (the most a [vehicle] type = "
                               f"\"{vehicle_type}\" goes) at t = {float(t[i]):.1f} s, reaching "
                               f"{math.sqrt(float(speed2[j])):.4g} m/s")]
     return []

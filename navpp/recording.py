@@ -17,6 +17,12 @@ from .errors import InputError
 #: A stamp may step back by at most this much (s) and still be taken for a reordered message
 #: (sorted into place); a larger step back is a clock jump or a concatenated log: an error.
 MAX_REORDER_S = 1.0
+#: An IMU interval longer than this many nominal sample periods is a long gap (dropped
+#: messages, a logger stall).  The strapdown integrates across any gap with its true length,
+#: interpolating the rates linearly; across a long gap the motion it cannot see is added to the
+#: covariance (:meth:`navpp.ins.model.InsModel.gap_noise`).  Shorter gaps (a few dropped samples) cost nothing
+#: measurable at vehicle dynamics and are integrated silently.
+LONG_GAP_PERIODS = 5.0
 
 
 def _readonly(*arrays: np.ndarray | None) -> None:
@@ -76,7 +82,7 @@ def lone_stamp(t: np.ndarray, reorder_s: float = MAX_REORDER_S) -> tuple[int, fl
     stream itself, in seconds:
 
     - inside the stream (``0 < k < N-1``): the two neighbours are at most two long-gap spans
-      apart (``2 * 5`` median intervals, :data:`navpp.ins.model.LONG_GAP_PERIODS`) and stamp
+      apart (``2 * 5`` median intervals, :data:`LONG_GAP_PERIODS`) and stamp
       ``k`` lies outside their interval by more than that span and more than ``reorder_s``
       (a smaller step back is a reordering, sorted by :func:`order_samples`);
     - at either end: the step to the neighbour is longer than the whole rest of the stream
@@ -104,8 +110,6 @@ def lone_stamp(t: np.ndarray, reorder_s: float = MAX_REORDER_S) -> tuple[int, fl
     pos = d[d > 0]
     if pos.size == 0:
         return None
-    from .ins.model import LONG_GAP_PERIODS
-
     span = LONG_GAP_PERIODS * float(np.median(pos))        # the longest regular step, s
     regular = (d > 0) & (d <= span)
     floor = max(span, reorder_s)

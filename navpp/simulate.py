@@ -58,14 +58,14 @@ leaves the other two streams as they were.
 
 Real-world effects (consumer car logs)
 --------------------------------------
-All off by default: a spec without them writes the same files as before they existed.
+All off by default; with every one off the third stream is not drawn from.
 ``realism="consumer-car"`` turns on the bundle :data:`REALISM_BUNDLES` at once; a field given
 explicitly overrides the bundle's value (0 turns an effect off).  ``imu_rate_hz``,
 ``gnss_rate_hz``, ``preset``, ``still_s``, ``gnss_std_h_m`` and ``gnss_std_u_m`` default to None:
 the bundle's value with one, else 125 Hz, 5 Hz, automotive, 60 s, 1.8 m, 2.5 m.
 
 - Mounting ``mounting_rpy_deg`` (deg, roll/pitch/yaw about x, y, z, ROS rpy): the IMU is rotated
-  against the body (vehicle, FLU); with ``C_bs = rpy_matrix(mounting_rpy_deg)`` (sensor -> body,
+  against the body (vehicle, FLU); with ``C_bs = rpy_deg_to_dcm(mounting_rpy_deg)`` (sensor -> body,
   the convention of navpp's ``[imu] mounting_rpy_deg``) it reads ``w_s = C_bs^T w_b`` and
   ``f_s = C_bs^T f_b``, so ``[imu] mounting_rpy_deg`` = the same angles undoes it exactly.  Roll
   90 deg: the IMU's +y is up.  All sensor errors below are in the sensor axes.
@@ -83,9 +83,8 @@ the bundle's value with one, else 125 Hz, 5 Hz, automotive, 60 s, 1.8 m, 2.5 m.
   :data:`VIBRATION_DAMPING`), whose integral stays bounded (the mount's angle and velocity
   oscillate, they do not wander); the rest is white (broadband shaking aliased into the
   samples), an angle random walk of ``sqrt(share) * std * sqrt(dt)``: about 9 deg/sqrt(h) at
-  16 m/s for the consumer-car bundle at 100 Hz, near the ~10 deg/sqrt(h) that a real car log of
-  that vibration needed (issue 14).  The oscillation's frequency is physical; at a low IMU rate it
-  aliases.
+  16 m/s for the consumer-car bundle at 100 Hz.  The oscillation's frequency is physical; at a
+  low IMU rate it aliases.
 - Stale rows ``stale_fraction``: each IMU row after the first is, independently with this
   probability, a copy of the previous row's six values under its own (new) stamp.
 - Clock offset ``imu_time_offset_s`` (s): the IMU row's written stamp = true sample time +
@@ -114,11 +113,12 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from functools import cached_property
 from itertools import pairwise
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -126,7 +126,7 @@ from scipy.signal import lfilter
 
 from navpp.errors import ConfigError
 from navpp.geodesy import E2, OMEGA_E, A, gravity, radii
-from navpp.ins.attitude import rph_to_dcm, rpy_matrix
+from navpp.ins.attitude import rph_to_dcm, rpy_deg_to_dcm
 from navpp.recording import GnssData, ImuData, Recording, ReferenceData
 
 G0 = 9.80665  #: standard gravity, m/s^2 (mg conversion and the roll lean law)
@@ -138,6 +138,15 @@ _DEG_PER_H = math.pi / 180.0 / 3600.0  # deg/h -> rad/s
 _DEG_PER_SQRT_H = math.pi / 180.0 / 60.0  # deg/sqrt(h) -> rad/sqrt(s)
 _MPS_PER_SQRT_H = 1.0 / 60.0  # m/s/sqrt(h) -> m/s/sqrt(s)
 _MG = 9.80665e-3  # mg -> m/s^2
+
+_T = TypeVar("_T")
+
+
+def _resolved(value: _T | None) -> _T:
+    """A spec field that :meth:`SimulationSpec.__post_init__` has filled in (never None after it)."""
+    if value is None:  # pragma: no cover - __post_init__ resolves every default
+        raise AssertionError("a SimulationSpec field was left unresolved")
+    return value
 
 
 # --------------------------------------------------------------------------- IMU grades
@@ -293,9 +302,9 @@ class SimulationSpec:
                 raise ConfigError(f"simulate: {name} must be a finite number, got {value!r}")
         if not self.duration_s >= 30.0:
             raise ConfigError(f"simulate: duration must be >= 30 s, got {self.duration_s!r}")
-        if not self.imu_rate_hz > 0.0:
+        if not _resolved(self.imu_rate_hz) > 0.0:
             raise ConfigError(f"simulate: IMU rate must be > 0 Hz, got {self.imu_rate_hz!r}")
-        if not 1.0 <= self.gnss_rate_hz <= 10.0:
+        if not 1.0 <= _resolved(self.gnss_rate_hz) <= 10.0:
             raise ConfigError(f"simulate: GNSS rate must be within 1-10 Hz, got {self.gnss_rate_hz!r}")
         if not self.reference_rate_hz > 0.0:
             raise ConfigError(f"simulate: reference rate must be > 0 Hz, got {self.reference_rate_hz!r}")
@@ -305,7 +314,7 @@ class SimulationSpec:
             )
         if self.gnss_error not in ("white", "correlated"):
             raise ConfigError(f"simulate: gnss_error must be 'white' or 'correlated', got {self.gnss_error!r}")
-        if not self.still_s >= 0.0:
+        if not _resolved(self.still_s) >= 0.0:
             raise ConfigError(f"simulate: still_s must be >= 0 s, got {self.still_s!r}")
         for name in ("gnss_std_h_m", "gnss_std_u_m", "gnss_std_vel_mps"):
             if not getattr(self, name) >= 0.0:
@@ -317,7 +326,7 @@ class SimulationSpec:
 
     def _check_realism(self) -> None:
         """Validate the real-world effects' fields (tuples become tuples of floats)."""
-        def number(name: str, value) -> float:
+        def number(name: str, value: object) -> float:
             if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
                     or not math.isfinite(value):
                 raise ConfigError(f"simulate: {name} must be a finite number, got {value!r}")
@@ -358,7 +367,7 @@ class SimulationSpec:
         """Still period actually used: ``min(still_s, duration_s / 2)``; 0 with ``start_in_motion``."""
         if self.start_in_motion:
             return 0.0
-        return min(self.still_s, 0.5 * self.duration_s)
+        return min(_resolved(self.still_s), 0.5 * self.duration_s)
 
     @property
     def start_cut_s(self) -> float:
@@ -441,6 +450,7 @@ class _Channel:
         return (self.base + before + amp * f, amp * d1 / t_scale, amp * d2 / (t_scale * t_scale))
 
     def breakpoints(self) -> np.ndarray:
+        """Start and end times (s) of every event, unsorted."""
         return np.concatenate([self.start, self.start + self.length])
 
     def piece(self, t_mid: float) -> tuple[float, float, float, float, bool]:
@@ -539,6 +549,7 @@ class DriveControls:
                     theta=theta, theta_dot=theta_dot, phi=phi, phi_dot=phi_dot)
 
     def breakpoints(self) -> np.ndarray:
+        """Sorted times (s) where any control's event starts or ends: between two, all are analytic."""
         return np.unique(np.concatenate([c.breakpoints() for c in (self.speed, self.heading, self.pitch)]))
 
 
@@ -730,7 +741,8 @@ class Trajectory:
         return gyro, accel
 
 
-def _position_rhs(speed_piece: tuple, heading_piece: tuple, pitch_piece: tuple):
+def _position_rhs(speed_piece: tuple, heading_piece: tuple,
+                  pitch_piece: tuple) -> Callable[[float, np.ndarray], list[float]]:
     """Scalar right-hand side of the position ODE on one breakpoint-free chunk."""
     s_off, s_amp, s_t0, s_len, _ = speed_piece
     p_off, p_amp, p_t0, p_len, _ = heading_piece
@@ -738,7 +750,7 @@ def _position_rhs(speed_piece: tuple, heading_piece: tuple, pitch_piece: tuple):
     one_minus_e2 = 1.0 - E2
     sin, cos, sqrt = math.sin, math.cos, math.sqrt
 
-    def rhs(t, y):
+    def rhs(t: float, y: np.ndarray) -> list[float]:
         s = s_off + s_amp * _scalar_shape((t - s_t0) / s_len, True)
         psi = p_off + p_amp * _scalar_shape((t - p_t0) / p_len, True)
         th = q_off + q_amp * _scalar_shape((t - q_t0) / q_len, False)
@@ -860,20 +872,46 @@ def simulate(spec: SimulationSpec) -> Simulation:
     Simulation
     """
     traj = Trajectory.from_spec(spec)
-    streams = np.random.SeedSequence(spec.seed).spawn(3)  # the first two as ever: spawn keys (0,), (1,)
+    streams = np.random.SeedSequence(spec.seed).spawn(3)  # IMU (0,), GNSS (1,), real-world effects (2,)
     imu_rng, gnss_rng = (np.random.default_rng(s) for s in streams[:2])
+    imu, truth_imu, err, applied = _simulate_imu(spec, traj, imu_rng, streams[2])
+    gnss, errors = _simulate_gnss(spec, traj, gnss_rng, err)
+    if applied is not None:
+        gnss, applied["gnss_gap"] = _gnss_gap(spec, traj, gnss)
+        if applied["gnss_gap"] is not None:
+            keep = applied["gnss_gap"].pop("_keep")
+            for key in ("gnss_error_enu", "gnss_true_lat_deg", "gnss_true_lon_deg", "gnss_true_alt",
+                        "gnss_true_vel_enu"):
+                if key in errors:
+                    errors[key] = errors[key][keep]
+    return Simulation(
+        imu=imu,
+        gnss=gnss,
+        reference=_simulate_reference(spec, traj),
+        truth_imu=truth_imu,
+        t0_ns=int(round(spec.t0_unix * 1e6)) * 1000,  # the microsecond the CSV times are written to
+        spec=spec,
+        sensor_errors=errors,
+        trajectory=traj,
+        realism=applied,
+    )
 
-    # IMU ---------------------------------------------------------------------------------
-    dt = 1.0 / spec.imu_rate_hz
-    t_imu = _sample_times(spec.duration_s, spec.imu_rate_hz)
+
+def _simulate_imu(spec: SimulationSpec, traj: Trajectory, imu_rng: np.random.Generator,
+                  effects_seed: np.random.SeedSequence) -> tuple[ImuData, ImuData, dict, dict | None]:
+    """The logged IMU (written stamps, sensor axes, with errors), the error-free IMU of the body at
+    the true sample times, the drawn errors (:attr:`Simulation.sensor_errors`) and the applied
+    real-world effects (None when none is on; ``effects_seed`` seeds their draws)."""
+    dt = 1.0 / _resolved(spec.imu_rate_hz)
+    t_imu = _sample_times(spec.duration_s, _resolved(spec.imu_rate_hz))
     st_imu = traj.state(t_imu) if spec.realistic else None
     gyro_true, accel_true = traj.ideal_imu(t_imu, st_imu)
     gyro_in, accel_in = gyro_true, accel_true
     mount = None
     if spec.mounting_rpy_deg is not None:
-        mount = rpy_matrix(spec.mounting_rpy_deg)  # sensor -> body, as navpp's [imu] mounting_rpy_deg
+        mount = rpy_deg_to_dcm(spec.mounting_rpy_deg)  # sensor -> body, as navpp's [imu] mounting_rpy_deg
         gyro_in, accel_in = gyro_true @ mount, accel_true @ mount  # rows: C_bs^T w_b, C_bs^T f_b
-    grade = IMU_GRADES[spec.preset] if spec.errors else IMU_GRADES["ideal"]
+    grade = IMU_GRADES[_resolved(spec.preset)] if spec.errors else IMU_GRADES["ideal"]
     err = draw_imu_errors(imu_rng, t_imu.size, dt, grade)
     gyro_white = err.pop("_gyro_white")
     accel_white = err.pop("_accel_white")
@@ -890,12 +928,18 @@ def simulate(spec: SimulationSpec) -> Simulation:
     del gyro_white, accel_white
     applied = None
     t_imu_written = t_imu
-    if spec.realistic:
+    if st_imu is not None:
         gyro, accel, t_imu_written, applied = _real_world_imu(
-            spec, np.random.default_rng(streams[2]), t_imu, st_imu, gyro_in, accel_in, gyro, accel, err, mount)
+            spec, np.random.default_rng(effects_seed), t_imu, st_imu, gyro_in, accel_in, gyro, accel, err, mount)
+    return (ImuData(t=t_imu_written, gyro=gyro, accel=accel),
+            ImuData(t=t_imu.copy(), gyro=gyro_true, accel=accel_true), err, applied)
 
-    # GNSS --------------------------------------------------------------------------------
-    t_gnss = _sample_times(spec.duration_s, spec.gnss_rate_hz)
+
+def _simulate_gnss(spec: SimulationSpec, traj: Trajectory, gnss_rng: np.random.Generator,
+                   imu_errors: dict) -> tuple[GnssData, dict]:
+    """The GNSS fixes of the antenna (all of them: the gap is cut by :func:`_gnss_gap`) and the
+    sensor errors: ``imu_errors`` plus the GNSS errors and antenna truth."""
+    t_gnss = _sample_times(spec.duration_s, _resolved(spec.gnss_rate_hz))
     st = traj.state(t_gnss)
     mat_nb = rph_to_dcm(st["rph"][:, 0], st["rph"][:, 1], st["rph"][:, 2])
     lever = np.asarray(spec.lever_arm_m, dtype=float)
@@ -906,11 +950,11 @@ def simulate(spec: SimulationSpec) -> Simulation:
         e_gnss = gnss_rng.standard_normal((m, 3)) * std
         std_total = std
     else:
-        gm = gauss_markov(gnss_rng, m, 1.0 / spec.gnss_rate_hz, std, spec.gnss_corr_time_s)
+        gm = gauss_markov(gnss_rng, m, 1.0 / _resolved(spec.gnss_rate_hz), std, spec.gnss_corr_time_s)
         e_gnss = gm + gnss_rng.standard_normal((m, 3)) * (0.5 * std)
         std_total = std * math.sqrt(1.25)
     lat_m, lon_m, h_m = _offset_geodetic(lat_a, lon_a, h_a, e_gnss)
-    errors = dict(err, gnss_error_enu=e_gnss, gnss_true_lat_deg=np.degrees(lat_a),
+    errors = dict(imu_errors, gnss_error_enu=e_gnss, gnss_true_lat_deg=np.degrees(lat_a),
                   gnss_true_lon_deg=np.degrees(lon_a), gnss_true_alt=h_a)
     vel_m = std_vel = None
     if spec.gnss_velocity:
@@ -922,36 +966,19 @@ def simulate(spec: SimulationSpec) -> Simulation:
         errors["gnss_true_vel_enu"] = vel_a
     gnss = GnssData(t=t_gnss, lat_deg=np.degrees(lat_m), lon_deg=np.degrees(lon_m), alt=h_m,
                     std_enu=np.tile(std_total, (m, 1)), vel_enu=vel_m, std_vel_enu=std_vel)
-    if spec.realistic:
-        gnss, applied["gnss_gap"] = _gnss_gap(spec, traj, gnss)
-        if applied["gnss_gap"] is not None:
-            keep = applied["gnss_gap"].pop("_keep")
-            for key in ("gnss_error_enu", "gnss_true_lat_deg", "gnss_true_lon_deg", "gnss_true_alt",
-                        "gnss_true_vel_enu"):
-                if key in errors:
-                    errors[key] = errors[key][keep]
+    return gnss, errors
 
-    # reference ---------------------------------------------------------------------------
+
+def _simulate_reference(spec: SimulationSpec, traj: Trajectory) -> ReferenceData:
+    """The exact truth of the body origin at ``reference_rate_hz`` (heading in [0, 360) deg)."""
     t_ref = _sample_times(spec.duration_s, spec.reference_rate_hz)
     sr = traj.state(t_ref)
     rph_deg = np.degrees(sr["rph"])
     rph_deg[:, 2] = np.mod(rph_deg[:, 2], 360.0)
     rph_deg[:, 2] = np.where(rph_deg[:, 2] >= 360.0, 0.0, rph_deg[:, 2])
-    reference = ReferenceData(t=t_ref, lat_deg=np.degrees(sr["lat"]), lon_deg=np.degrees(sr["lon"]),
-                              alt=sr["h"], vel_enu=sr["vel_enu"], rph_deg=rph_deg,
-                              source="navpp.simulate truth (body origin)")
-
-    return Simulation(
-        imu=ImuData(t=t_imu_written, gyro=gyro, accel=accel),
-        gnss=gnss,
-        reference=reference,
-        truth_imu=ImuData(t=t_imu.copy(), gyro=gyro_true, accel=accel_true),
-        t0_ns=int(round(spec.t0_unix * 1e6)) * 1000,  # the microsecond the CSV times are written to
-        spec=spec,
-        sensor_errors=errors,
-        trajectory=traj,
-        realism=applied,
-    )
+    return ReferenceData(t=t_ref, lat_deg=np.degrees(sr["lat"]), lon_deg=np.degrees(sr["lon"]),
+                         alt=sr["h"], vel_enu=sr["vel_enu"], rph_deg=rph_deg,
+                         source="navpp.simulate truth (body origin)")
 
 
 #: Vibration (module docstring): the mount's oscillation, Hz, its damping ratio, and the share of
@@ -988,35 +1015,64 @@ def _real_world_imu(spec: SimulationSpec, rng: np.random.Generator, t: np.ndarra
     stamps (s from ``t0_unix``) and the applied effects (``realism.json``).  Draws from
     ``rng`` in a fixed order: gyro vibration, accel vibration, stale rows.
     """
-    on = spec.errors
     speed = np.linalg.norm(state["vel_enu"], axis=1)
     applied: dict = {"realism": spec.realism}
-
     meas = {"gyro": gyro, "accel": accel}
     true_s = {"gyro": gyro_s, "accel": accel_s}
     for kind, unit, mis_deg in (("gyro", math.radians(1.0), spec.gyro_misalignment_deg),
                                 ("accel", _MG, spec.accel_misalignment_deg)):
-        mis = np.zeros(3) if mis_deg is None or not on else np.radians(mis_deg)
-        n = np.zeros((3, 3))
-        n[1, 0], n[2, 0], n[2, 1] = mis  # axis y senses x, z senses x, z senses y (rad)
-        if n.any():
-            meas[kind] = meas[kind] + true_s[kind] @ n.T
-        real = on and spec.preset != "ideal"  # the preset's errors are in (or the extras alone)
-        sf = err[f"{kind}_scale_factor"] if real else np.zeros(3)
-        bias = err[f"{kind}_bias"] if real else np.zeros(3)
-        if not real and on and spec.preset == "ideal":  # an ideal IMU with explicit extras
-            sf, bias = _extras_alone(spec, kind)
-            meas[kind] = meas[kind] + sf * true_s[kind] + bias
-        applied[kind] = {
-            "turn_on_bias": (bias / unit).tolist(),
-            "turn_on_bias_units": "deg/s" if kind == "gyro" else "mg",
-            "scale_factor": np.asarray(sf, dtype=float).tolist(),
-            "misalignment_deg": np.degrees(mis).tolist(),
-            "error_matrix": (np.eye(3) + np.diag(sf) + n).tolist(),
-            "model": "measured = error_matrix @ true (sensor axes) + turn_on_bias + Gauss-Markov + white "
-                     "+ vibration",
-        }
+        meas[kind], applied[kind] = _axis_errors(spec, kind, unit, mis_deg, meas[kind], true_s[kind], err)
+    applied["vibration"] = _add_vibration(spec, rng, t, speed, meas)
+    gyro, accel, applied["stale_rows"] = _stale_rows(spec, rng, meas["gyro"], meas["accel"])
+    offset = spec.imu_time_offset_s or 0.0
+    applied["imu_time_offset_s"] = spec.imu_time_offset_s
+    applied["imu_time_offset_meaning"] = ("written IMU stamp = true time + offset (the IMU is late for > 0); "
+                                          "[gnss] time_offset_s = offset puts the GNSS on the IMU's time base")
+    applied["mounting_rpy_deg"] = None if spec.mounting_rpy_deg is None else list(spec.mounting_rpy_deg)
+    applied["mounting_matrix"] = None if mount is None else mount.tolist()
+    applied["mounting_meaning"] = ("sensor -> body rotation (as [imu] mounting_rpy_deg, rpy_matrix): the IMU "
+                                   "reads w_s = C^T w_b, f_s = C^T f_b")
+    applied["start_in_motion"] = bool(spec.start_in_motion)
+    applied["start_speed_mps"] = float(speed[0])
+    applied["start_cut_s"] = spec.start_cut_s
+    applied["still_s"] = spec.still_effective_s
+    t_written = t + offset if offset else t
+    return gyro, accel, t_written, applied
 
+
+def _axis_errors(spec: SimulationSpec, kind: str, unit: float, mis_deg: tuple[float, float, float] | None,
+                 meas: np.ndarray, true_s: np.ndarray, err: dict) -> tuple[np.ndarray, dict]:
+    """The ``kind`` ("gyro" / "accel") readings with the axis non-orthogonality (and, for an ideal
+    IMU, the spec's own scale factors and biases) added, and their entry of ``realism.json``
+    (biases in ``unit``: rad/s per deg/s, m/s^2 per mg)."""
+    on = spec.errors
+    mis = np.zeros(3) if mis_deg is None or not on else np.radians(mis_deg)
+    n = np.zeros((3, 3))
+    n[1, 0], n[2, 0], n[2, 1] = mis  # axis y senses x, z senses x, z senses y (rad)
+    if n.any():
+        meas = meas + true_s @ n.T
+    real = on and spec.preset != "ideal"  # the preset's errors are in (or the extras alone)
+    sf = err[f"{kind}_scale_factor"] if real else np.zeros(3)
+    bias = err[f"{kind}_bias"] if real else np.zeros(3)
+    if not real and on and spec.preset == "ideal":  # an ideal IMU with explicit extras
+        sf, bias = _extras_alone(spec, kind)
+        meas = meas + sf * true_s + bias
+    return meas, {
+        "turn_on_bias": (bias / unit).tolist(),
+        "turn_on_bias_units": "deg/s" if kind == "gyro" else "mg",
+        "scale_factor": np.asarray(sf, dtype=float).tolist(),
+        "misalignment_deg": np.degrees(mis).tolist(),
+        "error_matrix": (np.eye(3) + np.diag(sf) + n).tolist(),
+        "model": "measured = error_matrix @ true (sensor axes) + turn_on_bias + Gauss-Markov + white "
+                 "+ vibration",
+    }
+
+
+def _add_vibration(spec: SimulationSpec, rng: np.random.Generator, t: np.ndarray, speed: np.ndarray,
+                   meas: dict[str, np.ndarray]) -> dict:
+    """Add the vibration to the readings of ``meas`` ("gyro", "accel": each entry replaced) and
+    return its model for ``realism.json``; ``speed`` (N,) m/s is the body's true speed."""
+    on = spec.errors
     vib_model = {"model": "per sensor axis, sample std = a + b * speed (true speed, m/s); engine on for the "
                           "whole log; variance share 1 - white_share: sampled rate of a damped oscillation "
                           "(bounded integral), white_share: white",
@@ -1032,34 +1088,24 @@ def _real_world_imu(spec: SimulationSpec, rng: np.random.Generator, t: np.ndarra
         unit_std = math.sqrt(1.0 - VIBRATION_WHITE_SHARE) * shake + math.sqrt(VIBRATION_WHITE_SHARE) * white
         meas[kind] = meas[kind] + unit_std * sigma[:, None]
         vib_model[f"{kind}_{'dps' if kind == 'gyro' else 'mps2'}"] = {"a": pair[0], "b": pair[1]}
-    applied["vibration"] = vib_model
+    return vib_model
 
-    gyro, accel = meas["gyro"], meas["accel"]
+
+def _stale_rows(spec: SimulationSpec, rng: np.random.Generator, gyro: np.ndarray,
+                accel: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The readings with ``stale_fraction`` of the rows after the first replaced by the previous
+    row's values, and the ``realism.json`` entry listing them."""
+    n = int(gyro.shape[0])
     stale_idx = np.zeros(0, dtype=np.int64)
     if spec.stale_fraction:
-        stale = rng.random(t.size) < spec.stale_fraction
+        stale = rng.random(n) < spec.stale_fraction
         stale[0] = False
-        src = np.maximum.accumulate(np.where(stale, 0, np.arange(t.size)))  # the last fresh row
+        src = np.maximum.accumulate(np.where(stale, 0, np.arange(n)))  # the last fresh row
         gyro, accel = gyro[src], accel[src]
         stale_idx = np.nonzero(stale)[0]
-    applied["stale_rows"] = {"fraction": spec.stale_fraction, "count": int(stale_idx.size),
-                             "rows": stale_idx.tolist(),
-                             "meaning": "0-based IMU rows (after the header) that repeat the previous row's six "
-                                        "values under their own stamp"}
-    offset = spec.imu_time_offset_s or 0.0
-    applied["imu_time_offset_s"] = spec.imu_time_offset_s
-    applied["imu_time_offset_meaning"] = ("written IMU stamp = true time + offset (the IMU is late for > 0); "
-                                          "[gnss] time_offset_s = offset puts the GNSS on the IMU's time base")
-    applied["mounting_rpy_deg"] = None if mount is None else list(spec.mounting_rpy_deg)
-    applied["mounting_matrix"] = None if mount is None else mount.tolist()
-    applied["mounting_meaning"] = ("sensor -> body rotation (as [imu] mounting_rpy_deg, rpy_matrix): the IMU "
-                                   "reads w_s = C^T w_b, f_s = C^T f_b")
-    applied["start_in_motion"] = bool(spec.start_in_motion)
-    applied["start_speed_mps"] = float(speed[0])
-    applied["start_cut_s"] = spec.start_cut_s
-    applied["still_s"] = spec.still_effective_s
-    t_written = t + offset if offset else t
-    return gyro, accel, t_written, applied
+    return gyro, accel, {"fraction": spec.stale_fraction, "count": int(stale_idx.size), "rows": stale_idx.tolist(),
+                         "meaning": "0-based IMU rows (after the header) that repeat the previous row's six "
+                                    "values under their own stamp"}
 
 
 def _override_turn_on(spec: SimulationSpec, err: dict) -> None:
@@ -1105,7 +1151,7 @@ def _gnss_gap(spec: SimulationSpec, traj: Trajectory, gnss: GnssData) -> tuple[G
     keep = ~((gnss.t >= start) & (gnss.t < end))
     sel = lambda a: None if a is None else a[keep]  # noqa: E731
     out = GnssData(t=gnss.t[keep], lat_deg=gnss.lat_deg[keep], lon_deg=gnss.lon_deg[keep], alt=gnss.alt[keep],
-                   std_enu=gnss.std_enu[keep], vel_enu=sel(gnss.vel_enu), std_vel_enu=sel(gnss.std_vel_enu))
+                   std_enu=sel(gnss.std_enu), vel_enu=sel(gnss.vel_enu), std_vel_enu=sel(gnss.std_vel_enu))
     return out, {"start_s": start, "end_s": end, "removed_fixes": int(np.count_nonzero(~keep)), "_keep": keep,
                  "meaning": "GNSS fixes with start_s <= true time < end_s (s from t0_unix) are missing"}
 
@@ -1228,19 +1274,22 @@ def write_csv_log(sim: Simulation, out_dir: str | os.PathLike) -> None:
     g = sim.gnss
     header = ["t", "lat", "lon", "alt", "std_e", "std_n", "std_u"]
     cols = [(g.lat_deg, "%.12f"), (g.lon_deg, "%.12f"), (g.alt, "%.9f")]
-    cols += [(g.std_enu[:, i], "%.6g") for i in range(3)]
+    std_enu = _resolved(g.std_enu)
+    cols += [(std_enu[:, i], "%.6g") for i in range(3)]
     if g.vel_enu is not None:
         header += ["ve", "vn", "vu", "std_ve", "std_vn", "std_vu"]
+        std_vel = _resolved(g.std_vel_enu)
         cols += [(g.vel_enu[:, i], "%.9f") for i in range(3)]
-        cols += [(g.std_vel_enu[:, i], "%.6g") for i in range(3)]
+        cols += [(std_vel[:, i], "%.6g") for i in range(3)]
     _write_atomic(out / "gnss.csv", _table(t0, g.t, header, cols))
 
     r = sim.reference
     cols = [(r.lat_deg, "%.12f"), (r.lon_deg, "%.12f"), (r.alt, "%.9f")]
-    cols += [(r.vel_enu[:, i], "%.9f") for i in range(3)]
-    heading = np.round(r.rph_deg[:, 2], 9)
+    vel_ref, rph_deg = _resolved(r.vel_enu), _resolved(r.rph_deg)
+    cols += [(vel_ref[:, i], "%.9f") for i in range(3)]
+    heading = np.round(rph_deg[:, 2], 9)
     heading = np.where(heading >= 360.0, 0.0, heading)  # [0, 360) after rounding too
-    cols += [(r.rph_deg[:, 0], "%.9f"), (r.rph_deg[:, 1], "%.9f"), (heading, "%.9f")]
+    cols += [(rph_deg[:, 0], "%.9f"), (rph_deg[:, 1], "%.9f"), (heading, "%.9f")]
     _write_atomic(out / "reference.csv", _table(
         t0, r.t, ["t", "lat", "lon", "alt", "ve", "vn", "vu", "roll", "pitch", "heading"], cols))
 

@@ -34,6 +34,7 @@ Times before the GPS epoch are converted with GPS-UTC = 0 (GPS time did not exis
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 __all__ = [
     "GPS_EPOCH_UNIX",
@@ -42,6 +43,7 @@ __all__ = [
     "LEAP_TABLE_VALID_UNTIL_UNIX",
     "SECONDS_PER_WEEK",
     "TIME_BASES",
+    "FloatSeconds",
     "convert",
     "convert_ns",
     "gps_week_tow_to_unix",
@@ -58,17 +60,20 @@ __all__ = [
 
 TIME_BASES = ("unix", "gpst", "relative")
 
+FloatSeconds = np.ndarray | np.float64
+"""What the float-second converters return: a numpy float64 for a scalar input, else an array."""
+
 NS = 1_000_000_000
 SECONDS_PER_DAY = 86_400
 SECONDS_PER_WEEK = 604_800
 GPS_EPOCH_UNIX = 315_964_800
-"""Unix time of the GPS epoch 1980-01-06 00:00:00 UTC (GPS-UTC was 0 then)."""
+"""Unix time of the GPS epoch 1980-01-06 00:00:00 UTC (where GPS-UTC = 0)."""
 
 # --------------------------------------------------------------------------------------------
 # GPS-UTC leap-second table.
 #
 # Source: IERS Bulletin C / the IERS leap-second history (hpiers.obspm.fr/iers/bul/bulc/
-# Leap_Second.dat; also the IANA tz "leap-seconds.list"), where TAI-UTC was 19 s at the GPS
+# Leap_Second.dat; also the IANA tz "leap-seconds.list"), where TAI-UTC = 19 s at the GPS
 # epoch and GPS-UTC = (TAI-UTC) - 19 s.  Each row is the UTC date at whose 00:00:00 the new
 # GPS-UTC value starts (the leap second was inserted as 23:59:60 of the day before) and that
 # value.  Checked against the IERS list updated through Bulletin C of July 2025, which announced
@@ -123,33 +128,33 @@ _LEAP_UNIX_S = (_LEAP_UNIX_NS // NS).astype(np.float64)
 _LEAP_GPST_S = (_LEAP_GPST_NS // NS).astype(np.float64)
 
 
-def _as_int_ns(t_ns) -> np.ndarray:
+def _as_int_ns(t_ns: npt.ArrayLike) -> np.ndarray:
     a = np.asarray(t_ns)
     if a.dtype.kind not in "iu":
         raise TypeError(f"nanosecond times must be integers, got dtype {a.dtype}")
     return a.astype(np.int64)
 
 
-def _seconds_to_ns(t) -> np.ndarray:
+def _seconds_to_ns(t: npt.ArrayLike) -> np.ndarray:
     """Float seconds -> int64 ns, whole seconds split off first so the fraction keeps its digits."""
     t = np.asarray(t, dtype=np.float64)
     s = np.floor(t)
     return s.astype(np.int64) * NS + np.round((t - s) * NS).astype(np.int64)
 
 
-def leap_seconds_at_unix_ns(unix_ns) -> np.ndarray:
+def leap_seconds_at_unix_ns(unix_ns: npt.ArrayLike) -> np.ndarray:
     """GPS-UTC in whole seconds (int64) at the given unix instants (int64 ns)."""
     t = _as_int_ns(unix_ns)
     return _LEAP_LOOKUP[np.searchsorted(_LEAP_UNIX_NS, t, side="right")]
 
 
-def leap_seconds_at_gpst_base_ns(gpst_ns) -> np.ndarray:
+def leap_seconds_at_gpst_base_ns(gpst_ns: npt.ArrayLike) -> np.ndarray:
     """GPS-UTC in whole seconds (int64) at instants given on the ``gpst`` base (int64 ns)."""
     t = _as_int_ns(gpst_ns)
     return _LEAP_LOOKUP[np.searchsorted(_LEAP_GPST_NS, t, side="right")]
 
 
-def in_leap_second_gpst_base_ns(gpst_ns) -> np.ndarray:
+def in_leap_second_gpst_base_ns(gpst_ns: npt.ArrayLike) -> np.ndarray:
     """True where a ``gpst`` base instant (int64 ns) falls inside an inserted leap second.
 
     Those instants are 23:59:60.x UTC, which has no unix value of its own (see the module
@@ -166,19 +171,19 @@ def in_leap_second_gpst_base_ns(gpst_ns) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 
 
-def gpst_to_unix_ns(gps_ns):
+def gpst_to_unix_ns(gps_ns: npt.ArrayLike) -> np.ndarray:
     """GPS time as int64 ns since the GPS epoch (1980-01-06) -> unix int64 ns (exact)."""
     base = _as_int_ns(gps_ns) + GPS_EPOCH_UNIX * NS
     return base - leap_seconds_at_gpst_base_ns(base) * NS
 
 
-def unix_to_gpst_ns(unix_ns):
+def unix_to_gpst_ns(unix_ns: npt.ArrayLike) -> np.ndarray:
     """Unix int64 ns -> GPS time as int64 ns since the GPS epoch (exact)."""
     t = _as_int_ns(unix_ns)
     return t + leap_seconds_at_unix_ns(t) * NS - GPS_EPOCH_UNIX * NS
 
 
-def _float_out(a: np.ndarray):
+def _float_out(a: np.ndarray) -> FloatSeconds:
     return a[()] if a.ndim == 0 else a
 
 
@@ -190,7 +195,7 @@ def _gpst_base_to_unix_s(t: np.ndarray) -> np.ndarray:
     return t - _LEAP_LOOKUP[np.searchsorted(_LEAP_GPST_S, t, side="right")]
 
 
-def gpst_to_unix(gps_seconds):
+def gpst_to_unix(gps_seconds: npt.ArrayLike) -> FloatSeconds:
     """GPS time in seconds since the GPS epoch (week * 604800 + tow) -> unix seconds (float).
 
     Vectorised; scalars give a numpy float.  Only whole seconds are added or subtracted, so the
@@ -200,13 +205,13 @@ def gpst_to_unix(gps_seconds):
     return _float_out(_gpst_base_to_unix_s(t))
 
 
-def unix_to_gpst(unix_seconds):
+def unix_to_gpst(unix_seconds: npt.ArrayLike) -> FloatSeconds:
     """Unix seconds -> GPS time in seconds since the GPS epoch (float, vectorised)."""
     t = np.asarray(unix_seconds, dtype=np.float64)
     return _float_out(_unix_to_gpst_base_s(t) - float(GPS_EPOCH_UNIX))
 
 
-def gps_week_tow_to_unix_ns(week, tow):
+def gps_week_tow_to_unix_ns(week: npt.ArrayLike, tow: npt.ArrayLike) -> np.ndarray:
     """GPS week number (full, not modulo 1024) and time of week (s) -> unix int64 ns."""
     week = np.asarray(week)
     if week.dtype.kind not in "iu":
@@ -217,7 +222,7 @@ def gps_week_tow_to_unix_ns(week, tow):
     return gpst_to_unix_ns(gps_ns)
 
 
-def gps_week_tow_to_unix(week, tow):
+def gps_week_tow_to_unix(week: npt.ArrayLike, tow: npt.ArrayLike) -> FloatSeconds:
     """GPS week number (full) and time of week (s) -> unix seconds (float, vectorised)."""
     week = np.asarray(week, dtype=np.float64)
     if not np.all(week == np.floor(week)):
@@ -226,7 +231,7 @@ def gps_week_tow_to_unix(week, tow):
     return _float_out(_gpst_base_to_unix_s(base))
 
 
-def unix_to_gps_week_tow(unix_seconds):
+def unix_to_gps_week_tow(unix_seconds: npt.ArrayLike) -> tuple[np.ndarray, FloatSeconds]:
     """Unix seconds -> (GPS week int64, time of week float seconds)."""
     gps = unix_to_gpst(unix_seconds)
     week = np.floor_divide(gps, SECONDS_PER_WEEK)
@@ -243,7 +248,7 @@ def _check_base(name: str, what: str) -> None:
         raise ValueError(f"unknown {what} time base {name!r}; expected one of {', '.join(TIME_BASES)}")
 
 
-def convert_ns(t_ns, from_base: str, to_base: str):
+def convert_ns(t_ns: npt.ArrayLike, from_base: str, to_base: str) -> np.ndarray:
     """Convert int64 ns between the ``"unix"`` and ``"gpst"`` bases (see the module docstring).
 
     ``"relative"`` converts only to itself; anything else raises ``ValueError``.
@@ -261,7 +266,7 @@ def convert_ns(t_ns, from_base: str, to_base: str):
     return t - leap_seconds_at_gpst_base_ns(t) * NS  # gpst -> unix
 
 
-def convert(t, from_base: str, to_base: str):
+def convert(t: npt.ArrayLike, from_base: str, to_base: str) -> FloatSeconds:
     """Convert float seconds between the ``"unix"`` and ``"gpst"`` bases (vectorised).
 
     ``gpst = unix + (GPS - UTC)``; see the module docstring for the definitions.

@@ -318,11 +318,11 @@ def misaligned():
     pitch +1.5 and yaw -2 deg (to first order); two 30 s outages."""
     from dataclasses import replace
 
-    from navpp.ins.attitude import rpy_matrix
+    from navpp.ins.attitude import rpy_deg_to_dcm
     from navpp.recording import ImuData
 
     rec = simulate(SimulationSpec(duration_s=600.0, seed=3)).recording()
-    R = rpy_matrix((0.0, -1.5, 2.0))
+    R = rpy_deg_to_dcm((0.0, -1.5, 2.0))
     rec = replace(rec, imu=ImuData(rec.imu.t, rec.imu.gyro @ R, rec.imu.accel @ R))
     return rec
 

@@ -1,5 +1,7 @@
 """Attitude algebra against scipy's Rotation (an independent implementation)."""
 
+import math
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -57,3 +59,46 @@ def test_small_rotation_vectors_keep_precision(angle):
 def test_skew():
     a, b = np.array([1.0, -2.0, 0.5]), np.array([0.3, 4.0, -1.0])
     np.testing.assert_allclose(att.skew(a) @ b, np.cross(a, b))
+
+
+def test_body_to_nav_rotation_convention():
+    h, p, r = 30.0, 10.0, 20.0
+    rad = math.radians
+    c = att.rph_deg_to_dcm([0.0, 0.0, h])
+    np.testing.assert_allclose(c @ [1, 0, 0], [math.sin(rad(h)), math.cos(rad(h)), 0], atol=1e-15)
+    np.testing.assert_allclose(c @ [0, 1, 0], [-math.cos(rad(h)), math.sin(rad(h)), 0], atol=1e-15)
+    # nose up: forward axis rises
+    np.testing.assert_allclose(att.rph_deg_to_dcm([0.0, p, 0.0]) @ [1, 0, 0],
+                               [0, math.cos(rad(p)), math.sin(rad(p))], atol=1e-15)
+    # right side down: the left (y) axis rises, the up (z) axis leans right (east at heading 0)
+    c = att.rph_deg_to_dcm([r, 0.0, 0.0])
+    np.testing.assert_allclose(c @ [0, 1, 0], [-math.cos(rad(r)), 0, math.sin(rad(r))], atol=1e-15)
+    np.testing.assert_allclose(c @ [0, 0, 1], [math.sin(rad(r)), 0, math.cos(rad(r))], atol=1e-15)
+    many = att.rph_deg_to_dcm(np.random.default_rng(0).uniform(-180, 180, (10, 3)))
+    np.testing.assert_allclose(many @ np.swapaxes(many, -1, -2), np.broadcast_to(np.eye(3), (10, 3, 3)),
+                               atol=1e-14)
+    np.testing.assert_allclose(np.linalg.det(many), 1.0)
+
+
+def test_rpy_to_dcm_matches_scipy_intrinsic_zyx():
+    rng = _rng()
+    for _ in range(20):
+        r, p, y = rng.uniform(-np.pi, np.pi), rng.uniform(-1.5, 1.5), rng.uniform(-np.pi, np.pi)
+        ref = Rotation.from_euler("ZYX", [y, p, r]).as_matrix()
+        np.testing.assert_allclose(att.rpy_to_dcm(r, p, y), ref, atol=1e-12)
+        np.testing.assert_allclose(att.rpy_deg_to_dcm(np.degrees([r, p, y])), ref, atol=1e-12)
+    rpy = rng.uniform(-180.0, 180.0, (7, 3))
+    batch = att.rpy_deg_to_dcm(rpy)
+    assert batch.shape == (7, 3, 3)
+    for k in range(7):
+        np.testing.assert_array_equal(batch[k], att.rpy_deg_to_dcm(rpy[k]))
+
+
+def test_navigation_angles_are_the_rpy_rotation():
+    """rph (heading clockwise from north, pitch nose up) is rpy with yaw = pi/2 - heading and the
+    pitch negated, bit for bit (one builder)."""
+    rng = _rng()
+    r, p, h = rng.uniform(-np.pi, np.pi, 50), rng.uniform(-1.5, 1.5, 50), rng.uniform(0.0, 2 * np.pi, 50)
+    np.testing.assert_array_equal(att.rph_to_dcm(r, p, h), att.rpy_to_dcm(r, -p, 0.5 * np.pi - h))
+    np.testing.assert_array_equal(att.rph_deg_to_dcm(np.degrees(np.stack([r, p, h], -1))),
+                                  att.rph_to_dcm(*np.radians(np.degrees([r, p, h]))))

@@ -9,17 +9,18 @@ import numpy as np
 import pytest
 
 from navpp import geodesy
+from navpp import papers as benchmarks
 from navpp.errors import ConfigError
-from navpp.filters import bench_sins as bs
-from navpp.filters import benchmarks
+from navpp.ins.model import minus, plus
 from navpp.ins.strapdown import free_inertial
+from navpp.papers import sins as bs
 
 SHORT = replace(bs.Paper002Scenario(), duration_s=60.0)
 
 
 def _err_truth(sc: bs.Paper002Scenario, out: np.ndarray, t: np.ndarray) -> np.ndarray:
     truth = bs.truth_states(sc, t)
-    return np.array([bs.minus(truth[k], out[k]) for k in range(t.size)])
+    return np.array([minus(truth[k], out[k]) for k in range(t.size)])
 
 
 @pytest.mark.parametrize("heading_deg", [90.0, 270.0])
@@ -53,8 +54,8 @@ def test_start_state_is_truth_minus_the_drawn_error():
     sim = bs.simulate_run(SHORT, np.random.default_rng(3))
     x_true = bs.truth_states(SHORT, np.zeros(1))[0]
     x_true[10:13], x_true[13:16] = sim.gyro_bias, sim.accel_bias
-    dx = bs.minus(x_true, sim.x0)
-    assert np.allclose(bs.plus(sim.x0, dx), x_true, rtol=0, atol=1e-12)
+    dx = minus(x_true, sim.x0)
+    assert np.allclose(plus(sim.x0, dx), x_true, rtol=0, atol=1e-12)
     assert np.all(np.abs(dx) <= 6 * np.sqrt(np.diag(sim.P0)))
 
 
@@ -66,7 +67,7 @@ def _meas(x: np.ndarray) -> bs.GnssPositionVelocity:
 def test_measurement_jacobian_matches_finite_differences():
     rng = np.random.default_rng(0)
     x = bs.truth_states(bs.Paper002Scenario(), np.array([123.4]))[0]
-    x = bs.plus(x, rng.normal(0.0, [1e-3] * 3 + [0.5] * 3 + [5.0] * 3 + [1e-5] * 3 + [1e-3] * 3))
+    x = plus(x, rng.normal(0.0, [1e-3] * 3 + [0.5] * 3 + [5.0] * 3 + [1e-5] * 3 + [1e-3] * 3))
     meas = _meas(x)
     H = meas.jacobian(x)
     eps = np.array([1e-6] * 3 + [1e-3] * 3 + [1e-2] * 3 + [1e-6] * 6)
@@ -74,7 +75,7 @@ def test_measurement_jacobian_matches_finite_differences():
     for i in range(15):
         e = np.zeros(15)
         e[i] = eps[i]
-        J[:, i] = -(meas.innovation_at(bs.plus(x, e)) - meas.innovation_at(bs.plus(x, -e))) / (2 * eps[i])
+        J[:, i] = -(meas.innovation_at(plus(x, e)) - meas.innovation_at(plus(x, -e))) / (2 * eps[i])
     assert np.allclose(J, H, atol=1e-5)   # neglected terms ~ innovation / Earth radius
     # sigma points: h(x ⊞ dX) ⊟ h(x) is H dX to first order
     dX = rng.normal(0.0, eps * 10, (5, 15))

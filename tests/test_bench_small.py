@@ -1,4 +1,4 @@
-"""The small papers' benchmarks (navpp/filters/bench_small.py): models against hand-computed
+"""The small papers' benchmarks (navpp/papers: tracking, bearing, turn, montecarlo): models against hand-computed
 steps and finite differences, the filters' agreement on a linear model, reproducibility, and
 what VCE does with noise configured at 3x truth."""
 
@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from navpp.errors import ConfigError
-from navpp.filters import bench_small as bs
-from navpp.filters.benchmarks import run_benchmark
+from navpp.papers import bearing as bearing_only
+from navpp.papers import montecarlo, run_benchmark, tracking, turn
+from navpp.papers.angles import wrap_angle
 
 # ----------------------------------------------------------------------------- paper 001 truth
 
@@ -24,43 +25,43 @@ def test_tracking_step_is_eq38_with_g_of_previous_state_by_hand():
                          2 + -r5 + 0.2,                  # x_dot + M g_x + w
                          3 - 1 + 0.5 * (r5 / 2) - 0.1,
                          -1 + r5 / 2 + 0.05])
-    np.testing.assert_allclose(bs.tracking_step(x, w), expected, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(tracking.tracking_step(x, w), expected, rtol=0, atol=1e-14)
 
 
 def test_tracking_step_implicit_reading_satisfies_eq38_as_printed():
-    Phi, F, _, _ = bs.tracking_matrices()
+    Phi, F, _, _ = tracking.tracking_matrices()
     rng = np.random.default_rng(1)
     for _ in range(5):
         x, w = rng.normal(size=4) * 2, rng.normal(size=4)
-        xk = bs.tracking_step(x, w, g_at="current")
-        np.testing.assert_allclose(xk, Phi @ x + F @ bs.systematic_error(xk) + w, atol=1e-12)
+        xk = tracking.tracking_step(x, w, g_at="current")
+        np.testing.assert_allclose(xk, Phi @ x + F @ tracking.systematic_error(xk) + w, atol=1e-12)
 
 
 def test_simulate_tracking_steps_the_truth_and_measures_positions():
     seed = 5
-    X, Z, runaway = bs.simulate_tracking(np.random.default_rng(seed))
+    X, Z, runaway = tracking.simulate_tracking(np.random.default_rng(seed))
     rng = np.random.default_rng(seed)                   # the same draws, in the documented order
-    _, _, Q, H = bs.tracking_matrices()
-    x0 = bs.TRACK_X0 + np.sqrt(np.diag(bs.TRACK_P0)) * rng.standard_normal(4)
-    W = rng.standard_normal((bs.TRACK_STEPS, 4)) @ np.linalg.cholesky(Q).T
-    V = rng.standard_normal((bs.TRACK_STEPS, 2))
+    _, _, Q, H = tracking.tracking_matrices()
+    x0 = tracking.TRACK_X0 + np.sqrt(np.diag(tracking.TRACK_P0)) * rng.standard_normal(4)
+    W = rng.standard_normal((tracking.TRACK_STEPS, 4)) @ np.linalg.cholesky(Q).T
+    V = rng.standard_normal((tracking.TRACK_STEPS, 2))
     np.testing.assert_array_equal(X[0], x0)
-    np.testing.assert_allclose(X[1], bs.tracking_step(x0, W[0]), atol=1e-14)
-    np.testing.assert_allclose(X[2], bs.tracking_step(X[1], W[1]), atol=1e-14)
+    np.testing.assert_allclose(X[1], tracking.tracking_step(x0, W[0]), atol=1e-14)
+    np.testing.assert_allclose(X[2], tracking.tracking_step(X[1], W[1]), atol=1e-14)
     if not runaway:
         np.testing.assert_allclose(Z, X[1:] @ H.T + V, atol=1e-12)
 
 
 def test_runaway_truth_is_flagged_and_excluded():
-    cases, tracks = bs.monte_carlo(bs.tracking_case, 20, 0, ("ekf",))
+    cases, tracks = montecarlo.monte_carlo(tracking.tracking_case, 20, 0, ("ekf",))
     runaway = [c.runaway for c in cases]
     assert any(runaway) and not all(runaway)            # 18 % of runs run away on this reading
     for case, track in zip(cases, tracks["ekf"]):
         speed = np.hypot(case.truth[:, 1], case.truth[:, 3])
         if case.runaway:
-            assert track is None and np.nanmax(speed) > bs.TRACK_RUNAWAY_SPEED
+            assert track is None and np.nanmax(speed) > tracking.TRACK_RUNAWAY_SPEED
         else:
-            assert track is not None and np.max(speed) <= bs.TRACK_RUNAWAY_SPEED
+            assert track is not None and np.max(speed) <= tracking.TRACK_RUNAWAY_SPEED
 
 
 # ----------------------------------------------------------------------------- paper 003 models
@@ -78,13 +79,13 @@ CT_STATES = [
 @pytest.mark.parametrize("x", CT_STATES)
 @pytest.mark.parametrize("T", [1.0, 0.5])
 def test_ct_jacobian_equals_finite_differences(x, T):
-    J = bs.CoordinatedTurnModel.jacobian(x, T)
+    J = turn.CoordinatedTurnModel.jacobian(x, T)
     Jn = np.empty((5, 5))
     for j in range(5):
         h = 1e-6 * max(1.0, abs(x[j])) if j < 4 else 1e-7
         e = np.zeros(5)
         e[j] = h
-        Jn[:, j] = (bs.CoordinatedTurnModel.f(x + e, T) - bs.CoordinatedTurnModel.f(x - e, T)) / (2 * h)
+        Jn[:, j] = (turn.CoordinatedTurnModel.f(x + e, T) - turn.CoordinatedTurnModel.f(x - e, T)) / (2 * h)
     np.testing.assert_allclose(J, Jn, rtol=1e-6, atol=1e-6)
 
 
@@ -97,13 +98,13 @@ def test_ct_transition_is_eq42_matrix_and_constant_velocity_at_zero_rate():
                   [0, (1 - c) / w, 1, s / w, 0],
                   [0, s, 0, c, 0],
                   [0, 0, 0, 0, 1]])
-    np.testing.assert_allclose(bs.CoordinatedTurnModel.f(x, T), A @ x, rtol=1e-13)
-    np.testing.assert_allclose(bs.CoordinatedTurnModel.f(np.array([1.0, 2.0, 3.0, 4.0, 0.0]), 2.0),
+    np.testing.assert_allclose(turn.CoordinatedTurnModel.f(x, T), A @ x, rtol=1e-13)
+    np.testing.assert_allclose(turn.CoordinatedTurnModel.f(np.array([1.0, 2.0, 3.0, 4.0, 0.0]), 2.0),
                                [5.0, 2.0, 11.0, 4.0, 0.0], atol=1e-14)
 
 
 def test_ct_propagate_points_equals_pointwise_f_and_transition():
-    model = bs.CoordinatedTurnModel(0.3, 3 * 1.75e-4)
+    model = turn.CoordinatedTurnModel(0.3, 3 * 1.75e-4)
     x = CT_STATES[0]
     dX = np.random.default_rng(2).normal(size=(10, 5)) * [10, 10, 10, 10, 0.05]
     fx, dY = model.propagate_points(x, dX, (3.0, 4.0))
@@ -119,7 +120,7 @@ def test_ct_propagate_points_equals_pointwise_f_and_transition():
 @pytest.mark.parametrize("T", [1.0, 0.25])
 def test_ct_noise_groups_sum_to_q_with_table1_structure(T):
     q1, q2 = 0.1, 1.75e-4
-    model = bs.CoordinatedTurnModel(q1, q2)
+    model = turn.CoordinatedTurnModel(q1, q2)
     names, Qs = model.noise_groups(CT_STATES[0], (0.0, T))
     assert names == ["q1", "q2"] and Qs.shape == (2, 5, 5)
     Q = model.process_noise(CT_STATES[0], (0.0, T))
@@ -137,12 +138,12 @@ def _fd_jacobian(h, x):
     for j in range(x.size):
         e = np.zeros(x.size)
         eps = e[j] = 1e-6 * max(1.0, abs(x[j]))
-        cols.append(bs.wrap_angle(h(x + e) - h(x - e)) / (2 * eps))
+        cols.append(wrap_angle(h(x + e) - h(x - e)) / (2 * eps))
     return np.array(cols).T.reshape(-1, x.size)
 
 
 def test_measurements_jacobians_and_angle_wrapping():
-    bearing = bs.BearingMeasurement(1.0, np.array([np.pi - 0.01]), np.array([1.0, 0.0]), np.array([[0.02]]))
+    bearing = bearing_only.BearingMeasurement(1.0, np.array([np.pi - 0.01]), np.array([1.0, 0.0]), np.array([[0.02]]))
     x = np.array([-4.0, -0.05])                          # bearing from (1, 0): just below -pi
     np.testing.assert_allclose(bearing.jacobian(x), _fd_jacobian(bearing.h, x), rtol=1e-6)
     nu = bearing.innovation_at(x)
@@ -150,20 +151,20 @@ def test_measurements_jacobians_and_angle_wrapping():
     Z = bearing.predict_points(x, np.array([[0.0, 0.2], [0.0, -0.2]]))
     assert Z.shape == (2, 1) and np.all(np.abs(Z) < 0.1)
 
-    rb = bs.RangeBearingMeasurement(1.0, np.array([100.0, -np.pi + 0.001]), np.eye(2))
+    rb = turn.RangeBearingMeasurement(1.0, np.array([100.0, -np.pi + 0.001]), np.eye(2))
     x = np.array([-100.0, 1.0, 0.5, 2.0, 0.01])          # bearing just below +pi
     np.testing.assert_allclose(rb.jacobian(x), _fd_jacobian(rb.h, x), rtol=1e-6, atol=1e-11)
     nu = rb.innovation_at(x)
     assert abs(nu[1]) < 0.01 and abs(nu[0]) < 1.0
     assert np.all(np.abs(rb.predict_points(x, np.array([[0, 0, -1.0, 0, 0], [0, 0, 1.0, 0, 0]]))[:, 1]) < 0.02)
-    assert bs.wrap_angle(-np.pi) == pytest.approx(np.pi) and bs.wrap_angle(np.pi) == pytest.approx(np.pi)
+    assert wrap_angle(-np.pi) == pytest.approx(np.pi) and wrap_angle(np.pi) == pytest.approx(np.pi)
 
 
 # ----------------------------------------------------------------------------- filters and runs
 
 
 def test_tracking_ekf_ckf_ukf_coincide_on_the_linear_filter_model():
-    cases, tracks = bs.monte_carlo(bs.tracking_case, 3, 11, ("ekf", "ckf", "ukf"))
+    cases, tracks = montecarlo.monte_carlo(tracking.tracking_case, 3, 11, ("ekf", "ckf", "ukf"))
     done = [i for i, c in enumerate(cases) if not c.runaway]
     assert done
     for name in ("ckf", "ukf"):
@@ -183,8 +184,8 @@ def test_same_seed_same_rows_and_runs_independent_of_run_count():
     assert _figures(a) == _figures(b)
     c = run_benchmark("paper001-tracking", runs=3, seed=5, filters=("ekf", "rwckf"))
     assert _figures(a) != _figures(c)
-    cases2, tracks2 = bs.monte_carlo(bs.turn_case, 2, 9, ("ckf",))
-    cases3, tracks3 = bs.monte_carlo(bs.turn_case, 3, 9, ("ckf",))
+    cases2, tracks2 = montecarlo.monte_carlo(turn.turn_case, 2, 9, ("ckf",))
+    cases3, tracks3 = montecarlo.monte_carlo(turn.turn_case, 3, 9, ("ckf",))
     for i in range(2):
         np.testing.assert_array_equal(cases2[i].truth, cases3[i].truth)
         np.testing.assert_array_equal(tracks2["ckf"][i].x, tracks3["ckf"][i].x)
@@ -299,8 +300,7 @@ def test_bearing_20_runs_vce_brings_r_toward_truth_and_anees_toward_1():
 
 
 def test_filter_specs_carry_options_and_fail_clearly():
-    from navpp.errors import ConfigError
-    from navpp.filters.benchmarks import make_bench_filter, parse_filter_spec
+    from navpp.papers import make_bench_filter, parse_filter_spec
 
     assert parse_filter_spec("rwckf[covariance=random; candidates=4]") == (
         "rwckf", {"covariance": "random", "candidates": 4})

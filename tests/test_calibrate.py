@@ -16,7 +16,7 @@ import pytest
 from navpp import api, engine
 from navpp.config import config_from_dict
 from navpp.errors import FilterDivergedError, InputError
-from navpp.ins.attitude import rpy_matrix
+from navpp.ins.attitude import rpy_deg_to_dcm
 from navpp.ins.calibrate import calibrate, gross_mounting, matrix_to_rpy_deg, noise_profile
 from navpp.metrics import compute_metrics
 from navpp.recording import ImuData
@@ -103,19 +103,19 @@ def test_noise_profile_reads_white_noise(consumer_drive):
 def test_gross_mounting_puts_gravity_on_z(rpy):
     """A sensor whose gravity axis is y, -y, -z (FRD written as FLU) or x: the rotation found
     maps the sensor's up onto +z, and the rpy it reports rebuilds the same matrix."""
-    m = rpy_matrix(rpy)                      # sensor -> body
+    m = rpy_deg_to_dcm(rpy)                      # sensor -> body
     up_sensor = m.T @ np.array([0.0, 0.0, 1.0])
     rot = gross_mounting(up_sensor)
     assert rot is not None
     np.testing.assert_allclose(rot @ up_sensor, [0, 0, 1], atol=1e-12)
-    np.testing.assert_allclose(rpy_matrix(matrix_to_rpy_deg(rot)), rot, atol=1e-4)
+    np.testing.assert_allclose(rpy_deg_to_dcm(matrix_to_rpy_deg(rot)), rot, atol=1e-4)
     assert gross_mounting(np.array([0.1, -0.2, 0.97])) is None       # a tilt, not a mounting
 
 
 def _rotated(sim, rpy):
     """The recording as a sensor mounted with ``rpy`` (sensor -> body) would log it."""
     rec = sim.recording()
-    m = rpy_matrix(rpy)
+    m = rpy_deg_to_dcm(rpy)
     imu = ImuData(rec.imu.t, rec.imu.gyro @ m, rec.imu.accel @ m)       # body -> sensor: m^T v
     return replace(rec, imu=imu)
 

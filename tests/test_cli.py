@@ -356,11 +356,11 @@ class _Run:
 def test_summary_compile_note(computed, capsys, compile_s, quiet, shown) -> None:
     import dataclasses
 
-    from navpp import cli
+    from navpp import cli_print
 
     res = dataclasses.replace(computed, run=_Run(computed.run, compile_s))
     assert hasattr(res.run, "compile_s") is (compile_s is not None)
-    cli._print_summary(res, quiet)
+    cli_print.print_process_summary(res, quiet)
     captured = capsys.readouterr()
     err = flat(captured.err)
     assert ("· compiled navpp's kernels in 2.3 s (first run only; cached for next time)" in err) is shown

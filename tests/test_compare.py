@@ -387,11 +387,12 @@ def test_bench_lists_runs_and_refuses_bad_arguments():
 
 
 def test_parallel_schedule_is_log_by_log_costliest_first():
-    from navpp.comparison import _schedule, _Task
+    from navpp.comparison.runs import RunTask
+    from navpp.comparison.schedule import submission_order
 
-    tasks = [_Task(i * 3 + j, log, f, None, None, None, None, None, False, False)
+    tasks = [RunTask(i * 3 + j, log, f, None, None, None, None, None, False, False)
              for i, log in enumerate(["b", "a"]) for j, f in enumerate(["ekf", "ckf", "rwckf"])]
-    assert [(t.log, t.filter) for t in _schedule(tasks)] == [
+    assert [(t.log, t.filter) for t in submission_order(tasks)] == [
         ("b", "rwckf"), ("b", "ckf"), ("b", "ekf"), ("a", "rwckf"), ("a", "ckf"), ("a", "ekf")]
 
 

@@ -361,10 +361,9 @@ def test_diagnostics_dataframe_equals_the_csv(every_format) -> None:
 def test_top_level_api(sim_log_dir: Path) -> None:
     assert navpp.process is api.process
     assert "compare" in navpp.__all__ and callable(navpp.compare)
-    if (Path(navpp.__file__).parent / "comparison.py").is_file():
-        from navpp import comparison
+    from navpp import comparison
 
-        assert navpp.compare is comparison.compare
+    assert navpp.compare is comparison.compare
     res = navpp.process(sim_log_dir, write=False, output_rate_hz=10.0)
     assert res.files == () and list(res.trajectory.columns) == list(writers.TRAJECTORY_COLUMNS)
     assert set(res.metrics) >= {"position_m", "filter"}

@@ -265,9 +265,7 @@ def _poisoned_update(monkeypatch, after_s, poison):
 
     def update(self, state, model, meas):
         up = original(self, state, model, meas)
-        if meas.t >= after_s:
-            up = replace(up, state=poison(up.state))
-        return up
+        return replace(up, state=poison(up.state)) if meas.t >= after_s else up
     monkeypatch.setattr(cls, "update", update)
 
 

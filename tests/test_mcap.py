@@ -26,6 +26,7 @@ from ros_oracles import expected_from_objects, fill_genpy, ros2_name
 from rosbags.typesys import Stores, get_typestore
 
 from navpp.errors import InputError
+from navpp.findings import code_of
 from navpp.io.mcap import list_topics, read_mcap
 from navpp.io.ros import (
     FIX_TYPE,
@@ -394,6 +395,7 @@ def test_cut_off_recording_reads_up_to_the_cut(tmp_path: Path, compression, chun
         last_log = max(m.log_ns[-1] for m in decoded(contents).values())
         last = f"{last_log // 10**9}.{last_log % 10**9:09d} s"
         assert str(cut) in warning and "cut off" in warning and last in warning
+        assert code_of(warning) == "recording-cut-off"
         assert f"ends at byte {cut_at} inside the record starting at byte" in warning
 
 

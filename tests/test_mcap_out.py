@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import os
+import types
 import warnings
 from pathlib import Path
 
@@ -15,7 +16,7 @@ import pytest
 
 from navpp.io import frames, mcap_out
 from navpp.io import roswrite as rw
-from navpp.recording import Solution
+from navpp.recording import GnssData, ImuData, Recording, Solution
 
 OUTPUT_TOPICS = sorted(mcap_out.TOPICS)
 
@@ -250,12 +251,104 @@ def test_log_time_order_summary_and_metadata(processed, trajectory):
         meta = {m.name: m.metadata for m in reader.iter_metadata()}
     assert summary.statistics.message_count == len(logs)
     assert summary.statistics.message_start_time == logs[0] and summary.statistics.message_end_time == logs[-1]
+    n, m = len(processed.solution), processed.run.gnss_epochs
+    counts = {summary.channels[c].topic: k for c, k in summary.statistics.channel_message_counts.items()}
+    assert counts == {"/navpp/fix": n, "/navpp/odometry": n, "/tf": n, "/navpp/bias/gyro": m,
+                      "/navpp/bias/accel": m, "/navpp/diagnostics": m}
+    assert summary.statistics.channel_count == len(summary.channels) == 6
+    assert summary.statistics.schema_count == len(summary.schemas) == 5      # the two biases share one
+    assert {(s.name, s.encoding) for s in summary.schemas.values()} == {
+        (mcap_out.TOPICS[t], "ros2msg") for t in mcap_out.TOPICS}
+    assert {c.message_encoding for c in summary.channels.values()} == {"cdr"}
+    assert summary.statistics.chunk_count == len(summary.chunk_indexes)
+    assert summary.statistics.metadata_count == 1
+    with open(trajectory, "rb") as f:
+        assert make_reader(f).get_header().profile == "ros2"
     assert summary.chunk_indexes and {c.compression for c in summary.chunk_indexes} == {"zstd"}
     anchor = _expected(processed)["anchor"]
     assert meta["navpp"]["filter"] == "vce-ckf"
     assert float(meta["navpp"]["map_anchor_lat_deg"]) == anchor.lat_deg
     assert float(meta["navpp"]["map_anchor_alt_m"]) == anchor.alt
     assert int(meta["navpp"]["t0_ns"]) == processed.recording.t0_ns
+
+
+def test_a_fixed_solution_decodes_to_the_expected_messages(tmp_path):
+    """Two hand-made rows at the anchor (heading north, then east), decoded with rosbags' Humble
+    types from the file alone; the expectation is written out, independent of the writer."""
+    from mcap.reader import make_reader
+    from rosbags.typesys import Stores, get_typestore
+
+    t0 = 1_700_000_000_000_000_000
+    rec = Recording(ImuData(np.arange(3) * 0.5, np.zeros((3, 3)), np.tile([0.0, 0.0, 9.8], (3, 1))),
+                    GnssData(np.array([0.5, 1.0]), np.array([45.0, 45.0]), np.array([7.0, 7.0]),
+                             np.array([100.0, 100.0])), t0_ns=t0)
+    sol = Solution(np.array([0.5, 1.0]), np.array([45.0, 45.0]), np.array([7.0, 7.0]), np.array([100.0, 100.0]),
+                   np.array([[0.0, 2.0, 0.0], [3.0, 0.0, 0.0]]), np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 90.0]]),
+                   np.array([[1.0, 2.0, 3.0], [1.0, 2.0, 3.0]]))
+    biases = types.SimpleNamespace(t=np.array([1.0]), gyro=np.array([[1e-4, -2e-4, 3e-4]]),
+                                   accel=np.array([[0.01, 0.02, -0.03]]))
+    diag = types.SimpleNamespace(t=np.array([1.0]), nu=np.array([[0.5, -0.25, 2.0]]), nis=np.array([1.5]),
+                                 accepted=np.array([True]), forced=np.array([False]),
+                                 r_std=np.array([[1.0, 1.0, 2.0]]), adaptive={"fading": np.array([1.25])})
+    path = tmp_path / "fixed.mcap"
+    mcap_out.write_trajectory_mcap(path, solution=sol, recording=rec, diagnostics=diag, biases=biases,
+                                   filter_name="ekf")
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    with open(path, "rb") as f:
+        reader = make_reader(f, validate_crcs=True)
+        assert reader.get_header().profile == "ros2"
+        got = [(c.topic, s.name, s.encoding, c.message_encoding, m.log_time, m.publish_time, m.sequence, m.data)
+               for s, c, m in reader.iter_messages(log_time_order=False)]
+    s1, s2 = t0 + 500_000_000, t0 + 1_000_000_000
+    assert [g[0] for g in got] == ["/navpp/fix", "/navpp/odometry", "/tf", "/navpp/fix", "/navpp/odometry", "/tf",
+                                   "/navpp/bias/gyro", "/navpp/bias/accel", "/navpp/diagnostics"]
+    assert [(g[4], g[5], g[6]) for g in got] == [(s1, s1, 0)] * 3 + [(s2, s2, 1)] * 3 + [(s2, s2, 0)] * 3
+    assert {(g[2], g[3]) for g in got} == {("ros2msg", "cdr")}
+    for g in got:
+        if g[0] == "/navpp/diagnostics":
+            assert g[1] == "navpp_msgs/msg/FilterDiagnostics"
+    msgs = [store.deserialize_cdr(bytes(g[7]), g[1]) if g[0] != "/navpp/diagnostics" else None for g in got]
+    half = np.sqrt(0.5)
+    for k, (stamp, quat, forward) in enumerate(((s1, [0.0, 0.0, half, half], 2.0), (s2, [0.0, 0.0, 0.0, 1.0], 3.0))):
+        fix, odo, tf = msgs[3 * k:3 * k + 3]
+        sec, nsec = divmod(stamp, 10**9)
+        for m in (fix, odo, tf.transforms[0]):
+            assert (m.header.stamp.sec, m.header.stamp.nanosec) == (sec, nsec)
+        assert (fix.header.frame_id, fix.status.status, fix.status.service) == ("base_link", 0, 1)
+        assert (fix.latitude, fix.longitude, fix.altitude) == (45.0, 7.0, 100.0)
+        assert list(fix.position_covariance) == [1.0, 0, 0, 0, 4.0, 0, 0, 0, 9.0]
+        assert fix.position_covariance_type == 2
+        assert (odo.header.frame_id, odo.child_frame_id) == ("map", "base_link")
+        p = odo.pose.pose.position
+        assert np.allclose([p.x, p.y, p.z], 0.0, atol=1e-9)
+        q = odo.pose.pose.orientation
+        assert np.allclose([q.x, q.y, q.z, q.w], quat, atol=1e-12)
+        assert np.array_equal(np.diag(odo.pose.covariance.reshape(6, 6)), [1.0, 4.0, 9.0, 1e6, 1e6, 1e6])
+        assert np.count_nonzero(odo.pose.covariance) == 6
+        assert np.array_equal(np.diag(odo.twist.covariance.reshape(6, 6)), [1e6] * 6)
+        v, w = odo.twist.twist.linear, odo.twist.twist.angular
+        assert np.allclose([v.x, v.y, v.z], [forward, 0.0, 0.0], atol=1e-12)
+        assert (w.x, w.y, w.z) == (0.0, 0.0, 0.0)
+        assert len(tf.transforms) == 1
+        tr = tf.transforms[0]
+        assert (tr.header.frame_id, tr.child_frame_id) == ("map", "base_link")
+        assert np.allclose([tr.transform.translation.x, tr.transform.translation.y, tr.transform.translation.z],
+                           0.0, atol=1e-9)
+        r = tr.transform.rotation
+        assert (r.x, r.y, r.z, r.w) == (q.x, q.y, q.z, q.w)
+    gyro, accel = msgs[6], msgs[7]
+    assert (gyro.header.frame_id, gyro.header.stamp.sec, gyro.header.stamp.nanosec) == ("base_link", s2 // 10**9, 0)
+    assert (gyro.vector.x, gyro.vector.y, gyro.vector.z) == (1e-4, -2e-4, 3e-4)
+    assert (accel.vector.x, accel.vector.y, accel.vector.z) == (0.01, 0.02, -0.03)
+    from rosbags.typesys import get_types_from_msg
+
+    store.register(get_types_from_msg(rw.FILTER_DIAGNOSTICS_MSGDEF, "navpp_msgs/msg/FilterDiagnostics"))
+    d = store.deserialize_cdr(bytes(got[8][7]), "navpp_msgs/msg/FilterDiagnostics")
+    assert (d.header.frame_id, d.header.stamp.sec, d.header.stamp.nanosec) == ("map", s2 // 10**9, 0)
+    assert list(d.innovation_enu) == [0.5, -0.25, 2.0] and d.nis == 1.5
+    assert (d.accepted, d.forced) == (True, False)
+    assert list(d.r_std_enu) == [1.0, 1.0, 2.0]
+    assert list(d.names) == ["fading"] and list(d.values) == [1.25]
 
 
 # --------------------------------------------------------------------------- frames
@@ -392,10 +485,7 @@ def _fix_lat(item) -> float:
 def test_container_variants_read_back(processed, tmp_path, compression, chunk_size):
     from mcap.reader import NonSeekingReader, make_reader
 
-    streams, _ = mcap_out._solution_streams(processed.solution, processed.recording, processed.run.diagnostics,
-                                           processed.run.biases)
-    path = tmp_path / "t.mcap"
-    mcap_out._write(path, streams, {"k": "v"}, chunk_size=chunk_size, compression=compression)
+    path = _write(tmp_path / "t.mcap", processed, chunk_size=chunk_size, compression=compression)
     with open(path, "rb") as f:
         summary = make_reader(f).get_summary()
         f.seek(0)
@@ -404,7 +494,7 @@ def test_container_variants_read_back(processed, tmp_path, compression, chunk_si
         f.seek(0)
         indexed = [(c.topic, m.log_time, m.data) for _, c, m in
                    make_reader(f, validate_crcs=True).iter_messages(log_time_order=True)]
-    assert len(streamed) == len(indexed) == sum(len(s) for s in streams)
+    assert len(streamed) == len(indexed) == 3 * len(processed.solution) + 3 * processed.run.gnss_epochs
     assert [m[1] for m in streamed] == sorted(m[1] for m in streamed)
     for topic in {m[0] for m in streamed}:
         assert [m for m in streamed if m[0] == topic] == [m for m in indexed if m[0] == topic]
@@ -437,8 +527,7 @@ def test_failure_leaves_no_file_and_keeps_an_old_one(processed, tmp_path, monkey
 
 
 def _write_small_chunks(path, res):
-    streams, _ = mcap_out._solution_streams(res.solution, res.recording, None, None)
-    mcap_out._write(path, streams, {}, chunk_size=10_000)
+    mcap_out.write_trajectory_mcap(path, solution=res.solution, recording=res.recording, chunk_size=10_000)
 
 
 def test_bad_inputs_are_rejected_before_writing(processed, tmp_path):
@@ -453,6 +542,8 @@ def test_bad_inputs_are_rejected_before_writing(processed, tmp_path):
     with pytest.raises(ValueError, match="ROS time"):
         mcap_out.write_trajectory_mcap(tmp_path / "a.mcap", solution=dataclasses.replace(sol, t0_ns=-10**12),
                                        recording=dataclasses.replace(rec, t0_ns=-10**12))
+    with pytest.raises(ValueError, match="compression"):
+        mcap_out.write_trajectory_mcap(tmp_path / "a.mcap", solution=sol, recording=rec, compression="bz2")
     assert os.listdir(tmp_path) == []
 
 
@@ -521,11 +612,13 @@ def test_packers_match_rosbags_serializer(encoding, frame):
 
 
 def test_diagnostics_without_adaptive_values_and_multi_column_names(processed, tmp_path):
-    """Empty name list (EKF) and a (M, k) entry (named ``key_<i>`` as in diagnostics.csv)."""
+    """Empty name list (EKF), a single value (AUKF's fading) and a (M, k) entry (named ``key_<i>``
+    as in diagnostics.csv)."""
     diag = processed.run.diagnostics
     m = len(diag.t)
-    for adaptive, names in (({}, []), ({"weights": np.arange(3.0 * m).reshape(m, 3), "fading": np.ones((m, 1))},
-                                       ["weights_0", "weights_1", "weights_2", "fading"])):
+    for adaptive, names in (({}, []), ({"fading": np.linspace(1.0, 2.0, m)}, ["fading"]),
+                            ({"weights": np.arange(3.0 * m).reshape(m, 3), "fading": np.ones((m, 1))},
+                             ["weights_0", "weights_1", "weights_2", "fading"])):
         d = dataclasses.replace(diag, adaptive=adaptive)
         path = tmp_path / f"d{len(names)}.mcap"
         mcap_out.write_trajectory_mcap(path, solution=processed.solution, recording=processed.recording,
@@ -553,7 +646,7 @@ def test_message_indexes_point_at_their_messages(trajectory):
         assert data[ci.chunk_start_offset] == 0x06
         chunk = Chunk.read(ReadDataStream(io.BytesIO(data[ci.chunk_start_offset + 9:
                                                           ci.chunk_start_offset + ci.chunk_length])))
-        records = mcap_out._decompress(chunk)
+        records = np.frombuffer(_decompressed(chunk), dtype=np.uint8)
         assert records.size == ci.uncompressed_size == chunk.uncompressed_size
         first = min(ci.message_index_offsets.values())
         assert first == ci.chunk_start_offset + ci.chunk_length
@@ -578,6 +671,19 @@ def test_message_indexes_point_at_their_messages(trajectory):
         assert seen == n
         total += n
     assert total == summary.statistics.message_count
+
+
+def _decompressed(chunk) -> bytes:
+    if chunk.compression == "zstd":
+        import zstandard
+
+        return zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size)
+    if chunk.compression == "lz4":
+        import lz4.frame
+
+        return lz4.frame.decompress(chunk.data)
+    assert chunk.compression == ""
+    return chunk.data
 
 
 @pytest.mark.parametrize("kind", ["mcap", "ros2", "none"])

@@ -10,12 +10,12 @@ import pytest
 
 from navpp import geodesy
 from navpp.errors import InputError
+from navpp.ins.attitude import rph_deg_to_dcm
 from navpp.metrics import (
     associate,
     compute_metrics,
     error_stats,
     interpolate_solution,
-    mat_nb_from_rph,
     position_errors_enu,
     wrap_deg,
 )
@@ -211,25 +211,6 @@ def test_no_overlap_raises_one_line_input_error():
 # --------------------------------------------------------------------------- rotations, raw GNSS
 
 
-def test_body_to_nav_rotation_convention():
-    h, p, r = 30.0, 10.0, 20.0
-    rad = math.radians
-    c = mat_nb_from_rph([0.0, 0.0, h])
-    np.testing.assert_allclose(c @ [1, 0, 0], [math.sin(rad(h)), math.cos(rad(h)), 0], atol=1e-15)
-    np.testing.assert_allclose(c @ [0, 1, 0], [-math.cos(rad(h)), math.sin(rad(h)), 0], atol=1e-15)
-    # nose up: forward axis rises
-    np.testing.assert_allclose(mat_nb_from_rph([0.0, p, 0.0]) @ [1, 0, 0],
-                               [0, math.cos(rad(p)), math.sin(rad(p))], atol=1e-15)
-    # right side down: the left (y) axis rises, the up (z) axis leans right (east at heading 0)
-    c = mat_nb_from_rph([r, 0.0, 0.0])
-    np.testing.assert_allclose(c @ [0, 1, 0], [-math.cos(rad(r)), 0, math.sin(rad(r))], atol=1e-15)
-    np.testing.assert_allclose(c @ [0, 0, 1], [math.sin(rad(r)), 0, math.cos(rad(r))], atol=1e-15)
-    many = mat_nb_from_rph(np.random.default_rng(0).uniform(-180, 180, (10, 3)))
-    np.testing.assert_allclose(many @ np.swapaxes(many, -1, -2), np.broadcast_to(np.eye(3), (10, 3, 3)),
-                               atol=1e-14)
-    np.testing.assert_allclose(np.linalg.det(many), 1.0)
-
-
 def _gnss_at_antenna(ref, antenna_enu, fix_error_enu, t):
     """GNSS fixes at ``antenna + fix_error`` (ENU about the reference body point) at times t."""
     lat = np.interp(t, ref.t, ref.lat_deg)
@@ -244,7 +225,7 @@ def test_raw_gnss_stats_with_lever_arm_and_attitude():
     rph = np.tile([20.0, -5.0, 135.0], (n, 1))
     ref = _reference(n=n, rph=rph)
     lever = (0.5, -0.3, 1.2)
-    antenna = mat_nb_from_rph(rph[0]) @ lever
+    antenna = rph_deg_to_dcm(rph[0]) @ lever
     t_g = np.array([-1.0, 0.05, 0.5, 1.25, 2.0, 3.9, 4.5])  # -1.0 and 4.5 lie outside the reference
     gnss = _gnss_at_antenna(ref, antenna, [0.3, -0.2, 0.1], t_g)
     sol = _solution(ref.t, ref.lat_deg, ref.lon_deg, ref.alt, rph=rph)

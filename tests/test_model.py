@@ -40,7 +40,7 @@ def _fd_jacobian(x0, t, gyro, accel, ta, tb):
     """d(end error)/d(start error) by central differences through the real strapdown."""
     x_end = x0.copy()
     no = np.empty((1, S.PATH_SIZE))
-    S.integrate(x_end, t, gyro, accel, ta, tb, no, False, 0.0, S._NO_SEG, S._NO_SEG3, S._NO_T)
+    S.integrate(x_end, t, gyro, accel, ta, tb, no, False, 0.0, S.NO_SEG_X, S.NO_SEG_FN, S.NO_SEG_T)
     J = np.zeros((15, 15))
     for i in range(15):
         cols = []
@@ -48,7 +48,7 @@ def _fd_jacobian(x0, t, gyro, accel, ta, tb):
             e = np.zeros(15)
             e[i] = sgn * EPS[i]
             xp = M.plus(x0, e)
-            S.integrate(xp, t, gyro, accel, ta, tb, no, False, 0.0, S._NO_SEG, S._NO_SEG3, S._NO_T)
+            S.integrate(xp, t, gyro, accel, ta, tb, no, False, 0.0, S.NO_SEG_X, S.NO_SEG_FN, S.NO_SEG_T)
             cols.append(M.minus(xp, x_end))
         J[:, i] = (cols[0] - cols[1]) / (2 * EPS[i])
     return J, x_end
@@ -96,7 +96,7 @@ def test_phi_qd_match_van_loan_for_frozen_dynamics(drive):
     Qd_ex = Phi_ex @ B[:n, n:]
     seg_x = np.tile(x, (n_seg, 1))
     seg_fn = np.tile(fn, (n_seg, 1))
-    Phi, Qd = M._transition_from_segments(x, seg_x, seg_fn, np.full(n_seg, total / n_seg), n_seg, psd,
+    Phi, Qd = M.transition_from_segments(x, seg_x, seg_fn, np.full(n_seg, total / n_seg), n_seg, psd,
                                           1.0 / 300.0, 1.0 / 300.0)
     assert np.max(np.abs(Phi - Phi_ex)) < 1e-8
     # trapezoidal Qd per step (ALGORITHMS.md): relative error ~ 1/n_seg^2 in the position block

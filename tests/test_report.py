@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from navpp.comparison import CompareRow, compare, minmax_decimate
-from navpp.report import TABLE_ERROR_COLUMNS, best_cells
+from navpp.comparison.report import TABLE_ERROR_COLUMNS, best_cells
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 HEADER_TO_COLUMN = {h: c for c, h in TABLE_ERROR_COLUMNS}

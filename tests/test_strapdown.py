@@ -79,12 +79,12 @@ def test_stopping_between_samples_changes_nothing():
     t, g, a = (np.ascontiguousarray(v) for v in (imu.t, imu.gyro, imu.accel))
     no = np.empty((1, S.PATH_SIZE))
     direct = x0.copy()
-    S.integrate(direct, t, g, a, 40.0, 50.0, no, False, 0.0, S._NO_SEG, S._NO_SEG3, S._NO_T)
+    S.integrate(direct, t, g, a, 40.0, 50.0, no, False, 0.0, S.NO_SEG_X, S.NO_SEG_FN, S.NO_SEG_T)
     split = x0.copy()
     stops = np.arange(40.0, 50.0, 1.0 / 3.0)[1:]          # 3 Hz epochs, between the 100 Hz samples
     t_prev = 40.0
     for ts in list(stops) + [50.0]:
-        S.integrate(split, t, g, a, t_prev, float(ts), no, False, 0.0, S._NO_SEG, S._NO_SEG3, S._NO_T)
+        S.integrate(split, t, g, a, t_prev, float(ts), no, False, 0.0, S.NO_SEG_X, S.NO_SEG_FN, S.NO_SEG_T)
         t_prev = float(ts)
     d = geodesy.geodetic_to_enu(split[7], split[8], split[9], direct[7], direct[8], direct[9])
     assert np.linalg.norm(d) < 1e-3

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,8 +26,26 @@ from .. import geodesy
 from ..errors import InputError
 from .aids.standstill import quiet_blocks
 from .attitude import dcm_to_quat, rph_to_dcm
-from .model import ATT, BA, BG, N_ERR, POS, VEL
-from .strapdown import NOMINAL_BA, NOMINAL_BG, NOMINAL_SIZE
+from .calibrate import gnss_speed_at, spans
+from .state import (
+    ATT,
+    BA,
+    BG,
+    N_ERR,
+    NOMINAL_BA,
+    NOMINAL_BG,
+    NOMINAL_Q,
+    NOMINAL_SIZE,
+    NOMINAL_VEL,
+    POS,
+    VEL,
+    X_H,
+    X_LAT,
+    X_LON,
+)
+
+if TYPE_CHECKING:
+    from ..recording import GnssData
 
 
 @dataclass(frozen=True)
@@ -111,11 +130,9 @@ def still_runs(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_durati
     return runs
 
 
-def _first_gnss_motion(gnss, speed: float = 0.5) -> float:
+def _first_gnss_motion(gnss: GnssData, speed: float = 0.5) -> float:
     """Time (s) of the first GNSS epoch whose speed (velocity, or a fit of the fixes within
     +-1 s) exceeds ``speed`` m/s and by more than 3 sigma; inf when the GNSS never moves."""
-    from .calibrate import gnss_speed_at
-
     tg = np.asarray(gnss.t, dtype=float)
     v, sv = gnss_speed_at(gnss, tg)
     moving = np.nonzero(np.isfinite(v) & (v > speed) & (v > 3.0 * np.nan_to_num(sv, nan=np.inf)))[0]
@@ -131,7 +148,7 @@ def detect_still(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_dura
     return runs[0] if runs else None
 
 
-def gnss_speed_bound(gnss, sel: np.ndarray, lat: float, lon: float, h: float) -> tuple[float, float]:
+def gnss_speed_bound(gnss: GnssData, sel: np.ndarray, lat: float, lon: float, h: float) -> tuple[float, float]:
     """Horizontal speed (m/s) of the GNSS track over the fixes ``sel`` and its 1-sigma.
 
     From GNSS velocity when the log has it (median), else from a straight-line fit of the
@@ -156,7 +173,8 @@ def gnss_speed_bound(gnss, sel: np.ndarray, lat: float, lon: float, h: float) ->
     return math.hypot(ve, vn), sp / math.sqrt(stt)
 
 
-def _not_still(t, accel, gnss, i0: int, i1: int, window_s: float = 1.0, max_change: float = 0.15) -> str:
+def _not_still(t: np.ndarray, accel: np.ndarray, gnss: GnssData, i0: int, i1: int, window_s: float = 1.0,
+               max_change: float = 0.15) -> str:
     """Why samples [i0, i1) are not a still period ('' when they are).
 
     The mean specific force must be gravity, its 1-s means must not drift from the run's
@@ -213,24 +231,44 @@ def gyrocompass(w_mean: np.ndarray, roll: float, pitch: float) -> float:
     return float(np.mod(-math.atan2(w_l[0], w_l[1]), 2 * math.pi))
 
 
-def _gnss_enu(gnss, lat0: float, lon0: float, h0: float) -> np.ndarray:
+def _gnss_enu(gnss: GnssData, lat0: float, lon0: float, h0: float) -> np.ndarray:
     return geodesy.geodetic_to_enu(np.radians(gnss.lat_deg), np.radians(gnss.lon_deg), gnss.alt,
                                    lat0, lon0, h0)
 
 
-def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: AlignmentSettings) -> Alignment:
-    """Initial nominal state and covariance (see module docstring)."""
-    lines: list[str] = []
-    warnings: list[str] = []
-    lever = np.asarray(settings.lever_arm_b, dtype=float)
-    if len(gnss) == 0:
-        raise InputError("no GNSS fixes: cannot initialise the position")
-    first_fix = float(gnss.t[0])
-    still = None
-    if settings.still_mask is not None:
-        from .calibrate import spans as mask_runs
+@dataclass(frozen=True)
+class _Levelling:
+    """Where the run starts and how roll and pitch were found (a step of :func:`align`).
 
-        runs = mask_runs(t, settings.still_mask, settings.still_min_s)
+    ``start`` the IMU sample of the start; ``still`` the still period's samples [i0, i1) (None:
+    starting in motion); ``t_s0, t_s1`` its first and last sample times, s (the start time twice
+    in motion); ``roll, pitch`` rad with the 1-sigma ``att_std`` rad, found by ``how``; ``w_mean``
+    the still period's mean body rate, rad/s (None in motion).
+    """
+
+    start: int
+    still: tuple[int, int] | None
+    t_s0: float
+    t_s1: float
+    roll: float
+    pitch: float
+    att_std: float
+    how: str
+    w_mean: np.ndarray | None
+
+    @property
+    def moving(self) -> bool:
+        return self.still is None
+
+
+def _still_period(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: GnssData, settings: AlignmentSettings,
+                  lines: list[str]) -> tuple[int, int] | None:
+    """The first still period with GNSS before the first motion, as IMU samples [i0, i1): the
+    quiet runs (calibration's mask, else :func:`still_runs`), each cut to the longest prefix that
+    gravity and the GNSS track confirm (:func:`_not_still`).  What was skipped goes to ``lines``."""
+    first_fix = float(gnss.t[0])
+    if settings.still_mask is not None:
+        runs = spans(t, settings.still_mask, settings.still_min_s)
         first_motion = _first_gnss_motion(gnss)
     else:
         runs = still_runs(t, gyro, accel, min_duration=settings.still_min_s, gyro_arw=settings.gyro_arw,
@@ -260,14 +298,19 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
         if i_end < i1:
             lines.append(f"quiet IMU until t = {t_s1:.2f} s, but the vehicle moves after "
                          f"t = {float(t[i_end - 1]):.2f} s")
-        i1 = i_end
-        t_s1 = float(t[i1 - 1])
         if t_s0 < first_fix - 0.5:
             # GNSS starts during the still period: still fine, the vehicle has not moved
             lines.append(f"GNSS starts at t = {first_fix:.2f} s, inside the still period")
-        still = (i0, i1)
-        break
+        return i0, i_end
+    return None
 
+
+def _levelling(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, first_fix: float, settings: AlignmentSettings,
+               still: tuple[int, int] | None, lines: list[str], warnings: list[str]) -> _Levelling:
+    """Roll and pitch: static levelling on the still period, else the log's mean gravity
+    direction (``settings.up_b``) or level, starting in motion at the first fix; the config's
+    roll and pitch when given.  Refuses a body whose z axis points down (InputError)."""
+    w_mean = None
     if still is not None:
         i0, i1 = still
         t_s0, t_s1 = float(t[i0]), float(t[i1 - 1])
@@ -281,7 +324,6 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
         att_std = math.hypot(settings.accel_bias_sigma / max(g_est, 1.0), math.radians(0.05))
         level_how = "static levelling"
         start = i0
-        moving = False
         if max(abs(roll), abs(pitch)) > math.radians(TILT_WARN_DEG):
             warnings.append(f"the IMU is tilted by roll {math.degrees(roll):+.1f} deg, "
                             f"pitch {math.degrees(pitch):+.1f} deg at rest: "
@@ -300,8 +342,6 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
             roll = pitch = 0.0
             level_how = "assumed level"
         att_std = math.radians(3.0)
-        i0 = i1 = start
-        moving = True
         t_s0 = t_s1 = float(t[start])
     if settings.roll is not None and settings.pitch is not None:
         roll, pitch = settings.roll, settings.pitch
@@ -312,44 +352,64 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
         # y-up mounting near 90 deg stays a warning): no land vehicle runs upside down, but
         # forward-right-down axes read as forward-left-up do; the strapdown would carry the roll of
         # 180 deg and the lever arm's up component would become down (a vertical bias of twice it)
-        where = (f"at rest, t = {t_s0:.1f} .. {t_s1:.1f} s" if not moving else "on the log's mean")
+        where = (f"at rest, t = {t_s0:.1f} .. {t_s1:.1f} s" if still is not None else "on the log's mean")
         raise InputError(f"gravity is measured along -z of the declared forward-left-up body ({where}, roll "
                          f"{math.degrees(roll):+.0f} deg): the axes look forward-right-down; set [imu] "
                          f"mounting_rpy_deg = [180, 0, 0]")
-    t_start = float(t[start])
+    return _Levelling(start, still, t_s0, t_s1, roll, pitch, att_std, level_how, w_mean)
 
-    # position: GNSS fixes during the still period, else the first fix after the start
-    in_still = (gnss.t >= t_s0 - 0.5) & (gnss.t <= t_s1 + 0.5) if not moving else np.zeros(len(gnss), bool)
+
+@dataclass(frozen=True)
+class _StartFix:
+    """The antenna position at the start (a step of :func:`align`): ``lat``, ``lon`` rad, ``h`` m,
+    the mean of ``count`` fixes, with the per-axis ENU 1-sigma ``std_enu`` (3,) m."""
+
+    lat: float
+    lon: float
+    h: float
+    std_enu: np.ndarray
+    count: int
+
+
+def _start_fix(gnss: GnssData, lv: _Levelling, t_start: float) -> _StartFix:
+    """The GNSS fixes during the still period averaged, else the first fix at or after the start."""
+    in_still = (gnss.t >= lv.t_s0 - 0.5) & (gnss.t <= lv.t_s1 + 0.5) if not lv.moving else np.zeros(len(gnss), bool)
     after = np.nonzero(gnss.t >= t_start)[0]
     if not in_still.any() and after.size == 0:
         raise InputError("no GNSS fix at or after the alignment start: cannot initialise the position")
     idx = np.nonzero(in_still)[0] if in_still.any() else after[:1]
-    lat_a = math.radians(float(np.mean(gnss.lat_deg[idx])))
-    lon_a = math.radians(float(np.mean(gnss.lon_deg[idx])))
-    h_a = float(np.mean(gnss.alt[idx]))
     fix_std = (np.mean(gnss.std_enu[idx], axis=0) if gnss.std_enu is not None else np.array([2.0, 2.0, 4.0]))
+    return _StartFix(math.radians(float(np.mean(gnss.lat_deg[idx]))), math.radians(float(np.mean(gnss.lon_deg[idx]))),
+                     float(np.mean(gnss.alt[idx])), fix_std, len(idx))
 
-    # heading
+
+def _heading(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, settings: AlignmentSettings, lv: _Levelling,
+             t_start: float, fix: _StartFix, lines: list[str], warnings: list[str]) -> tuple[float, float, str]:
+    """(heading rad, 1-sigma rad, how it was found): the config's heading (cross-checked with the
+    GNSS track), gyrocompassing when the gyro grade allows it at rest, else the GNSS track
+    (:func:`_heading_from_gnss` / :func:`_heading_first_motion`; GNSS velocity checked against the
+    positions)."""
     method = settings.method
-    g_sigma = math.sqrt(settings.gyro_bias_sigma ** 2 + (settings.gyro_arw ** 2 / max(t_s1 - t_s0, 1e-3)))
-    gc_std = g_sigma / (geodesy.OMEGA_E * max(math.cos(lat_a), 1e-3))
+    g_sigma = math.sqrt(settings.gyro_bias_sigma ** 2 + (settings.gyro_arw ** 2 / max(lv.t_s1 - lv.t_s0, 1e-3)))
+    gc_std = g_sigma / (geodesy.OMEGA_E * max(math.cos(fix.lat), 1e-3))
     bias_g = np.zeros(3) if settings.gyro_bias is None else np.asarray(settings.gyro_bias, dtype=float)
     bias_g_std = (settings.gyro_bias_sigma if settings.gyro_bias_std is None
                   else float(np.max(settings.gyro_bias_std)))
 
-    def track_heading(use_velocity: bool):
+    def track_heading(use_velocity: bool) -> tuple[float, float, float]:
         if settings.first_motion:
-            return _heading_first_motion(t, gyro - bias_g, gnss, t_start, t_s1, roll, pitch, lat_a, lon_a, h_a,
-                                         fix_std, settings.min_speed_mps, bias_g_std, settings.heading_floor,
-                                         use_velocity=use_velocity)
-        return _heading_from_gnss(t, gyro, gnss, t_start, t_s1, roll, pitch, lat_a, lon_a, h_a, fix_std,
-                                  settings.min_speed_mps, use_velocity=use_velocity)
+            return _heading_first_motion(t, gyro - bias_g, gnss, t_start, lv.t_s1, lv.roll, lv.pitch, fix.lat,
+                                         fix.lon, fix.h, fix.std_enu, settings.min_speed_mps, bias_g_std,
+                                         settings.heading_floor, use_velocity=use_velocity)
+        return _heading_from_gnss(t, gyro, gnss, t_start, lv.t_s1, lv.roll, lv.pitch, fix.lat, fix.lon, fix.h,
+                                  fix.std_enu, settings.min_speed_mps, use_velocity=use_velocity)
 
     if settings.heading is not None and method in ("auto", "config"):
         heading = settings.heading
         head_std = math.radians(1.0)
         head_how = "config"
         try:      # a cross-check, not a requirement: the track may be too short
+            h_trk: float | None
             h_trk, s_trk, _ = track_heading(use_velocity=False)
         except InputError:
             h_trk = None
@@ -359,55 +419,60 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
                 warnings.append(f"[init] heading_deg = {math.degrees(heading):.1f} differs by {diff:+.1f} deg from the "
                                 f"heading of the GNSS track ({math.degrees(h_trk):.1f} +- {math.degrees(s_trk):.1f}): "
                                 "heading is clockwise from north, not a ROS yaw")
-    elif method == "config":
+        return heading, head_std, head_how
+    if method == "config":
         raise InputError("[init] method = 'config' needs heading_deg")
-    elif not moving and (method == "gyrocompass"
-                         or (method == "auto" and gc_std < settings.gyrocompass_max_heading_std)):
-        heading = gyrocompass(w_mean, roll, pitch)
-        head_std = max(gc_std, math.radians(0.1))
-        head_how = f"gyrocompassing (predicted 1-sigma {math.degrees(gc_std):.2f} deg)"
-    else:
-        if method == "auto" and not moving:
-            lines.append(f"gyrocompassing not possible with this gyro (predicted 1-sigma "
-                         f"{math.degrees(gc_std):.1f} deg): heading from the GNSS track")
-        heading, head_std, t_course = track_heading(use_velocity=gnss.vel_enu is not None)
-        head_how = (f"GNSS track of the first motion up to t = {t_course:.2f} s, gyro bias removed"
-                    if settings.first_motion
-                    else f"GNSS track up to t = {t_course:.2f} s, turns taken out with the gyro")
-        if gnss.vel_enu is not None:
-            # the velocity columns are easy to get wrong (NED, swapped, sign): check them against
-            # the positions, which cannot be
-            try:
-                h_pos, s_pos, _ = track_heading(use_velocity=False)
-            except InputError:
-                h_pos = None
-            if h_pos is not None:
-                diff = math.degrees(math.remainder(heading - h_pos, 2 * math.pi))
-                if abs(diff) > max(5.0, 3.0 * math.degrees(math.hypot(head_std, s_pos))):
-                    warnings.append(f"the course of the GNSS velocity differs by {diff:+.1f} deg from the GNSS "
-                                    "positions' track (are ve, vn swapped, NED or of the wrong sign?): heading "
-                                    "taken from the positions")
-                    heading, head_std = h_pos, s_pos
-                    head_how = "GNSS position track, turns taken out with the gyro"
+    if lv.w_mean is not None and (method == "gyrocompass"
+                                  or (method == "auto" and gc_std < settings.gyrocompass_max_heading_std)):
+        return (gyrocompass(lv.w_mean, lv.roll, lv.pitch), max(gc_std, math.radians(0.1)),
+                f"gyrocompassing (predicted 1-sigma {math.degrees(gc_std):.2f} deg)")
+    if method == "auto" and not lv.moving:
+        lines.append(f"gyrocompassing not possible with this gyro (predicted 1-sigma "
+                     f"{math.degrees(gc_std):.1f} deg): heading from the GNSS track")
+    heading, head_std, t_course = track_heading(use_velocity=gnss.vel_enu is not None)
+    head_how = (f"GNSS track of the first motion up to t = {t_course:.2f} s, gyro bias removed"
+                if settings.first_motion
+                else f"GNSS track up to t = {t_course:.2f} s, turns taken out with the gyro")
+    if gnss.vel_enu is not None:
+        # the velocity columns are easy to get wrong (NED, swapped, sign): check them against
+        # the positions, which cannot be
+        try:
+            h_pos: float | None
+            h_pos, s_pos, _ = track_heading(use_velocity=False)
+        except InputError:
+            h_pos = None
+        if h_pos is not None:
+            diff = math.degrees(math.remainder(heading - h_pos, 2 * math.pi))
+            if abs(diff) > max(5.0, 3.0 * math.degrees(math.hypot(head_std, s_pos))):
+                warnings.append(f"the course of the GNSS velocity differs by {diff:+.1f} deg from the GNSS "
+                                "positions' track (are ve, vn swapped, NED or of the wrong sign?): heading "
+                                "taken from the positions")
+                heading, head_std = h_pos, s_pos
+                head_how = "GNSS position track, turns taken out with the gyro"
+    return heading, head_std, head_how
 
-    C = rph_to_dcm(roll, pitch, heading)
+
+def _initial_state(gnss: GnssData, settings: AlignmentSettings, lv: _Levelling, fix: _StartFix, t_start: float,
+                   heading: float, head_std: float) -> tuple[np.ndarray, np.ndarray]:
+    """Nominal (16,) and covariance (15, 15) at the start: the IMU position is the antenna fix
+    less the lever arm rotated by the attitude; velocity zero at rest, from GNSS in motion;
+    biases from calibration when it measured them, else zero with the configured turn-on sigma."""
+    C = rph_to_dcm(lv.roll, lv.pitch, heading)
     # the GNSS fixes are of the antenna: remove the lever arm to get the IMU position
-    off = C @ lever
-    rm, rn = geodesy.radii(lat_a)
-    lat0 = lat_a - off[1] / (rm + h_a)
-    lon0 = lon_a - off[0] / ((rn + h_a) * math.cos(lat_a))
-    h0 = h_a - off[2]
-
+    off = C @ np.asarray(settings.lever_arm_b, dtype=float)
+    rm, rn = geodesy.radii(fix.lat)
     x = np.zeros(NOMINAL_SIZE)
-    x[0:4] = dcm_to_quat(C)
-    x[7], x[8], x[9] = lat0, lon0, h0
-    if moving:
-        x[4:7] = _gnss_velocity_at(gnss, t_start, lat_a, lon_a, h_a)
+    x[NOMINAL_Q] = dcm_to_quat(C)
+    x[X_LAT] = fix.lat - off[1] / (rm + fix.h)
+    x[X_LON] = fix.lon - off[0] / ((rn + fix.h) * math.cos(fix.lat))
+    x[X_H] = fix.h - off[2]
+    if lv.moving:
+        x[NOMINAL_VEL] = _gnss_velocity_at(gnss, t_start, fix.lat, fix.lon, fix.h)
     P = np.zeros((N_ERR, N_ERR))
-    P[ATT, ATT] = np.diag([att_std ** 2, att_std ** 2, head_std ** 2])
-    vel_std = 0.05 if not moving else 1.0
+    P[ATT, ATT] = np.diag([lv.att_std ** 2, lv.att_std ** 2, head_std ** 2])
+    vel_std = 0.05 if not lv.moving else 1.0
     P[VEL, VEL] = np.eye(3) * vel_std ** 2
-    P[POS, POS] = np.diag(fix_std ** 2)
+    P[POS, POS] = np.diag(fix.std_enu ** 2)
     if settings.gyro_bias is not None:
         x[NOMINAL_BG] = settings.gyro_bias
         P[BG, BG] = np.diag(np.maximum(np.asarray(settings.gyro_bias_std, dtype=float), 1e-9) ** 2)
@@ -418,15 +483,32 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, settings: Al
         P[BA, BA] = np.diag(np.maximum(np.asarray(settings.accel_bias_std, dtype=float), 1e-9) ** 2)
     else:
         P[BA, BA] = np.eye(3) * max(settings.accel_bias_sigma, 1e-9) ** 2
+    return x, P
 
-    lines.append(f"attitude: roll {math.degrees(roll):+.2f} deg, pitch {math.degrees(pitch):+.2f} deg "
-                 f"({level_how}), heading {math.degrees(heading) % 360:.1f} deg +- "
+
+def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: GnssData, settings: AlignmentSettings
+          ) -> Alignment:
+    """Initial nominal state and covariance (see module docstring): the still period, levelling,
+    the start fix, the heading, the state."""
+    lines: list[str] = []
+    warnings: list[str] = []
+    if len(gnss) == 0:
+        raise InputError("no GNSS fixes: cannot initialise the position")
+    still = _still_period(t, gyro, accel, gnss, settings, lines)
+    lv = _levelling(t, gyro, accel, float(gnss.t[0]), settings, still, lines, warnings)
+    t_start = float(t[lv.start])
+    fix = _start_fix(gnss, lv, t_start)
+    heading, head_std, head_how = _heading(t, gyro, gnss, settings, lv, t_start, fix, lines, warnings)
+    x, P = _initial_state(gnss, settings, lv, fix, t_start, heading, head_std)
+    lines.append(f"attitude: roll {math.degrees(lv.roll):+.2f} deg, pitch {math.degrees(lv.pitch):+.2f} deg "
+                 f"({lv.how}), heading {math.degrees(heading) % 360:.1f} deg +- "
                  f"{math.degrees(head_std):.1f} ({head_how})")
-    lines.append(f"position: {len(idx)} GNSS fix(es) averaged; start at t = {t_start:.2f} s")
-    return Alignment(t_start, start, x, P, None if moving else (t_s0, t_s1), tuple(lines), tuple(warnings))
+    lines.append(f"position: {fix.count} GNSS fix(es) averaged; start at t = {t_start:.2f} s")
+    return Alignment(t_start, lv.start, x, P, None if lv.moving else (lv.t_s0, lv.t_s1), tuple(lines),
+                     tuple(warnings))
 
 
-def _gnss_velocity_at(gnss, t0: float, lat: float, lon: float, h: float, span: float = 2.0) -> np.ndarray:
+def _gnss_velocity_at(gnss: GnssData, t0: float, lat: float, lon: float, h: float, span: float = 2.0) -> np.ndarray:
     """ENU velocity (m/s) at ``t0`` for a start in motion: the GNSS velocity nearest ``t0`` when
     the log has it, else a straight-line fit of the positions over ``[t0, t0 + span]``."""
     if gnss.vel_enu is not None:
@@ -440,21 +522,38 @@ def _gnss_velocity_at(gnss, t0: float, lat: float, lon: float, h: float, span: f
     enu = geodesy.geodetic_to_enu(np.radians(gnss.lat_deg[sel]), np.radians(gnss.lon_deg[sel]), gnss.alt[sel],
                                   lat, lon, h)
     tt = gnss.t[sel] - gnss.t[sel].mean()
-    return (tt @ (enu - enu.mean(axis=0))) / float(tt @ tt)
+    vel: np.ndarray = (tt @ (enu - enu.mean(axis=0))) / float(tt @ tt)
+    return vel
 
 
-def _rotated_track(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, min_speed, use_velocity):
+@dataclass(frozen=True)
+class _Track:
+    """The GNSS track after the still period as K displacements (:func:`_rotated_track`).
+
+    ``tg`` (K,) fix times, s; ``dt`` (K,) s since the previous fix (or the still end); ``d``
+    (K, 2) east/north displacements, m; ``t_mid`` (K,) s their middles; ``rot`` (K,) rad turned
+    (counter-clockwise) since the start at each displacement's middle; ``moving`` (K,) bool;
+    ``step_noise`` (K,) m per displacement from velocity (None from positions: their sum
+    telescopes, only the end's noise remains, the start being the mean of the still fixes).
+    """
+
+    tg: np.ndarray
+    dt: np.ndarray
+    d: np.ndarray
+    t_mid: np.ndarray
+    rot: np.ndarray
+    moving: np.ndarray
+    step_noise: np.ndarray | None
+
+
+def _rotated_track(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_start: float, t_still_end: float, roll: float,
+                   pitch: float, lat: float, lon: float, h: float, min_speed: float, use_velocity: bool) -> _Track:
     """The GNSS track after the still period, as displacements, with the gyro's turn since
     ``t_start`` at each of them (shared by :func:`_heading_from_gnss` and
     :func:`_heading_first_motion`).
 
     Displacements come from GNSS velocity x dt when the log has it and ``use_velocity`` (zero
-    below ``min_speed``), else from positions, the still position as the origin.  Returns a dict:
-    ``tg`` (K,) fix times, ``dt`` (K,) s since the previous fix (or the still end), ``d`` (K, 2)
-    E/N displacements m, ``t_mid`` (K,) s their middles, ``rot`` (K,) rad turned (counter-clockwise) at each
-    displacement's middle, ``moving`` (K,) bool, ``step_noise`` (K,) m per displacement from velocity (None
-    from positions: their sum telescopes, only the end's noise remains, the start being the
-    mean of the still fixes)."""
+    below ``min_speed``), else from positions, the still position as the origin."""
     C = rph_to_dcm(roll, pitch, 0.0)
     i0 = int(np.searchsorted(t, t_start))
     w_up = gyro[i0:] @ C[2] - geodesy.OMEGA_E * math.sin(lat)
@@ -481,12 +580,13 @@ def _rotated_track(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h
         t_mid = 0.5 * (prev + tg)
         step_noise = None
         moving = np.hypot(d[:, 0], d[:, 1]) > min_speed * dt
-    return {"tg": tg, "dt": dt, "d": d, "t_mid": t_mid, "rot": np.interp(t_mid, ts, turned), "moving": moving,
-            "step_noise": step_noise}
+    return _Track(tg, dt, d, t_mid, np.interp(t_mid, ts, turned), moving, step_noise)
 
 
-def _heading_from_gnss(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, fix_std, min_speed,
-                       use_velocity=True, path_length=150.0, min_length=30.0, max_window=120.0):
+def _heading_from_gnss(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_start: float, t_still_end: float,
+                       roll: float, pitch: float, lat: float, lon: float, h: float, fix_std: np.ndarray,
+                       min_speed: float, use_velocity: bool = True, path_length: float = 150.0,
+                       min_length: float = 30.0, max_window: float = 120.0) -> tuple[float, float, float]:
     """Heading at ``t_start`` from the GNSS track once moving, referred back with the gyro.
 
     Every GNSS displacement after the still period (from positions, or from GNSS velocity x dt
@@ -499,7 +599,7 @@ def _heading_from_gnss(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lo
     Returns (heading rad, 1-sigma rad, time the summed track ends).
     """
     tr = _rotated_track(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, min_speed, use_velocity)
-    tg, d, rot, step_noise = tr["tg"], tr["d"], tr["rot"], tr["step_noise"]
+    tg, d, rot, step_noise = tr.tg, tr.d, tr.rot, tr.step_noise
     # rotate each displacement back to the start heading: course + turn (complex N + iE)
     z = (d[:, 1] + 1j * d[:, 0]) * np.exp(1j * rot)
     csum = np.cumsum(z)
@@ -518,9 +618,11 @@ def _heading_from_gnss(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lo
     return heading, std, float(tg[k])
 
 
-def _heading_first_motion(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, fix_std, min_speed,
-                          bias_std, floor, use_velocity=True, path_length=60.0, min_length=5.0,
-                          max_turn=math.radians(90.0), max_window=60.0):
+def _heading_first_motion(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_start: float, t_still_end: float,
+                          roll: float, pitch: float, lat: float, lon: float, h: float, fix_std: np.ndarray,
+                          min_speed: float, bias_std: float, floor: float, use_velocity: bool = True,
+                          path_length: float = 60.0, min_length: float = 5.0, max_turn: float = math.radians(90.0),
+                          max_window: float = 60.0) -> tuple[float, float, float]:
     """Heading at ``t_start`` from the GNSS track of the first motion only.
 
     As :func:`_heading_from_gnss` (displacements rotated back by the turn the gyro measured,
@@ -532,14 +634,12 @@ def _heading_first_motion(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat,
     Returns (heading rad, 1-sigma rad, time the summed track ends).
     """
     tr = _rotated_track(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, min_speed, use_velocity)
-    tg, dt, d, t_mid, rot = tr["tg"], tr["dt"], tr["d"], tr["t_mid"], tr["rot"]
-    moving, step_noise = tr["moving"], tr["step_noise"]
+    tg, dt, d, t_mid, rot = tr.tg, tr.dt, tr.d, tr.t_mid, tr.rot
+    moving, step_noise = tr.moving, tr.step_noise
     nominal = float(np.median(np.diff(gnss.t))) if len(gnss) > 1 else 1.0
     first = np.nonzero(moving)[0]
     if first.size == 0 or float(tg[first[0]]) - t_still_end > max_window:
         # a slow platform (a walker, a robot): moving is relative to the log's own pace
-        from .calibrate import gnss_speed_at
-
         v_all, _ = gnss_speed_at(gnss, tg)
         fast = float(np.nanpercentile(v_all, 90)) if np.isfinite(v_all).any() else 0.0
         slow = max(0.3, 0.5 * fast)

@@ -44,10 +44,15 @@ import bisect
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .. import geodesy
+from .attitude import rpy_to_dcm
+
+if TYPE_CHECKING:
+    from ..recording import GnssData
 
 BLOCK_S = 0.5            #: standstill block, s
 SUB_S = 0.05             #: sub-block for the low-passed spread, s
@@ -121,10 +126,10 @@ class Calibration:
     profile: NoiseProfile
     notes: tuple[str, ...] = field(default_factory=tuple)
 
-    def report(self) -> dict:
+    def report(self) -> dict[str, object]:
         """The estimates as plain numbers (datasheet units) for metrics.json."""
         rad2deg = 180.0 / math.pi
-        out = {
+        out: dict[str, object] = {
             "still_spans_s": [[round(a, 3), round(b, 3)] for a, b in self.still_spans],
             "still_fraction": round(float(self.still.mean()) if self.still.size else 0.0, 4),
             "gravity_up_body": [round(float(v), 5) for v in self.up_b],
@@ -139,7 +144,7 @@ class Calibration:
             "accel_vrw_mps_per_sqrt_h_median": round(float(np.median(self.profile.accel_vrw)) * 60.0, 4),
             "accel_vrw_mps_per_sqrt_h_p90": round(float(np.percentile(self.profile.accel_vrw, 90)) * 60.0, 4),
         }
-        if self.still_arw is not None:
+        if self.still_arw is not None and self.still_vrw is not None:      # measured together
             out["gyro_arw_deg_per_sqrt_h_still"] = round(self.still_arw * rad2deg * 60.0, 4)
             out["accel_vrw_mps_per_sqrt_h_still"] = round(float(self.still_vrw) * 60.0, 5)
         return out
@@ -160,24 +165,39 @@ def _blocks(x: np.ndarray, w: int, nb: int) -> np.ndarray:
     return x[: nb * w].reshape(nb, w, x.shape[1])
 
 
+@dataclass(frozen=True)
+class BlockStatistics:
+    """The IMU cut into ``nb`` blocks of ``w`` samples, each into sub-blocks of ``m`` samples
+    (``dt`` the sample period, s).  Per block and axis, (nb, 3): the mean, the per-sample spread
+    (standard deviation) and the low-passed spread (standard deviation of the sub-block means)
+    of the rate (``gyro_*``, rad/s) and of the specific force (``accel_*``, m/s^2)."""
+
+    w: int
+    m: int
+    nb: int
+    dt: float
+    gyro_mean: np.ndarray
+    gyro_std: np.ndarray
+    gyro_lp: np.ndarray
+    accel_mean: np.ndarray
+    accel_std: np.ndarray
+    accel_lp: np.ndarray
+
+
 def block_statistics(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: float = BLOCK_S,
-                     sub_s: float = SUB_S) -> dict[str, np.ndarray | int]:
-    """Per block of ``block_s``: means (nb, 3), per-sample spread (nb, 3) and low-passed spread
-    (nb, 3) of the rate (rad/s) and the specific force (m/s^2); ``w`` samples per block, ``m``
-    per sub-block."""
+                     sub_s: float = SUB_S) -> BlockStatistics:
+    """:class:`BlockStatistics` over blocks of about ``block_s`` and sub-blocks of about ``sub_s`` s."""
     n = t.shape[0]
     dt = sample_period(t)
     m = max(1, int(round(sub_s / dt)))
     w = max(2 * m, int(round(block_s / dt / m)) * m)
     nb = n // w
-    out: dict[str, np.ndarray | int] = {"w": w, "m": m, "nb": nb, "dt": dt}
-    for name, x in (("gyro", gyro), ("accel", accel)):
+    per_sensor: list[np.ndarray] = []
+    for x in (gyro, accel):
         b = _blocks(x, w, nb)
-        out[f"{name}_mean"] = b.mean(axis=1)
-        out[f"{name}_std"] = b.std(axis=1)
         sub = b.reshape(nb, w // m, m, 3).mean(axis=2)
-        out[f"{name}_lp"] = sub.std(axis=1)
-    return out
+        per_sensor += [b.mean(axis=1), b.std(axis=1), sub.std(axis=1)]
+    return BlockStatistics(w, m, nb, dt, *per_sensor)
 
 
 def gnss_scatter_h(tg: np.ndarray, enu: np.ndarray) -> float:
@@ -195,7 +215,7 @@ def gnss_scatter_h(tg: np.ndarray, enu: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(d2)) / math.sqrt(6.0))
 
 
-def gnss_speed_at(gnss, times: np.ndarray, half_window: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def gnss_speed_at(gnss: GnssData, times: np.ndarray, half_window: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Horizontal GNSS speed (m/s) and its 1-sigma near each of ``times`` (NaN: no GNSS there).
 
     From the log's velocity where it has one (the nearest within ``half_window``), else a
@@ -259,7 +279,8 @@ def _pooled_var(v: np.ndarray) -> np.ndarray:
     cnt3[1:] += cnt[:-1]
     ssq3[:-1] += ssq[1:]
     cnt3[:-1] += cnt[1:]
-    return ssq3 / np.maximum(cnt3, 1.0)
+    pooled: np.ndarray = ssq3 / np.maximum(cnt3, 1.0)
+    return pooled
 
 
 def noise_profile(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: float = NOISE_BLOCK_S,
@@ -320,16 +341,16 @@ def noise_profile(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: f
     return NoiseProfile(edges.astype(float), dens[0], dens[1])
 
 
-def standstill(t: np.ndarray, stats: dict, gnss, gyro_arw: float, accel_vrw: float
+def standstill(t: np.ndarray, stats: BlockStatistics, gnss: GnssData, gyro_arw: float, accel_vrw: float
                ) -> tuple[np.ndarray, np.ndarray]:
     """(N,) bool still samples and (nb,) bool still blocks (see the module docstring)."""
     n = t.shape[0]
-    nb, w, m, dt = int(stats["nb"]), int(stats["w"]), int(stats["m"]), float(stats["dt"])
+    nb, w, m, dt = stats.nb, stats.w, stats.m, stats.dt
     mask = np.zeros(n, bool)
     if nb < 3:
         return mask, np.zeros(nb, bool)
-    lp_g = stats["gyro_lp"].max(axis=1)
-    lp_a = stats["accel_lp"].max(axis=1)
+    lp_g = stats.gyro_lp.max(axis=1)
+    lp_a = stats.accel_lp.max(axis=1)
     q_g = float(np.percentile(lp_g, QUIET_PERCENTILE))
     q_a = float(np.percentile(lp_a, QUIET_PERCENTILE))
     # with the GNSS speed to confirm, quiet reaches halfway (geometrically) from the quietest
@@ -353,8 +374,8 @@ def standstill(t: np.ndarray, stats: dict, gnss, gyro_arw: float, accel_vrw: flo
     sub_n = math.sqrt(w / m)
     for i0, i1 in spans(np.arange(nb, dtype=float), quiet, 1.0):
         # the rate only: a hand-held IMU tilts slowly at rest, which moves the mean force, not the rate
-        lp = stats["gyro_lp"]
-        dev = np.abs(stats["gyro_mean"][i0:i1] - np.median(stats["gyro_mean"][i0:i1], axis=0))
+        lp = stats.gyro_lp
+        dev = np.abs(stats.gyro_mean[i0:i1] - np.median(stats.gyro_mean[i0:i1], axis=0))
         allowed = np.maximum(3.0 * lp[i0:i1] / sub_n + 2.0 * np.median(lp[i0:i1], axis=0), floor_g)
         quiet[i0:i1] &= np.all(dev <= allowed, axis=1)
     confirmed = quiet.copy()
@@ -372,7 +393,8 @@ def spans(t: np.ndarray, mask: np.ndarray, min_s: float) -> list[tuple[int, int]
     return [(int(a), int(b)) for a, b in zip(starts, ends) if b - a >= 2 and t[b - 1] - t[a] >= min_s]
 
 
-def _vertical_bias_from_course(t, gyro_up, gnss, min_speed: float = 3.0) -> tuple[float, float, float] | None:
+def _vertical_bias_from_course(t: np.ndarray, gyro_up: np.ndarray, gnss: GnssData, min_speed: float = 3.0
+                               ) -> tuple[float, float, float] | None:
     """Vertical gyro bias (rad/s) from the GNSS course: over every stretch driven faster than
     ``min_speed`` without a gap, the integrated vertical rate minus the course change.
     Returns (bias, 1-sigma, seconds used) or None."""
@@ -430,7 +452,7 @@ def _vertical_bias_from_course(t, gyro_up, gnss, min_speed: float = 3.0) -> tupl
     return num / tot, math.sqrt(var) / tot, tot
 
 
-def calibrate(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, *, gyro_arw: float, accel_vrw: float,
+def calibrate(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: GnssData, *, gyro_arw: float, accel_vrw: float,
               gyro_bias_sigma: float, accel_bias_sigma: float, min_still_s: float = 2.0) -> Calibration:
     """Measure the log (see the module docstring).
 
@@ -449,83 +471,31 @@ def calibrate(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, *, gyro_
     profile = noise_profile(t, gyro, accel)
     lat = math.radians(float(np.median(gnss.lat_deg))) if len(gnss) else 0.0
     h = float(np.median(gnss.alt)) if len(gnss) else 0.0
-    g_local = float(geodesy.gravity(lat, h))
-    w_e = geodesy.OMEGA_E
-    gyro_bias = np.zeros(3)
-    gyro_bias_std = np.full(3, gyro_bias_sigma)
-    accel_bias = np.zeros(3)
-    accel_bias_std = np.full(3, accel_bias_sigma)
-    still_arw = still_vrw = None
-    dt = sample_period(t)
     if runs:
-        sel = np.concatenate([np.arange(a, b) for a, b in runs])
-        f_all = accel[sel].mean(axis=0)
-        up = f_all / np.linalg.norm(f_all)
-        up_from = f"{len(runs)} still stretch{'es' if len(runs) > 1 else ''}, {sel.size * dt:.0f} s"
+        est = _biases_at_rest(t, gyro, accel, runs, lat, h, gyro_bias_sigma, accel_bias_sigma)
+        dt = sample_period(t)
         a, b = runs[0]
-        n = b - a
-        w_mean = gyro[a:b].mean(axis=0)
-        f_mean = accel[a:b].mean(axis=0)
-        # the 1-sigma of a mean: from the scatter of 0.5-s means (vibration is not white)
-        wb = max(2, int(round(0.5 / dt)))
-        nblk = max(1, n // wb)
-        gm = gyro[a:a + nblk * wb].reshape(nblk, wb, 3).mean(axis=1) if nblk >= 2 else gyro[a:b]
-        fm = accel[a:a + nblk * wb].reshape(nblk, wb, 3).mean(axis=1) if nblk >= 2 else accel[a:b]
-        g_sd = gm.std(axis=0, ddof=1) / math.sqrt(gm.shape[0]) if gm.shape[0] > 1 else np.full(3, gyro_bias_sigma)
-        f_sd = fm.std(axis=0, ddof=1) / math.sqrt(fm.shape[0]) if fm.shape[0] > 1 else np.full(3, accel_bias_sigma)
-        up1 = f_mean / np.linalg.norm(f_mean)
-        est_g = w_mean - w_e * math.sin(lat) * up1
-        # the horizontal Earth rate (unknown heading) is part of the error on the axes across up
-        sd_g = np.sqrt(g_sd ** 2 + (w_e * math.cos(lat)) ** 2 * np.clip(1.0 - up1 ** 2, 0.0, 1.0))
-        est_a = (float(np.linalg.norm(f_mean)) - g_local) * up1
-        sd_a = np.sqrt(f_sd ** 2 + (3e-4 * g_local) ** 2) * np.abs(up1) + 1e-9   # gravity model, 30 ug
-        gyro_bias, gyro_bias_std = _with_prior(est_g, sd_g, gyro_bias_sigma)
-        # only the component along up is observed; across it the prior stays
-        accel_bias, accel_bias_std = _with_prior(est_a, np.where(np.abs(up1) > 0.5, sd_a, np.inf), accel_bias_sigma)
-        bias_from = "still"
-        res = gyro[sel] - gyro[sel].mean(axis=0)
-        still_arw = float(np.sqrt(np.mean(res ** 2))) * math.sqrt(dt)
-        resf = accel[sel] - accel[sel].mean(axis=0)
-        still_vrw = float(np.sqrt(np.mean(resf ** 2))) * math.sqrt(dt)
+        n_still = sum(b1 - a1 for a1, b1 in runs)
         notes.append(
-            f"still: {len(runs)} stretch{'es' if len(runs) > 1 else ''} of {sel.size * dt:.1f} s in all "
+            f"still: {len(runs)} stretch{'es' if len(runs) > 1 else ''} of {n_still * dt:.1f} s in all "
             f"(first t = {t[a]:.2f} .. {t[b - 1]:.2f} s), found relative to the log's quietest blocks"
             + (" and confirmed by the GNSS speed" if len(gnss) else ""))
+        still_arw, still_vrw = float(est.still_arw or 0.0), float(est.still_vrw or 0.0)
         notes.append(
             f"IMU noise in the still stretches (vibration included): gyro {math.degrees(still_arw) * 60.0:.3g} "
             f"deg/sqrt(h) ({math.degrees(still_arw / math.sqrt(dt)):.3g} deg/s per sample), accel "
             f"{still_vrw * 60.0:.3g} m/s/sqrt(h) ({still_vrw / math.sqrt(dt):.3g} m/s^2 per sample)")
     else:
-        f_all = accel.mean(axis=0)
-        up = f_all / np.linalg.norm(f_all)
-        up_from = "the whole log (no still stretch)"
-        bias_from = "none"
-        w_all = gyro.mean(axis=0)
-        T = float(t[-1] - t[0])
-        if T > 30.0:
-            # across up: a land vehicle or a walker does not keep rolling or pitching
-            across = w_all - float(w_all @ up) * up
-            sd_across = math.radians(5.0) / T              # a few degrees of net roll/pitch change
-            est = across.copy()
-            sd = np.full(3, sd_across)
-            vert = _vertical_bias_from_course(t, gyro @ up, gnss)
-            if vert is not None:
-                est = est + vert[0] * up
-                sd = np.sqrt(sd ** 2 + (vert[1] * up) ** 2)
-            else:
-                sd = np.sqrt(sd ** 2 + (gyro_bias_sigma * up) ** 2)
-            gyro_bias, gyro_bias_std = _with_prior(est, sd, gyro_bias_sigma)
-            bias_from = "motion"
-            notes.append(f"no still stretch: gyro biases from the mean rate over the {T:.0f} s log (across the "
-                         "vertical)" + (f" and from the GNSS course over {vert[2]:.0f} s of driving (vertical)"
-                                        if vert is not None else "; the vertical bias stays unknown"))
+        est = _biases_in_motion(t, gyro, accel, gnss, gyro_bias_sigma, accel_bias_sigma, notes)
+    up, gyro_bias, gyro_bias_std = est.up, est.gyro_bias, est.gyro_bias_std
     tilt = math.degrees(math.acos(float(np.clip(up[2], -1.0, 1.0))))
     deg = np.degrees(gyro_bias)
-    notes.append(f"gyro bias ({'from ' + bias_from if bias_from != 'none' else 'prior only'}): "
+    notes.append(f"gyro bias ({'from ' + est.bias_from if est.bias_from != 'none' else 'prior only'}): "
                  f"{deg[0]:+.3f} {deg[1]:+.3f} {deg[2]:+.3f} deg/s +- "
                  f"{' '.join(f'{v:.3f}' for v in np.degrees(gyro_bias_std))}; accel bias along up "
-                 f"{float(accel_bias @ up) / 9.80665e-3:+.1f} mg")
-    if np.any(np.abs(gyro_bias) > PRIOR_CONFLICT * np.hypot(gyro_bias_sigma, gyro_bias_std)) and bias_from != "none":
+                 f"{float(est.accel_bias @ up) / 9.80665e-3:+.1f} mg")
+    if (np.any(np.abs(gyro_bias) > PRIOR_CONFLICT * np.hypot(gyro_bias_sigma, gyro_bias_std))
+            and est.bias_from != "none"):
         notes.append("the gyro biases are beyond the configured turn-on 1-sigma "
                      f"({math.degrees(gyro_bias_sigma) * 3600:.3g} deg/h): "
                      "the IMU is of a lower grade than the preset says; the bias prior is widened")
@@ -537,11 +507,102 @@ def calibrate(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss, *, gyro_
                  f"m/s/sqrt(h) (configured {math.degrees(gyro_arw) * 60:.3g} and {accel_vrw * 60:.3g}: "
                  "the larger is used)")
     if tilt > 1.0:
-        notes.append(f"gravity in body axes ({up_from}): ({up[0]:+.3f}, {up[1]:+.3f}, {up[2]:+.3f}), "
+        notes.append(f"gravity in body axes ({est.up_from}): ({up[0]:+.3f}, {up[1]:+.3f}, {up[2]:+.3f}), "
                      f"{tilt:.1f} deg from +z")
-    return Calibration(still, tuple((float(t[a]), float(t[b - 1])) for a, b in runs), up, up_from, gyro_bias,
-                       gyro_bias_std, accel_bias, accel_bias_std, bias_from, still_arw, still_vrw, profile,
-                       tuple(notes))
+    return Calibration(still, tuple((float(t[a]), float(t[b - 1])) for a, b in runs), up, est.up_from, gyro_bias,
+                       gyro_bias_std, est.accel_bias, est.accel_bias_std, est.bias_from, est.still_arw,
+                       est.still_vrw, profile, tuple(notes))
+
+
+@dataclass(frozen=True)
+class _Biases:
+    """What :func:`calibrate` reads from the still stretches or, without one, from the motion:
+    the sensor's up (unit, body FLU) and where from; the biases with their 1-sigma (rad/s,
+    m/s^2) and where from ("still" | "motion" | "none"); the white noise of the still stretches
+    (rad/sqrt(s), m/s/sqrt(s); None in motion)."""
+
+    up: np.ndarray
+    up_from: str
+    gyro_bias: np.ndarray
+    gyro_bias_std: np.ndarray
+    accel_bias: np.ndarray
+    accel_bias_std: np.ndarray
+    bias_from: str
+    still_arw: float | None = None
+    still_vrw: float | None = None
+
+
+def _biases_at_rest(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, runs: list[tuple[int, int]], lat: float,
+                    h: float, gyro_bias_sigma: float, accel_bias_sigma: float) -> _Biases:
+    """Up from the mean specific force of all still stretches (samples ``runs``); the biases from
+    the first one: gyro = mean rate less the vertical Earth rate at ``lat`` (rad), the horizontal
+    Earth rate (unknown heading) in its 1-sigma; accelerometer along up only, ``|f| - g(lat, h)``;
+    each combined with the zero-mean prior (:func:`_with_prior`)."""
+    g_local = float(geodesy.gravity(lat, h))
+    w_e = geodesy.OMEGA_E
+    dt = sample_period(t)
+    sel = np.concatenate([np.arange(a, b) for a, b in runs])
+    f_all = accel[sel].mean(axis=0)
+    up = f_all / np.linalg.norm(f_all)
+    up_from = f"{len(runs)} still stretch{'es' if len(runs) > 1 else ''}, {sel.size * dt:.0f} s"
+    a, b = runs[0]
+    n = b - a
+    w_mean = gyro[a:b].mean(axis=0)
+    f_mean = accel[a:b].mean(axis=0)
+    # the 1-sigma of a mean: from the scatter of 0.5-s means (vibration is not white)
+    wb = max(2, int(round(0.5 / dt)))
+    nblk = max(1, n // wb)
+    gm = gyro[a:a + nblk * wb].reshape(nblk, wb, 3).mean(axis=1) if nblk >= 2 else gyro[a:b]
+    fm = accel[a:a + nblk * wb].reshape(nblk, wb, 3).mean(axis=1) if nblk >= 2 else accel[a:b]
+    g_sd = gm.std(axis=0, ddof=1) / math.sqrt(gm.shape[0]) if gm.shape[0] > 1 else np.full(3, gyro_bias_sigma)
+    f_sd = fm.std(axis=0, ddof=1) / math.sqrt(fm.shape[0]) if fm.shape[0] > 1 else np.full(3, accel_bias_sigma)
+    up1 = f_mean / np.linalg.norm(f_mean)
+    est_g = w_mean - w_e * math.sin(lat) * up1
+    # the horizontal Earth rate (unknown heading) is part of the error on the axes across up
+    sd_g = np.sqrt(g_sd ** 2 + (w_e * math.cos(lat)) ** 2 * np.clip(1.0 - up1 ** 2, 0.0, 1.0))
+    est_a = (float(np.linalg.norm(f_mean)) - g_local) * up1
+    sd_a = np.sqrt(f_sd ** 2 + (3e-4 * g_local) ** 2) * np.abs(up1) + 1e-9   # gravity model, 30 ug
+    gyro_bias, gyro_bias_std = _with_prior(est_g, sd_g, gyro_bias_sigma)
+    # only the component along up is observed; across it the prior stays
+    accel_bias, accel_bias_std = _with_prior(est_a, np.where(np.abs(up1) > 0.5, sd_a, np.inf), accel_bias_sigma)
+    res = gyro[sel] - gyro[sel].mean(axis=0)
+    still_arw = float(np.sqrt(np.mean(res ** 2))) * math.sqrt(dt)
+    resf = accel[sel] - accel[sel].mean(axis=0)
+    still_vrw = float(np.sqrt(np.mean(resf ** 2))) * math.sqrt(dt)
+    return _Biases(up, up_from, gyro_bias, gyro_bias_std, accel_bias, accel_bias_std, "still", still_arw, still_vrw)
+
+
+def _biases_in_motion(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: GnssData, gyro_bias_sigma: float,
+                      accel_bias_sigma: float, notes: list[str]) -> _Biases:
+    """Without a still stretch: up from the mean specific force of the whole log; over more than
+    30 s, the gyro biases across up from the mean rate (a land vehicle or a walker does not keep
+    rolling or pitching) and the vertical one from the GNSS course
+    (:func:`_vertical_bias_from_course`); else the priors alone."""
+    f_all = accel.mean(axis=0)
+    up = f_all / np.linalg.norm(f_all)
+    gyro_bias, gyro_bias_std = np.zeros(3), np.full(3, gyro_bias_sigma)
+    bias_from = "none"
+    w_all = gyro.mean(axis=0)
+    T = float(t[-1] - t[0])
+    if T > 30.0:
+        # across up: a land vehicle or a walker does not keep rolling or pitching
+        across = w_all - float(w_all @ up) * up
+        sd_across = math.radians(5.0) / T              # a few degrees of net roll/pitch change
+        est = across.copy()
+        sd = np.full(3, sd_across)
+        vert = _vertical_bias_from_course(t, gyro @ up, gnss)
+        if vert is not None:
+            est = est + vert[0] * up
+            sd = np.sqrt(sd ** 2 + (vert[1] * up) ** 2)
+        else:
+            sd = np.sqrt(sd ** 2 + (gyro_bias_sigma * up) ** 2)
+        gyro_bias, gyro_bias_std = _with_prior(est, sd, gyro_bias_sigma)
+        bias_from = "motion"
+        notes.append(f"no still stretch: gyro biases from the mean rate over the {T:.0f} s log (across the "
+                     "vertical)" + (f" and from the GNSS course over {vert[2]:.0f} s of driving (vertical)"
+                                    if vert is not None else "; the vertical bias stays unknown"))
+    return _Biases(up, "the whole log (no still stretch)", gyro_bias, gyro_bias_std, np.zeros(3),
+                   np.full(3, accel_bias_sigma), bias_from)
 
 
 def _with_prior(est: np.ndarray, sd: np.ndarray, prior_sd: float) -> tuple[np.ndarray, np.ndarray]:
@@ -577,11 +638,7 @@ def gross_mounting(up_b: np.ndarray) -> np.ndarray | None:
     phi = math.atan2(up[1], up[2])
     r = math.hypot(up[1], up[2])
     theta = math.atan2(-up[0], r)
-    c, s = math.cos(phi), math.sin(phi)
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-    c, s = math.cos(theta), math.sin(theta)
-    ry = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-    return ry @ rx
+    return rpy_to_dcm(phi, theta, 0.0)          # Ry(theta) Rx(phi)
 
 
 def matrix_to_rpy_deg(mat: np.ndarray) -> tuple[float, float, float]:

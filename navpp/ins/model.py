@@ -1,18 +1,8 @@
 """The INS as a state-space model for the filters: 15-element error space around a nominal.
 
-Error state (``true = nominal ⊞ dx``), in this order (ALGORITHMS.md):
-
-=========  =====  =========================================================
-block      slice  meaning
-=========  =====  =========================================================
-``ATT``    0:3    attitude error phi, ENU, rad: ``C_true = exp([phi x]) C_est``
-``VEL``    3:6    velocity error, ENU, m/s
-``POS``    6:9    position error, local ENU metres
-``BG``     9:12   gyro bias error, body FLU, rad/s
-``BA``     12:15  accelerometer bias error, body FLU, m/s^2
-=========  =====  =========================================================
-
-The nominal state is the 16-vector of :mod:`navpp.ins.strapdown`.  Filters see only
+The error state ``dx`` (``true = nominal ⊞ dx``: attitude, velocity, position, gyro bias,
+accelerometer bias; ALGORITHMS.md) and the 16-element nominal state of
+:mod:`navpp.ins.strapdown` are laid out in :mod:`navpp.ins.state`.  Filters see only
 ``plus``/``minus`` (⊞/⊟), ``transition`` (EKF: nominal propagation + Phi, Qd) and
 ``propagate_points`` (sigma-point filters: every point through the real strapdown).
 
@@ -29,12 +19,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 from numba import njit
 
-from .. import geodesy
+from ..geodesy import GRAVITY_H1, GRAVITY_H1_LAT, GRAVITY_H2
+from ..recording import LONG_GAP_PERIODS
 from .attitude import (
     quat_conj,
     quat_mul,
@@ -43,22 +34,44 @@ from .attitude import (
     rotvec_quat_coeffs,
     rotvec_to_quat,
 )
-from .strapdown import PATH_SIZE, _nav_rates, radii
-from .strapdown import integrate as _integrate_nominal
+from .state import (
+    ATT,
+    BA,
+    BG,
+    DP_E,
+    DP_N,
+    DP_U,
+    DX_ATT,
+    DX_BA,
+    DX_BG,
+    DX_POS,
+    DX_VEL,
+    N_ERR,
+    NOMINAL_BA,
+    NOMINAL_BG,
+    NOMINAL_Q,
+    NOMINAL_SIZE,
+    NOMINAL_VEL,
+    PATH_SIZE,
+    POS,
+    VEL,
+    X_H,
+    X_LAT,
+    X_LON,
+    X_QW,
+    X_QX,
+    X_QY,
+    X_QZ,
+    X_VE,
+    X_VN,
+    X_VU,
+)
+from .strapdown import integrate as integrate_nominal
+from .strapdown import nav_rates, radii
 
-N_ERR = 15
-ATT = slice(0, 3)
-VEL = slice(3, 6)
-POS = slice(6, 9)
-BG = slice(9, 12)
-BA = slice(12, 15)
+if TYPE_CHECKING:
+    from .calibrate import NoiseProfile
 
-#: An IMU interval longer than this many nominal sample periods is a long gap (dropped
-#: messages, a logger stall).  The strapdown integrates across any gap with its true length,
-#: interpolating the rates linearly; across a long gap the motion it cannot see is added to the
-#: covariance (:meth:`InsModel.gap_noise`).  Shorter gaps (a few dropped samples) cost nothing
-#: measurable at vehicle dynamics and are integrated silently.
-LONG_GAP_PERIODS = 5.0
 #: Unseen motion across a long gap of length T (s): the true specific force and rate depart
 #: from the linear interpolation by a 1-sigma of ``min(JERK * T, ACCEL)`` (m/s^2, per ENU axis)
 #: and ``min(ANG_ACCEL * T, RATE)`` (rad/s, per axis), constant over the gap: typical land
@@ -71,8 +84,8 @@ GAP_RATE = 0.1              # rad/s
 #: ``min(GAP_ANG_ACCEL * T, GAP_RATE) * T``, :meth:`InsModel.gap_noise`) reaches pi/3 rad, where
 #: the 3-sigma attitude interval spans the whole circle: after a longer gap the heading is
 #: unknown, not uncertain, the small-angle error model (sin x = x: 17 % off at pi/3) no longer
-#: holds, and propagating through it writes free-inertial nonsense (10.5 s with the constants
-#: above; a 10 s stall in motion is bridged, tests/test_faults.py, a 20 s one is not).
+#: holds, and propagating through it writes free-inertial nonsense (the gap length:
+#: :func:`max_bridgeable_gap_s`).
 GAP_MAX_ATT_STD = math.pi / 3.0     # rad
 
 
@@ -80,10 +93,6 @@ def max_bridgeable_gap_s() -> float:
     """The longest IMU gap (s) whose unseen-rotation 1-sigma stays within :data:`GAP_MAX_ATT_STD`."""
     t = math.sqrt(GAP_MAX_ATT_STD / GAP_ANG_ACCEL)         # while the rate is still growing
     return t if GAP_ANG_ACCEL * t <= GAP_RATE else GAP_MAX_ATT_STD / GAP_RATE
-
-_DGDH_H1 = geodesy._H1
-_DGDH_H1_LAT = geodesy._H1_LAT
-_DGDH_H2 = geodesy._H2
 
 
 @dataclass(frozen=True)
@@ -133,68 +142,84 @@ class NoiseModel:
         return cls(gyro_arw, accel_vrw, qg, tg, qa, ta)
 
     def psd(self) -> np.ndarray:
-        """Diagonal of G Qc G^T (the noise enters isotropically), (15,)."""
-        return np.concatenate([np.full(3, self.gyro_arw ** 2), np.full(3, self.accel_vrw ** 2), np.zeros(3),
-                               np.full(3, self.gyro_bias_psd), np.full(3, self.accel_bias_psd)])
+        """Diagonal of G Qc G^T (the noise enters isotropically), (15,): gyro white noise on the
+        attitude error, accelerometer white noise on the velocity error, the bias drives on the
+        bias errors, (rad/s)^2/s ... in the units of each block per second."""
+        psd = np.zeros(N_ERR)
+        psd[ATT] = self.gyro_arw ** 2
+        psd[VEL] = self.accel_vrw ** 2
+        psd[BG] = self.gyro_bias_psd
+        psd[BA] = self.accel_bias_psd
+        return psd
 
     def inv_tau(self) -> tuple[float, float]:
+        """(1 / gyro_bias_tau, 1 / accel_bias_tau), 1/s; 0 for an infinite correlation time."""
         g = 0.0 if math.isinf(self.gyro_bias_tau) else 1.0 / self.gyro_bias_tau
         a = 0.0 if math.isinf(self.accel_bias_tau) else 1.0 / self.accel_bias_tau
         return g, a
 
 
+@njit(cache=True, inline="always")
+def _set_neg_skew(M: np.ndarray, r0: int, c0: int, w: np.ndarray) -> None:
+    """Write the off-diagonal elements of ``-[w x]`` into the 3x3 block of ``M`` at (r0, c0)
+    (its diagonal is left as it is)."""
+    M[r0, c0 + 1], M[r0, c0 + 2] = w[2], -w[1]
+    M[r0 + 1, c0], M[r0 + 1, c0 + 2] = -w[2], w[0]
+    M[r0 + 2, c0], M[r0 + 2, c0 + 1] = w[1], -w[0]
+
+
 @njit(cache=True)
-def error_dynamics(x, fn, inv_tau_g, inv_tau_a):
-    """Continuous error-state matrix F (15, 15) at nominal ``x`` with ENU specific force ``fn``."""
-    F = np.zeros((15, 15))
-    vel = x[4:7]
-    lat, h = x[7], x[9]
-    wie, wen, _g, rm, rn = _nav_rates(lat, h, vel)
+def error_dynamics(x: np.ndarray, fn: np.ndarray, inv_tau_g: float, inv_tau_a: float) -> np.ndarray:
+    """Continuous error-state matrix F (15, 15) at nominal ``x`` with ENU specific force ``fn``
+    (m/s^2) and bias correlation rates ``inv_tau_g``, ``inv_tau_a`` (1/s); equations in the
+    module docstring."""
+    F = np.zeros((N_ERR, N_ERR))
+    vel = x[NOMINAL_VEL]
+    lat, h = x[X_LAT], x[X_H]
+    wie, wen, _g, rm, rn = nav_rates(lat, h, vel)
     win = wie + wen
-    C = quat_to_dcm(x[0:4])
-    mv = np.zeros((3, 3))
+    C = quat_to_dcm(x[NOMINAL_Q])
+    mv = np.zeros((3, 3))                   # d(w_en)/d(dv)
     mv[0, 1] = -1.0 / (rm + h)
     mv[1, 0] = 1.0 / (rn + h)
     mv[2, 0] = np.tan(lat) / (rn + h)
-    # attitude rows
-    F[0, 1], F[0, 2] = win[2], -win[1]
-    F[1, 0], F[1, 2] = -win[2], win[0]
-    F[2, 0], F[2, 1] = win[1], -win[0]
+    # attitude rows: -[w_in x] phi - M_v dv - C dbg
+    _set_neg_skew(F, DX_ATT, DX_ATT, win)
     for r in range(3):
         for c in range(3):
-            F[r, 3 + c] = -mv[r, c]
-            F[r, 9 + c] = -C[r, c]
-            F[3 + r, 12 + c] = -C[r, c]
-    # velocity rows: phi x f_n = -[f_n x] phi
-    F[3, 1], F[3, 2] = fn[2], -fn[1]
-    F[4, 0], F[4, 2] = -fn[2], fn[0]
-    F[5, 0], F[5, 1] = fn[1], -fn[0]
+            F[DX_ATT + r, DX_VEL + c] = -mv[r, c]
+            F[DX_ATT + r, DX_BG + c] = -C[r, c]
+            F[DX_VEL + r, DX_BA + c] = -C[r, c]
+    # velocity rows: phi x f_n = -[f_n x] phi, ([v x] M_v - [(2 w_ie + w_en) x]) dv, gravity's height gradient
+    _set_neg_skew(F, DX_VEL, DX_ATT, fn)
     w2 = 2.0 * wie + wen
     sk_v = np.array([[0.0, -vel[2], vel[1]], [vel[2], 0.0, -vel[0]], [-vel[1], vel[0], 0.0]])
     vm = sk_v @ mv
-    F[3, 3], F[3, 4], F[3, 5] = vm[0, 0], vm[0, 1] + w2[2], vm[0, 2] - w2[1]
-    F[4, 3], F[4, 4], F[4, 5] = vm[1, 0] - w2[2], vm[1, 1], vm[1, 2] + w2[0]
-    F[5, 3], F[5, 4], F[5, 5] = vm[2, 0] + w2[1], vm[2, 1] - w2[0], vm[2, 2]
+    v = DX_VEL
+    F[v, v], F[v, v + 1], F[v, v + 2] = vm[0, 0], vm[0, 1] + w2[2], vm[0, 2] - w2[1]
+    F[v + 1, v], F[v + 1, v + 1], F[v + 1, v + 2] = vm[1, 0] - w2[2], vm[1, 1], vm[1, 2] + w2[0]
+    F[v + 2, v], F[v + 2, v + 1], F[v + 2, v + 2] = vm[2, 0] + w2[1], vm[2, 1] - w2[0], vm[2, 2]
     s2 = np.sin(lat) ** 2
-    F[5, 8] = _DGDH_H1 - _DGDH_H1_LAT * s2 - 2.0 * _DGDH_H2 * h   # -d(gravity)/dh
-    # position rows
-    F[6, 3] = F[7, 4] = F[8, 5] = 1.0
+    F[DX_VEL + 2, DP_U] = GRAVITY_H1 - GRAVITY_H1_LAT * s2 - 2.0 * GRAVITY_H2 * h   # -d(gravity)/dh
+    # position rows: dp' = dv;  bias rows: first-order Gauss-Markov
+    F[DP_E, DX_VEL] = F[DP_N, DX_VEL + 1] = F[DP_U, DX_VEL + 2] = 1.0
     for k in range(3):
-        F[9 + k, 9 + k] = -inv_tau_g
-        F[12 + k, 12 + k] = -inv_tau_a
+        F[DX_BG + k, DX_BG + k] = -inv_tau_g
+        F[DX_BA + k, DX_BA + k] = -inv_tau_a
     return F
 
 
 @njit(cache=True)
-def _transition_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd, inv_tau_g, inv_tau_a):
-    """Accumulate Phi and Qd over the strapdown's segments (module docstring).
-
-    F of a segment is the mean of F at its start and end states (with the segment's mean
-    specific force), and Phi_j = I + FT + (FT)^2/2 + (FT)^3/6: the third-order term carries
-    gyro bias -> attitude -> velocity -> position within one step.
+def transition_from_segments(x_start: np.ndarray, seg_x: np.ndarray, seg_fn: np.ndarray, seg_T: np.ndarray,
+                             n_seg: int, psd: np.ndarray, inv_tau_g: float, inv_tau_a: float
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    """(Phi, Qd), each (15, 15), accumulated over the strapdown's ``n_seg`` segments (nominal
+    ``seg_x[j]`` (16,) at the end of segment j, its mean ENU specific force ``seg_fn[j]`` m/s^2
+    and length ``seg_T[j]`` s) from the nominal ``x_start``; ``psd`` (15,) the diagonal of
+    G Qc G^T.  Per segment: :func:`_segment_phi` and the trapezoid Qd of :func:`_segment_qd`.
     """
-    Phi = np.eye(15)
-    Qd = np.zeros((15, 15))
+    Phi = np.eye(N_ERR)
+    Qd = np.zeros((N_ERR, N_ERR))
     F_prev_state = x_start
     for j in range(n_seg):
         T = seg_T[j]
@@ -206,62 +231,70 @@ def _transition_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd, inv_tau
 
 
 @njit(cache=True)
-def _segment_phi(x_start, x_end, fn, T, inv_tau_g, inv_tau_a):
-    """Phi of one segment: F the mean of F at its start and end states, to third order in FT."""
+def _segment_phi(x_start: np.ndarray, x_end: np.ndarray, fn: np.ndarray, T: float, inv_tau_g: float,
+                inv_tau_a: float) -> np.ndarray:
+    """Phi (15, 15) of one segment of ``T`` s: F the mean of F at its start and end states (with
+    the segment's mean specific force ``fn``), ``Phi = I + FT + (FT)^2/2 + (FT)^3/6`` (the
+    third-order term carries gyro bias -> attitude -> velocity -> position within one step)."""
     F = 0.5 * (error_dynamics(x_start, fn, inv_tau_g, inv_tau_a) + error_dynamics(x_end, fn, inv_tau_g, inv_tau_a))
     FT = F * T
     FT2 = FT @ FT
-    return np.eye(15) + FT + 0.5 * FT2 + (FT2 @ FT) / 6.0
+    Phi: np.ndarray = np.eye(N_ERR) + FT + 0.5 * FT2 + (FT2 @ FT) / 6.0
+    return Phi
 
 
 @njit(cache=True)
-def _segment_qd(Phi_j, psd, T):
-    """Qd of one segment by the trapezoid: (Phi_j GQG Phi_j^T + GQG) T / 2 with GQG = diag(psd)."""
-    Qd_j = Phi_j * (psd * (0.5 * T)) @ Phi_j.T
-    for k in range(15):
+def _segment_qd(Phi_j: np.ndarray, psd: np.ndarray, T: float) -> np.ndarray:
+    """Qd (15, 15) of one segment of ``T`` s by the trapezoid: (Phi_j GQG Phi_j^T + GQG) T / 2
+    with GQG = diag(psd)."""
+    Qd_j: np.ndarray = Phi_j * (psd * (0.5 * T)) @ Phi_j.T
+    for k in range(N_ERR):
         Qd_j[k, k] += 0.5 * T * psd[k]
     return Qd_j
 
 
 @njit(cache=True)
-def integrate_with_jacobian(x, t, gyro, accel, t_start, t_end, out, record, psd,
-                            inv_tau_g, inv_tau_a, cov_step_s):
-    """Propagate nominal ``x`` (in place) and return the interval's (Phi, Qd).
-
-    The error-state transition is accumulated over the strapdown's segments of about
-    ``cov_step_s``.
+def integrate_with_jacobian(x: np.ndarray, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, t_start: float,
+                            t_end: float, out: np.ndarray, record: bool, psd: np.ndarray, inv_tau_g: float,
+                            inv_tau_a: float, cov_step_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Propagate nominal ``x`` (in place) from ``t_start`` to ``t_end`` (s) through the IMU
+    samples (``t`` s, ``gyro`` rad/s, ``accel`` m/s^2; recording into ``out`` when ``record``,
+    :func:`navpp.ins.strapdown.integrate`) and return the interval's (Phi, Qd), accumulated over
+    segments of about ``cov_step_s`` s (:func:`transition_from_segments`).
     """
     m = int((t_end - t_start) / cov_step_s) + 2
-    seg_x = np.empty((m, 16))
+    seg_x = np.empty((m, NOMINAL_SIZE))
     seg_fn = np.empty((m, 3))
     seg_T = np.empty(m)
     x_start = x.copy()
-    n_seg = _integrate_nominal(x, t, gyro, accel, t_start, t_end, out, record, cov_step_s, seg_x, seg_fn, seg_T)
-    return _transition_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd, inv_tau_g, inv_tau_a)
+    n_seg = integrate_nominal(x, t, gyro, accel, t_start, t_end, out, record, cov_step_s, seg_x, seg_fn, seg_T)
+    return transition_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd, inv_tau_g, inv_tau_a)
 
 
 #: process-noise groups of the 15-state model (VCE): name -> error-state indices driven by it.
 #: White noise enters the attitude and velocity errors in ENU (``G Qc G^T`` is diagonal and
 #: isotropic, :meth:`NoiseModel.psd`); the bias drives act on the body-FLU bias states.
 NOISE_GROUPS_TRIAD: tuple[tuple[str, tuple[int, ...]], ...] = (
-    ("gyro_white", (0, 1, 2)), ("accel_white", (3, 4, 5)), ("gyro_bias", (9, 10, 11)), ("accel_bias", (12, 13, 14)))
+    ("gyro_white", tuple(range(DX_ATT, DX_ATT + 3))), ("accel_white", tuple(range(DX_VEL, DX_VEL + 3))),
+    ("gyro_bias", tuple(range(DX_BG, DX_BG + 3))), ("accel_bias", tuple(range(DX_BA, DX_BA + 3))))
 NOISE_GROUPS_AXIS: tuple[tuple[str, tuple[int, ...]], ...] = tuple(
     (f"{name}_{axis}", (idx,))
-    for name, first, axes in (("gyro_white", 0, "enu"), ("accel_white", 3, "enu"),
-                              ("gyro_bias", 9, "xyz"), ("accel_bias", 12, "xyz"))
+    for name, first, axes in (("gyro_white", DX_ATT, "enu"), ("accel_white", DX_VEL, "enu"),
+                              ("gyro_bias", DX_BG, "xyz"), ("accel_bias", DX_BA, "xyz"))
     for idx, axis in zip(range(first, first + 3), axes))
 
 
 @njit(cache=True)
-def _noise_groups_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd_groups, inv_tau_g, inv_tau_a):
+def _noise_groups_from_segments(x_start: np.ndarray, seg_x: np.ndarray, seg_fn: np.ndarray, seg_T: np.ndarray,
+                                n_seg: int, psd_groups: np.ndarray, inv_tau_g: float, inv_tau_a: float
+                                ) -> np.ndarray:
     """Qd of every noise group over the strapdown's segments, in one pass, (G, 15, 15).
 
-    Same discretisation as :func:`_transition_from_segments` (Phi_j to third order, Qd_j by the
-    trapezoid), with the psd masked to one group at a time: Qd is linear in the psd, so the
-    groups sum to the interval's Qd.
+    Same discretisation as :func:`transition_from_segments`, with the psd masked to one group
+    at a time: Qd is linear in the psd, so the groups sum to the interval's Qd.
     """
     G = psd_groups.shape[0]
-    Qg = np.zeros((G, 15, 15))
+    Qg = np.zeros((G, N_ERR, N_ERR))
     F_prev_state = x_start
     for j in range(n_seg):
         T = seg_T[j]
@@ -273,97 +306,105 @@ def _noise_groups_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd_groups
 
 
 @njit(cache=True)
-def integrate_noise_groups(x, t, gyro, accel, t_start, t_end, psd_groups, inv_tau_g, inv_tau_a, cov_step_s):
+def integrate_noise_groups(x: np.ndarray, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, t_start: float,
+                           t_end: float, psd_groups: np.ndarray, inv_tau_g: float, inv_tau_a: float,
+                           cov_step_s: float) -> np.ndarray:
     """Propagate nominal ``x`` (in place, nothing recorded) and return the interval's Qd per
     noise group, (G, 15, 15), the psd of group g being ``psd_groups[g]`` (15,)."""
     m = int((t_end - t_start) / cov_step_s) + 2
-    seg_x = np.empty((m, 16))
+    seg_x = np.empty((m, NOMINAL_SIZE))
     seg_fn = np.empty((m, 3))
     seg_T = np.empty(m)
     x_start = x.copy()
     unused = np.empty((1, PATH_SIZE))
-    n_seg = _integrate_nominal(x, t, gyro, accel, t_start, t_end, unused, False, cov_step_s, seg_x, seg_fn, seg_T)
+    n_seg = integrate_nominal(x, t, gyro, accel, t_start, t_end, unused, False, cov_step_s, seg_x, seg_fn, seg_T)
     return _noise_groups_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd_groups, inv_tau_g, inv_tau_a)
 
 
 @njit(cache=True, inline="always")
-def _wrap_pi(a):
+def _wrap_pi(a: float) -> float:
     """Angle difference wrapped to [-pi, pi) (longitude across the antimeridian)."""
-    return (a + np.pi) % (2.0 * np.pi) - np.pi
+    wrapped: float = (a + np.pi) % (2.0 * np.pi) - np.pi
+    return wrapped
 
 
 @njit(cache=True)
-def plus(x, dx):
-    """Nominal ⊞ error: ``x`` (16,) and ``dx`` (15,) -> (16,)."""
+def plus(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
+    """Nominal ⊞ error: ``x`` (16,) and ``dx`` (15,) -> (16,).  The attitude error rotates
+    ``q_nb`` in the navigation frame; the position error (ENU m) moves lat, lon, h with the
+    radii of curvature at ``x``."""
     y = x.copy()
-    y[0:4] = quat_mul(rotvec_to_quat(dx[0:3]), x[0:4])
-    y[4:7] = x[4:7] + dx[3:6]
-    rm, rn = radii(x[7])
-    h = x[9]
-    y[7] = x[7] + dx[7] / (rm + h)
-    y[8] = _wrap_pi(x[8] + dx[6] / ((rn + h) * np.cos(x[7])))
-    y[9] = h + dx[8]
-    y[10:13] = x[10:13] + dx[9:12]
-    y[13:16] = x[13:16] + dx[12:15]
+    y[NOMINAL_Q] = quat_mul(rotvec_to_quat(dx[ATT]), x[NOMINAL_Q])
+    y[NOMINAL_VEL] = x[NOMINAL_VEL] + dx[VEL]
+    rm, rn = radii(x[X_LAT])
+    h = x[X_H]
+    y[X_LAT] = x[X_LAT] + dx[DP_N] / (rm + h)
+    y[X_LON] = _wrap_pi(x[X_LON] + dx[DP_E] / ((rn + h) * np.cos(x[X_LAT])))
+    y[X_H] = h + dx[DP_U]
+    y[NOMINAL_BG] = x[NOMINAL_BG] + dx[BG]
+    y[NOMINAL_BA] = x[NOMINAL_BA] + dx[BA]
     return y
 
 
 @njit(cache=True)
-def minus(x1, x0):
+def minus(x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
     """Error taking ``x0`` to ``x1``: ``x1 = x0 ⊞ minus(x1, x0)``, (15,)."""
-    dx = np.empty(15)
-    dx[0:3] = quat_to_rotvec(quat_mul(x1[0:4], quat_conj(x0[0:4])))
-    dx[3:6] = x1[4:7] - x0[4:7]
-    rm, rn = radii(x0[7])
-    h = x0[9]
-    dx[6] = _wrap_pi(x1[8] - x0[8]) * (rn + h) * np.cos(x0[7])
-    dx[7] = (x1[7] - x0[7]) * (rm + h)
-    dx[8] = x1[9] - h
-    dx[9:12] = x1[10:13] - x0[10:13]
-    dx[12:15] = x1[13:16] - x0[13:16]
+    dx = np.empty(N_ERR)
+    dx[ATT] = quat_to_rotvec(quat_mul(x1[NOMINAL_Q], quat_conj(x0[NOMINAL_Q])))
+    dx[VEL] = x1[NOMINAL_VEL] - x0[NOMINAL_VEL]
+    rm, rn = radii(x0[X_LAT])
+    h = x0[X_H]
+    dx[DP_E] = _wrap_pi(x1[X_LON] - x0[X_LON]) * (rn + h) * np.cos(x0[X_LAT])
+    dx[DP_N] = (x1[X_LAT] - x0[X_LAT]) * (rm + h)
+    dx[DP_U] = x1[X_H] - h
+    dx[BG] = x1[NOMINAL_BG] - x0[NOMINAL_BG]
+    dx[BA] = x1[NOMINAL_BA] - x0[NOMINAL_BA]
     return dx
 
 
 @njit(cache=True)
-def _propagate_points(x, dX, t, gyro, accel, t_start, t_end, out, record):
-    no_seg = np.empty((0, 16))      # (module-level empty arrays would be read-only constants here)
+def _propagate_points(x: np.ndarray, dX: np.ndarray, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
+                      t_start: float, t_end: float, out: np.ndarray, record: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The nominal ``x`` and the points ``x ⊞ dX[k]`` through the strapdown (recording the
+    nominal's path into ``out`` when ``record``): ``f(x)`` and ``f(x ⊞ dX[k]) ⊟ f(x)``."""
+    no_seg = np.empty((0, NOMINAL_SIZE))    # (module-level empty arrays would be read-only constants here)
     no_seg3 = np.empty((0, 3))
     no_t = np.empty(0)
     xn = x.copy()
-    _integrate_nominal(xn, t, gyro, accel, t_start, t_end, out, record, 0.0, no_seg, no_seg3, no_t)
+    integrate_nominal(xn, t, gyro, accel, t_start, t_end, out, record, 0.0, no_seg, no_seg3, no_t)
     dX_new = np.empty_like(dX)
     unused = np.empty((1, PATH_SIZE))
     for k in range(dX.shape[0]):
         xk = plus(x, dX[k])
-        _integrate_nominal(xk, t, gyro, accel, t_start, t_end, unused, False, 0.0, no_seg, no_seg3, no_t)
+        integrate_nominal(xk, t, gyro, accel, t_start, t_end, unused, False, 0.0, no_seg, no_seg3, no_t)
         dX_new[k] = minus(xk, xn)
     return xn, dX_new
 
 
-
 @njit(cache=True, inline="always")
-def _plus_row(row, c):
+def _plus_row(row: np.ndarray, c: np.ndarray) -> None:
     """``row ⊞ c`` in place for a recorded path row (q_nb, vel_enu, lat, lon, h): the same
     arithmetic as :func:`plus`, without temporaries (it runs once per IMU sample)."""
-    w, s = rotvec_quat_coeffs(c[0], c[1], c[2])
-    p0, p1, p2, p3 = w, s * c[0], s * c[1], s * c[2]
-    q0, q1, q2, q3 = row[0], row[1], row[2], row[3]
-    row[0] = p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3
-    row[1] = p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2
-    row[2] = p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1
-    row[3] = p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0
-    row[4] += c[3]
-    row[5] += c[4]
-    row[6] += c[5]
-    lat, h = row[7], row[9]
+    w, s = rotvec_quat_coeffs(c[DX_ATT], c[DX_ATT + 1], c[DX_ATT + 2])
+    p0, p1, p2, p3 = w, s * c[DX_ATT], s * c[DX_ATT + 1], s * c[DX_ATT + 2]
+    q0, q1, q2, q3 = row[X_QW], row[X_QX], row[X_QY], row[X_QZ]
+    row[X_QW] = p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3
+    row[X_QX] = p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2
+    row[X_QY] = p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1
+    row[X_QZ] = p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0
+    row[X_VE] += c[DX_VEL]
+    row[X_VN] += c[DX_VEL + 1]
+    row[X_VU] += c[DX_VEL + 2]
+    lat, h = row[X_LAT], row[X_H]
     rm, rn = radii(lat)
-    row[7] = lat + c[7] / (rm + h)
-    row[8] = _wrap_pi(row[8] + c[6] / ((rn + h) * np.cos(lat)))
-    row[9] = h + c[8]
+    row[X_LAT] = lat + c[DP_N] / (rm + h)
+    row[X_LON] = _wrap_pi(row[X_LON] + c[DP_E] / ((rn + h) * np.cos(lat)))
+    row[X_H] = h + c[DP_U]
 
 
 @njit(cache=True)
-def apply_node_corrections(path, t, node_t, xs, x_post, x_ref):
+def apply_node_corrections(path: np.ndarray, t: np.ndarray, node_t: np.ndarray, xs: np.ndarray, x_post: np.ndarray,
+                           x_ref: np.ndarray) -> None:
     """Move a recorded forward path (N, PATH_SIZE) onto a smoothed one, in place.
 
     ``t`` (N,) sample times (s, increasing); ``node_t`` (M,) the forward run's node times;
@@ -378,9 +419,9 @@ def apply_node_corrections(path, t, node_t, xs, x_post, x_ref):
     m = node_t.shape[0]
     width = path.shape[1]
     j = 0
-    cl = np.zeros(15)
-    cr = np.zeros(15)
-    c = np.zeros(15)
+    cl = np.zeros(N_ERR)
+    cr = np.zeros(N_ERR)
+    c = np.zeros(N_ERR)
     have = -1                                # the interval whose corrections are in cl, cr
     for i in range(n):
         ti = t[i]
@@ -398,13 +439,13 @@ def apply_node_corrections(path, t, node_t, xs, x_post, x_ref):
             have = j
         span = node_t[j + 1] - node_t[j]
         w = (ti - node_t[j]) / span if span > 0.0 else 1.0
-        for e in range(15):
+        for e in range(N_ERR):
             c[e] = (1.0 - w) * cl[e] + w * cr[e]
         _plus_row(path[i], c)
 
 
 @njit(cache=True)
-def rts_means(x_post, x_prior, gains, reset):
+def rts_means(x_post: np.ndarray, x_prior: np.ndarray, gains: np.ndarray, reset: np.ndarray) -> np.ndarray:
     """The smoother's mean recursion on the INS nominal (:func:`navpp.filters.smoother.smooth_arrays`):
     ``xs[k] = x_post[k] ⊞ gains[k+1] (xs[k+1] ⊟ x_prior[k+1])`` backwards from the last node,
     ``xs[k] = x_post[k]`` where ``reset[k+1]``.  (M, 16) arrays, gains (M, 15, 15)."""
@@ -444,7 +485,7 @@ class InsModel:
     dim: int = N_ERR
     #: white noise the data show (:class:`navpp.ins.calibrate.NoiseProfile`): over an interval,
     #: Q's gyro and accel white noise is the larger of ``noise`` and the profile's
-    profile: object | None = None
+    profile: NoiseProfile | None = None
 
     def __post_init__(self) -> None:
         self.t = np.ascontiguousarray(self.t, dtype=float)
@@ -466,11 +507,11 @@ class InsModel:
             return self._psd
         g, a = self.profile.over(interval[0], interval[1])
         psd = self._psd
-        if g * g <= psd[0] and a * a <= psd[3]:
+        if g * g <= psd[DX_ATT] and a * a <= psd[DX_VEL]:
             return psd
         psd = psd.copy()
-        psd[0:3] = max(psd[0], g * g)
-        psd[3:6] = max(psd[3], a * a)
+        psd[ATT] = max(psd[DX_ATT], g * g)
+        psd[VEL] = max(psd[DX_VEL], a * a)
         return psd
 
     def gap_noise(self, interval: tuple[float, float]) -> np.ndarray | None:
@@ -501,17 +542,24 @@ class InsModel:
             if Q is None:
                 Q = np.zeros((N_ERR, N_ERR))
             for i in range(3):
-                Q[i, i] += (sw * T) ** 2
-                Q[3 + i, 3 + i] += (sf * T) ** 2
-                Q[6 + i, 6 + i] += (sf * sp) ** 2
-                Q[3 + i, 6 + i] += sf * sf * T * sp
-                Q[6 + i, 3 + i] += sf * sf * T * sp
+                att, vel, pos = DX_ATT + i, DX_VEL + i, DX_POS + i
+                Q[att, att] += (sw * T) ** 2
+                Q[vel, vel] += (sf * T) ** 2
+                Q[pos, pos] += (sf * sp) ** 2
+                Q[vel, pos] += sf * sf * T * sp
+                Q[pos, vel] += sf * sf * T * sp
         return Q
 
     #: the smoother's mean recursion, compiled (:func:`rts_means`)
     rts_means = staticmethod(rts_means)
     #: VCE's process-noise groups reach the fixes through many time updates (filters.protocols)
     noise_share: ClassVar[str] = "propagated"
+
+    def _path_out(self) -> np.ndarray:
+        """The (N, PATH_SIZE) array the strapdown records the nominal into."""
+        if self.path is None:
+            raise ValueError("InsModel.path was released (set to None): the model cannot propagate any more")
+        return self.path
 
     # ⊞ / ⊟ -----------------------------------------------------------------------------------
     @staticmethod
@@ -527,8 +575,8 @@ class InsModel:
         """Nominal propagation over ``interval = (t_start, t_end)`` with its Phi (15, 15) and Qd."""
         xn = x.copy()
         Phi, Qd = integrate_with_jacobian(xn, self.t, self.gyro, self.accel, interval[0], interval[1],
-                                          self.path, True, self.psd_over(interval), self._inv_tau[0], self._inv_tau[1],
-                                          self.cov_step_s)
+                                          self._path_out(), True, self.psd_over(interval), self._inv_tau[0],
+                                          self._inv_tau[1], self.cov_step_s)
         Qg = self.gap_noise(interval)
         return xn, Phi, (Qd if Qg is None else Qd + Qg)
 
@@ -536,8 +584,8 @@ class InsModel:
         """Qd over the interval (additive noise for sigma-point filters)."""
         xn = x.copy()
         _, Qd = integrate_with_jacobian(xn, self.t, self.gyro, self.accel, interval[0], interval[1],
-                                        self.path, False, self.psd_over(interval), self._inv_tau[0], self._inv_tau[1],
-                                        self.cov_step_s)
+                                        self._path_out(), False, self.psd_over(interval), self._inv_tau[0],
+                                        self._inv_tau[1], self.cov_step_s)
         Qg = self.gap_noise(interval)
         return Qd if Qg is None else Qd + Qg
 
@@ -560,7 +608,8 @@ class InsModel:
         table = {"triad": NOISE_GROUPS_TRIAD, "axis": NOISE_GROUPS_AXIS}.get(per)
         if table is None:
             raise ValueError(f"noise_groups: per must be 'triad' or 'axis', got {per!r}")
-        names, rows = [], []
+        names: list[str] = []
+        rows: list[np.ndarray] = []
         base = self.psd_over(interval)
         for name, idx in table:
             mask = np.zeros(N_ERR)
@@ -584,13 +633,14 @@ class InsModel:
         Returns the propagated nominal ``f(x)`` and the points ``f(x ⊞ dX_i) ⊟ f(x)``.
         """
         return _propagate_points(x, np.ascontiguousarray(dX, dtype=float), self.t, self.gyro, self.accel,
-                                 interval[0], interval[1], self.path, True)
+                                 interval[0], interval[1], self._path_out(), True)
 
 
 @njit(cache=True)
-def antenna_offset_enu(x, lever_arm_b):
+def antenna_offset_enu(x: np.ndarray, lever_arm_b: np.ndarray) -> np.ndarray:
     """ENU offset (m) of an antenna at ``lever_arm_b`` (body FLU, m) from the nominal position."""
-    return quat_to_dcm(x[0:4]) @ lever_arm_b
+    offset: np.ndarray = quat_to_dcm(x[NOMINAL_Q]) @ lever_arm_b
+    return offset
 
 
 @dataclass(frozen=True)
@@ -617,14 +667,16 @@ class GnssPosition:
     forceable: ClassVar[bool] = True      # forced in after a run of gate rejections (re-anchored)
 
     def innovation_at(self, x: np.ndarray) -> np.ndarray:
-        return _gnss_innovation(x, self.lat, self.lon, self.h, self.lever_arm_b)
+        """Fix minus predicted antenna position at nominal ``x``, local ENU m (3,)."""
+        return gnss_innovation(x, self.lat, self.lon, self.h, self.lever_arm_b)
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
-        return _gnss_jacobian(x, self.lever_arm_b)
+        """H (3, 15) at nominal ``x``."""
+        return gnss_jacobian(x, self.lever_arm_b)
 
     def predict_points(self, x: np.ndarray, dX: np.ndarray) -> np.ndarray:
         """``h(x ⊞ dX_i) ⊟ h(x)`` in ENU metres, (m, 3)."""
-        return _gnss_points(x, np.ascontiguousarray(dX, dtype=float), self.lever_arm_b)
+        return gnss_points(x, np.ascontiguousarray(dX, dtype=float), self.lever_arm_b)
 
     def reanchor(self, P: np.ndarray, nu: np.ndarray, R: np.ndarray) -> np.ndarray:
         """Covariance for a fix forced through the gate: the position block restarts from the
@@ -647,45 +699,55 @@ class GnssPosition:
 
 
 @njit(cache=True)
-def _gnss_innovation(x, lat, lon, h, lever):
-    rm, rn = radii(x[7])
-    hx = x[9]
+def gnss_innovation(x: np.ndarray, lat: float, lon: float, h: float, lever: np.ndarray) -> np.ndarray:
+    """GNSS fix (``lat``, ``lon`` rad, ``h`` m) minus the antenna position predicted from the
+    nominal ``x`` with the lever arm ``lever`` (body FLU, m): local ENU m about the nominal (3,)."""
+    rm, rn = radii(x[X_LAT])
+    hx = x[X_H]
     d = np.empty(3)
-    d[0] = _wrap_pi(lon - x[8]) * (rn + hx) * np.cos(x[7])
-    d[1] = (lat - x[7]) * (rm + hx)
+    d[0] = _wrap_pi(lon - x[X_LON]) * (rn + hx) * np.cos(x[X_LAT])
+    d[1] = (lat - x[X_LAT]) * (rm + hx)
     d[2] = h - hx
-    return d - antenna_offset_enu(x, lever)
+    nu: np.ndarray = d - antenna_offset_enu(x, lever)
+    return nu
 
 
 @njit(cache=True)
-def _gnss_jacobian(x, lever):
-    H = np.zeros((3, 15))
+def gnss_jacobian(x: np.ndarray, lever: np.ndarray) -> np.ndarray:
+    """H (3, 15) of :func:`gnss_innovation`'s prediction: ``[-[(C l) x], 0, I, 0, 0]``."""
+    H = np.zeros((3, N_ERR))
     a = antenna_offset_enu(x, lever)
-    # -[a x]
-    H[0, 1], H[0, 2] = a[2], -a[1]
-    H[1, 0], H[1, 2] = -a[2], a[0]
-    H[2, 0], H[2, 1] = a[1], -a[0]
-    H[0, 6] = H[1, 7] = H[2, 8] = 1.0
+    _set_neg_skew(H, 0, DX_ATT, a)
+    H[0, DP_E] = H[1, DP_N] = H[2, DP_U] = 1.0
     return H
 
 
 @njit(cache=True)
-def _gnss_points(x, dX, lever):
+def gnss_points(x: np.ndarray, dX: np.ndarray, lever: np.ndarray) -> np.ndarray:
     """``h(x ⊞ dX_k) ⊟ h(x)`` for error points ``dX`` (m, 15): ENU m, (m, 3).
 
     ``minus(plus(x, d), x)`` returns the position part of ``d`` unchanged (both use the radii
-    at ``x``), so the antenna moves by ``d[6:9]`` plus the change of the rotated lever arm,
-    ``(exp([phi x]) - I) C a``; written that way it costs one small rotation per point instead
-    of a quaternion round trip (the sigma-point filters call this for every candidate point).
+    at ``x``), so the antenna moves by the position error plus the change of the rotated lever
+    arm, ``(exp([phi x]) - I) C a``: one small rotation per point instead of a quaternion round
+    trip.
     """
     m = dX.shape[0]
     Z = np.empty((m, 3))
     a0 = antenna_offset_enu(x, lever)
     has_lever = lever[0] != 0.0 or lever[1] != 0.0 or lever[2] != 0.0
     for k in range(m):
-        Z[k, 0] = dX[k, 6]
-        Z[k, 1] = dX[k, 7]
-        Z[k, 2] = dX[k, 8]
+        Z[k, 0] = dX[k, DP_E]
+        Z[k, 1] = dX[k, DP_N]
+        Z[k, 2] = dX[k, DP_U]
         if has_lever:
-            Z[k] += quat_to_dcm(rotvec_to_quat(dX[k, 0:3])) @ a0 - a0
+            Z[k] += quat_to_dcm(rotvec_to_quat(dX[k, ATT])) @ a0 - a0
     return Z
+
+
+__all__ = [
+    "ATT", "BA", "BG", "GAP_ACCEL", "GAP_ANG_ACCEL", "GAP_JERK", "GAP_MAX_ATT_STD", "GAP_RATE", "LONG_GAP_PERIODS",
+    "NOISE_GROUPS_AXIS", "NOISE_GROUPS_TRIAD", "N_ERR", "POS", "VEL", "GnssPosition", "InsModel", "NoiseModel",
+    "antenna_offset_enu", "apply_node_corrections", "error_dynamics", "gnss_innovation", "gnss_jacobian",
+    "gnss_points", "integrate_noise_groups", "integrate_with_jacobian", "max_bridgeable_gap_s", "minus", "plus",
+    "rts_means", "transition_from_segments",
+]

@@ -1,6 +1,6 @@
 """Strapdown mechanisation in the local-level ENU frame (numba kernels + thin wrappers).
 
-Nominal navigation state, a flat float64 vector of length 16 (``NOMINAL_*`` slices):
+Nominal navigation state, a flat float64 vector of length 16 (layout in :mod:`navpp.ins.state`):
 ``q_nb`` (4, scalar-first quaternion body FLU -> nav ENU), ``vel_enu`` (3, m/s), ``lat, lon``
 (rad), ``h`` (m, WGS-84 ellipsoidal), ``gyro_bias`` (3, rad/s, body), ``accel_bias`` (3, m/s^2,
 body).  Sensor model: true rate = measured - gyro_bias, true specific force = measured -
@@ -19,43 +19,47 @@ Groves (2013) eqs 5.54-5.56 (local-navigation-frame mechanisation); Shin (2005) 
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import cast
+
 import numpy as np
 from numba import njit
 
 from .. import geodesy
+from .state import (
+    NOMINAL_BA,
+    NOMINAL_BG,
+    NOMINAL_POS,
+    NOMINAL_Q,
+    NOMINAL_SIZE,
+    NOMINAL_VEL,
+    PATH_SIZE,
+    X_H,
+    X_LAT,
+    X_LON,
+    X_QW,
+    X_QX,
+    X_QY,
+    X_QZ,
+    X_VE,
+    X_VN,
+    X_VU,
+)
 
-NOMINAL_SIZE = 16
-NOMINAL_Q = slice(0, 4)
-NOMINAL_VEL = slice(4, 7)
-NOMINAL_POS = slice(7, 10)
-NOMINAL_BG = slice(10, 13)
-NOMINAL_BA = slice(13, 16)
-PATH_SIZE = 10   #: recorded columns per IMU sample: q_nb, vel_enu, lat, lon, h (biases change only at updates)
-
-radii = njit(cache=True)(geodesy.radii)
-gravity = njit(cache=True)(geodesy.gravity)
+# the scalar geodesy functions compiled for the kernels (typed for scalars: numba specialises per call)
+#: :func:`navpp.geodesy.radii`, compiled: (meridian, prime-vertical) radius of curvature, m, at a latitude (rad)
+radii = cast(Callable[[float], tuple[float, float]], njit(cache=True)(geodesy.radii))
+#: :func:`navpp.geodesy.gravity`, compiled: normal gravity, m/s^2, at (lat rad, h m)
+gravity = cast(Callable[[float, float], float], njit(cache=True)(geodesy.gravity))
 _OMEGA_E = geodesy.OMEGA_E
 _A = geodesy.A
 _E2 = geodesy.E2
 
 
 @njit(cache=True)
-def _cross(a, b):
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-@njit(cache=True)
-def _quat_rotate(q, v):
-    """``quat_to_dcm(q) @ v`` without forming the matrix."""
-    w = q[0]
-    u = q[1:4]
-    t = 2.0 * _cross(u, v)
-    return v + w * t + _cross(u, t)
-
-
-@njit(cache=True)
-def _nav_rates(lat, h, vel):
-    """Earth rate, transport rate (ENU, rad/s) and gravity magnitude at a point."""
+def nav_rates(lat: float, h: float, vel: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float, float]:
+    """At (``lat`` rad, ``h`` m) with ENU velocity ``vel`` (m/s): the Earth rate and the transport
+    rate (ENU, rad/s), the normal gravity (m/s^2) and the meridian and prime-vertical radii (m)."""
     rm, rn = radii(lat)
     wie = np.array([0.0, _OMEGA_E * np.cos(lat), _OMEGA_E * np.sin(lat)])
     wen = np.array([-vel[1] / (rm + h), vel[0] / (rn + h), vel[0] * np.tan(lat) / (rn + h)])
@@ -63,7 +67,8 @@ def _nav_rates(lat, h, vel):
 
 
 @njit(cache=True, inline="always")
-def _qmul(a0, a1, a2, a3, b0, b1, b2, b3):
+def _qmul(a0: float, a1: float, a2: float, a3: float, b0: float, b1: float, b2: float, b3: float
+          ) -> tuple[float, float, float, float]:
     """Hamilton product of two quaternions given as scalars."""
     return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
             a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
@@ -72,7 +77,7 @@ def _qmul(a0, a1, a2, a3, b0, b1, b2, b3):
 
 
 @njit(cache=True, inline="always")
-def _rv2q(x, y, z):
+def _rv2q(x: float, y: float, z: float) -> tuple[float, float, float, float]:
     """Quaternion of the rotation vector (x, y, z), exact (series below 1e-8 rad)."""
     a2 = x * x + y * y + z * z
     if a2 < 1e-16:
@@ -86,15 +91,15 @@ def _rv2q(x, y, z):
 
 
 @njit(cache=True)
-def step(x, w0, w1, f0, f1, dt, fn_out):
+def step(x: np.ndarray, w0: np.ndarray, w1: np.ndarray, f0: np.ndarray, f1: np.ndarray, dt: float,
+         fn_out: np.ndarray) -> None:
     """Advance the nominal state ``x`` (in place) over one interval of ``dt`` seconds.
 
     ``w0, w1`` (rad/s) and ``f0, f1`` (m/s^2) are the bias-corrected body rates and specific
     forces at the start and end of the interval.  ``fn_out`` (3,) receives the interval's
     velocity increment from specific force, resolved in ENU (m/s), for the error model.
 
-    Written with scalars only (no temporary arrays): this is the innermost loop of every
-    filter.
+    Written with scalars only (no temporary arrays): this is the innermost loop of every filter.
     """
     dt2 = dt * dt
     a0, a1, a2 = w0[0], w0[1], w0[2]
@@ -117,7 +122,7 @@ def step(x, w0, w1, f0, f1, dt, fn_out):
     v1b = (g1 + 0.5 * e1) * dt + u1 * dt2
     v2b = (g2 + 0.5 * e2) * dt + u2 * dt2
     # rotate into the start navigation frame: v_n = q v_b q*
-    qw, qx, qy, qz = x[0], x[1], x[2], x[3]
+    qw, qx, qy, qz = x[X_QW], x[X_QX], x[X_QY], x[X_QZ]
     t0 = 2.0 * (qy * v2b - qz * v1b)
     t1 = 2.0 * (qz * v0b - qx * v2b)
     t2 = 2.0 * (qx * v1b - qy * v0b)
@@ -125,8 +130,8 @@ def step(x, w0, w1, f0, f1, dt, fn_out):
     n1 = v1b + qw * t1 + (qz * t0 - qx * t2)
     n2 = v2b + qw * t2 + (qx * t1 - qy * t0)
 
-    ve, vn, vu = x[4], x[5], x[6]
-    lat, lon, h = x[7], x[8], x[9]
+    ve, vn, vu = x[X_VE], x[X_VN], x[X_VU]
+    lat, lon, h = x[X_LAT], x[X_LON], x[X_H]
     # predictor with the start values, then the mid-point values
     lat_m, h_m = lat, h
     vme, vmn, vmu = ve, vn, vu
@@ -157,27 +162,27 @@ def step(x, w0, w1, f0, f1, dt, fn_out):
         if it == 0:
             h_m = h + 0.5 * vmu * dt
             lat_m = lat + 0.5 * vmn / (rm + h) * dt
-    x[9] = h + vmu * dt
-    x[7] = lat + vmn / (rm + h_m) * dt
+    x[X_H] = h + vmu * dt
+    x[X_LAT] = lat + vmn / (rm + h_m) * dt
     lon = lon + vme / ((rn + h_m) * cl) * dt
     if lon >= np.pi:          # keep longitude in [-pi, pi) across the antimeridian
         lon -= 2.0 * np.pi
     elif lon < -np.pi:
         lon += 2.0 * np.pi
-    x[8] = lon
-    x[4], x[5], x[6] = ne, nn, nu
+    x[X_LON] = lon
+    x[X_VE], x[X_VN], x[X_VU] = ne, nn, nu
     # C(k) = exp(-zeta x) C(k-1) exp(phi x)
     r0, r1, r2, r3 = _rv2q(p0, p1, p2)
     s0, s1, s2, s3 = _qmul(qw, qx, qy, qz, r0, r1, r2, r3)
     m0, m1, m2, m3 = _rv2q(-z0, -z1, -z2)
     o0, o1, o2, o3 = _qmul(m0, m1, m2, m3, s0, s1, s2, s3)
     inv = 1.0 / np.sqrt(o0 * o0 + o1 * o1 + o2 * o2 + o3 * o3)
-    x[0], x[1], x[2], x[3] = o0 * inv, o1 * inv, o2 * inv, o3 * inv
+    x[X_QW], x[X_QX], x[X_QY], x[X_QZ] = o0 * inv, o1 * inv, o2 * inv, o3 * inv
     fn_out[0], fn_out[1], fn_out[2] = n0, n1, n2
 
 
 @njit(cache=True, inline="always")
-def _sample_at(t, a, i, tq, bias, out):
+def _sample_at(t: np.ndarray, a: np.ndarray, i: int, tq: float, bias: np.ndarray, out: np.ndarray) -> None:
     """``out = a(tq) - bias``, linear between rows ``i-1`` and ``i`` (``t[i-1] <= tq <= t[i]``)."""
     n = t.shape[0]
     if i <= 0:
@@ -193,7 +198,9 @@ def _sample_at(t, a, i, tq, bias, out):
 
 
 @njit(cache=True)
-def integrate(x, t, gyro, accel, t_start, t_end, out, record, seg_dt, seg_x, seg_fn, seg_T):
+def integrate(x: np.ndarray, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, t_start: float, t_end: float,
+              out: np.ndarray, record: bool, seg_dt: float, seg_x: np.ndarray, seg_fn: np.ndarray,
+              seg_T: np.ndarray) -> int:
     """Propagate nominal ``x`` (in place) from ``t_start`` to ``t_end`` (s) through IMU samples.
 
     Nodes are ``t_start``, every sample with ``t_start < t[i] < t_end``, and ``t_end``; rates at
@@ -210,9 +217,9 @@ def integrate(x, t, gyro, accel, t_start, t_end, out, record, seg_dt, seg_x, seg
         (s), which is what the error model needs.  Returns the number of segments.
     """
     n = t.shape[0]
-    i = np.searchsorted(t, t_start, side="right")
-    bg = x[10:13].copy()
-    ba = x[13:16].copy()
+    i = int(np.searchsorted(t, t_start, side="right"))
+    bg = x[NOMINAL_BG].copy()
+    ba = x[NOMINAL_BA].copy()
     w0 = np.empty(3)
     f0 = np.empty(3)
     w1 = np.empty(3)
@@ -257,9 +264,10 @@ def integrate(x, t, gyro, accel, t_start, t_end, out, record, seg_dt, seg_x, seg
     return n_seg
 
 
-_NO_SEG = np.empty((0, NOMINAL_SIZE))
-_NO_SEG3 = np.empty((0, 3))
-_NO_T = np.empty(0)
+#: empty segment buffers (``seg_x``, ``seg_fn``, ``seg_T``) for :func:`integrate` with ``seg_dt = 0``
+NO_SEG_X = np.empty((0, NOMINAL_SIZE))
+NO_SEG_FN = np.empty((0, 3))
+NO_SEG_T = np.empty(0)
 
 
 def free_inertial(x0: np.ndarray, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> np.ndarray:
@@ -270,5 +278,9 @@ def free_inertial(x0: np.ndarray, t: np.ndarray, gyro: np.ndarray, accel: np.nda
     out[0] = x
     integrate(x, np.ascontiguousarray(t, dtype=float), np.ascontiguousarray(gyro, dtype=float),
               np.ascontiguousarray(accel, dtype=float), float(t[0]), float(t[-1]), out, True,
-              0.0, _NO_SEG, _NO_SEG3, _NO_T)
+              0.0, NO_SEG_X, NO_SEG_FN, NO_SEG_T)
     return out
+
+
+__all__ = ["NOMINAL_BA", "NOMINAL_BG", "NOMINAL_POS", "NOMINAL_Q", "NOMINAL_SIZE", "NOMINAL_VEL", "NO_SEG_FN",
+           "NO_SEG_T", "NO_SEG_X", "PATH_SIZE", "free_inertial", "gravity", "integrate", "nav_rates", "radii", "step"]

@@ -20,6 +20,7 @@ IMU stamp); body frame FLU, navigation frame ENU; gyro in rad/s, specific force 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,6 +32,7 @@ __all__ = [
     "YawScale",
     "estimate_clock_offset",
     "find_stale_rows",
+    "fresh_count_dispersion",
     "velocity_from_positions",
     "yaw_scale_from_track",
 ]
@@ -190,7 +192,7 @@ def find_stale_rows(
     excess = k_obs > 0 and k_obs > excess_factor * expected and p_tail < alpha
 
     # 2. polling signature: the fresh count per 1-s window
-    dispersion = _dispersion(t, repeats, k_obs / n)
+    dispersion = fresh_count_dispersion(t, repeats, k_obs / n)
     regular = bool(np.isfinite(dispersion) and dispersion < regular_dispersion)
     fraction_rep = k_obs / n
 
@@ -224,7 +226,8 @@ def _channel_rates(same: np.ndarray) -> np.ndarray:
     """Per-channel repeat rate of the rows ``same`` (R, C) bool; 0 for R = 0."""
     if same.shape[0] == 0:
         return np.zeros(same.shape[1])
-    return same.mean(axis=0)
+    rates: np.ndarray = same.mean(axis=0)
+    return rates
 
 
 def _rate(t: np.ndarray) -> float:
@@ -239,8 +242,11 @@ def _median_rate(t: np.ndarray) -> float:
     return float(1.0 / np.median(np.diff(t)))
 
 
-def _dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_s: float = 1.0) -> float:
-    """Var(fresh rows per window) / binomial variance if the repeats fell at random.
+def fresh_count_dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_s: float = 1.0) -> float:
+    """The fresh-count dispersion of :func:`find_stale_rows`: over windows of ``window_s`` s of the
+    stamps ``t`` (N,) s, the variance of the rows that are not ``repeats`` (N,) bool, divided by
+    the binomial variance they would have if a fraction ``f`` of the rows repeated at random.
+
     NaN when the log has fewer samples than windows (its time is mostly gaps): the windows are
     never more than the samples, so the cost stays O(N) whatever the stamps span."""
     if not (t[-1] - t[0]) / window_s <= t.shape[0]:
@@ -413,10 +419,8 @@ def estimate_clock_offset(
     ``sigma_s`` is a delete-one-block jackknife over ``n_blocks`` contiguous blocks of the
     samples (each block far longer than the residuals' correlation span): model-free, it
     counts the gyro noise that enters the lag through the shifted window's ends, which a
-    linearised least-squares sigma misses (on a simulated consumer car with vibration a
-    Gauss-Newton sandwich sigma came out ~10x optimistic), and it is not inflated by the
-    telescoping course noise of overlapping baselines (the sandwich was ~4x conservative
-    there).
+    linearised least-squares sigma misses, and it is not inflated by the telescoping course
+    noise of overlapping baselines (docs/ins.md compares the two).
 
     ``split_sigmas``: the lag is also searched (whole window) on the two halves of the
     samples that hold equal shares of the turning; ``split_sigmas = |lag_1 - lag_2| /
@@ -463,88 +467,23 @@ def estimate_clock_offset(
     if v.ndim != 2 or v.shape[0] != t_g.shape[0] or v.shape[1] < 2 or w.shape != t_imu.shape:
         raise ValueError(f"estimate_clock_offset: shapes t_imu {t_imu.shape}, gyro_z_up {w.shape}, "
                          f"t_gnss {t_g.shape}, vel_en {v.shape}; expected (N,), (N,), (M,), (M, 2)")
-    nan = float("nan")
-
-    def fail(reason: str, n_used: int = 0) -> ClockOffset:
-        return ClockOffset(nan, nan, nan, n_used, nan, nan, nan, False, False, reason)
-
     fine = np.isfinite(t_g) & np.all(np.isfinite(v[:, :2]), axis=1)     # e.g. a lone fix's NaN velocity
     t_g, v = t_g[fine], v[fine]
-
     if t_g.shape[0] < 3 or t_imu.shape[0] < 3:
-        return fail("too few samples")
-    theta = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t_imu))])
-    # a C2 interpolant of the integral: with linear interpolation the cost has kinks at every
-    # lag that aligns the GNSS stamps with IMU stamps, and the minimum sticks to them
-    theta_at = interpolate.CubicSpline(t_imu, theta, extrapolate=False)
-    t_lo, t_hi = float(t_imu[0]), float(t_imu[-1])
-    if smooth_s > 0.0 and t_hi - t_lo > 4.0 * smooth_s:
-        # the centred moving average, on a uniform grid at the IMU's median step; its integral
-        step = float(np.median(np.diff(t_imu)))
-        grid = np.arange(t_lo + 0.5 * smooth_s, t_hi - 0.5 * smooth_s, step)
-        lo = np.clip(grid - 0.5 * smooth_s, t_lo, t_hi)
-        hi = np.clip(grid + 0.5 * smooth_s, t_lo, t_hi)
-        ws = (theta_at(hi) - theta_at(lo)) / (hi - lo)
-        phi = np.concatenate([[0.0], np.cumsum(0.5 * (ws[1:] + ws[:-1]) * step)])
-        theta_at = interpolate.CubicSpline(grid, phi, extrapolate=False)
-        t_lo, t_hi = float(grid[0]), float(grid[-1])
-
-    # GNSS yaw-rate samples over baselines of m epochs
-    dt_med = float(np.median(np.diff(t_g)))
-    m = max(1, int(round(baseline_s / dt_med)))
-    speed = np.hypot(v[:, 0], v[:, 1])
-    course = np.unwrap(np.arctan2(v[:, 0], v[:, 1]))
-    if t_g.shape[0] <= m:
-        return fail("fewer GNSS epochs than one baseline")
-    a, b = t_g[:-m], t_g[m:]
-    # every epoch of the baseline fast enough: a sliding minimum over m + 1 epochs
-    fast = speed > min_speed
-    run = np.convolve(fast.astype(int), np.ones(m + 1, dtype=int), mode="valid") == m + 1
-    ok = (run
-          & (b - a <= 1.5 * m * dt_med)                       # no gap inside the baseline
-          & (a - max_lag_s >= t_lo) & (b + max_lag_s <= t_hi))
-    # a course jump of more than pi between epochs is not a turn the unwrap can resolve
-    step = np.abs(np.diff(course))
-    big = np.convolve((step > 0.5 * np.pi).astype(int), np.ones(m, dtype=int), mode="valid") > 0
-    ok &= ~big
-    r = -(course[m:] - course[:-m]) / (b - a)
-    a, b, r = a[ok], b[ok], r[ok]
-    if r.shape[0] > MAX_SAMPLES:
-        # overlapping baselines repeat each other: every k-th loses little (a long log's search
-        # would otherwise cost seconds of spline evaluations per lag)
-        k = -(-r.shape[0] // MAX_SAMPLES)
-        a, b, r = a[::k], b[::k], r[::k]
+        return _failed("too few samples")
+    theta_at, t_lo, t_hi = _gyro_angle(t_imu, w, smooth_s)
+    samples = _course_rate_samples(t_g, v, baseline_s, min_speed, max_lag_s, t_lo, t_hi)
+    if isinstance(samples, str):
+        return _failed(samples)
+    a, b, r, m = samples
     n = int(r.shape[0])
     if n < _MIN_SAMPLES:
-        return fail(f"only {n} course-rate samples at speed > {min_speed:g} m/s "
-                    f"(need {_MIN_SAMPLES})", n)
-
-    def gyro_mean(dt: float, sel: slice | np.ndarray = slice(None)) -> np.ndarray:
-        aa, bb = a[sel], b[sel]
-        return (theta_at(bb + dt) - theta_at(aa + dt)) / (bb - aa)
-
-    def neg_corr(dt: float, sel: slice | np.ndarray = slice(None)) -> float:
-        g = gyro_mean(dt, sel)
-        rr = r[sel]
-        gs, rs = g - g.mean(), rr - rr.mean()
-        den = np.sqrt(np.dot(gs, gs) * np.dot(rs, rs))
-        return -float(np.dot(gs, rs) / den) if den > 0 else 0.0
-
+        return _failed(f"only {n} course-rate samples at speed > {min_speed:g} m/s (need {_MIN_SAMPLES})", n)
     lags = np.arange(-max_lag_s, max_lag_s + 0.5 * lag_step_s, lag_step_s)
-
-    def best_lag(sel: slice | np.ndarray = slice(None)) -> tuple[float, float, bool]:
-        costs = np.array([neg_corr(d, sel) for d in lags])
-        i = int(np.argmin(costs))
-        lo, hi = lags[max(i - 1, 0)], lags[min(i + 1, lags.shape[0] - 1)]
-        res = optimize.minimize_scalar(lambda d: neg_corr(d, sel), bounds=(lo, hi), method="bounded",
-                                       options={"xatol": 1e-5})
-        d, c = (float(res.x), float(res.fun)) if res.fun <= costs[i] else (float(lags[i]), float(costs[i]))
-        edge = i == 0 or i == lags.shape[0] - 1
-        return d, -c, edge
-
-    offset, corr, at_edge = best_lag()
+    fit = _LagFit(theta_at, a, b, r, lags)
+    offset, corr, at_edge = fit.best_lag()
     # glitches in the course (a velocity across a gap, a receiver jump): drop, search again
-    g = gyro_mean(offset)
+    g = fit.gyro_mean(offset)
     scale, c0 = np.polyfit(g, r, 1)
     e = r - scale * g - c0
     mad = 1.4826 * float(np.median(np.abs(e - np.median(e))))
@@ -554,11 +493,12 @@ def estimate_clock_offset(
         a, b, r = a[keep], b[keep], r[keep]
         n = int(r.shape[0])
         if n < _MIN_SAMPLES:
-            return fail(f"only {n} course-rate samples left after {n_out} outliers (need {_MIN_SAMPLES})", n)
-        offset, corr, at_edge = best_lag()
-        g = gyro_mean(offset)
+            return _failed(f"only {n} course-rate samples left after {n_out} outliers (need {_MIN_SAMPLES})", n)
+        fit = _LagFit(theta_at, a, b, r, lags)
+        offset, corr, at_edge = fit.best_lag()
+        g = fit.gyro_mean(offset)
         scale, c0 = np.polyfit(g, r, 1)
-    bias = -c0 / scale if scale != 0 else nan
+    bias = -c0 / scale if scale != 0 else float("nan")
     # how much turning: the gyro over the samples used, bias removed, each sample weighted
     # by its share of time (overlapping baselines count once: divide by m)
     turn = np.abs(g - bias) * (b - a) / m
@@ -567,13 +507,13 @@ def estimate_clock_offset(
     # the gyro means of every sample at every lag of a fine grid, once: the jackknife's many
     # block-deleted fits are then a few matrix products each (no spline evaluations)
     grid = np.arange(-max_lag_s, max_lag_s + 0.5 * _JACK_STEP_S, _JACK_STEP_S)
-    table = np.stack([gyro_mean(d) for d in grid])            # (L, n)
+    table = np.stack([fit.gyro_mean(d) for d in grid])            # (L, n)
     sigma = _jackknife_sigma(grid, table, r, offset, np.ones(n, bool), n_blocks, max_lag_s)
     # the two halves of the turning, each searched over the whole window, each with its own
     # jackknife sigma (the whole log's would grow with their disagreement)
     half = np.cumsum(turn) <= 0.5 * np.sum(turn)
-    lag_1, _, _ = best_lag(half)
-    lag_2, _, _ = best_lag(~half)
+    lag_1, _, _ = fit.best_lag(half)
+    lag_2, _, _ = fit.best_lag(~half)
     sig_12 = math.hypot(_jackknife_sigma(grid, table, r, lag_1, half, n_blocks, max_lag_s),
                         _jackknife_sigma(grid, table, r, lag_2, ~half, n_blocks, max_lag_s))
     split = abs(lag_1 - lag_2) / sig_12 if sig_12 > 0 else float("inf")
@@ -600,6 +540,112 @@ def estimate_clock_offset(
                        turn_deg=turn_deg, scale=float(scale), bias_rad_s=float(bias),
                        at_edge=bool(at_edge), confident=bool(confident), reason=reason,
                        consistent=consistent, split_sigmas=float(split), n_outliers=n_out)
+
+
+def _failed(reason: str, n_used: int = 0) -> ClockOffset:
+    """A :class:`ClockOffset` that estimates nothing (NaN figures), saying why."""
+    nan = float("nan")
+    return ClockOffset(nan, nan, nan, n_used, nan, nan, nan, False, False, reason)
+
+
+#: ``theta_at(t)``: the integral of the (smoothed) vertical gyro rate at times ``t`` (s), rad
+AngleAt = Callable[[np.ndarray], np.ndarray]
+
+
+def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[AngleAt, float, float]:
+    """The integral of the vertical rate ``w`` (rad/s at ``t_imu``) as a C2 interpolant, after a
+    centred moving average over ``smooth_s`` s (0: none), with the span (s) it covers.
+
+    A C2 interpolant: with linear interpolation the lag search's cost has kinks at every lag
+    that aligns the GNSS stamps with IMU stamps, and the minimum sticks to them."""
+    theta = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t_imu))])
+    theta_at = interpolate.CubicSpline(t_imu, theta, extrapolate=False)
+    t_lo, t_hi = float(t_imu[0]), float(t_imu[-1])
+    if smooth_s > 0.0 and t_hi - t_lo > 4.0 * smooth_s:
+        # the centred moving average, on a uniform grid at the IMU's median step; its integral
+        step = float(np.median(np.diff(t_imu)))
+        grid = np.arange(t_lo + 0.5 * smooth_s, t_hi - 0.5 * smooth_s, step)
+        lo = np.clip(grid - 0.5 * smooth_s, t_lo, t_hi)
+        hi = np.clip(grid + 0.5 * smooth_s, t_lo, t_hi)
+        ws = (theta_at(hi) - theta_at(lo)) / (hi - lo)
+        phi = np.concatenate([[0.0], np.cumsum(0.5 * (ws[1:] + ws[:-1]) * step)])
+        theta_at = interpolate.CubicSpline(grid, phi, extrapolate=False)
+        t_lo, t_hi = float(grid[0]), float(grid[-1])
+    return theta_at, t_lo, t_hi
+
+
+def _course_rate_samples(t_g: np.ndarray, v: np.ndarray, baseline_s: float, min_speed: float, max_lag_s: float,
+                         t_lo: float, t_hi: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int] | str:
+    """GNSS yaw-rate samples over baselines of ``m`` epochs (about ``baseline_s``): their starts
+    ``a``, ends ``b`` (s) and counter-clockwise course rates ``r`` (rad/s), and ``m``; or why
+    there are none.  A baseline is used when every epoch of it moves faster than ``min_speed``
+    (m/s), it holds no gap and no course jump beyond pi/2 between epochs, and it stays inside the
+    gyro span [t_lo, t_hi] shifted by any lag within ``+-max_lag_s``; beyond :data:`MAX_SAMPLES`
+    they are thinned evenly."""
+    dt_med = float(np.median(np.diff(t_g)))
+    m = max(1, int(round(baseline_s / dt_med)))
+    speed = np.hypot(v[:, 0], v[:, 1])
+    course = np.unwrap(np.arctan2(v[:, 0], v[:, 1]))
+    if t_g.shape[0] <= m:
+        return "fewer GNSS epochs than one baseline"
+    a, b = t_g[:-m], t_g[m:]
+    # every epoch of the baseline fast enough: a sliding minimum over m + 1 epochs
+    fast = speed > min_speed
+    run = np.convolve(fast.astype(int), np.ones(m + 1, dtype=int), mode="valid") == m + 1
+    ok = (run
+          & (b - a <= 1.5 * m * dt_med)                       # no gap inside the baseline
+          & (a - max_lag_s >= t_lo) & (b + max_lag_s <= t_hi))
+    # a course jump of more than pi between epochs is not a turn the unwrap can resolve
+    step = np.abs(np.diff(course))
+    big = np.convolve((step > 0.5 * np.pi).astype(int), np.ones(m, dtype=int), mode="valid") > 0
+    ok &= ~big
+    r = -(course[m:] - course[:-m]) / (b - a)
+    a, b, r = a[ok], b[ok], r[ok]
+    if r.shape[0] > MAX_SAMPLES:
+        # overlapping baselines repeat each other: every k-th loses little (a long log's search
+        # would otherwise cost seconds of spline evaluations per lag)
+        k = -(-r.shape[0] // MAX_SAMPLES)
+        a, b, r = a[::k], b[::k], r[::k]
+    return a, b, r, m
+
+
+@dataclass(frozen=True)
+class _LagFit:
+    """The lag search over the course-rate samples ``(a, b, r)`` (:func:`_course_rate_samples`)
+    against the gyro angle ``theta_at`` (:func:`_gyro_angle`), on the grid ``lags`` (s)."""
+
+    theta_at: AngleAt
+    a: np.ndarray
+    b: np.ndarray
+    r: np.ndarray
+    lags: np.ndarray
+
+    def gyro_mean(self, dt: float, sel: slice | np.ndarray = slice(None)) -> np.ndarray:
+        """The gyro's mean rate over each baseline shifted by ``dt`` s, rad/s."""
+        aa, bb = self.a[sel], self.b[sel]
+        mean: np.ndarray = (self.theta_at(bb + dt) - self.theta_at(aa + dt)) / (bb - aa)
+        return mean
+
+    def neg_corr(self, dt: float, sel: slice | np.ndarray = slice(None)) -> float:
+        """Minus the correlation of the course rates with the gyro means at lag ``dt``."""
+        g = self.gyro_mean(dt, sel)
+        rr = self.r[sel]
+        gs, rs = g - g.mean(), rr - rr.mean()
+        den = np.sqrt(np.dot(gs, gs) * np.dot(rs, rs))
+        return -float(np.dot(gs, rs) / den) if den > 0 else 0.0
+
+    def best_lag(self, sel: slice | np.ndarray = slice(None)) -> tuple[float, float, bool]:
+        """(lag s, correlation, at the grid's edge) maximising the correlation over the samples
+        ``sel``: the grid's best point refined between its neighbours (bounded minimisation)."""
+        lags = self.lags
+        costs = np.array([self.neg_corr(d, sel) for d in lags])
+        i = int(np.argmin(costs))
+        lo, hi = lags[max(i - 1, 0)], lags[min(i + 1, lags.shape[0] - 1)]
+        res = optimize.minimize_scalar(lambda d: self.neg_corr(d, sel), bounds=(lo, hi), method="bounded",
+                                       options={"xatol": 1e-5})
+        d, c = (float(res.x), float(res.fun)) if res.fun <= costs[i] else (float(lags[i]), float(costs[i]))
+        edge = i == 0 or i == lags.shape[0] - 1
+        return d, -c, edge
 
 
 _MIN_SAMPLES = 40

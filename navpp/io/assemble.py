@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
+from ..findings import with_code
 from ..recording import GnssData, ImuData, Recording, ReferenceData, lone_stamp, order_samples
 from .ros import FIX_TYPE, IMU_TYPE, TWIST_COV_TYPE, TWIST_TYPE, FixMessages, LogContents
 
@@ -160,11 +161,39 @@ def recording_from_log(contents: LogContents, *, imu_topic: str | None = None, g
                          time_source=time_source, time_base=time_base, default_std_m=default_std_m,
                          gyro_scale=gyro_scale, accel_scale=accel_scale, time_offset_s=time_offset_s)
     except InputError as exc:
-        cut = [w for w in contents.warnings if "the recording is cut off" in w]
+        cut = with_code(contents.warnings, "recording-cut-off")
         if not cut:
             raise
         note = cut[0].removeprefix(f"{contents.source}: ")
         raise InputError(f"{exc} ({note})") from None
+
+
+def _imu_data(contents: LogContents, imu_name: str, time_source: str, gyro_scale: float, accel_scale: float,
+              warnings: list[str]) -> tuple[ImuData, int]:
+    """The IMU topic as :class:`ImuData` (s from its first kept sample; rad/s and m/s^2 times
+    the scales) and that first sample's stamp (ns); samples out of order or repeated are
+    dropped (with a warning), a low rate and gaps are warned about."""
+    src = contents.source
+    imu = contents.imu.get(imu_name)
+    if imu is None or imu.stamp_ns.shape[0] == 0:
+        raise InputError(f"{src}: topic {imu_name!r} has no IMU message")
+    what = f"{src}: topic {imu_name!r}"
+    stamps = _stamps(imu, time_source, what)
+    _finite_rows([imu.gyro, imu.accel], ["angular_velocity", "linear_acceleration"], what, stamps)
+    _check_lone_stamp(stamps, what, time_source)
+    keep = _ordered(stamps, np.hstack([np.asarray(imu.gyro, float), np.asarray(imu.accel, float)]), what, warnings)
+    stamps = stamps[keep]
+    if stamps.shape[0] < 2:
+        raise InputError(f"{what}: at least 2 IMU messages are needed, found {stamps.shape[0]}")
+    t0_ns = int(stamps[0])
+    t_imu = (stamps - t0_ns) * 1e-9
+    rate = 1.0 / float(np.median(np.diff(t_imu)))
+    if rate < 50.0:
+        warnings.append(f"{what}: IMU rate {rate:.1f} Hz is low for strapdown navigation (100-200 Hz expected); "
+                        "processed anyway")
+    _gap_warning(what, t_imu, warnings)
+    return ImuData(t_imu, np.ascontiguousarray(np.asarray(imu.gyro, float)[keep] * gyro_scale),
+                   np.ascontiguousarray(np.asarray(imu.accel, float)[keep] * accel_scale)), t0_ns
 
 
 def _assemble(contents: LogContents, *, imu_topic: str | None = None, gnss_topic: str | None = None,
@@ -185,26 +214,8 @@ def _assemble(contents: LogContents, *, imu_topic: str | None = None, gnss_topic
     if reference_topic is not None:
         choose_topic(contents, FIX_TYPE, "reference", "--reference-topic", reference_topic)
 
-    imu = contents.imu.get(imu_name)
-    if imu is None or imu.stamp_ns.shape[0] == 0:
-        raise InputError(f"{src}: topic {imu_name!r} has no IMU message")
-    what = f"{src}: topic {imu_name!r}"
-    stamps = _stamps(imu, time_source, what)
-    _finite_rows([imu.gyro, imu.accel], ["angular_velocity", "linear_acceleration"], what, stamps)
-    _check_lone_stamp(stamps, what, time_source)
-    keep = _ordered(stamps, np.hstack([np.asarray(imu.gyro, float), np.asarray(imu.accel, float)]), what, warnings)
-    stamps = stamps[keep]
-    if stamps.shape[0] < 2:
-        raise InputError(f"{what}: at least 2 IMU messages are needed, found {stamps.shape[0]}")
-    t0_ns = int(stamps[0])
-    t_imu = (stamps - t0_ns) * 1e-9
-    rate = 1.0 / float(np.median(np.diff(t_imu)))
-    if rate < 50.0:
-        warnings.append(f"{what}: IMU rate {rate:.1f} Hz is low for strapdown navigation (100-200 Hz expected); "
-                        "processed anyway")
-    _gap_warning(what, t_imu, warnings)
-    imu_data = ImuData(t_imu, np.ascontiguousarray(np.asarray(imu.gyro, float)[keep] * gyro_scale),
-                       np.ascontiguousarray(np.asarray(imu.accel, float)[keep] * accel_scale))
+    imu_data, t0_ns = _imu_data(contents, imu_name, time_source, gyro_scale, accel_scale, warnings)
+    t_imu = imu_data.t
 
     fix = contents.fix.get(gnss_name)
     if fix is None or fix.stamp_ns.shape[0] == 0:

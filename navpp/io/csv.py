@@ -32,6 +32,7 @@ import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO, cast
 
 import numpy as np
 import pandas as pd
@@ -127,9 +128,30 @@ def read_csv_log(
             f"{log_dir}: not a directory; a CSV log is a directory holding {IMU_FILE} and {GNSS_FILE}"
         )
     warnings: list[str] = []
+    imu_data, t0_ns, imu_span = _read_imu(log_dir / IMU_FILE, gyro_scale, accel_scale, warnings, progress)
+    gnss_data = _read_gnss(log_dir / GNSS_FILE, t0_ns, imu_span, time_offset_s, warnings)
+    ref_data: ReferenceData | None = None
+    if reference is not None:
+        ref_data = read_reference_csv(reference, t0_ns, warnings_out=warnings)
+    elif (log_dir / REFERENCE_FILE).exists():
+        ref_data = read_reference_csv(log_dir / REFERENCE_FILE, t0_ns, warnings_out=warnings)
 
-    # IMU -------------------------------------------------------------------------------------
-    imu_path = log_dir / IMU_FILE
+    return Recording(
+        imu=imu_data,
+        gnss=gnss_data,
+        t0_ns=t0_ns,
+        time_base=time_base,
+        reference=ref_data,
+        source=str(path),
+        warnings=tuple(warnings),
+    )
+
+
+def _read_imu(imu_path: Path, gyro_scale: float, accel_scale: float, warnings: list[str],
+              progress: Callable[[float], None] | None) -> tuple[ImuData, int, tuple[float, float]]:
+    """``imu.csv`` (rates or increments) as :class:`ImuData` in rad/s and m/s^2, its ``t``
+    relative to the first kept stamp; that stamp (int ns on the log's time base) and the first
+    and last stamp as read (float s, the span the GNSS fixes are checked against)."""
     header = _read_header(imu_path)
     imu_format, imu_cols = _imu_format(imu_path, header)
     imu = _read_table(imu_path, header, imu_cols, warnings, progress)
@@ -151,8 +173,7 @@ def read_csv_log(
         warnings.append(f"{imu.path.name}: IMU rate {rate:.1f} Hz is low for strapdown navigation "
                         "(100-200 Hz expected); processed anyway")
     _gap_warning(imu.path.name, t_imu, imu_lines, warnings)
-    t_first = float(t_imu[0])
-    t_last = float(t_imu[-1])
+    span = (float(t_imu[0]), float(t_imu[-1]))
     imu_ns = imu.data["t_ns"]
     if imu_format == "increments":
         imu_ns = imu_ns[1:]
@@ -164,10 +185,14 @@ def read_csv_log(
         gyro = np.ascontiguousarray(rates[:, 0:3] * gyro_scale)
         accel = np.ascontiguousarray(rates[:, 3:6] * accel_scale)
     del imu, rates
-    imu_data = ImuData(t=(imu_ns - t0_ns) * 1e-9, gyro=gyro, accel=accel)
+    return ImuData(t=(imu_ns - t0_ns) * 1e-9, gyro=gyro, accel=accel), t0_ns, span
 
-    # GNSS ------------------------------------------------------------------------------------
-    gnss_path = log_dir / GNSS_FILE
+
+def _read_gnss(gnss_path: Path, t0_ns: int, imu_span: tuple[float, float], time_offset_s: float,
+               warnings: list[str]) -> GnssData:
+    """``gnss.csv`` as :class:`GnssData`, ``t`` relative to ``t0_ns`` after adding ``time_offset_s``
+    (s); invalid fixes dropped, fixes outside ``imu_span`` (first and last IMU stamp as read, s)
+    kept with a warning, none inside it an error."""
     header = _read_header(gnss_path)
     gnss_cols = _select_columns(gnss_path, header, _GNSS_REQUIRED, _GNSS_GROUPS, _GNSS_SINGLES)
     if "std_ve" in gnss_cols and "ve" not in gnss_cols:
@@ -186,6 +211,25 @@ def read_csv_log(
         raise _need_more(gnss, "at least 1 GNSS fix is needed")
     t_gnss = gnss.col("t") + float(time_offset_s)
     _gap_warning(gnss.path.name, t_gnss, gnss.lines, warnings)
+    _check_gnss_span(gnss, t_gnss, imu_span, time_offset_s, warnings)
+    return GnssData(
+        t=(gnss.data["t_ns"] + round(float(time_offset_s) * 1e9) - t0_ns) * 1e-9,
+        lat_deg=gnss.col("lat"),
+        lon_deg=gnss.col("lon"),
+        alt=gnss.col("alt"),
+        std_enu=gnss.block(_GNSS_GROUPS[0]) if "std_e" in gnss_cols else None,
+        vel_enu=gnss.block(_GNSS_GROUPS[1]) if "ve" in gnss_cols else None,
+        std_vel_enu=gnss.block(_GNSS_GROUPS[2]) if "std_ve" in gnss_cols else None,
+        fix=gnss.col("fix").astype(np.int64) if "fix" in gnss_cols else None,
+        num_sats=gnss.col("num_sats").astype(np.int64) if "num_sats" in gnss_cols else None,
+    )
+
+
+def _check_gnss_span(gnss: _Table, t_gnss: np.ndarray, imu_span: tuple[float, float], time_offset_s: float,
+                     warnings: list[str]) -> None:
+    """Fixes (``t_gnss``, s, offset applied) outside the IMU's first..last stamp: a warning; all of
+    them outside: an error (the time bases of the two files disagree)."""
+    t_first, t_last = imu_span
     n_before = int(np.count_nonzero(t_gnss < t_first))
     n_after = int(np.count_nonzero(t_gnss > t_last))
     if n_before + n_after == gnss.n:
@@ -202,34 +246,6 @@ def read_csv_log(
             + (f", after adding time_offset_s={time_offset_s!r}" if time_offset_s else "")
             + "); kept, but the engine ignores them"
         )
-    gnss_data = GnssData(
-        t=(gnss.data["t_ns"] + round(float(time_offset_s) * 1e9) - t0_ns) * 1e-9,
-        lat_deg=gnss.col("lat"),
-        lon_deg=gnss.col("lon"),
-        alt=gnss.col("alt"),
-        std_enu=gnss.block(_GNSS_GROUPS[0]) if "std_e" in gnss_cols else None,
-        vel_enu=gnss.block(_GNSS_GROUPS[1]) if "ve" in gnss_cols else None,
-        std_vel_enu=gnss.block(_GNSS_GROUPS[2]) if "std_ve" in gnss_cols else None,
-        fix=gnss.col("fix").astype(np.int64) if "fix" in gnss_cols else None,
-        num_sats=gnss.col("num_sats").astype(np.int64) if "num_sats" in gnss_cols else None,
-    )
-
-    # reference -------------------------------------------------------------------------------
-    ref_data: ReferenceData | None = None
-    if reference is not None:
-        ref_data = read_reference_csv(reference, t0_ns, warnings_out=warnings)
-    elif (log_dir / REFERENCE_FILE).exists():
-        ref_data = read_reference_csv(log_dir / REFERENCE_FILE, t0_ns, warnings_out=warnings)
-
-    return Recording(
-        imu=imu_data,
-        gnss=gnss_data,
-        t0_ns=t0_ns,
-        time_base=time_base,
-        reference=ref_data,
-        source=str(path),
-        warnings=tuple(warnings),
-    )
 
 
 def read_reference_csv(
@@ -331,12 +347,15 @@ class _Table:
 
     @property
     def n(self) -> int:
+        """Number of rows."""
         return int(self.lines.shape[0])
 
     def col(self, name: str) -> np.ndarray:
+        """(n,) C-contiguous column ``name``."""
         return np.ascontiguousarray(self.data[name])
 
     def block(self, names: Sequence[str]) -> np.ndarray:
+        """(n, len(names)) array of the columns."""
         return np.column_stack([self.data[c] for c in names])
 
     def vectors(self, names: Sequence[str], scale: float = 1.0) -> np.ndarray:
@@ -347,6 +366,7 @@ class _Table:
         return out
 
     def take(self, keep: np.ndarray) -> _Table:
+        """The rows selected by ``keep`` (a boolean mask or indices)."""
         return _Table(self.path, {k: v[keep] for k, v in self.data.items()}, self.lines[keep])
 
 
@@ -492,7 +512,7 @@ def prescan(path: Path) -> None:
         raise InputError(f"{path}: cannot read: {e.strerror or e}") from e
 
 
-def _line_number(f, at: int) -> int:
+def _line_number(f: BinaryIO, at: int) -> int:
     """1-based number of the line holding byte ``at`` of the open binary file ``f``."""
     f.seek(0)
     count = 1
@@ -506,7 +526,7 @@ def _line_number(f, at: int) -> int:
     return count
 
 
-def _long_line(path: Path, f, start: int) -> InputError:
+def _long_line(path: Path, f: BinaryIO, start: int) -> InputError:
     line = _line_number(f, start)
     f.seek(start)
     head = f.read(40).decode("utf-8", errors="replace")
@@ -611,7 +631,7 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
     size = max(path.stat().st_size, 1)
     try:
         # Chunked parsing keeps the peak memory near the size of the data itself (a one-shot
-        # read_csv holds ~4x the table in parser buffers for a 450k-row file).
+        # read_csv holds several times the table in parser buffers).
         with open(path, "rb") as fh:
             reader = pd.read_csv(
                 fh,
@@ -622,7 +642,7 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
                 encoding="utf-8-sig",
                 chunksize=_CHUNK_ROWS,
             )
-            parts = []
+            parts: list[np.ndarray] = []
             with reader:
                 for chunk in reader:
                     parts.append(chunk.iloc[:, positions].to_numpy(dtype=np.float64))
@@ -648,7 +668,7 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
     finite = np.isfinite(block)
     n = block.shape[0]
     # Blank lines at the end of the file are harmless: drop them.
-    row_empty = np.isnan(block).all(axis=1)
+    row_empty = cast(np.ndarray, np.isnan(block).all(axis=1))      # (n,) bool, for every (n, k) block
     while n > 0 and row_empty[n - 1]:
         n -= 1
     if n == 0:

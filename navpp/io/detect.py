@@ -58,7 +58,7 @@ def log_kind(path: Path) -> tuple[str, Path]:
                      "imu.csv and gnss.csv)")
 
 
-def _bag_paths(kind: str, path: Path):
+def _bag_paths(kind: str, path: Path) -> Path | list[Path]:
     """The files of a split ROS 1 recording given as a directory, else the path itself."""
     if kind == "ros1" and path.is_dir():
         return sorted(path.glob("*.bag"))
@@ -68,10 +68,12 @@ def _bag_paths(kind: str, path: Path):
 def list_topics(kind: str, path: Path) -> tuple[TopicInfo, ...]:
     """Every topic of a ROS log, cheaply (summary or index)."""
     if kind == "mcap":
-        from .mcap import list_topics as lt
-    else:
-        from .rosbag import list_topics as lt
-    return lt(_bag_paths(kind, path))
+        from .mcap import list_topics as mcap_topics
+
+        return mcap_topics(path)
+    from .rosbag import list_topics as bag_topics
+
+    return bag_topics(_bag_paths(kind, path))
 
 
 def read_topics(kind: str, path: Path, topics: list[str]) -> LogContents:

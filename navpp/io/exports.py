@@ -51,7 +51,7 @@ import json
 import math
 import os
 from collections.abc import Mapping
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
@@ -59,6 +59,9 @@ import numpy as np
 from .. import timebase
 from ..recording import Recording, Solution
 from . import frames, writers
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = [
     "GEOJSON_FILE",
@@ -363,7 +366,7 @@ def write_kml(path: str | os.PathLike[str], solution: Solution, recording: Recor
 # --------------------------------------------------------------------------- pandas
 
 
-def trajectory_frame(solution: Solution):
+def trajectory_frame(solution: Solution) -> pd.DataFrame:
     """The solution as a ``pandas.DataFrame`` with ``trajectory.csv``'s columns.
 
     ``t`` is float64 seconds on the log's time base (:func:`absolute_time`); ``lat, lon``
@@ -381,7 +384,7 @@ def trajectory_frame(solution: Solution):
     return pd.DataFrame({name: np.array(v, dtype=np.float64) for name, v in zip(writers.TRAJECTORY_COLUMNS, values)})
 
 
-def diagnostics_frame(diagnostics: Any, t0_ns: int):
+def diagnostics_frame(diagnostics: Any, t0_ns: int) -> pd.DataFrame:
     """The filter's per-GNSS-epoch diagnostics as a ``pandas.DataFrame`` with
     ``diagnostics.csv``'s columns (:func:`navpp.io.writers.diagnostics_columns`); ``t`` is
     float64 seconds on the log's time base, ``diagnostics.t`` being relative to ``t0_ns``."""

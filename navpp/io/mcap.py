@@ -15,7 +15,7 @@ and files whose recording was cut off (no footer, a partial last record) read th
 a cut-off file yields the messages up to the cut and a warning saying where it stopped.
 
 ``engine="library"`` reads through ``mcap``'s own message iteration and the ``mcap_ros2`` /
-``mcap_ros1`` decoders, one Python object per message (~100x slower): the cross-check the
+``mcap_ros1`` decoders, one Python object per message (far slower): the cross-check the
 tests use, and an escape hatch.
 """
 
@@ -34,6 +34,7 @@ import numpy as np
 from numba import njit
 
 from navpp.errors import InputError
+from navpp.findings import Finding
 from navpp.io.messages import (
     ENCODINGS,
     Messages,
@@ -494,9 +495,9 @@ class _FastReader:
         if cut is not None:
             where = (f"the last message read has log time {_time_text(self.last_log)}"
                      if self.last_log is not None else "no message could be read")
-            warnings.append(f"{self.source}: the recording is cut off: the file ends at byte "
-                            f"{self.size} {self._cut_reason.format(pos=cut)}; read "
-                            f"{self.n_messages} messages, {where}")
+            warnings.append(Finding("recording-cut-off", f"{self.source}: the recording is cut off: the file ends at "
+                                    f"byte {self.size} {self._cut_reason.format(pos=cut)}; read "
+                                    f"{self.n_messages} messages, {where}"))
         contents: dict[str, dict[str, Any]] = {"imu": {}, "fix": {}, "twist": {}}
         for topic, decoder in self.reg.decoders.items():
             msgs = _in_log_order(decoder.result())

@@ -62,9 +62,9 @@ Every message's log time = publish time = header stamp: integer ns on the log's 
 
 Embedded input (``embed_input=True``): the IMU and GNSS that navpp processed, in the same file,
 so one file replays everything.  From an MCAP input whose IMU / GNSS topics are CDR encoded,
-the raw Message records of those topics are copied (payload, log and publish time, sequence;
-bytes identical) with their schemas, topics and channel metadata (e.g. rosbag2's QoS
-profiles); a GNSS velocity topic goes with the GNSS when the recording used one.  Anything
+the Message records of those topics are copied (read with ``mcap``'s stream reader: payload,
+log and publish time, sequence; bytes identical) with their schemas, topics and channel metadata
+(e.g. rosbag2's QoS profiles); a GNSS velocity topic goes with the GNSS when the recording used one.  Anything
 else (CSV, ROS 1 bag, ROS 2 bag, a ROS 1 encoded MCAP, or an MCAP whose topic does not hold the
 recording's data, e.g. GNSS replaced by ``--gnss FILE.pos``) is encoded from the Recording:
 ``sensor_msgs/msg/Imu`` on ``/imu/data`` (frame ``imu_link``), ``sensor_msgs/msg/NavSatFix``
@@ -75,32 +75,29 @@ arrays).  The copied topics are identified by content: the recording's IMU stamp
 log) and GNSS positions must all be found in the topic; a topic the copy cannot take whole (the
 last, partial chunk of a cut-off recording, which navpp's reader still decodes) is encoded too.
 
-File layout and speed
----------------------
-All messages are in log-time order (stable: embedded input first, then the topics above, at
-equal times), in chunks of about :data:`CHUNK_SIZE` bytes compressed with zstd, each followed
-by its message indexes; Schema, Channel and the ``navpp`` Metadata record come first; the
-summary repeats schemas and channels and holds statistics, the metadata and chunk indexes and
-summary offsets; CRCs of chunks and summary are written.  That is the layout of the ``mcap``
-package's ``Writer`` (``mcap`` reads it back, tested), but the records are assembled here in
-bulk: payloads are packed a chunk at a time by numpy (:mod:`navpp.io.roswrite`'s ``pack_*``)
-and laid out as Message records by a numba kernel, because the ``mcap`` Writer's
-``add_message`` costs ~2.5 us per message in Python (an hour at 125 Hz is 1.35 M messages).
-The file is written atomically (:func:`navpp.io.writers.atomic_write`).
+File layout
+-----------
+The container is written by the ``mcap`` package's :class:`mcap.writer.Writer`: profile
+``ros2``, the ``navpp`` Metadata record ahead of the data, messages in log-time order (stable:
+embedded input first, then the topics above, at equal times) in zstd chunks of about
+:data:`CHUNK_SIZE` bytes, each followed by its message indexes; the summary holds the schemas,
+channels, statistics, chunk and metadata indexes and the summary offsets, with CRCs.  The
+payloads are serialised in bulk by numpy (:mod:`navpp.io.roswrite`'s ``pack_*``, one structured
+array per stream and block of about a chunk), then handed to the Writer as one ``bytes`` per
+message.  The file is written atomically (:func:`navpp.io.writers.atomic_write`).
 """
 
 from __future__ import annotations
 
 import os
 import struct
-import zlib
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
+from operator import itemgetter
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
-from numba import njit
 
 from navpp.io import frames, roswrite
 from navpp.io.writers import adaptive_columns, atomic_write
@@ -109,6 +106,7 @@ from navpp.recording import Recording, Solution
 __all__ = [
     "BODY_FRAME",
     "CHUNK_SIZE",
+    "COMPRESSIONS",
     "MAP_FRAME",
     "NOT_ESTIMATED_VARIANCE",
     "TOPICS",
@@ -151,20 +149,8 @@ EMBED_IMU_TOPIC = "/imu/data"
 EMBED_GNSS_TOPIC = "/gnss/fix"
 EMBED_GNSS_VEL_TOPIC = "/gnss/vel"
 
-_MSGDEFS = {
-    "sensor_msgs/msg/NavSatFix": roswrite.NAVSATFIX_MSGDEF,
-    "sensor_msgs/msg/Imu": roswrite.IMU_MSGDEF,
-    "geometry_msgs/msg/TwistWithCovarianceStamped": roswrite.TWIST_WITH_COVARIANCE_STAMPED_MSGDEF,
-    "nav_msgs/msg/Odometry": roswrite.ODOMETRY_MSGDEF,
-    "tf2_msgs/msg/TFMessage": roswrite.TF_MESSAGE_MSGDEF,
-    "geometry_msgs/msg/Vector3Stamped": roswrite.VECTOR3_STAMPED_MSGDEF,
-    roswrite.FILTER_DIAGNOSTICS_TYPE: roswrite.FILTER_DIAGNOSTICS_MSGDEF,
-}
-
-_MAGIC = b"\x89MCAP0\r\n"
-_OP_MESSAGE_INDEX = 0x07
-_MESSAGE_OVERHEAD = 1 + 8 + 2 + 4 + 8 + 8  # opcode, length, channel, sequence, log and publish time
-_COMPRESSIONS = ("zstd", "lz4", "none")
+#: Chunk compressions :func:`write_trajectory_mcap` takes ("none": uncompressed chunks).
+COMPRESSIONS = ("zstd", "lz4", "none")
 
 
 # --------------------------------------------------------------------------- message streams
@@ -184,25 +170,24 @@ class _Packed:
     def lengths(self) -> np.ndarray:
         return np.full(self.n, self.size, dtype=np.int64)
 
-    def block(self, i0: int, i1: int) -> tuple[np.ndarray, np.ndarray]:
-        arr = np.ascontiguousarray(self.pack(i0, i1))
+    def block(self, i0: int, i1: int) -> list[bytes]:
+        arr = self.pack(i0, i1)
         if arr.shape != (i1 - i0,) or arr.dtype.itemsize != self.size:
             raise ValueError(f"packed {arr.shape} x {arr.dtype.itemsize} B, expected ({i1 - i0},) x {self.size} B")
-        return arr.view(np.uint8).reshape(-1), np.full(i1 - i0, self.size, dtype=np.int64)
+        return roswrite.payload_bytes(arr)
 
 
 @dataclass(frozen=True)
 class _Raw:
-    """Payloads held as bytes: message ``i`` is ``data[offsets[i]:offsets[i + 1]]``."""
+    """Payloads held as ``bytes``, one per message."""
 
-    data: np.ndarray  # (total,) uint8
-    offsets: np.ndarray  # (N + 1,) int64
+    data: list[bytes]
 
     def lengths(self) -> np.ndarray:
-        return np.diff(self.offsets)
+        return np.fromiter((len(d) for d in self.data), dtype=np.int64, count=len(self.data))
 
-    def block(self, i0: int, i1: int) -> tuple[np.ndarray, np.ndarray]:
-        return self.data[self.offsets[i0]:self.offsets[i1]], np.diff(self.offsets[i0:i1 + 1])
+    def block(self, i0: int, i1: int) -> list[bytes]:
+        return self.data[i0:i1]
 
 
 @dataclass(frozen=True)
@@ -216,7 +201,7 @@ class _Stream:
     message_encoding: str
     log_ns: np.ndarray  # (N,) int64
     publish_ns: np.ndarray  # (N,) int64
-    sequence: np.ndarray  # (N,) int64 (stored as u32)
+    sequence: np.ndarray  # (N,) int64, each in the u32 range
     payloads: _Packed | _Raw
     metadata: dict[str, str] = field(default_factory=dict)
 
@@ -230,7 +215,7 @@ def _ros2_stream(topic: str, msgtype: str, stamps: np.ndarray,
     stamps = np.asarray(stamps, dtype=np.int64)
     if stamps.size > 1 and bool(np.any(np.diff(stamps) < 0)):
         raise ValueError(f"{topic}: stamps must not decrease")
-    return _Stream(topic, msgtype, "ros2msg", _MSGDEFS[msgtype].encode(), "cdr", stamps, stamps,
+    return _Stream(topic, msgtype, "ros2msg", roswrite.MSGDEFS[msgtype].encode(), "cdr", stamps, stamps,
                    np.arange(stamps.size, dtype=np.int64),
                    _Packed(stamps.size, lambda i0, i1: pack(stamps[i0:i1], slice(i0, i1))))
 
@@ -380,19 +365,20 @@ def _mcap_input_streams(path: Path, recording: Recording) -> list[_Stream]:
     contents = read_mcap(path, imu_cands + fix_cands) if imu_cands or fix_cands else None
 
     imu_topic = None
-    want = roswrite.stamps_ns(recording, recording.imu.t)
-    for topic in imu_cands:
-        msgs = contents.imu[topic]
-        if _contains_all(msgs.stamp_ns, want) or _contains_all(msgs.log_ns, want):
-            imu_topic = topic
-            break
     gnss_topic = None
     g = recording.gnss
-    for topic in fix_cands:
-        msgs = contents.fix[topic]
-        if _contains_all(msgs.lat_deg, g.lat_deg) and _contains_all(msgs.lon_deg, g.lon_deg):
-            gnss_topic = topic
-            break
+    if contents is not None:
+        want = roswrite.stamps_ns(recording, recording.imu.t)
+        for topic in imu_cands:
+            imu = contents.imu[topic]
+            if _contains_all(imu.stamp_ns, want) or _contains_all(imu.log_ns, want):
+                imu_topic = topic
+                break
+        for topic in fix_cands:
+            fix = contents.fix[topic]
+            if _contains_all(fix.lat_deg, g.lat_deg) and _contains_all(fix.lon_deg, g.lon_deg):
+                gnss_topic = topic
+                break
     vel_topic = None
     twists = [t for t in infos if t.msgtype in (TWIST_COV_TYPE, TWIST_TYPE)]
     if gnss_topic is not None and g.vel_enu is not None and len(twists) == 1 and twists[0].encoding == "cdr":
@@ -402,7 +388,7 @@ def _mcap_input_streams(path: Path, recording: Recording) -> list[_Stream]:
     streams = _copy_topics(path, copied) if copied else []
     # a cut-off file: the reader may have decoded messages a copy cannot take whole; encode instead
     expected = {t.topic: t.count for t in infos}
-    short = {t for t in copied if sum(len(s) for s in streams if s.topic == t) != expected[t]}
+    short: set[str | None] = {t for t in copied if sum(len(s) for s in streams if s.topic == t) != expected[t]}
     if gnss_topic in short:
         short.add(vel_topic)
     streams = [s for s in streams if s.topic not in short]
@@ -416,404 +402,138 @@ def _mcap_input_streams(path: Path, recording: Recording) -> list[_Stream]:
     return streams
 
 
-@njit(cache=True, nogil=True)
-def _copy_spans(dst, dst_off, src, src_off, length):  # pragma: no cover - compiled
-    """``dst[dst_off[i]:+length[i]] = src[src_off[i]:+length[i]]`` for every i."""
-    for i in range(length.shape[0]):
-        a = dst_off[i]
-        b = src_off[i]
-        for k in range(length[i]):
-            dst[a + k] = src[b + k]
-
-
-def _exclusive_cumsum(a: np.ndarray) -> np.ndarray:
-    out = np.zeros(a.shape[0] + 1, dtype=np.int64)
-    np.cumsum(a, out=out[1:])
-    return out
-
-
-def _le_fields(buf: np.ndarray, pos: np.ndarray, width: int) -> np.ndarray:
-    """Little-endian unsigned integers of ``width`` bytes at ``buf[pos]`` (vectorised), as int64."""
-    raw = buf[pos[:, None] + np.arange(width)]
-    return raw.copy().view(f"<u{width}").reshape(-1).astype(np.int64)
-
-
-class _RawCollector:
-    """The Message records of some channels, gathered chunk by chunk."""
-
-    def __init__(self) -> None:
-        self.parts: dict[int, list[tuple[np.ndarray, ...]]] = {}
-
-    def add(self, buf: np.ndarray, chan: np.ndarray, log: np.ndarray, pos: np.ndarray,
-            length: np.ndarray, wanted: set[int]) -> None:
-        for cid in sorted(wanted):
-            m = chan == cid
-            if not m.any():
-                continue
-            ln = length[m]
-            p = pos[m]
-            seq = _le_fields(buf, p - 20, 4)
-            pub = _le_fields(buf, p - 8, 8)
-            off = _exclusive_cumsum(ln)
-            data = np.empty(int(off[-1]), dtype=np.uint8)
-            _copy_spans(data, off[:-1], buf, p, ln)
-            self.parts.setdefault(cid, []).append((log[m], pub, seq, data, ln))
-
-    def result(self, cid: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, _Raw]:
-        parts = self.parts.get(cid, [])
-        log = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int64)
-        pub = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, np.int64)
-        seq = np.concatenate([p[2] for p in parts]) if parts else np.zeros(0, np.int64)
-        data = np.concatenate([p[3] for p in parts]) if parts else np.zeros(0, np.uint8)
-        length = np.concatenate([p[4] for p in parts]) if parts else np.zeros(0, np.int64)
-        off = _exclusive_cumsum(length)
-        if log.size > 1 and bool(np.any(np.diff(log) < 0)):
-            order = np.argsort(log, kind="stable")
-            log, pub, seq, length = log[order], pub[order], seq[order], length[order]
-            new_off = _exclusive_cumsum(length)
-            moved = np.empty_like(data)
-            _copy_spans(moved, new_off[:-1], data, off[:-1][order], length)
-            data, off = moved, new_off
-        return log, pub, seq, _Raw(data, off)
-
-
 def _copy_topics(path: Path, topics: Sequence[str]) -> list[_Stream]:
-    """The raw Message records of ``topics`` (one stream per input channel), with their schemas."""
-    from mcap.records import Channel, Chunk, Message, Schema
+    """The Message records of ``topics`` in the data section (one stream per input channel), with
+    their schemas and channels, read with ``mcap``'s streaming reader.  Reading stops at the data
+    section's end or before a record the file does not hold whole (a cut-off recording)."""
+    from mcap.exceptions import EndOfFile
+    from mcap.records import Channel, DataEnd, Footer, Message, Schema
+    from mcap.stream_reader import StreamReader
 
-    # navpp's MCAP reader's record scanner (numba) and record parser: one reading of the format
-    from navpp.io.mcap import _parse_record, _Scan
-
-    schemas: dict[int, Any] = {}
-    channels: dict[int, Any] = {}
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
     wanted: set[int] = set()
-    collector = _RawCollector()
-
-    def channel(record: Any) -> None:
-        if record.id not in channels:
-            channels[record.id] = record
-            if record.topic in topics:
-                wanted.add(record.id)
-
-    for op, content in _top_level_records(path):
-        if op == 0x03:
-            s = _parse_record(Schema, content)
-            schemas.setdefault(s.id, s)
-        elif op == 0x04:
-            channel(_parse_record(Channel, content))
-        elif op == 0x05:
-            record = _parse_record_sized(Message, content)
-            if record.channel_id in wanted:
-                data = np.frombuffer(record.data, dtype=np.uint8)
-                collector.parts.setdefault(record.channel_id, []).append(
-                    (np.array([record.log_time]), np.array([record.publish_time]),
-                     np.array([record.sequence]), data.copy(), np.array([data.size])))
-        elif op == 0x06:
-            raw = _decompress(_parse_record(Chunk, content))
-            scan = _Scan(raw, 0, raw.shape[0], False)
-            for r_op, pos, length in zip(scan.rec_op.tolist(), scan.rec_pos.tolist(), scan.rec_len.tolist()):
-                if r_op == 0x03:
-                    s = _parse_record(Schema, raw[pos:pos + length])
-                    schemas.setdefault(s.id, s)
-                elif r_op == 0x04:
-                    channel(_parse_record(Channel, raw[pos:pos + length]))
-            if wanted:
-                collector.add(raw, scan.chan, scan.log, scan.pos, scan.len, wanted)
+    messages: dict[int, list[Message]] = {}
+    with open(path, "rb") as f:
+        records = StreamReader(f).records
+        while True:
+            try:
+                record = next(records)
+            except (StopIteration, EndOfFile, struct.error):    # the end, or a record cut short
+                break
+            if isinstance(record, Message):
+                if record.channel_id in wanted:
+                    messages[record.channel_id].append(record)
+            elif isinstance(record, Schema):
+                schemas.setdefault(record.id, record)
+            elif isinstance(record, Channel):
+                if record.id not in channels:
+                    channels[record.id] = record
+                    if record.topic in topics:
+                        wanted.add(record.id)
+                        messages[record.id] = []
+            elif isinstance(record, (DataEnd, Footer)):
+                break
     streams = []
     for cid in sorted(wanted):
         ch = channels[cid]
         schema = schemas.get(ch.schema_id)
         if schema is None:
             raise ValueError(f"{path}: channel {cid} ({ch.topic}) has no schema")
-        log, pub, seq, raw_payloads = collector.result(cid)
+        msgs = messages[cid]
+        log = np.array([m.log_time for m in msgs], dtype=np.int64)
+        order = np.argsort(log, kind="stable")
+        msgs = [msgs[i] for i in order.tolist()]
         streams.append(_Stream(ch.topic, schema.name, schema.encoding, bytes(schema.data), ch.message_encoding,
-                               log, pub, seq, raw_payloads, dict(ch.metadata)))
+                               log[order], np.array([m.publish_time for m in msgs], dtype=np.int64),
+                               np.array([m.sequence for m in msgs], dtype=np.int64),
+                               _Raw([bytes(m.data) for m in msgs]), dict(ch.metadata)))
     return streams
-
-
-def _top_level_records(path: Path) -> Iterator[tuple[int, bytes]]:
-    """(opcode, content) of the data section's Schema, Channel, Message and Chunk records; the
-    others (message indexes, attachments, ...) are skipped unread.  Stops at DataEnd / Footer,
-    or before a record the file does not hold whole (a cut-off recording)."""
-    wanted = (0x03, 0x04, 0x05, 0x06)
-    size = path.stat().st_size
-    with open(path, "rb") as f:
-        pos = len(_MAGIC)
-        while pos + 9 <= size:
-            f.seek(pos)
-            op, length = struct.unpack("<BQ", f.read(9))
-            if op in (0x0F, 0x02) or pos + 9 + length > size:
-                return
-            if op in wanted:
-                yield op, f.read(length)
-            pos += 9 + length
-
-
-def _parse_record_sized(cls: Any, content: bytes) -> Any:
-    """Parse a record whose reader needs its length (Message)."""
-    import io
-
-    from mcap.data_stream import ReadDataStream
-
-    return cls.read(ReadDataStream(io.BytesIO(content)), len(content))
-
-
-def _decompress(chunk: Any) -> np.ndarray:
-    if chunk.compression == "":
-        data = chunk.data
-    elif chunk.compression == "zstd":
-        import zstandard
-
-        data = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size)
-    elif chunk.compression == "lz4":
-        import lz4.frame
-
-        data = lz4.frame.decompress(chunk.data)
-    else:
-        raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
-    return np.frombuffer(data, dtype=np.uint8)
 
 
 # --------------------------------------------------------------------------- the container
 
 
-@njit(cache=True, inline="always")
-def _put(out, p, value, nbytes):  # pragma: no cover - compiled
-    v = np.uint64(value)
-    for k in range(nbytes):
-        out[p + k] = np.uint8((v >> np.uint64(8 * k)) & np.uint64(0xFF))
-
-
-@njit(cache=True, nogil=True)
-def _message_records(out, src, src_off, length, chan, seq, log, pub):  # pragma: no cover - compiled
-    """Lay out MCAP Message records (opcode 0x05, u64 length, u16 channel, u32 sequence, u64
-    log time, u64 publish time, payload) back to back in ``out``; returns the bytes written."""
-    p = 0
-    for i in range(length.shape[0]):
-        n = length[i]
-        out[p] = 5
-        _put(out, p + 1, 22 + n, 8)
-        _put(out, p + 9, chan[i], 2)
-        _put(out, p + 11, seq[i] & 0xFFFFFFFF, 4)
-        _put(out, p + 15, log[i], 8)
-        _put(out, p + 23, pub[i], 8)
-        q = p + 31
-        s = src_off[i]
-        for k in range(n):
-            out[q + k] = src[s + k]
-        p = q + n
-    return p
-
-
-class _Output:
-    """A binary file and the number of bytes written to it."""
-
-    def __init__(self, f: IO[bytes]) -> None:
-        self.f = f
-        self.pos = 0
-
-    def write(self, data: Any) -> None:
-        self.f.write(data)
-        self.pos += memoryview(data).nbytes
-
-
-def _record_bytes(*records: Any) -> bytes:
-    from mcap.data_stream import RecordBuilder
-
-    builder = RecordBuilder()
-    for r in records:
-        r.write(builder)
-    return bytes(builder.end())
-
-
-def _compressor(compression: str) -> tuple[str, Callable[[np.ndarray], Any]]:
-    if compression == "zstd":
-        import zstandard
-
-        return "zstd", zstandard.ZstdCompressor(level=1).compress
-    if compression == "lz4":
-        import lz4.frame
-
-        return "lz4", lambda data: lz4.frame.compress(data)
-    if compression == "none":
-        return "", lambda data: data
-    raise ValueError(f"compression must be one of {_COMPRESSIONS}, got {compression!r}")
-
-
-def _message_index_records(chan: np.ndarray, log: np.ndarray, rec_off: np.ndarray) -> tuple[bytes, dict[int, int]]:
-    """Message Index records (one per channel of the chunk): bytes and each record's offset."""
-    parts: list[bytes] = []
-    offsets: dict[int, int] = {}
-    pos = 0
-    for cid in np.unique(chan).tolist():
-        m = chan == cid
-        entries = np.empty((int(np.count_nonzero(m)), 2), dtype="<u8")
-        entries[:, 0] = log[m]
-        entries[:, 1] = rec_off[m]
-        body = entries.tobytes()
-        head = struct.pack("<BQHI", _OP_MESSAGE_INDEX, 2 + 4 + len(body), cid, len(body))
-        offsets[cid] = pos
-        parts += [head, body]
-        pos += len(head) + len(body)
-    return b"".join(parts), offsets
-
-
 class _Timeline:
     """Every message of ``streams`` in log-time order (stable: stream order at equal times),
-    cut into chunks of about ``chunk_size`` bytes of records.
+    cut into blocks of about ``block_size`` bytes of payload.
 
-    Each stream's messages are sorted by log time, so every chunk holds a contiguous run of
+    Each stream's messages are sorted by log time, so every block holds a contiguous run of
     each stream's messages, packed in one call.
     """
 
-    def __init__(self, streams: Sequence[_Stream], chunk_size: int) -> None:
+    def __init__(self, streams: Sequence[_Stream], block_size: int) -> None:
         if not streams:
             raise ValueError("no message stream to write")
         self.streams = streams
-        self.counts = np.array([len(s) for s in streams], dtype=np.int64)
+        counts = [len(s) for s in streams]
         log = np.concatenate([s.log_ns for s in streams])
         order = np.argsort(log, kind="stable")
         self.log = log[order]
-        self.stream = np.repeat(np.arange(len(streams), dtype=np.int64), self.counts)[order]
-        self.index = np.concatenate([np.arange(c, dtype=np.int64) for c in self.counts])[order]
+        self.stream = np.repeat(np.arange(len(streams), dtype=np.int64), counts)[order]
+        self.index = np.concatenate([np.arange(c, dtype=np.int64) for c in counts])[order]
         self.publish = np.concatenate([s.publish_ns for s in streams])[order]
         self.sequence = np.concatenate([s.sequence for s in streams])[order]
-        self.length = np.concatenate([s.payloads.lengths() for s in streams])[order]
-        self.record_length = self.length + _MESSAGE_OVERHEAD
-        self.start = np.cumsum(self.record_length) - self.record_length
-        cuts = np.flatnonzero(np.diff(self.start // max(int(chunk_size), 1))) + 1
+        length = np.concatenate([s.payloads.lengths() for s in streams])[order]
+        start = np.cumsum(length) - length
+        cuts = np.flatnonzero(np.diff(start // max(int(block_size), 1))) + 1
         self.bounds = np.concatenate([[0], cuts, [self.log.size]]).astype(np.int64)
 
-    def chunks(self) -> Iterator[tuple[int, int]]:
+    def blocks(self) -> Iterator[tuple[int, int]]:
         for a, b in zip(self.bounds[:-1].tolist(), self.bounds[1:].tolist()):
             if b > a:
                 yield a, b
 
-    def records(self, a: int, b: int) -> np.ndarray:
-        """The Message records of messages a..b-1 (channel id = stream index + 1), laid out."""
+    def payloads(self, a: int, b: int) -> list[bytes]:
+        """The payloads of messages a..b-1 of the timeline, in its order."""
         which = self.stream[a:b]
-        length = self.length[a:b]
-        src_off = np.empty(b - a, dtype=np.int64)
-        blocks = []
-        base = 0
+        index = self.index[a:b]
+        parts: list[bytes] = []
         for sid in np.unique(which).tolist():
-            mine = which == sid
-            idx = self.index[a:b][mine]
+            idx = index[which == sid]
             i0, i1 = int(idx[0]), int(idx[-1]) + 1
-            flat, lens = self.streams[sid].payloads.block(i0, i1)
-            if i1 - i0 != idx.size or not np.array_equal(lens, length[mine]):
-                raise AssertionError(f"{self.streams[sid].topic}: messages out of order or of unexpected size")
-            src_off[mine] = base + _exclusive_cumsum(lens)[:-1]
-            blocks.append(flat)
-            base += flat.size
-        src = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
-        out = np.empty(int(self.start[b - 1] + self.record_length[b - 1] - self.start[a]), dtype=np.uint8)
-        _message_records(out, src, src_off, length, which + 1, self.sequence[a:b], self.log[a:b],
-                         self.publish[a:b])
-        return out
+            if i1 - i0 != idx.size:
+                raise AssertionError(f"{self.streams[sid].topic}: messages out of log-time order")
+            parts += self.streams[sid].payloads.block(i0, i1)
+        # parts holds the block's messages grouped by stream; rank[k] is message k's place there
+        rank = np.empty(b - a, dtype=np.int64)
+        rank[np.argsort(which, kind="stable")] = np.arange(b - a)
+        return list(itemgetter(*rank.tolist())(parts)) if b - a > 1 else parts
 
 
-class _McapWriter:
-    """The records of an MCAP file (profile ``ros2``), written front to back.
+def _compression_type(compression: str) -> Any:
+    from mcap.writer import CompressionType
 
-    Schema, Channel and the Metadata record first; then each chunk followed by its Message Index
-    records; DataEnd; the summary (schemas, channels, statistics, metadata index, chunk indexes),
-    the summary offsets and the footer.
-    """
-
-    def __init__(self, f: IO[bytes], compression: str) -> None:
-        self.out = _Output(f)
-        self.compression, self.compress = _compressor(compression)
-        self.schemas: list[Any] = []
-        self.channels: list[Any] = []
-        self.metadata_indexes: list[Any] = []
-        self.chunk_indexes: list[Any] = []
-
-    def start(self, streams: Sequence[_Stream], metadata: dict[str, str]) -> None:
-        from mcap.records import Channel, Header, Metadata, MetadataIndex, Schema
-
-        from navpp import __version__
-
-        self.out.write(_MAGIC)
-        self.out.write(_record_bytes(Header(profile="ros2", library=f"navpp {__version__}")))
-        schema_ids: dict[tuple[str, str, bytes], int] = {}
-        for s in streams:              # channel id i + 1 for stream i
-            key = (s.schema_name, s.schema_encoding, s.schema_data)
-            if key not in schema_ids:
-                schema_ids[key] = len(self.schemas) + 1
-                self.schemas.append(Schema(id=schema_ids[key], name=s.schema_name, encoding=s.schema_encoding,
-                                           data=s.schema_data))
-            self.channels.append(Channel(id=len(self.channels) + 1, topic=s.topic,
-                                         message_encoding=s.message_encoding, schema_id=schema_ids[key],
-                                         metadata=dict(s.metadata)))
-        self.out.write(_record_bytes(*self.schemas, *self.channels))
-        meta = _record_bytes(Metadata(name="navpp", metadata=dict(metadata)))
-        self.metadata_indexes.append(MetadataIndex(offset=self.out.pos, length=len(meta), name="navpp"))
-        self.out.write(meta)
-
-    def chunk(self, records: np.ndarray, channel: np.ndarray, log: np.ndarray, offsets: np.ndarray) -> None:
-        """A Chunk of Message ``records`` (per message: channel, log time, offset in ``records``),
-        then its Message Index records."""
-        from mcap.records import ChunkIndex
-
-        name = self.compression
-        packed = self.compress(records)
-        t0, t1 = int(log.min()), int(log.max())
-        head = struct.pack("<BQQQQI", 0x06, 8 + 8 + 8 + 4 + 4 + len(name) + 8 + len(packed), t0, t1,
-                           records.size, zlib.crc32(records))
-        head += struct.pack("<I", len(name)) + name.encode() + struct.pack("<Q", len(packed))
-        chunk_start = self.out.pos
-        self.out.write(head)
-        self.out.write(packed)
-        chunk_length = self.out.pos - chunk_start
-        index_start = self.out.pos
-        index, where = _message_index_records(channel, log, offsets)
-        self.out.write(index)
-        self.chunk_indexes.append(ChunkIndex(
-            message_start_time=t0, message_end_time=t1, chunk_start_offset=chunk_start, chunk_length=chunk_length,
-            message_index_offsets={c: index_start + o for c, o in where.items()}, message_index_length=len(index),
-            compression=name, compressed_size=len(packed), uncompressed_size=records.size))
-
-    def finish(self, counts: np.ndarray, log_start: int, log_end: int) -> None:
-        from mcap.records import DataEnd, Footer, Statistics, SummaryOffset
-
-        self.out.write(_record_bytes(DataEnd(data_section_crc=0)))
-        stats = Statistics(message_count=int(counts.sum()), schema_count=len(self.schemas),
-                           channel_count=len(self.channels), attachment_count=0,
-                           metadata_count=len(self.metadata_indexes), chunk_count=len(self.chunk_indexes),
-                           message_start_time=log_start, message_end_time=log_end,
-                           channel_message_counts={i + 1: int(c) for i, c in enumerate(counts.tolist()) if c})
-        summary_start = self.out.pos
-        summary = b""
-        offsets = []
-        for opcode, group in ((0x03, self.schemas), (0x04, self.channels), (0x0B, [stats]),
-                              (0x0D, self.metadata_indexes), (0x08, self.chunk_indexes)):
-            data = _record_bytes(*group)
-            if data:
-                offsets.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + len(summary),
-                                             group_length=len(data)))
-                summary += data
-        offsets_start = summary_start + len(summary)
-        summary += _record_bytes(*offsets)
-        # summary CRC: the summary section and the footer up to its summary_offset_start field
-        footer_head = struct.pack("<BQQQ", 0x02, 8 + 8 + 4, summary_start, offsets_start)
-        self.out.write(summary)
-        self.out.write(_record_bytes(Footer(summary_start=summary_start, summary_offset_start=offsets_start,
-                                            summary_crc=zlib.crc32(footer_head, zlib.crc32(summary)))))
-        self.out.write(_MAGIC)
+    if compression not in COMPRESSIONS:
+        raise ValueError(f"compression must be one of {COMPRESSIONS}, got {compression!r}")
+    return {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[compression]
 
 
 def _write_container(f: IO[bytes], streams: Sequence[_Stream], metadata: dict[str, str], *,
-                     chunk_size: int = CHUNK_SIZE, compression: str = "zstd") -> None:
-    """Write an MCAP file holding ``streams`` (channel ``i + 1`` for stream ``i``), in log-time order."""
+                     chunk_size: int, compression: str) -> None:
+    """Write an MCAP file (profile ``ros2``) holding ``streams`` (channel ``i + 1`` for stream
+    ``i``) in log-time order, with ``mcap``'s Writer."""
+    from mcap.writer import Writer
+
+    from navpp.version import __version__
+
     timeline = _Timeline(streams, chunk_size)
-    writer = _McapWriter(f, compression)
-    writer.start(streams, metadata)
-    for a, b in timeline.chunks():
-        writer.chunk(timeline.records(a, b), timeline.stream[a:b] + 1, timeline.log[a:b],
-                     timeline.start[a:b] - timeline.start[a])
-    log = timeline.log
-    writer.finish(timeline.counts, int(log[0]) if log.size else 0, int(log[-1]) if log.size else 0)
+    writer = Writer(f, chunk_size=max(int(chunk_size), 1), compression=_compression_type(compression))
+    writer.start(profile="ros2", library=f"navpp {__version__}")
+    schema_ids: dict[tuple[str, str, bytes], int] = {}
+    for s in streams:
+        key = (s.schema_name, s.schema_encoding, s.schema_data)
+        if key not in schema_ids:
+            schema_ids[key] = writer.register_schema(s.schema_name, s.schema_encoding, s.schema_data)
+        writer.register_channel(s.topic, s.message_encoding, schema_ids[key], dict(s.metadata))
+    writer.add_metadata("navpp", dict(metadata))
+    add = writer.add_message
+    for a, b in timeline.blocks():
+        for channel, log, publish, sequence, data in zip(
+                (timeline.stream[a:b] + 1).tolist(), timeline.log[a:b].tolist(), timeline.publish[a:b].tolist(),
+                timeline.sequence[a:b].tolist(), timeline.payloads(a, b)):
+            add(channel, log, data, publish, sequence)
+    writer.finish()
 
 
 # --------------------------------------------------------------------------- entry point
@@ -826,7 +546,7 @@ def _write(path: str | os.PathLike[str], streams: Sequence[_Stream], metadata: d
         if types.setdefault(s.topic, s.schema_name) != s.schema_name:
             raise ValueError(f"topic {s.topic} would carry both {types[s.topic]} and {s.schema_name} "
                              "(an input topic named like one of navpp's output topics?)")
-    _compressor(compression)  # a bad name fails before the file is created
+    _compression_type(compression)  # a bad name fails before the file is created
     atomic_write(path, lambda f: _write_container(f, streams, metadata, chunk_size=chunk_size,
                                                   compression=compression), mode="wb")
 
@@ -834,7 +554,8 @@ def _write(path: str | os.PathLike[str], streams: Sequence[_Stream], metadata: d
 def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, recording: Recording,
                           diagnostics: Any = None, biases: Any = None, embed_input: bool = False,
                           input_log: str | os.PathLike[str] | None = None, filter_name: str = "",
-                          forward: Solution | None = None) -> None:
+                          forward: Solution | None = None, chunk_size: int = CHUNK_SIZE,
+                          compression: str = "zstd") -> None:
     """Write ``trajectory.mcap``: the solution, biases and filter diagnostics as ROS 2 messages.
 
     See the module docstring for the topics, frames, units and covariances.
@@ -856,12 +577,15 @@ def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, r
     forward : for a smoothed ``solution``, the forward filter's solution (same rows' time base):
         written to ``/navpp/forward/fix`` and ``/navpp/forward/odometry``; the metadata's
         ``solution`` says ``smoothed`` (else ``forward``).
+    chunk_size : target uncompressed size of a chunk, bytes.
+    compression : chunk compression, one of :data:`COMPRESSIONS`.
 
     Raises
     ------
     ValueError
         An empty solution, a solution on another time base, stamps outside the ROS time range,
-        or an input topic named like one of navpp's output topics but of another type.
+        an input topic named like one of navpp's output topics but of another type, or an
+        unknown ``compression``.
     navpp.errors.InputError
         ``input_log`` cannot be read.
     """
@@ -881,4 +605,4 @@ def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, r
         "body_frame": "FLU (x forward, y left, z up)",
         "not_estimated_variance": repr(NOT_ESTIMATED_VARIANCE),
     }
-    _write(path, streams, metadata)
+    _write(path, streams, metadata, chunk_size=chunk_size, compression=compression)

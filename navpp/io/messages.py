@@ -480,8 +480,8 @@ class TopicDecoder:
         else:
             bad = np.arange(n)
             flag = np.full(n, _LONG, dtype=np.uint8)
-        for i in bad:
-            self._fallback(int(i), int(flag[i]), buf, starts, lengths, log_ns, table, stamps)
+        for k in bad:
+            self._fallback(int(k), int(flag[k]), buf, starts, lengths, log_ns, table, stamps)
         self._tables.append(table)
         self._stamps.append(stamps)
         self._logs.append(log_ns)

@@ -306,7 +306,7 @@ def _open_error(path: Path, kind: str, exc: BaseException) -> InputError:
         if cut is not None:
             return InputError(f"{cut}: the ROS 2 bag's MCAP storage file is truncated (no end magic; the recording "
                               f"was not closed); navpp reads a cut-off .mcap given on its own: process {cut.name}")
-    if _is_definition_error(exc):
+    if _is_definition_error(path, kind, exc):
         return InputError(f"{path}: the message definitions stored in the {kind} bag cannot be used: {reason}")
     return InputError(f"{path}: cannot read {kind} bag: {reason}")
 
@@ -327,8 +327,10 @@ def _truncated_mcap(bag_dir: Path) -> Path | None:
     return None
 
 
-def _is_definition_error(exc: BaseException) -> bool:
-    """A message-definition problem (AnyReader re-raises rosbags' TypesysError without its type)."""
+def _is_definition_error(path: Path, kind: str, exc: BaseException) -> bool:
+    """A message-definition problem: a rosbags ``TypesysError`` (AnyReader re-raises it as an
+    AnyReaderError, with the TypesysError as its context), or a stored definition that does not
+    hash to the digest stored beside it (:func:`_digest_mismatch`)."""
     from rosbags.typesys import TypesysError
 
     seen: BaseException | None = exc
@@ -336,7 +338,45 @@ def _is_definition_error(exc: BaseException) -> bool:
         if isinstance(seen, TypesysError):
             return True
         seen = seen.__context__ if seen.__context__ is not seen else None
-    return "hash mismatch" in str(exc)
+    return _digest_mismatch(path, kind == "ROS 1")
+
+
+#: The separator between the definitions of a ROS 2 IDL message-definition bundle.
+_IDL_SEPARATOR = "=" * 80 + "\n"
+
+
+def _digest_mismatch(path: Path, ros1: bool) -> bool:
+    """True when a message definition stored in the bag at ``path`` does not hash to the digest
+    stored with it (ROS 1: the MD5 sum; ROS 2: the RIHS01 type hash), the check rosbags'
+    AnyReader makes when it opens a bag; rosbags reports it as a plain AnyReaderError, so it is
+    redone here with rosbags' typesys.  False when the bag cannot be opened this way."""
+    from rosbags.interfaces import MessageDefinitionFormat
+    from rosbags.rosbag1 import Reader as Reader1
+    from rosbags.rosbag2 import Reader as Reader2
+    from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+
+    try:
+        with (Reader1 if ros1 else Reader2)(path) as reader:
+            stored = [c for c in reader.connections if c.msgdef.format != MessageDefinitionFormat.NONE]
+            types: dict[str, Any] = {}
+            for conn in stored:
+                text = conn.msgdef.data
+                if conn.msgdef.format == MessageDefinitionFormat.MSG:
+                    types.update(get_types_from_msg(text, conn.msgtype))
+                else:
+                    parts = text.split(_IDL_SEPARATOR)[1:] if text.startswith(f"{_IDL_SEPARATOR}IDL: ") else [text]
+                    for part in parts:
+                        types.update(get_types_from_idl(part.split("\n", 1)[1] if part.startswith("IDL: ") else part))
+            store = get_typestore(Stores.EMPTY)
+            store.register(types)
+            for conn in stored:
+                if conn.digest:
+                    digest = store.generate_msgdef(conn.msgtype)[1] if ros1 else store.hash_rihs01(conn.msgtype)
+                    if digest != conn.digest:
+                        return True
+    except Exception:  # noqa: BLE001 - a bag this cannot open is not a digest mismatch
+        return False
+    return False
 
 
 @contextmanager

@@ -25,19 +25,19 @@ What is written
 The same bulk serialisation packs navpp's *output* messages for ``trajectory.mcap``
 (:mod:`navpp.io.mcap_out`): ``nav_msgs/Odometry``, ``tf2_msgs/TFMessage``,
 ``geometry_msgs/Vector3Stamped`` and navpp's ``navpp_msgs/FilterDiagnostics``.  The ``pack_*``
-functions return the messages as one packed numpy array (row ``i`` is message ``i``'s payload),
-which a container writer copies without making one Python object per message; the
-``encode_*`` functions return the same payloads as a list of ``bytes``.
+functions return the messages as one packed numpy array (row ``i`` is message ``i``'s payload);
+the ``encode_*`` functions return the same payloads as a list of ``bytes``.
 
 Time: header stamps are the absolute stamps ``t0_ns + round(t * 1e9)`` (integer ns, see
 :func:`stamps_ns`); the log (receive) time of each message is its stamp plus
 ``log_offset_ns``.  Messages of all topics are written in log-time order.
 
-Payloads are serialised in bulk (numpy structured arrays with the exact CDR / ROS 1 byte
-layout; see :func:`encode_imu`), byte-identical to what ``rosbags``' ``serialize_cdr`` /
-``serialize_ros1`` and ``mcap_ros2``'s encoder produce (tested), at about 900,000 Imu
-messages/s (``mcap_ros2``'s encoder: about 50,000/s; rosbags' serializer about 250,000/s
-before any message object is built), so an hour-long log is written in about 2 s.
+Payloads are serialised in bulk: one numpy structured array per message type whose dtype is
+the message's exact CDR / ROS 1 byte layout (:class:`_Layout`, see :func:`pack_imu`), so no
+Python object is built per message; the bytes equal what ``rosbags``' ``serialize_cdr`` /
+``serialize_ros1`` and ``mcap_ros2``'s encoder produce (tested).  The containers are the
+libraries': ``mcap``'s :class:`mcap.writer.Writer` for MCAP, ``rosbags``' ``rosbag1.Writer`` and
+``rosbag2.Writer`` for bags.
 
 Every writer is atomic: files are written to a temporary name in the target directory and
 renamed when complete; a ROS 2 bag directory is built inside a temporary directory and
@@ -63,6 +63,7 @@ __all__ = [
     "FILTER_DIAGNOSTICS_MSGDEF",
     "FILTER_DIAGNOSTICS_TYPE",
     "IMU_MSGDEF",
+    "MSGDEFS",
     "NAVSATFIX_MSGDEF",
     "ODOMETRY_MSGDEF",
     "TF_MESSAGE_MSGDEF",
@@ -212,7 +213,8 @@ _FIX = "sensor_msgs/msg/NavSatFix"
 _TWIST_COV = "geometry_msgs/msg/TwistWithCovarianceStamped"
 _TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
 
-_MSGDEFS = {
+#: ROS 2 message type -> its ``ros2msg`` schema text (every type navpp writes).
+MSGDEFS = {
     _IMU: IMU_MSGDEF,
     _FIX: NAVSATFIX_MSGDEF,
     _TWIST_COV: TWIST_WITH_COVARIANCE_STAMPED_MSGDEF,
@@ -220,6 +222,7 @@ _MSGDEFS = {
     "nav_msgs/msg/Odometry": ODOMETRY_MSGDEF,
     "tf2_msgs/msg/TFMessage": TF_MESSAGE_MSGDEF,
     "geometry_msgs/msg/Vector3Stamped": VECTOR3_STAMPED_MSGDEF,
+    FILTER_DIAGNOSTICS_TYPE: FILTER_DIAGNOSTICS_MSGDEF,
 }
 
 _ENCODINGS = ("cdr", "ros1")
@@ -247,16 +250,17 @@ class _Layout:
         if self.cdr:
             self.field("encapsulation", "u1", 4)
 
-    def field(self, name: str, dtype: str, count: int = 1) -> None:
+    def field(self, name: str, dtype: str, count: int | None = None) -> None:
+        """A field of one ``dtype`` value, or with ``count`` an array of ``count`` values (even of one)."""
         dt = np.dtype(dtype).newbyteorder("<")
         if self.cdr and name != "encapsulation":
             align = 1 if dt.kind == "S" else min(dt.itemsize, 8)
             rel = self.pos - 4
             self.pos = 4 + -(-rel // align) * align
         self.names.append(name)
-        self.formats.append(dt if count == 1 else (dt, (count,)))
+        self.formats.append(dt if count is None else (dt, (count,)))
         self.offsets.append(self.pos)
-        self.pos += dt.itemsize * count
+        self.pos += dt.itemsize * (1 if count is None else count)
 
     def string(self, name: str, text: str) -> bytes:
         raw = text.encode("utf-8")
@@ -761,7 +765,7 @@ def write_mcap_ros2(rec: Recording, path: str | os.PathLike[str], *, imu_topic: 
         channels = []
         for s in streams:
             if s.msgtype not in schema_ids:
-                schema_ids[s.msgtype] = w.register_schema(s.msgtype, "ros2msg", _MSGDEFS[s.msgtype].encode())
+                schema_ids[s.msgtype] = w.register_schema(s.msgtype, "ros2msg", MSGDEFS[s.msgtype].encode())
             channels.append(w.register_channel(s.topic, "cdr", schema_ids[s.msgtype]))
         logs = [s.log_ns.tolist() for s in streams]
         add = w.add_message

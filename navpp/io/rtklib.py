@@ -140,13 +140,7 @@ def read_pos(
     """
     path = Path(path)
     name = path.name
-    if time_base not in ("unix", "gpst"):
-        if time_base == "relative":
-            raise ConfigError(
-                f"{name}: RTKLIB times are absolute (GPST/UTC) and cannot be aligned with a log on "
-                "[time] base = \"relative\"; set base to \"unix\" or \"gpst\""
-            )
-        raise ConfigError(f"time base {time_base!r} is not one of 'unix', 'gpst' for {name}")
+    _check_time_base(name, time_base)
     lines = _read_lines(path)
     warnings: list[str] = []
     layout = _parse_header(name, lines, time_system, warnings)
@@ -157,8 +151,47 @@ def read_pos(
     if parsed is None:  # the line-by-line parser finds and names the bad line
         parsed = _parse_slow(name, data, layout)
     linenos, t_src, numeric = parsed
-    cols = layout["numeric_index"]
+    abs_ns, numeric, linenos, q, ns = _usable_epochs(name, linenos, t_src, numeric, layout, time_base, warnings)
+    lat, lon, h, std_enu, vel_enu, std_vel = _positions(name, numeric, layout, linenos)
+    _late_and_zero_std_warnings(name, abs_ns, time_base, std_enu, warnings)
 
+    t0 = int(abs_ns[0]) if t0_ns is None else int(t0_ns)
+    whole, frac = np.divmod(abs_ns - np.int64(t0), _NS)
+    t_rel = whole.astype(np.float64) + frac.astype(np.float64) / 1e9
+    gnss = GnssData(
+        t=t_rel,
+        lat_deg=lat,
+        lon_deg=lon,
+        alt=h,
+        std_enu=std_enu,
+        vel_enu=vel_enu,
+        std_vel_enu=std_vel,
+        fix=q,
+        num_sats=ns,
+    )
+    return gnss, warnings, t0
+
+
+def _check_time_base(name: str, time_base: str) -> None:
+    """:class:`ConfigError` unless ``time_base`` can hold RTKLIB's absolute times."""
+    if time_base not in ("unix", "gpst"):
+        if time_base == "relative":
+            raise ConfigError(
+                f"{name}: RTKLIB times are absolute (GPST/UTC) and cannot be aligned with a log on "
+                "[time] base = \"relative\"; set base to \"unix\" or \"gpst\""
+            )
+        raise ConfigError(f"time base {time_base!r} is not one of 'unix', 'gpst' for {name}")
+
+
+def _usable_epochs(name: str, linenos: np.ndarray, t_src: np.ndarray, numeric: np.ndarray, layout: dict,
+                   time_base: str, warnings: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                              np.ndarray | None, np.ndarray | None]:
+    """The epochs kept: not ``Q = 0``, in strictly increasing time, not inside a leap second.
+
+    Returns their times (int64 ns on ``time_base``), numeric columns, line numbers, ``Q`` and
+    ``ns`` (None when the file has no such column); each dropped kind is a warning.
+    """
+    cols = layout["numeric_index"]
     keep = np.ones(len(linenos), dtype=bool)
     q = None
     if "Q" in cols:
@@ -177,12 +210,13 @@ def read_pos(
     if idx.size == 0:
         raise InputError(f"{name}: no usable solution epochs: every epoch has Q = 0 (no "
                          "solution), repeats a time or falls inside a leap second")
-    abs_ns = abs_ns[idx]
-    numeric = numeric[idx]
-    linenos = linenos[idx]
+    return (abs_ns[idx], numeric[idx], linenos[idx], None if q is None else q[idx],
+            None if ns is None else ns[idx])
 
-    lat, lon, h, std_enu, vel_enu, std_vel = _positions(name, numeric, layout, linenos)
 
+def _late_and_zero_std_warnings(name: str, abs_ns: np.ndarray, time_base: str, std_enu: np.ndarray | None,
+                                warnings: list[str]) -> None:
+    """Warn about epochs after the leap-second table's end and about zero standard deviations."""
     last_unix_s = (abs_ns[-1] if time_base == "unix"
                    else int(timebase.convert_ns(abs_ns[-1:], "gpst", "unix")[0])) // _NS
     if last_unix_s >= timebase.LEAP_TABLE_VALID_UNTIL_UNIX:
@@ -194,22 +228,6 @@ def read_pos(
     if std_enu is not None and np.any(std_enu <= 0.0):
         n_bad = int(np.any(std_enu <= 0.0, axis=1).sum())
         warnings.append(f"{name}: {_epochs(n_bad)} with a zero standard deviation in sdn/sde/sdu")
-
-    t0 = int(abs_ns[0]) if t0_ns is None else int(t0_ns)
-    whole, frac = np.divmod(abs_ns - np.int64(t0), _NS)
-    t_rel = whole.astype(np.float64) + frac.astype(np.float64) / 1e9
-    gnss = GnssData(
-        t=t_rel,
-        lat_deg=lat,
-        lon_deg=lon,
-        alt=h,
-        std_enu=std_enu,
-        vel_enu=vel_enu,
-        std_vel_enu=std_vel,
-        fix=None if q is None else q[idx],
-        num_sats=None if ns is None else ns[idx],
-    )
-    return gnss, warnings, t0
 
 
 # --------------------------------------------------------------------------------------------
@@ -236,73 +254,19 @@ def _read_lines(path: Path) -> list[str]:
 
 def _parse_header(name: str, lines: list[str], time_system: str | None,
                   warnings: list[str]) -> dict:
-    col_line = None
-    col_lineno = 0
-    legend = None
-    first_data = None
-    for i, ln in enumerate(lines, start=1):
-        s = ln.strip()
-        if not s:
-            continue
-        if not s.startswith("%"):
-            first_data = (i, s)
-            break
-        if any(k in s for k in _POS_FORMATS):
-            col_line, col_lineno = s, i
-        elif "lat/lon/height=" in s or "x/y/z-ecef=" in s or "e/n/u-baseline=" in s:
-            legend = s
-    if first_data is not None and first_data[1].startswith("$"):
-        raise InputError(f"{name}: line {first_data[0]} is an NMEA / solution-status record; navpp "
-                         "reads RTKLIB's lat/lon/height or x/y/z-ecef solution format")
-    if col_line is None:
-        raise InputError(
-            f"{name}: no RTKLIB column header line (e.g. '%  GPST  latitude(deg) longitude(deg) "
-            "height(m)  Q  ns  sdn(m) ...') before the data, so the time system (GPST or UTC) and "
-            "the columns are unknown; re-export with RTKLIB or add that line"
-        )
-    sep = None
-    for key, fmt in _POS_FORMATS.items():
-        p = col_line.find(key)
-        if p >= 0:
-            pos_format = fmt
-            nxt = col_line[p + len(key): p + len(key) + 1]
-            if nxt and not nxt.isspace():
-                sep = nxt
-            break
-    if pos_format == "enu":
-        raise InputError(f"{name}: line {col_lineno}: e/n/u-baseline solutions carry no absolute "
-                         "position; re-export with RTKLIB as lat/lon/height or x/y/z-ecef")
-    if legend is not None:
-        if "geodetic" in legend:
-            raise InputError(f"{name}: heights are geodetic (above the geoid); navpp needs "
-                             "ellipsoidal heights: re-export with RTKLIB output height = ellipsoidal")
-        if "Tokyo" in legend:
-            raise InputError(f"{name}: positions are on the Tokyo datum; navpp needs WGS84: "
-                             "re-export with RTKLIB output datum = WGS84")
-    elif pos_format != "xyz":
-        warnings.append(f"{name}: the header does not say the height type; read as ellipsoidal "
-                        "(RTKLIB's default)")
-
+    """The layout the column header describes: ``time_system``, ``pos_format`` (llh, dms, xyz),
+    ``sep`` (RTKLIB's field separator, None for blanks), ``n_fields`` per data line,
+    ``numeric_index`` (column name -> numeric column), ``numeric_fields`` (numeric column -> first
+    field of the line) and ``header_lineno``."""
+    col_line, col_lineno, legend = _header_lines(name, lines)
+    pos_format, sep = _position_format(name, col_line, col_lineno, legend, warnings)
     body = col_line[1:]
     if sep is not None:
         body = body.replace(sep, " ")
     names = body.split()
     if names and names[0] in _POS_FORMATS:  # no time label at all
         names = ["<time>"] + names
-    header_ts = names[0].upper() if names[0].upper() in TIME_SYSTEMS else None
-    if header_ts is None and time_system is None:
-        raise InputError(
-            f"{name}: line {col_lineno}: the column header does not name the time system "
-            "(it should start '%  GPST' or '%  UTC'); add it so GPS time and UTC are not confused"
-        )
-    if time_system is not None:
-        ts = time_system.upper()
-        if ts not in TIME_SYSTEMS:
-            raise ConfigError(f"time system {time_system!r} is not one of {', '.join(TIME_SYSTEMS)}")
-        if header_ts is not None and ts != header_ts:
-            raise InputError(f"{name}: line {col_lineno}: the header says {header_ts} but "
-                             f"{ts} was requested")
-        header_ts = ts
+    header_ts = _time_system(name, names[0], col_lineno, time_system)
 
     # Map column names to data-field positions (time = 2 fields, d'" = 3 fields).
     field = 2
@@ -329,6 +293,86 @@ def _parse_header(name: str, lines: list[str], time_system: str | None,
     }
 
 
+def _header_lines(name: str, lines: list[str]) -> tuple[str, int, str | None]:
+    """The column header line (stripped) and its line number, and the legend line saying the
+    position format (``lat/lon/height=...``) or None, from the ``%`` lines before the data."""
+    col_line = None
+    col_lineno = 0
+    legend = None
+    first_data = None
+    for i, ln in enumerate(lines, start=1):
+        s = ln.strip()
+        if not s:
+            continue
+        if not s.startswith("%"):
+            first_data = (i, s)
+            break
+        if any(k in s for k in _POS_FORMATS):
+            col_line, col_lineno = s, i
+        elif "lat/lon/height=" in s or "x/y/z-ecef=" in s or "e/n/u-baseline=" in s:
+            legend = s
+    if first_data is not None and first_data[1].startswith("$"):
+        raise InputError(f"{name}: line {first_data[0]} is an NMEA / solution-status record; navpp "
+                         "reads RTKLIB's lat/lon/height or x/y/z-ecef solution format")
+    if col_line is None:
+        raise InputError(
+            f"{name}: no RTKLIB column header line (e.g. '%  GPST  latitude(deg) longitude(deg) "
+            "height(m)  Q  ns  sdn(m) ...') before the data, so the time system (GPST or UTC) and "
+            "the columns are unknown; re-export with RTKLIB or add that line"
+        )
+    return col_line, col_lineno, legend
+
+
+def _position_format(name: str, col_line: str, col_lineno: int, legend: str | None,
+                     warnings: list[str]) -> tuple[str, str | None]:
+    """The position format the column header names (``llh``, ``dms`` or ``xyz``; baselines, geoid
+    heights and the Tokyo datum refused) and RTKLIB's field separator (None: blanks)."""
+    sep = None
+    pos_format = ""
+    for key, fmt in _POS_FORMATS.items():
+        p = col_line.find(key)
+        if p >= 0:
+            pos_format = fmt
+            nxt = col_line[p + len(key): p + len(key) + 1]
+            if nxt and not nxt.isspace():
+                sep = nxt
+            break
+    if pos_format == "enu":
+        raise InputError(f"{name}: line {col_lineno}: e/n/u-baseline solutions carry no absolute "
+                         "position; re-export with RTKLIB as lat/lon/height or x/y/z-ecef")
+    if legend is not None:
+        if "geodetic" in legend:
+            raise InputError(f"{name}: heights are geodetic (above the geoid); navpp needs "
+                             "ellipsoidal heights: re-export with RTKLIB output height = ellipsoidal")
+        if "Tokyo" in legend:
+            raise InputError(f"{name}: positions are on the Tokyo datum; navpp needs WGS84: "
+                             "re-export with RTKLIB output datum = WGS84")
+    elif pos_format != "xyz":
+        warnings.append(f"{name}: the header does not say the height type; read as ellipsoidal "
+                        "(RTKLIB's default)")
+    return pos_format, sep
+
+
+def _time_system(name: str, label: str, col_lineno: int, time_system: str | None) -> str:
+    """The data lines' time system: the column header's first word (``label``), or
+    ``time_system`` when the header names none; the two must agree when both are given."""
+    header_ts = label.upper() if label.upper() in TIME_SYSTEMS else None
+    if time_system is None:
+        if header_ts is None:
+            raise InputError(
+                f"{name}: line {col_lineno}: the column header does not name the time system "
+                "(it should start '%  GPST' or '%  UTC'); add it so GPS time and UTC are not confused"
+            )
+        return header_ts
+    ts = time_system.upper()
+    if ts not in TIME_SYSTEMS:
+        raise ConfigError(f"time system {time_system!r} is not one of {', '.join(TIME_SYSTEMS)}")
+    if header_ts is not None and ts != header_ts:
+        raise InputError(f"{name}: line {col_lineno}: the header says {header_ts} but "
+                         f"{ts} was requested")
+    return ts
+
+
 def _data_lines(lines: list[str], layout: dict) -> list[tuple[int, str]]:
     """(line number, stripped text with RTKLIB's separator turned into spaces) of data lines."""
     sep = layout["sep"]
@@ -341,7 +385,7 @@ def _data_lines(lines: list[str], layout: dict) -> list[tuple[int, str]]:
     return out
 
 
-def _parse_fast(data: list[tuple[int, str]], layout: dict):
+def _parse_fast(data: list[tuple[int, str]], layout: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Vectorised parse with pandas' C reader; None when anything is off (the slow path reports)."""
     n = layout["n_fields"]
     try:
@@ -395,7 +439,7 @@ def _parse_fast(data: list[tuple[int, str]], layout: dict):
     return linenos, t, _collapse(raw, layout)
 
 
-def _parse_slow(name: str, data: list[tuple[int, str]], layout: dict):
+def _parse_slow(name: str, data: list[tuple[int, str]], layout: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     n = layout["n_fields"]
     rows = []
     for i, s in data:
@@ -488,6 +532,7 @@ def _parse_numeric(name: str, rows: list[tuple[int, list[str]]], layout: dict) -
                 if not ok:
                     col = _column_of(f, fields, names, dms)
                     raise InputError(f"{name}: line {lineno}: {col} is {tok!r}, not a finite number")
+    assert raw is not None  # numpy parses a token as float() does: a failure was raised above
     return _collapse(raw, layout)
 
 
@@ -636,7 +681,7 @@ def _unsqvar(v: np.ndarray) -> np.ndarray:
     return np.sign(v) * v * v
 
 
-def _cov_from_fields(numeric: np.ndarray, cols: dict[str, int], names: tuple[str, ...]):
+def _cov_from_fields(numeric: np.ndarray, cols: dict[str, int], names: tuple[str, ...]) -> np.ndarray | None:
     """(M, 3, 3) covariance from sdx sdy sdz [sdxy sdyz sdzx]; None if the stds are absent."""
     if not all(n in cols for n in names[:3]):
         return None
@@ -659,7 +704,10 @@ def _rotate_std(cov: np.ndarray | None, rot: np.ndarray) -> np.ndarray | None:
     return np.sqrt(np.clip(np.einsum("mii->mi", c), 0.0, None))
 
 
-def _positions(name: str, numeric: np.ndarray, layout: dict, linenos: np.ndarray):
+def _positions(name: str, numeric: np.ndarray, layout: dict, linenos: np.ndarray) -> tuple[
+        np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+    """lat, lon (deg), h (m, ellipsoidal), std_enu (m), vel_enu (m/s) and std_vel_enu (m/s) of the
+    epochs (the last three None when the file has none), rotated from ECEF for xyz files."""
     cols = layout["numeric_index"]
     fmt = layout["pos_format"]
     std_names = _STD_NAMES[fmt]

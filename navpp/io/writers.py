@@ -6,8 +6,8 @@ when complete, so a failed or interrupted run never leaves a half-written file t
 finished.
 
 ``trajectory.csv`` is formatted by a vectorised fixed-point formatter (:func:`format_fixed_columns`)
-rather than ``pandas.to_csv`` or ``numpy.savetxt``: 450 000 rows take a fraction of a second
-instead of several seconds.  Its text is identical to Python's ``format(x, ".Nf")`` for every
+rather than ``pandas.to_csv`` or ``numpy.savetxt``, which format value by value (README, "Speed",
+has the times).  Its text is identical to Python's ``format(x, ".Nf")`` for every
 value (correct rounding of the exact binary value, ties to even, ``"nan"``, ``"inf"``,
 ``"-inf"``, and ``"-0.0000"`` for negative values that round to zero, as C's ``printf`` and
 pandas also write them).  The one exception is the ``t`` column, which is computed more
@@ -68,7 +68,7 @@ def _default_file_mode() -> int:
     return 0o644
 
 
-def atomic_write(path: str | os.PathLike[str], writer: Callable[[IO[Any]], None],
+def atomic_write(path: str | os.PathLike[str], writer: Callable[[IO[Any]], object],
                  mode: str = "w") -> None:
     """Write a file so that it appears complete or not at all.
 
@@ -134,8 +134,8 @@ def _product_error(a: np.ndarray, b: float, p: np.ndarray) -> np.ndarray:
     c = _SPLIT * a
     ah = c - (c - a)
     al = a - ah
-    c = _SPLIT * b
-    bh = c - (c - b)
+    cb = _SPLIT * b
+    bh = cb - (cb - b)
     bl = b - bh
     return ((ah * bh - p) + ah * bl + al * bh) + al * bl
 
@@ -214,8 +214,8 @@ def _special_text(v: np.ndarray, decimals: int) -> np.ndarray:
     out[np.isnan(v)] = b"nan"
     out[np.isposinf(v)] = b"inf"
     out[np.isneginf(v)] = b"-inf"
-    for i, s in texts.items():
-        out[i] = s
+    for k, s in texts.items():
+        out[k] = s
     return out
 
 
@@ -328,7 +328,7 @@ def write_trajectory_csv(path: str | os.PathLike[str], sol: Solution, *, t0_s: f
             fields = [_time_field(np.asarray(sol.t)[start:stop], t0_s)]
             fields += [_field_from_values(np.asarray(c, dtype=np.float64)[start:stop], d)
                        for c, d in zip(columns, TRAJECTORY_DECIMALS[1:])]
-            f.write(memoryview(_layout(fields, stop - start)))
+            f.write(_layout(fields, stop - start).data)
 
     atomic_write(path, write, mode="wb")
 
@@ -396,7 +396,7 @@ def write_diagnostics_csv(path: str | os.PathLike[str], diag: Any, *, t0_s: floa
             stop = min(n, start + _CHUNK_ROWS)
             fields = [_time_field(t[start:stop], t0_s)]
             fields += [_field_from_values(c[start:stop], d) for c, d in zip(cols, decimals)]
-            f.write(memoryview(_layout(fields, stop - start)))
+            f.write(_layout(fields, stop - start).data)
 
     atomic_write(path, write, mode="wb")
 

@@ -15,36 +15,33 @@ from typing import ClassVar
 import numpy as np
 from numba import njit
 
-from ..attitude import quat_to_dcm
-from ..model import plus
-from .base import Aid, skew
+from ..attitude import quat_to_dcm, skew
+from ..state import ATT, BG, DX_VEL, N_ERR, NOMINAL_BG, NOMINAL_Q, NOMINAL_VEL
+from .base import Aid, points_kernel
+
+P_GYRO = slice(0, 3)      #: ``p``: gyro output at the epoch, body FLU, rad/s
+P_LEVER = slice(3, 6)     #: ``p``: antenna lever arm, body FLU, m
 
 
 @njit(cache=True)
-def _h(x, p):
-    w = p[0:3] - x[10:13]
-    return x[4:7] + quat_to_dcm(x[0:4]) @ np.cross(w, p[3:6])
+def _h(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    w = p[P_GYRO] - x[NOMINAL_BG]
+    v_antenna: np.ndarray = x[NOMINAL_VEL] + quat_to_dcm(x[NOMINAL_Q]) @ np.cross(w, p[P_LEVER])
+    return v_antenna
 
 
 @njit(cache=True)
-def _H(x, p):
-    C = quat_to_dcm(x[0:4])
-    w = p[0:3] - x[10:13]
-    H = np.zeros((3, 15))
-    H[:, 0:3] = -skew(C @ np.cross(w, p[3:6]))
-    H[0, 3] = H[1, 4] = H[2, 5] = 1.0
-    H[:, 9:12] = C @ skew(p[3:6])
+def _H(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    C = quat_to_dcm(x[NOMINAL_Q])
+    w = p[P_GYRO] - x[NOMINAL_BG]
+    H = np.zeros((3, N_ERR))
+    H[:, ATT] = -skew(C @ np.cross(w, p[P_LEVER]))
+    H[0, DX_VEL] = H[1, DX_VEL + 1] = H[2, DX_VEL + 2] = 1.0
+    H[:, BG] = C @ skew(p[P_LEVER])
     return H
 
 
-@njit(cache=True)
-def _points(x, dX, p):
-    """``h(x ⊞ dX_i) - h(x)``, (m, k)."""
-    z0 = _h(x, p)
-    Z = np.empty((dX.shape[0], z0.shape[0]))
-    for i in range(dX.shape[0]):
-        Z[i] = _h(plus(x, dX[i]), p) - z0
-    return Z
+_points = points_kernel(_h)
 
 
 class GnssVelocity(Aid):

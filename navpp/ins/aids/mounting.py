@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..attitude import rph_deg_to_dcm
+
 
 @dataclass(frozen=True)
 class MountingEstimate:
@@ -37,8 +39,6 @@ def estimate_mounting(t: np.ndarray, vel_enu: np.ndarray, rph_deg: np.ndarray, *
                       max_rate_dps: float = 2.0) -> MountingEstimate | None:
     """Estimate the mounting from a solution (``t`` (N,) s; ``vel_enu`` (N, 3) m/s; ``rph_deg``
     (N, 3) navigation convention); None with less than 10 s of usable motion."""
-    from ...metrics import mat_nb_from_rph
-
     t = np.asarray(t, dtype=float)
     vel = np.asarray(vel_enu, dtype=float)
     rph = np.asarray(rph_deg, dtype=float)
@@ -53,7 +53,7 @@ def estimate_mounting(t: np.ndarray, vel_enu: np.ndarray, rph_deg: np.ndarray, *
     seconds = float(dt[use].sum())
     if seconds < 10.0:
         return None
-    vb = np.einsum("nji,nj->ni", mat_nb_from_rph(rph[use]), vel[use])
+    vb = np.einsum("nji,nj->ni", rph_deg_to_dcm(rph[use]), vel[use])
     yaw = np.degrees(np.arctan2(vb[:, 1], vb[:, 0]))
     pitch = np.degrees(np.arctan2(-vb[:, 2], np.hypot(vb[:, 0], vb[:, 1])))
     my, mp = float(np.median(yaw)), float(np.median(pitch))

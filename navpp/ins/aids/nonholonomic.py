@@ -17,37 +17,37 @@ from typing import ClassVar
 import numpy as np
 from numba import njit
 
-from ..attitude import quat_to_dcm
-from ..model import plus
-from .base import Aid, skew
+from ..attitude import quat_to_dcm, skew
+from ..state import ATT, BG, N_ERR, NOMINAL_BG, NOMINAL_Q, NOMINAL_VEL, VEL
+from .base import Aid, points_kernel
+
+P_C_VB = slice(0, 9)      #: ``p``: C_vb, body -> vehicle, row-major
+P_GYRO = slice(9, 12)     #: ``p``: gyro output at the epoch, body FLU, rad/s
+P_POINT = slice(12, 15)   #: ``p``: the constraint point, body FLU, m
+LATERAL_VERTICAL = slice(1, 3)    #: rows of the vehicle frame (FLU) the constraint holds to zero
 
 
 @njit(cache=True)
-def _h(x, p):
-    cvb = p[0:9].reshape(3, 3)
-    vb = quat_to_dcm(x[0:4]).T @ x[4:7] + np.cross(p[9:12] - x[10:13], p[12:15])
-    return (cvb @ vb)[1:3].copy()
+def _h(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    cvb = p[P_C_VB].reshape(3, 3)
+    vb = quat_to_dcm(x[NOMINAL_Q]).T @ x[NOMINAL_VEL] + np.cross(p[P_GYRO] - x[NOMINAL_BG], p[P_POINT])
+    z: np.ndarray = (cvb @ vb)[LATERAL_VERTICAL].copy()
+    return z
 
 
 @njit(cache=True)
-def _H(x, p):
-    cvb = np.ascontiguousarray(p[0:9]).reshape(3, 3)
-    Ct = np.ascontiguousarray(quat_to_dcm(x[0:4]).T)
-    H = np.zeros((3, 15))
-    H[:, 0:3] = Ct @ skew(x[4:7])
-    H[:, 3:6] = Ct
-    H[:, 9:12] = skew(p[12:15])
-    return (cvb @ H)[1:3].copy()
+def _H(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    cvb = np.ascontiguousarray(p[P_C_VB]).reshape(3, 3)
+    Ct = np.ascontiguousarray(quat_to_dcm(x[NOMINAL_Q]).T)
+    H = np.zeros((3, N_ERR))
+    H[:, ATT] = Ct @ skew(x[NOMINAL_VEL])
+    H[:, VEL] = Ct
+    H[:, BG] = skew(p[P_POINT])
+    Hz: np.ndarray = (cvb @ H)[LATERAL_VERTICAL].copy()
+    return Hz
 
 
-@njit(cache=True)
-def _points(x, dX, p):
-    """``h(x ⊞ dX_i) - h(x)``, (m, k)."""
-    z0 = _h(x, p)
-    Z = np.empty((dX.shape[0], z0.shape[0]))
-    for i in range(dX.shape[0]):
-        Z[i] = _h(plus(x, dX[i]), p) - z0
-    return Z
+_points = points_kernel(_h)
 
 
 class NonHolonomic(Aid):

@@ -16,37 +16,32 @@ import numpy as np
 from numba import njit
 
 from ...geodesy import OMEGA_E
-from ..attitude import quat_to_dcm
-from ..model import plus
-from .base import Aid, skew
+from ..attitude import quat_to_dcm, skew
+from ..state import ATT, DX_BG, N_ERR, NOMINAL_BG, NOMINAL_Q, X_LAT
+from .base import Aid, points_kernel
 
 
 @njit(cache=True, inline="always")
-def _earth_rate(lat):
+def _earth_rate(lat: float) -> np.ndarray:
+    """Earth rotation rate in ENU at latitude ``lat`` (rad), rad/s."""
     return np.array([0.0, OMEGA_E * np.cos(lat), OMEGA_E * np.sin(lat)])
 
 
 @njit(cache=True)
-def _h(x, p):
-    return x[10:13] + quat_to_dcm(x[0:4]).T @ _earth_rate(x[7])
+def _h(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    w: np.ndarray = x[NOMINAL_BG] + quat_to_dcm(x[NOMINAL_Q]).T @ _earth_rate(x[X_LAT])
+    return w
 
 
 @njit(cache=True)
-def _H(x, p):
-    H = np.zeros((3, 15))
-    H[:, 0:3] = quat_to_dcm(x[0:4]).T @ skew(_earth_rate(x[7]))
-    H[0, 9] = H[1, 10] = H[2, 11] = 1.0
+def _H(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    H = np.zeros((3, N_ERR))
+    H[:, ATT] = quat_to_dcm(x[NOMINAL_Q]).T @ skew(_earth_rate(x[X_LAT]))
+    H[0, DX_BG] = H[1, DX_BG + 1] = H[2, DX_BG + 2] = 1.0
     return H
 
 
-@njit(cache=True)
-def _points(x, dX, p):
-    """``h(x ⊞ dX_i) - h(x)``, (m, k)."""
-    z0 = _h(x, p)
-    Z = np.empty((dX.shape[0], z0.shape[0]))
-    for i in range(dX.shape[0]):
-        Z[i] = _h(plus(x, dX[i]), p) - z0
-    return Z
+_points = points_kernel(_h)
 
 
 class ZeroRate(Aid):

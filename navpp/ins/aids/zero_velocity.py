@@ -11,30 +11,24 @@ from typing import ClassVar
 import numpy as np
 from numba import njit
 
-from ..model import plus
-from .base import Aid
+from ..state import DX_VEL, N_ERR, NOMINAL_VEL
+from .base import Aid, points_kernel
 
 
 @njit(cache=True)
-def _h(x, p):
-    return x[4:7].copy()
+def _h(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    v: np.ndarray = x[NOMINAL_VEL].copy()
+    return v
 
 
 @njit(cache=True)
-def _H(x, p):
-    H = np.zeros((3, 15))
-    H[0, 3] = H[1, 4] = H[2, 5] = 1.0
+def _H(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    H = np.zeros((3, N_ERR))
+    H[0, DX_VEL] = H[1, DX_VEL + 1] = H[2, DX_VEL + 2] = 1.0
     return H
 
 
-@njit(cache=True)
-def _points(x, dX, p):
-    """``h(x ⊞ dX_i) - h(x)``, (m, k)."""
-    z0 = _h(x, p)
-    Z = np.empty((dX.shape[0], z0.shape[0]))
-    for i in range(dX.shape[0]):
-        Z[i] = _h(plus(x, dX[i]), p) - z0
-    return Z
+_points = points_kernel(_h)
 
 
 class ZeroVelocity(Aid):

@@ -25,37 +25,36 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from .errors import ConfigError, InputError
+from ..errors import ConfigError, InputError
+from .figures import FIGURE_KINDS, FigurePlan, Plot, plots_by_log, render_figures
+from .runs import ProgressFn, RecordingCache, RunOutcome, RunTask, failed_outcome, internal_error, run_task
+from .schedule import submission_order
 
 _local = threading.local()
 
 
-def _cache():
-    from .comparison import _RecordingCache
-
+def _cache() -> RecordingCache:
+    """This worker thread's recording cache."""
     cache = getattr(_local, "cache", None)
     if cache is None:
-        cache = _local.cache = _RecordingCache()
+        cache = _local.cache = RecordingCache()
     return cache
 
 
-def execute_task(task) -> Any:
+def execute_task(task: RunTask) -> RunOutcome:
     """Run one comparison task on a worker (its thread's recording cache, no progress)."""
-    from .comparison import _execute
-
-    return _execute(task, _cache(), None)
+    return run_task(task, _cache(), None)
 
 
-def render_log_figures(plan, log: str, kind: str, *outcomes) -> list:
+def render_log_figures(plan: FigurePlan, log: str, kind: str, *outcomes: RunOutcome) -> list[Plot]:
     """Draw one kind of figure of ``log`` from its runs' outcomes.  Runs on a worker, with the
     outcomes passed as the run tasks' futures: dask hands them over worker to worker, so the
     plot series never travel through the scheduler (nor back to the client first)."""
-    from .report import render_figures
-
     return render_figures(replace(plan.job(log, list(outcomes)), kinds=(kind,)))
 
 
-def _absolute(task):
+def _absolute(task: RunTask) -> RunTask:
+    """The task with its paths absolute (the workers may run in another directory)."""
     def ab(p: str | None) -> str | None:
         return None if p is None else str(Path(p).expanduser().resolve())
 
@@ -71,8 +70,8 @@ def _connect(scheduler: str | None, workers: int):
     if scheduler is None:
         import dask
 
-        # the workers' statistical profiler samples every thread's stack every 10 ms: about 3 % of
-        # a run here (measured), for a profile nobody looks at
+        # the workers' statistical profiler samples every thread's stack every 10 ms: a cost to
+        # every run, for a profile nobody looks at
         with dask.config.set({"distributed.worker.profile.enabled": False}):
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0")
         return Client(cluster, direct_to_workers=True), cluster
@@ -83,15 +82,11 @@ def _connect(scheduler: str | None, workers: int):
                          f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
 
 
-def run_dask(tasks: Sequence, workers: int | None, scheduler: str | None, progress, draw
-             ) -> tuple[list, dict[str, list], int]:
-    """Run ``tasks`` (comparison ``_Task``) on Dask; returns (outcomes in task order, plots per
-    log, number of workers).  ``workers``: LocalCluster size when ``scheduler`` is None (None:
-    one per CPU)."""
+def run_dask(tasks: Sequence[RunTask], workers: int | None, scheduler: str | None, progress: ProgressFn | None,
+             draw: FigurePlan | None) -> tuple[list[RunOutcome], dict[str, list[Plot]], int]:
+    """Run ``tasks`` on Dask; returns (outcomes in task order, plots per log, number of
+    workers).  ``workers``: LocalCluster size when ``scheduler`` is None (None: one per CPU)."""
     from distributed import as_completed
-
-    from .comparison import _failed, _internal, _schedule, plots_by_log
-    from .report import FIGURE_KINDS, render_figures
 
     def draw_here(log: str, kinds) -> None:          # from the outcomes that came back, in this process
         whole = draw.job(log, [results[t.index] for t in tasks if t.log == log])
@@ -103,7 +98,7 @@ def run_dask(tasks: Sequence, workers: int | None, scheduler: str | None, progre
     client, cluster = _connect(scheduler, workers or os.cpu_count() or 2)
     try:
         n_workers = len(client.scheduler_info().get("workers", {})) or (workers or 1)
-        order = _schedule(tasks)
+        order = submission_order(tasks)
         futures: dict[Any, Any] = {}
         for rank, task in enumerate(order):       # costly filters of each log first, logs in order
             fut = client.submit(execute_task, _absolute(task), key=f"navpp-run-{task.index}-{os.getpid()}",
@@ -124,7 +119,7 @@ def run_dask(tasks: Sequence, workers: int | None, scheduler: str | None, progre
             try:
                 results[item.index] = fut.result()
             except Exception as exc:  # noqa: BLE001  (KilledWorker, a result that does not travel: a row)
-                results[item.index] = _failed(item, f"the Dask worker failed: {_internal(exc)}")
+                results[item.index] = failed_outcome(item, f"the Dask worker failed: {internal_error(exc)}")
             if progress:
                 progress("all runs", len(results) / len(tasks))
             left[item.log] -= 1

@@ -1,21 +1,12 @@
-"""The ``navpp compare`` report: ``report.md`` (PNG figures beside it) and a self-contained ``report.html``.
+"""The comparison report: ``report.md`` (PNG figures beside it) and a self-contained ``report.html``.
 
 Content, for every log x filter: the position error against the reference (E/N/U/horizontal
 MAE and RMSE, m; the best, i.e. smallest, value of each column per log in bold), the GNSS fixes
-the gate rejected and the filter's run time (s).  Then, one figure set per log:
-
-- ``<log>_trajectory.png``: the filters' trajectories, the GNSS fixes and the reference in the
-  log's local ENU frame (m, equal axes; origin: the first GNSS fix);
-- ``<log>_error_time.png``: horizontal position error (m) versus time since log start (s);
-- ``<log>_error_cdf.png``: the cumulative distribution of the horizontal error;
-- ``<log>_adaptive.png`` (filters that adapt their noise only): the measurement-noise 1-sigma
-  the filter used (E/N/U, m) and its adaptive scale factors (VCE ``q_factor_*``/``r_factor_*``,
-  the AUKF fading factor; dimensionless, 1 = as configured) versus time.
+the gate rejected and the filter's run time (s).  Then, per log, its figures
+(:mod:`navpp.comparison.figures`) and the warnings of its runs.
 
 A log without a reference has status, rejected fixes and run time only, and no error plots
-(the trajectories, and the adaptive noise, need no reference); the report says so.  Figures are
-drawn with matplotlib's object API (``Figure`` + Agg), so the caller's pyplot backend is never
-touched; matplotlib is imported when a report is made.
+(the trajectories, and the adaptive noise, need no reference); the report says so.
 The HTML embeds every PNG as a base64 data URI and its CSS inline: no external resource.
 """
 
@@ -23,34 +14,21 @@ from __future__ import annotations
 
 import base64
 import html
-import io
 import math
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:
-    from .comparison import CompareRow, LogSeries, RunSeries
+from ..errors import InputError
+from ..outfiles import os_reason, write_text_file
+from ..version import __version__
+from .figures import FIGURE_SUFFIXES, Plot, log_label
+from .rows import CompareRow
 
 #: Table columns: (summary.csv column, header); the error columns are metres.
 TABLE_ERROR_COLUMNS = (("east_mae", "E MAE"), ("east_rmse", "E RMSE"), ("north_mae", "N MAE"),
                        ("north_rmse", "N RMSE"), ("up_mae", "U MAE"), ("up_rmse", "U RMSE"),
                        ("horizontal_mae", "H MAE"), ("horizontal_rmse", "H RMSE"))
-#: File-name endings of the figures; files with these endings that a run did not write are
-#: removed from the output directory (they belong to an earlier comparison).
-FIGURE_SUFFIXES = ("_trajectory.png", "_error_time.png", "_error_cdf.png", "_adaptive.png")
-_DPI = 110
-
-
-@dataclass(frozen=True)
-class Plot:
-    """One figure: its file name, a caption, and the PNG bytes."""
-
-    name: str
-    caption: str
-    png: bytes
 
 
 @dataclass(frozen=True)
@@ -103,7 +81,7 @@ def _table(rows: Sequence[CompareRow]) -> tuple[list[str], list[list[tuple[str, 
     best = best_cells(rows)
     body = []
     for i, r in enumerate(rows):
-        cells = [(_log_label(r.log), False), (r.filter, False), ("ok" if r.ok else "failed", False)]
+        cells = [(log_label(r.log), False), (r.filter, False), ("ok" if r.ok else "failed", False)]
         if with_ref:
             cells += [(_fmt(_number(r, c)), (i, c) in best) for c, _ in TABLE_ERROR_COLUMNS]
         if r.ok:
@@ -112,186 +90,6 @@ def _table(rows: Sequence[CompareRow]) -> tuple[list[str], list[list[tuple[str, 
             cells += [("", False)] * 3
         body.append(cells)
     return head, body
-
-
-def _log_label(log: str) -> str:
-    return Path(log).name or log
-
-
-def _slugs(logs: Sequence[str]) -> dict[str, str]:
-    out: dict[str, str] = {}
-    used: set[str] = set()
-    for log in logs:
-        base = re.sub(r"[^A-Za-z0-9._-]+", "_", _log_label(log)).strip("._") or "log"
-        slug, k = base, 2
-        while slug in used:
-            slug, k = f"{base}-{k}", k + 1
-        used.add(slug)
-        out[log] = slug
-    return out
-
-
-# --------------------------------------------------------------------------- figures
-
-
-def _png(fig) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=_DPI, metadata={"Software": None})
-    return buf.getvalue()
-
-
-def _colors(filters: Sequence[str]) -> dict[str, str]:
-    """A colour per filter; a smoothed run (``<filter>+rts``) shares its forward filter's colour
-    (:func:`_line` tells them apart by the line style)."""
-    from .comparison import SMOOTHED_SUFFIX
-
-    palette = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink",
-               "tab:olive", "tab:cyan"]
-    bases = list(dict.fromkeys(f.removesuffix(SMOOTHED_SUFFIX) for f in filters))
-    return {f: palette[bases.index(f.removesuffix(SMOOTHED_SUFFIX)) % len(palette)] for f in filters}
-
-
-def _line(name: str, runs: Mapping[str, RunSeries]) -> str:
-    """Line style: dashed for a forward run whose smoothed run is plotted too, else solid."""
-    from .comparison import smoothed_name
-
-    return "--" if smoothed_name(name) in runs else "-"
-
-
-def _trajectory_figure(label: str, slug: str, log_series: LogSeries | None, runs: Mapping[str, RunSeries],
-                       colors: Mapping[str, str]) -> Plot | None:
-    from matplotlib.figure import Figure
-
-    if log_series is None and not runs:
-        return None
-    fig = Figure(figsize=(7.5, 6.5), layout="constrained")
-    ax = fig.add_subplot()
-    if log_series is not None:
-        ax.plot(log_series.gnss_east_m, log_series.gnss_north_m, ".", ms=2.5, color="0.6", label="GNSS fixes")
-        if log_series.ref_east_m is not None:
-            ax.plot(log_series.ref_east_m, log_series.ref_north_m, "-", color="black", lw=1.8, label="reference")
-        lat, lon, alt = log_series.anchor
-        ax.set_title(f"{label}: trajectories, local ENU about the first GNSS fix\n"
-                     f"({lat:.6f}°, {lon:.6f}°, {alt:.1f} m)", fontsize=10)
-    for name, s in runs.items():
-        ax.plot(s.east_m, s.north_m, _line(name, runs), lw=1.0, color=colors[name], label=name)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("east, m")
-    ax.set_ylabel("north, m")
-    ax.grid(True, lw=0.4, alpha=0.6)
-    ax.legend(fontsize=8, loc="best")
-    return Plot(f"{slug}_trajectory.png", f"{label}: trajectories in local ENU (m) with the GNSS fixes", _png(fig))
-
-
-def _error_time_figure(label: str, slug: str, runs: Mapping[str, RunSeries], colors: Mapping[str, str]
-                       ) -> Plot | None:
-    from matplotlib.figure import Figure
-
-    with_err = {n: s for n, s in runs.items() if s.err_h_m is not None}
-    if not with_err:
-        return None
-    fig = Figure(figsize=(8.5, 4.2), layout="constrained")
-    ax = fig.add_subplot()
-    for name, s in with_err.items():
-        ax.plot(s.err_t_s, s.err_h_m, _line(name, runs), lw=0.8, color=colors[name], label=name)
-    ax.set_xlabel("time since log start, s")
-    ax.set_ylabel("horizontal position error, m")
-    ax.set_title(f"{label}: horizontal error against the reference", fontsize=10)
-    ax.set_ylim(bottom=0.0)
-    ax.grid(True, lw=0.4, alpha=0.6)
-    ax.legend(fontsize=8, loc="upper right")
-    return Plot(f"{slug}_error_time.png", f"{label}: horizontal position error (m) versus time (s)", _png(fig))
-
-
-def _error_cdf_figure(label: str, slug: str, runs: Mapping[str, RunSeries], colors: Mapping[str, str]
-                      ) -> Plot | None:
-    import numpy as np
-    from matplotlib.figure import Figure
-
-    with_err = {n: s for n, s in runs.items() if s.cdf_m is not None}
-    if not with_err:
-        return None
-    fig = Figure(figsize=(6.5, 4.5), layout="constrained")
-    ax = fig.add_subplot()
-    for name, s in with_err.items():
-        ax.plot(s.cdf_m, np.linspace(0.0, 1.0, len(s.cdf_m)), _line(name, runs), lw=1.2, color=colors[name],
-                label=name)
-    ax.axhline(0.95, color="0.5", lw=0.6, ls="--", label="95 %")
-    ax.set_xlabel("horizontal position error, m")
-    ax.set_ylabel("fraction of reference epochs, -")
-    ax.set_ylim(0.0, 1.0)
-    ax.set_xlim(left=0.0)
-    ax.set_title(f"{label}: cumulative distribution of the horizontal error", fontsize=10)
-    ax.grid(True, lw=0.4, alpha=0.6)
-    ax.legend(fontsize=8, loc="lower right")
-    return Plot(f"{slug}_error_cdf.png", f"{label}: horizontal error CDF (m)", _png(fig))
-
-
-def _adaptive_figure(label: str, slug: str, runs: Mapping[str, RunSeries], colors: Mapping[str, str]
-                     ) -> Plot | None:
-    from matplotlib.figure import Figure
-
-    adapt = {n: s for n, s in runs.items() if s.adaptive and s.diag_t_s is not None and len(s.diag_t_s)}
-    if not adapt:
-        return None
-    with_factors = any(s.factors for s in adapt.values())
-    fig = Figure(figsize=(8.5, 6.5 if with_factors else 4.2), layout="constrained")
-    axes = fig.subplots(2 if with_factors else 1, 1, sharex=True, squeeze=False)[:, 0]
-    for name, s in adapt.items():
-        for j, (axis, ls) in enumerate((("E", "-"), ("N", "--"), ("U", ":"))):
-            axes[0].plot(s.diag_t_s, s.r_std_m[:, j], ls, lw=1.0, color=colors[name], label=f"{name} R {axis}")
-    axes[0].set_ylabel("measurement noise R, 1σ, m")
-    axes[0].set_title(f"{label}: adaptive noise (R 1σ per axis: E solid, N dashed, U dotted)", fontsize=10)
-    axes[0].grid(True, lw=0.4, alpha=0.6)
-    axes[0].legend(fontsize=7, ncol=3, loc="upper right")
-    if with_factors:
-        styles = ["-", "--", ":", "-."]
-        for name, s in adapt.items():
-            for k, (key, values) in enumerate(s.factors.items()):
-                axes[1].plot(s.diag_t_s, values, styles[k % len(styles)], lw=1.0, color=colors[name],
-                             label=f"{name} {key}")
-        axes[1].axhline(1.0, color="0.5", lw=0.6)
-        axes[1].set_ylabel("adaptive scale factor, - (1 = as configured)")
-        axes[1].set_yscale("log")
-        axes[1].grid(True, lw=0.4, alpha=0.6)
-        axes[1].legend(fontsize=7, ncol=2, loc="upper right")
-    axes[-1].set_xlabel("time since log start, s")
-    return Plot(f"{slug}_adaptive.png", f"{label}: adaptive R (m) and Q/R scale factors versus time (s)", _png(fig))
-
-
-#: The figures of a log, in report order.
-FIGURE_KINDS = ("trajectory", "error_time", "error_cdf", "adaptive")
-
-
-@dataclass(frozen=True)
-class FigureJob:
-    """What :func:`render_figures` needs to draw figures of one log (plain data: it pickles, so
-    a worker process can draw them): ``runs`` maps filter -> series of the log's ok runs;
-    ``kinds`` the figures to draw (:data:`FIGURE_KINDS`)."""
-
-    log: str
-    slug: str
-    log_series: LogSeries | None
-    runs: dict[str, RunSeries]
-    colors: dict[str, str]
-    kinds: tuple[str, ...] = FIGURE_KINDS
-
-
-def render_figures(job: FigureJob) -> list[Plot]:
-    """Draw the job's figures (those that have something to show), in :data:`FIGURE_KINDS` order."""
-    label = _log_label(job.log)
-    plots = []
-    for kind in FIGURE_KINDS:
-        if kind not in job.kinds:
-            continue
-        if kind == "trajectory":
-            p = _trajectory_figure(label, job.slug, job.log_series, job.runs, job.colors)
-        else:
-            draw = {"error_time": _error_time_figure, "error_cdf": _error_cdf_figure, "adaptive": _adaptive_figure}
-            p = draw[kind](label, job.slug, job.runs, job.colors)
-        if p is not None:
-            plots.append(p)
-    return plots
 
 
 # --------------------------------------------------------------------------- documents
@@ -344,7 +142,7 @@ def markdown(rows: Sequence[CompareRow], sections: Sequence[LogSection], version
         out += ["## Failed runs", ""] + [f"- {_md_escape(r.filter)} on {_md_escape(r.log)}: {_md_escape(r.status)}"
                                          for r in failed] + [""]
     for sec in sections:
-        out += [f"## {_md_escape(_log_label(sec.log))}", "", f"Log: `{sec.log}`", ""]
+        out += [f"## {_md_escape(log_label(sec.log))}", "", f"Log: `{sec.log}`", ""]
         out += [_md_escape(n) + "\n" for n in _section_notes(sec)]
         for p in sec.plots:
             out += [f"![{_md_escape(p.caption)}]({p.name})", ""]
@@ -392,7 +190,7 @@ def html_document(rows: Sequence[CompareRow], sections: Sequence[LogSection], ve
         out += [f"<li>{e(r.filter)} on <code>{e(r.log)}</code>: {e(r.status)}</li>" for r in failed]
         out.append("</ul>")
     for sec in sections:
-        out.append(f"<h2>{e(_log_label(sec.log))}</h2>")
+        out.append(f"<h2>{e(log_label(sec.log))}</h2>")
         out.append(f'<p class="note">Log: <code>{e(sec.log)}</code></p>')
         out += [f'<p class="note">{e(n)}</p>' for n in _section_notes(sec)]
         for p in sec.plots:
@@ -404,12 +202,6 @@ def html_document(rows: Sequence[CompareRow], sections: Sequence[LogSection], ve
             out.append('<p class="note">Warnings:</p><ul>' + "".join(f"<li>{e(w)}</li>" for w in warnings) + "</ul>")
     out += ["</body>", "</html>"]
     return "\n".join(out) + "\n"
-
-
-def figure_names(logs: Sequence[str], filters: Sequence[str]) -> tuple[dict[str, str], dict[str, str]]:
-    """File-name stems per log (unique, file-system safe) and a colour per filter, shared by
-    every figure of a comparison."""
-    return _slugs(logs), _colors(filters)
 
 
 def build_sections(rows: Sequence[CompareRow], plots: Mapping[str, Sequence[Plot]]) -> list[LogSection]:
@@ -429,12 +221,6 @@ def write_report(out_dir: Path, rows: Sequence[CompareRow], plots: Mapping[str, 
     ``report.md`` and ``report.html`` into ``out_dir`` (atomically); remove
     figures of an earlier comparison (names ending in :data:`FIGURE_SUFFIXES`) this one did not
     write.  Returns the files written.  :class:`~navpp.errors.InputError` if one cannot be written."""
-    import navpp
-
-    from .api import _os_reason
-    from .comparison import write_text_file
-    from .errors import InputError
-
     out_dir = Path(out_dir)
     sections = build_sections(rows, plots)
     files: list[Path] = []
@@ -446,7 +232,7 @@ def write_report(out_dir: Path, rows: Sequence[CompareRow], plots: Mapping[str, 
     for sec in sections:
         for p in sec.plots:
             put(out_dir / p.name, p.png)
-    version = str(getattr(navpp, "__version__", ""))
+    version = __version__
     put(out_dir / "report.md", markdown(rows, sections, version))
     put(out_dir / "report.html", html_document(rows, sections, version))
     written = {p.name for p in files}
@@ -456,5 +242,5 @@ def write_report(out_dir: Path, rows: Sequence[CompareRow], plots: Mapping[str, 
                 old.unlink()
             except OSError as exc:
                 raise InputError(f"{old}: cannot remove this figure of an earlier comparison "
-                                 f"({_os_reason(exc)})") from None
+                                 f"({os_reason(exc)})") from None
     return files

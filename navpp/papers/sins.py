@@ -28,22 +28,21 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
 from .. import geodesy
-from ..config import (
-    DEG_PER_H_TO_RAD_PER_S,
-    DEG_PER_SQRT_H_TO_RAD_PER_SQRT_S,
-    DEG_TO_RAD,
-    STANDARD_GRAVITY,
-)
+from ..engine.loop import EpochOutcome, run_epochs
+from ..engine.schedule import Epoch
 from ..errors import ConfigError, FilterDivergedError
+from ..filters import GaussianState, Update
+from ..filters.protocols import MeasurementBase
 from ..ins.attitude import dcm_to_quat, rph_to_dcm
-from ..ins.model import POS, VEL, InsModel, NoiseModel, _gnss_innovation, minus, plus
-from .base import GaussianState
-from .benchmarks import BenchResult, Row, make_bench_filter, register_benchmark
-from .protocols import MeasurementBase
+from ..ins.model import POS, VEL, InsModel, NoiseModel, gnss_innovation, minus, plus
+from .filter_spec import make_bench_filter
+from .registry import BenchResult, Row, register_benchmark
+from .simulated import OneMeasurementPerEpoch, Recorder, measurement_epochs
 
 AXES = ("E", "N", "U")
 
@@ -54,8 +53,15 @@ PAPER_POS_RMS = {"ekf": (9.8577, 8.3439, 24.2267), "aekf": (6.2181, 8.1796, 6.75
 TITLE = "Paper 002 SINS/GPS simulation (400 s, 200 m/s east, GPS 6.5 m / 0.46 m/s): EKF vs improved AEKF"
 
 STEADY_AFTER_S = 100.0   #: start of the "steady state" figures in the notes, s
-_ARCMIN = DEG_TO_RAD / 60.0
-_UG_PER_SQRT_HZ = STANDARD_GRAVITY * 1e-6     # ug/sqrt(Hz) -> m/s^2/sqrt(Hz) = m/s/sqrt(s)
+
+# Unit factors, the values of navpp.config's (this package does not import the application's
+# configuration).
+STANDARD_GRAVITY = 9.80665                     #: g0, m/s^2 (the paper's "g")
+DEG_TO_RAD = math.pi / 180.0                   #: deg -> rad
+DEG_PER_H_TO_RAD_PER_S = DEG_TO_RAD / 3600.0   #: gyro bias, deg/h -> rad/s
+DEG_PER_SQRT_H_TO_RAD_PER_SQRT_S = DEG_TO_RAD / 60.0   #: angle random walk, deg/sqrt(h) -> rad/sqrt(s)
+ARCMIN_TO_RAD = DEG_TO_RAD / 60.0              #: arcmin -> rad
+UG_PER_SQRT_HZ_TO_MPS_PER_SQRT_S = STANDARD_GRAVITY * 1e-6   #: VRW, ug/sqrt(Hz) -> m/s^2/sqrt(Hz) = m/s/sqrt(s)
 
 
 @dataclass(frozen=True)
@@ -140,7 +146,7 @@ class Paper002Scenario:
     @property
     def accel_vrw(self) -> float:
         """m/s/sqrt(s)."""
-        return self.accel_vrw_ug_per_sqrt_hz * _UG_PER_SQRT_HZ
+        return self.accel_vrw_ug_per_sqrt_hz * UG_PER_SQRT_HZ_TO_MPS_PER_SQRT_S
 
     def noise_model(self) -> NoiseModel:
         """The filter's continuous noise: the true white-noise densities, constant biases."""
@@ -148,7 +154,7 @@ class Paper002Scenario:
 
     def p0_std(self) -> np.ndarray:
         """(15,) initial 1-sigma in the error-state order of :mod:`navpp.ins.model`."""
-        return np.concatenate([np.asarray(self.init_att_std_arcmin, dtype=float) * _ARCMIN,
+        return np.concatenate([np.asarray(self.init_att_std_arcmin, dtype=float) * ARCMIN_TO_RAD,
                                np.full(3, self.init_vel_std_mps), np.full(3, self.init_pos_std_m),
                                np.full(3, self.gyro_bias_sigma), np.full(3, self.accel_bias_sigma)])
 
@@ -221,7 +227,7 @@ class GnssPositionVelocity(MeasurementBase):
 
     def innovation_at(self, x: np.ndarray) -> np.ndarray:
         d = np.empty(6)
-        d[0:3] = _gnss_innovation(x, self.lat, self.lon, self.h, np.zeros(3))
+        d[0:3] = gnss_innovation(x, self.lat, self.lon, self.h, np.zeros(3))
         d[3:6] = self.vel_enu - x[4:7]
         return d
 
@@ -326,35 +332,48 @@ class FilterRun:
     diverged: str = ""
 
 
+class SinsRecorder(Recorder):
+    """Keeps what a :class:`FilterRun` holds: after each fix's update the error truth ⊟ estimate
+    and the filter's 1-sigma (position E, N, U m; velocity E, N, U m/s) and the 1-sigma of the
+    R used, (M, 6) each; ``r_last`` the last R used (6, 6)."""
+
+    #: the position and velocity blocks of the error state, in that order
+    IDX = np.r_[6:9, 3:6]
+
+    def __init__(self, truth: np.ndarray, R: np.ndarray) -> None:
+        m = truth.shape[0]
+        self.truth = truth
+        self.err, self.std, self.r_std = np.full((m, 6), np.nan), np.full((m, 6), np.nan), np.full((m, 6), np.nan)
+        self.r_last = R
+
+    def updated(self, epoch: Epoch, meas: Any, update: Update) -> None:
+        self.r_std[epoch.index] = np.sqrt(np.diag(update.innovation.R))
+        self.r_last = update.innovation.R
+
+    def epoch_done(self, epoch: Epoch, outcome: EpochOutcome) -> None:
+        k, state = epoch.index, outcome.state
+        dx = minus(self.truth[k], state.x)
+        self.err[k, 0:3], self.err[k, 3:6] = dx[POS], dx[VEL]
+        self.std[k] = np.sqrt(state.P.diagonal()[self.IDX])
+
+
 def run_filter(name: str, sc: Paper002Scenario, sim: SinsRun, seed: int = 0) -> FilterRun:
-    """Drive filter ``name`` (default options, no gate) over ``sim``: predict to each fix, update."""
+    """Drive filter ``name`` (default options, no gate) over ``sim`` on the engine's loop:
+    predict to each fix, update."""
     filt = make_bench_filter(name, seed)
     model = InsModel(sim.t_imu, sim.gyro, sim.accel, sc.noise_model())
     R = np.diag((sc.meas_std() * sc.r_std_scale) ** 2)
-    m = sim.t_gps.size
-    err = np.full((m, 6), np.nan)
-    std = np.full((m, 6), np.nan)
-    r_std = np.full((m, 6), np.nan)
-    idx = np.r_[6:9, 3:6]                 # position, velocity blocks of the error state
+    fixes = [GnssPositionVelocity(float(t), lat, lon, h, vel, R)
+             for t, (lat, lon, h), vel in zip(sim.t_gps, sim.z_pos, sim.z_vel)]
+    rec = SinsRecorder(sim.truth, R)
     state = GaussianState(float(sim.t_imu[0]), sim.x0.copy(), sim.P0.copy())
-    r_last = R
-    for k in range(m):
-        tk = float(sim.t_gps[k])
-        meas = GnssPositionVelocity(tk, *sim.z_pos[k], sim.z_vel[k], R)
-        try:
-            state = filt.predict(state, model, (state.t, tk)).state
-            up = filt.update(state, model, meas)
-            state, inn = up.state, up.innovation
-        except FilterDivergedError as exc:
-            return FilterRun(err, std, r_std, r_last, str(exc))
-        dx = minus(sim.truth[k], state.x)
-        err[k, 0:3], err[k, 3:6] = dx[POS], dx[VEL]
-        std[k] = np.sqrt(state.P.diagonal()[idx])
-        r_std[k] = np.sqrt(np.diag(inn.R))
-        r_last = inn.R
+    try:
+        run_epochs(filt, model, state, measurement_epochs(sim.t_gps), OneMeasurementPerEpoch(fixes), rec)
+    except FilterDivergedError as exc:
+        return FilterRun(rec.err, rec.std, rec.r_std, rec.r_last, str(exc))
     adapter = getattr(filt, "adapter", None)
     r_final = getattr(adapter, "R", None)
-    return FilterRun(err, std, r_std, np.array(r_last if r_final is None else r_final))
+    return FilterRun(rec.err, rec.std, rec.r_std, np.array(rec.r_last if r_final is None else r_final))
 
 
 # --------------------------------------------------------------------------- the benchmark
@@ -377,12 +396,23 @@ CASES = (
 class _Acc:
     """Per-filter accumulator over runs."""
 
-    rms: list = field(default_factory=list)          # (6,) per run
-    r_final_std: list = field(default_factory=list)  # (6,) per run
+    rms: list[np.ndarray] = field(default_factory=list)          # (6,) per run
+    r_final_std: list[np.ndarray] = field(default_factory=list)  # (6,) per run
     sq_sum: np.ndarray | None = None                 # (M, 6) sum over runs of err^2
     r_sum: np.ndarray | None = None                  # (M, 6) sum over runs of r_std
     diverged: int = 0
     first_failure: str = ""
+
+    def add(self, fr: FilterRun) -> None:
+        """Count one filter run: a divergence, or its figures."""
+        if fr.diverged:
+            self.diverged += 1
+            self.first_failure = self.first_failure or fr.diverged
+            return
+        self.rms.append(np.sqrt(np.mean(fr.err ** 2, axis=0)))
+        self.r_final_std.append(np.sqrt(np.diag(fr.r_final)))
+        self.sq_sum = fr.err ** 2 if self.sq_sum is None else self.sq_sum + fr.err ** 2
+        self.r_sum = fr.r_std if self.r_sum is None else self.r_sum + fr.r_std
 
 
 @register_benchmark("paper002-sins", TITLE, 20, ("ekf", "aekf"))
@@ -401,70 +431,85 @@ def run_scenario(base: Paper002Scenario, runs: int, seed: int, filters: Sequence
     ``"{case}/{filter}"``: ``err_rms`` (M, 6) RMS over runs at each fix and ``r_std`` (M, 6)
     the mean over runs of the R 1-sigma used at each fix.
     """
-    seeds = np.random.SeedSequence(seed).spawn(runs)
-    acc = {(c.key, f): _Acc() for c in CASES for f in filters}
+    acc = _monte_carlo(base, runs, seed, filters)
     t_gps = gps_times(base)
-    for i in range(runs):
-        sim = simulate_run(base, np.random.default_rng(seeds[i]))
-        for c in CASES:
-            sc = replace(base, r_std_scale=c.r_std_scale)
-            for f in filters:
-                fr = run_filter(f, sc, sim, seed=100_003 * seed + i)
-                a = acc[(c.key, f)]
-                if fr.diverged:
-                    a.diverged += 1
-                    a.first_failure = a.first_failure or fr.diverged
-                    continue
-                a.rms.append(np.sqrt(np.mean(fr.err ** 2, axis=0)))
-                a.r_final_std.append(np.sqrt(np.diag(fr.r_final)))
-                a.sq_sum = fr.err ** 2 if a.sq_sum is None else a.sq_sum + fr.err ** 2
-                a.r_sum = fr.r_std if a.r_sum is None else a.r_sum + fr.r_std
-
     rows: list[Row] = []
     series: dict[str, np.ndarray] = {"t": t_gps}
     notes = _notes(base)
     steady = []
-    true_std = base.meas_std()
     for c in CASES:
         for f in filters:
             a = acc[(c.key, f)]
-            ok = len(a.rms)
             tag = c.label + ("" if not a.diverged else f", {a.diverged}/{runs} diverged")
             if a.diverged:
                 notes.append(f"case {c.key}, {f}: {a.diverged} of {runs} runs diverged and are left out "
                              f"(first: {a.first_failure})")
-            if ok == 0:
+            if not a.rms:
                 continue
-            rms = np.mean(a.rms, axis=0)
-            for j, ax in enumerate(AXES):
-                rows.append(Row(f"position RMS {ax}", f, float(rms[j]), _paper(PAPER_POS_RMS, f, j), "m", tag))
-            for j, ax in enumerate(AXES):
-                rows.append(Row(f"velocity RMS {ax}", f, float(rms[3 + j]), _paper(PAPER_VEL_RMS, f, j), "m/s",
-                                tag))
-            r_std = np.mean(a.r_final_std, axis=0)
-            if not np.allclose(r_std, true_std * c.r_std_scale, rtol=1e-12, atol=0.0):
-                for j, ax in enumerate(AXES):
-                    rows.append(Row(f"learnt R std, position {ax} (true {true_std[j]:g})", f, float(r_std[j]),
-                                    None, "m", tag))
-                for j, ax in enumerate(AXES):
-                    rows.append(Row(f"learnt R std, velocity {ax} (true {true_std[3 + j]:g})", f,
-                                    float(r_std[3 + j]), None, "m/s", tag))
-            err_rms = np.sqrt(a.sq_sum / ok)
+            rows += _case_rows(base, c, f, a, tag)
+            err_rms = np.sqrt(_summed(a.sq_sum) / len(a.rms))
             series[f"{c.key}/{f}/err_rms"] = err_rms
-            series[f"{c.key}/{f}/r_std"] = a.r_sum / ok
+            series[f"{c.key}/{f}/r_std"] = _summed(a.r_sum) / len(a.rms)
             late = t_gps > STEADY_AFTER_S
             if late.any():
                 pos = np.sqrt(np.mean(err_rms[late, 0:3] ** 2, axis=0))
                 steady.append(f"{c.key} {f} {'/'.join(f'{v:.2f}' for v in pos)}")
     if steady:
-        notes.append(f"Position RMS E/N/U (m) after t = {STEADY_AFTER_S:g} s, pooled over runs: "
-                     + "; ".join(steady) + ". The cases and filters differ mostly in the first tens of "
-                     "seconds: with a Q this small the EKF is close to weighted least squares, whose "
-                     "estimate does not change when every R is scaled alike, so case b costs the EKF "
-                     "little; the AEKF starts case b with the small R (high gain, P shrinks), then "
-                     "learns the true R within seconds while P stays over-confident, so it weights "
-                     "the first fixes more than the later ones and converges more slowly.")
+        notes.append(_steady_note(steady))
     return BenchResult("paper002-sins", TITLE, rows, notes, runs, seed, series=series)
+
+
+def _monte_carlo(base: Paper002Scenario, runs: int, seed: int, filters: Sequence[str]
+                 ) -> dict[tuple[str, str], _Acc]:
+    """Every filter on every case over ``runs`` simulated runs: (case key, filter) -> figures."""
+    seeds = np.random.SeedSequence(seed).spawn(runs)
+    acc = {(c.key, f): _Acc() for c in CASES for f in filters}
+    for i in range(runs):
+        sim = simulate_run(base, np.random.default_rng(seeds[i]))
+        for c in CASES:
+            sc = replace(base, r_std_scale=c.r_std_scale)
+            for f in filters:
+                acc[(c.key, f)].add(run_filter(f, sc, sim, seed=100_003 * seed + i))
+    return acc
+
+
+def _summed(total: np.ndarray | None) -> np.ndarray:
+    """An accumulator's sum over runs (set once a run completed)."""
+    assert total is not None
+    return total
+
+
+def _case_rows(base: Paper002Scenario, c: _Case, f: str, a: _Acc, tag: str) -> list[Row]:
+    """Position and velocity RMS per axis of filter ``f`` on case ``c``, and its learnt R when
+    it moved away from the configured one."""
+    rows = []
+    rms = np.mean(a.rms, axis=0)
+    for j, ax in enumerate(AXES):
+        rows.append(Row(f"position RMS {ax}", f, float(rms[j]), _paper(PAPER_POS_RMS, f, j), "m", tag))
+    for j, ax in enumerate(AXES):
+        rows.append(Row(f"velocity RMS {ax}", f, float(rms[3 + j]), _paper(PAPER_VEL_RMS, f, j), "m/s",
+                        tag))
+    true_std = base.meas_std()
+    r_std = np.mean(a.r_final_std, axis=0)
+    if not np.allclose(r_std, true_std * c.r_std_scale, rtol=1e-12, atol=0.0):
+        for j, ax in enumerate(AXES):
+            rows.append(Row(f"learnt R std, position {ax} (true {true_std[j]:g})", f, float(r_std[j]),
+                            None, "m", tag))
+        for j, ax in enumerate(AXES):
+            rows.append(Row(f"learnt R std, velocity {ax} (true {true_std[3 + j]:g})", f,
+                            float(r_std[3 + j]), None, "m/s", tag))
+    return rows
+
+
+def _steady_note(steady: list[str]) -> str:
+    """The note on the position RMS after :data:`STEADY_AFTER_S` (one entry per case and filter)."""
+    return (f"Position RMS E/N/U (m) after t = {STEADY_AFTER_S:g} s, pooled over runs: "
+            + "; ".join(steady) + ". The cases and filters differ mostly in the first tens of "
+            "seconds: with a Q this small the EKF is close to weighted least squares, whose "
+            "estimate does not change when every R is scaled alike, so case b costs the EKF "
+            "little; the AEKF starts case b with the small R (high gain, P shrinks), then "
+            "learns the true R within seconds while P stays over-confident, so it weights "
+            "the first fixes more than the later ones and converges more slowly.")
 
 
 def _paper(table: dict, f: str, j: int) -> float | None:

@@ -1,11 +1,10 @@
-"""The papers' benchmarks, run with the same filter code that processes logs.
+"""The papers' benchmarks by name: what a run returns (:class:`BenchResult` of :class:`Row`),
+the table ``navpp bench`` reads (:data:`BENCHMARKS`) and how a run is started and printed.
 
-Each benchmark is registered by name (``navpp bench NAME``) and returns a :class:`BenchResult`:
-rows of our figure next to the paper's, plus notes saying which readings of the paper
-(ALGORITHMS.md, "The papers' benchmarks: readings") were taken and where we differ.
-
-Nothing here is tuned toward a paper's number: the models follow the papers' equations, the
-filters are the registry's filters with their documented defaults.
+Each experiment module of :mod:`navpp.papers` registers its run function here with
+:func:`register_benchmark`; the package ``__init__`` imports those modules, so this module
+imports none of them.  Nothing here is tuned toward a paper's number: the models follow the
+papers' equations, the filters are the registry's filters with their documented defaults.
 """
 
 from __future__ import annotations
@@ -14,7 +13,10 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from ..errors import ConfigError
+from .filter_spec import parse_filter_spec
 
 
 @dataclass(frozen=True)
@@ -46,7 +48,11 @@ class BenchResult:
     runs: int
     seed: int
     seconds: float = 0.0
-    series: dict = field(default_factory=dict)
+    series: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+#: A benchmark's run function: ``run(runs, seed, filters) -> BenchResult``.
+RunFunction = Callable[[int, int, Sequence[str]], BenchResult]
 
 
 @dataclass(frozen=True)
@@ -56,68 +62,26 @@ class Benchmark:
 
     name: str
     title: str
-    run: Callable[[int, int, Sequence[str]], BenchResult]
+    run: RunFunction
     default_runs: int
     filters: tuple[str, ...]
 
 
+#: name -> benchmark; filled by the experiment modules as :mod:`navpp.papers` imports them.
 BENCHMARKS: dict[str, Benchmark] = {}
 
 
-def register_benchmark(name: str, title: str, default_runs: int, filters: Sequence[str]):
+def register_benchmark(name: str, title: str, default_runs: int,
+                       filters: Sequence[str]) -> Callable[[RunFunction], RunFunction]:
     """Decorator registering ``run(runs, seed, filters) -> BenchResult`` under ``name``."""
-    def deco(fn: Callable[[int, int, Sequence[str]], BenchResult]):
+    def deco(fn: RunFunction) -> RunFunction:
         BENCHMARKS[name] = Benchmark(name, title, fn, int(default_runs), tuple(filters))
         return fn
     return deco
 
 
-def _load() -> None:
-    """Import the modules that register benchmarks (kept separate: each is self-contained)."""
-    from . import bench_sins, bench_small  # noqa: F401
-
-
-def parse_filter_spec(spec: str) -> tuple[str, dict]:
-    """``"rwckf"`` -> ("rwckf", {}); ``"rwckf[covariance=random; candidates=32]"`` -> the name and
-    its options (values read as TOML values, bare words as strings), checked against the
-    filter's Options (ConfigError naming the key otherwise)."""
-    import tomllib
-
-    from . import get_filter
-
-    spec = spec.strip()
-    name, opts = spec, {}
-    if "[" in spec:
-        if not spec.endswith("]"):
-            raise ConfigError(f"filter {spec!r}: write options as name[key=value; key=value]")
-        name, body = spec[:-1].split("[", 1)
-        name = name.strip()
-        for item in filter(None, (part.strip() for part in body.split(";"))):
-            if "=" not in item:
-                raise ConfigError(f"filter {spec!r}: option {item!r} is not key=value")
-            key, value = (v.strip() for v in item.split("=", 1))
-            try:
-                opts[key] = tomllib.loads(f"v = {value}")["v"]
-            except tomllib.TOMLDecodeError:
-                opts[key] = value
-    cls = get_filter(name)
-    cls.options_from_mapping(opts, f"filter {spec!r}")
-    return name, opts
-
-
-def make_bench_filter(spec: str, seed: int):
-    """A fresh filter for a benchmark run, as :func:`navpp.api.make_filter` builds it from the
-    spec's options: a seeded generator and the chi-square gate off (the papers' filters do not
-    gate; navpp's gate is a GNSS setting)."""
-    from ..api import make_filter
-    from ..config import Config, GnssConfig
-
-    name, opts = parse_filter_spec(spec)
-    return make_filter(name, Config(gnss=GnssConfig(gate_probability=0.0), filters={name: opts}), seed=seed)
-
-
 def get_benchmark(name: str) -> Benchmark:
-    _load()
+    """The benchmark registered as ``name``; :class:`ConfigError` listing the names otherwise."""
     try:
         return BENCHMARKS[name]
     except KeyError:

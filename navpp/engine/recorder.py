@@ -1,0 +1,157 @@
+"""The recorder of a run: it owns every output array the loop fills.
+
+Per GNSS fix: the innovation, NIS, gate decision, forced flag, the noise the filter used, what
+an adaptive filter decided, the biases and their 1-sigma, the GNSS velocity's innovation.  Per
+stop: the position variance knots of the output's 1-sigma.  With smoothing: the forward run's
+nodes (:class:`~navpp.filters.smoother.ForwardStore`).  At the IMU rate: the nominal path
+(:func:`new_path`), which the model writes while it propagates and the recorder overwrites with
+the posterior at a sample that is an epoch.
+"""
+
+from __future__ import annotations
+
+from array import array
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from ..filters.base import GaussianState, Prediction, Update
+from ..filters.smoother import ForwardStore
+from ..ins.model import BA, BG, POS
+from ..ins.strapdown import NOMINAL_BA, NOMINAL_BG, PATH_SIZE
+from .loop import EpochOutcome
+from .results import BiasHistory, Diagnostics
+from .schedule import Epoch, GnssFixes
+
+ProgressFn = Callable[[float], None]   # called with the fraction done, 0..1
+
+
+def new_path(n_samples: int) -> np.ndarray:
+    """The IMU-rate nominal path of a run: (N, PATH_SIZE) rows ``(q_nb, vel_enu, lat, lon, h)``,
+    NaN until written (:class:`~navpp.ins.model.InsModel` writes it while propagating)."""
+    return np.full((n_samples, PATH_SIZE), np.nan)
+
+
+class RunRecorder:
+    """What one run records (see the module docstring); a
+    :class:`~navpp.engine.loop.Recorder` of :class:`~navpp.engine.schedule.Epoch`.
+
+    Parameters
+    ----------
+    fixes : the run's GNSS fixes (the per-fix arrays have their length).
+    path : the IMU-rate path (:func:`new_path`), the one the model writes.
+    start : the start state; ``start_sample`` its IMU sample (its path row is written here).
+    noise_report : the filter's :meth:`~navpp.filters.base.Filter.noise_report`, read after each fix.
+    velocity : whether the run has GNSS velocity measurements.
+    smooth : keep the forward run for smoothing.
+    progress, n_epochs : called with the fraction of the ``n_epochs`` measurement epochs done.
+    """
+
+    def __init__(self, fixes: GnssFixes, path: np.ndarray, start: GaussianState, start_sample: int,
+                 noise_report: Callable[[], dict[str, np.ndarray]], *, velocity: bool, smooth: bool,
+                 progress: ProgressFn | None = None, n_epochs: int = 1) -> None:
+        m = len(fixes)
+        self.path = path
+        self.n_path = path.shape[1]
+        path[start_sample] = start.x[:self.n_path]
+        self.nu = np.full((m, 3), np.nan)
+        self.nis = np.full(m, np.nan)
+        self.accepted = np.zeros(m, bool)
+        self.forced = np.zeros(m, bool)
+        self.r_std = np.full((m, 3), np.nan)
+        self.s_used = np.full((m, 3, 3), np.nan)     # each fix's innovation covariance and R as the filter had them
+        self.r_used = np.full((m, 3, 3), np.nan)
+        self.adaptive: dict[str, np.ndarray] = {}
+        self.bias = np.empty((m, 6))
+        self.bias_var = np.empty((m, 6))
+        # GNSS velocity: innovation (M, 3) m/s, NIS (M,), applied (M,: 1, 0, NaN without one)
+        self.vel = (np.full((m, 3), np.nan), np.full(m, np.nan), np.full(m, np.nan)) if velocity else None
+        self.noise_report = noise_report
+        self.t = start.t            # time of the last state the loop made, s
+        # covariance knots for the output's 1-sigma: flat (t, prior E/N/U variance, posterior E/N/U
+        # variance) records, one per stop; long gaps between fixes get coasting stops
+        self.knots = array("d")
+        self.store: ForwardStore | None = None
+        self.epoch_node = np.zeros(m, np.int64)       # the smoother's node of each GNSS epoch
+        if smooth:
+            self.store = ForwardStore(start.P.shape[0], start.x.shape[0])
+            self.store.start(start)
+        self.progress, self.n_epochs = progress, n_epochs
+        self.tick = max(1, n_epochs // 200)
+        self.knot(start)
+
+    def knot(self, state: GaussianState, prior: np.ndarray | None = None) -> None:
+        """A knot at ``state.t``: position variance before (``prior``, default the state's) and after."""
+        v = state.P.diagonal()[POS]
+        self.knots.append(state.t)
+        self.knots.extend(v if prior is None else prior)
+        self.knots.extend(v)
+
+    # the loop's Recorder -------------------------------------------------------------------
+    def predicted(self, epoch: Epoch, prediction: Prediction) -> None:
+        self.t = prediction.state.t
+        if self.store is not None:
+            self.store.predicted(prediction)
+        if epoch.coast:
+            self.knot(prediction.state)
+
+    def updated(self, epoch: Epoch, meas: Any, update: Update) -> None:
+        k, inn = epoch.fix, update.innovation
+        if meas.kind == "gnss_position":
+            self.nu[k] = inn.nu
+            self.nis[k] = inn.nis
+            self.accepted[k] = inn.accepted
+            self.forced[k] = inn.forced
+            self.r_std[k] = np.sqrt(np.diagonal(inn.R))
+            self.s_used[k] = inn.S
+            self.r_used[k] = inn.R
+            for name, value in self.noise_report().items():
+                if name not in self.adaptive:
+                    self.adaptive[name] = np.full((len(self.nis), np.size(value)), np.nan)
+                self.adaptive[name][k] = value
+        elif meas.kind == "gnss_velocity" and self.vel is not None:
+            self.vel[0][k], self.vel[1][k], self.vel[2][k] = inn.nu, inn.nis, float(inn.accepted)
+
+    def epoch_done(self, epoch: Epoch, outcome: EpochOutcome) -> None:
+        state = outcome.state
+        if self.store is not None:
+            self.store.updated(outcome.prior_used, state, outcome.reset)
+        if outcome.applied and epoch.sample >= 0:
+            self.path[epoch.sample] = state.x[:self.n_path]     # the epoch's own sample shows the posterior
+        self.knot(state, outcome.prior.P.diagonal()[POS].copy())
+        k = epoch.fix
+        if k >= 0:
+            if self.store is not None:
+                self.epoch_node[k] = self.store.n - 1
+            self.bias[k, :3] = state.x[NOMINAL_BG]
+            self.bias[k, 3:] = state.x[NOMINAL_BA]
+            self.bias_var[k, :3] = state.P.diagonal()[BG]
+            self.bias_var[k, 3:] = state.P.diagonal()[BA]
+        if self.progress is not None and epoch.index % self.tick == 0:
+            self.progress(epoch.index / self.n_epochs)
+
+    # results -------------------------------------------------------------------------------
+    def knot_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The knots: times (K,) s, prior and posterior position variance (K, 3) ENU m^2."""
+        kn = np.frombuffer(self.knots, dtype=float).reshape(-1, 7)
+        return kn[:, 0].copy(), kn[:, 1:4].copy(), kn[:, 4:7].copy()
+
+    def diagnostics(self, t: np.ndarray, labels: dict[str, list[str]]) -> Diagnostics:
+        """The per-fix record at the fix times ``t`` (s); an adaptive report with ``labels`` (the
+        filter's :meth:`~navpp.filters.base.Filter.noise_report_labels`) is split per element."""
+        named: dict[str, np.ndarray] = {}
+        for key, values in self.adaptive.items():
+            lab = labels.get(key)
+            if lab is not None and len(lab) == values.shape[1] and values.shape[1] > 1:
+                named.update({f"{key}_{name}": values[:, [i]] for i, name in enumerate(lab)})
+            else:
+                named[key] = values
+        vel_nu, vel_nis, vel_accepted = self.vel if self.vel is not None else (None, None, None)
+        return Diagnostics(t, self.nu, self.nis, self.accepted, self.forced, self.r_std, named, vel_nu, vel_nis,
+                           vel_accepted)
+
+    def bias_history(self, t: np.ndarray) -> BiasHistory:
+        """The biases after each fix at the fix times ``t`` (s), with their 1-sigma."""
+        std = np.sqrt(np.maximum(self.bias_var, 0.0))     # a diverged run is reported by the checks
+        return BiasHistory(t, self.bias[:, :3], self.bias[:, 3:], std[:, :3], std[:, 3:])

@@ -1,0 +1,268 @@
+"""One run of one filter over one recording: the steps from the data to the result.
+
+:func:`run` cuts the log at IMU gaps the INS cannot bridge (:mod:`navpp.engine.segments`) and
+runs each piece with :func:`run_one`: check and fix the data (:mod:`navpp.engine.checks`,
+:mod:`navpp.engine.prepare`), build the INS model and align, estimate the vehicle mounting
+(:mod:`navpp.engine.mounting`), schedule the epochs (:mod:`navpp.engine.schedule`), run the
+loop (:mod:`navpp.engine.loop`) with the run's measurements and recorder, then smooth, convert
+and judge the result (:mod:`navpp.engine.output`, :mod:`navpp.engine.verdict`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from ..aiding import Aiding
+from ..config import Config
+from ..errors import FilterDivergedError, InputError, NavppError, RunRefused
+from ..filters.base import Filter, GaussianState
+from ..findings import Finding
+from ..gnss_jumps import check_gnss_jumps
+from ..ins.alignment import Alignment, align
+from ..ins.model import InsModel
+from ..recording import Recording
+from .checks import alignment_findings, check_data, check_imu_plausible
+from .loop import run_epochs
+from .measurements import RunMeasurements, recovery_reopening
+from .mounting import vehicle_mounting
+from .output import compile_seconds, interpolated_std, smoothed_run, solution_from_path
+from .prepare import alignment_settings, calibrated, mounting_matrix, noise_model, timing_fixes
+from .recorder import RunRecorder, new_path
+from .results import RunResult, SmoothedRun
+from .schedule import GnssFixes, epochs, gnss_fixes
+from .segments import ProgressFn, imu_segments, run_segments
+from .verdict import aid_checks, consistency_checks, plausibility_checks, refusal, state_fault
+
+
+def run(recording: Recording, config: Config, filt: Filter, *, progress: ProgressFn | None = None,
+        cov_step_s: float = 0.05, smooth: bool = False) -> RunResult:
+    """Process one recording with one filter; returns the IMU-rate solution and diagnostics.
+
+    With ``smooth``, the forward run is also smoothed backwards (Rauch-Tung-Striebel over the
+    stored forward run): ``RunResult.smoothed``; ``solution`` stays the forward solution.
+    ``runtime_s`` excludes the one-off compilation of navpp's kernels on a cold cache, which
+    is reported as ``compile_s``.
+    """
+    from numba.core import event as numba_event
+
+    t_wall = time.perf_counter()
+    with numba_event.install_recorder("numba:compile") as rec:
+        segments = imu_segments(recording)
+        if len(segments) > 1:
+            result = run_segments(recording, segments, config, filt, progress, cov_step_s, smooth, run_one)
+        else:
+            result = run_one(recording, config, filt, progress, cov_step_s, smooth)
+    compile_s = compile_seconds(rec.buffer)
+    return replace(result, runtime_s=time.perf_counter() - t_wall - compile_s, compile_s=compile_s)
+
+
+@dataclass
+class Journal:
+    """What a run has noted (decisions, measurements) and warned about so far."""
+
+    notes: list[str]
+    warnings: list[str]
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A recording ready for the loop: the recording as processed (timing fixed), the INS model
+    over it (its path is the recorder's), the path, the calibration (or None) and its figures
+    for metrics.json, the alignment and the GNSS fixes after it."""
+
+    recording: Recording
+    model: InsModel
+    path: np.ndarray
+    cal: Any
+    calibration: dict
+    alignment: Alignment
+    fixes: GnssFixes
+
+
+def run_one(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
+            cov_step_s: float, smooth: bool = False) -> RunResult:
+    """One run over a recording without unbridgeable gaps; a failure carries what the run had
+    noted and warned about so far (:meth:`navpp.errors.NavppError.with_context`), so the user
+    sees the likely cause first."""
+    log = Journal([], [])
+    try:
+        return processed(recording, config, filt, progress, cov_step_s, smooth, log)
+    except NavppError as exc:
+        exc.with_context(log.notes, log.warnings)
+        raise
+
+
+def prepared(recording: Recording, config: Config, cov_step_s: float, log: Journal) -> Prepared:
+    """Check the data, fix its timing, rotate and calibrate the IMU, build the model, align."""
+    check_gnss_jumps(recording, config.vehicle.type, config.gnss.default_std_m, config.gnss.reanchor_after_s)
+    log.warnings += check_imu_plausible(recording)
+    calibration: dict = {}
+    recording, t_notes, t_warnings = timing_fixes(recording, config, calibration)
+    log.notes += t_notes
+    log.warnings += t_warnings
+    log.warnings += check_data(recording, config)
+    imu, gnss = recording.imu, recording.gnss
+    gyro, accel = imu.gyro, imu.accel
+    if any(a != 0.0 for a in config.imu.mounting_rpy_deg):
+        m = mounting_matrix(config.imu.mounting_rpy_deg)
+        gyro, accel = gyro @ m.T, accel @ m.T
+    gyro, accel, noise, cal, cal_notes, cal_warnings = calibrated(recording, config, gyro, accel, calibration)
+    log.notes += cal_notes
+    log.warnings += cal_warnings
+    profile = cal.profile if (cal is not None and config.auto.noise) else None
+    path = new_path(imu.t.shape[0])
+    model = InsModel(imu.t, gyro, accel, noise_model(config, noise), cov_step_s=cov_step_s, path=path,
+                     profile=profile)
+    try:
+        al = align(model.t, model.gyro, model.accel, gnss, alignment_settings(config, noise, cal))
+    except InputError as exc:  # alignment knows the data, not where it came from
+        from ..plausibility import fix_suspect
+
+        suspect = fix_suspect(recording.source, gnss.lat_deg, gnss.lon_deg, gnss.alt)
+        if suspect is not None:     # the fixes themselves first: the alignment only saw their symptom
+            both = f"{recording.source}: {suspect}; {exc}"
+            raise InputError(both if len(both) < 285 else f"{recording.source}: {suspect}") from None
+        raise InputError(f"{recording.source}: {exc}") from None
+    log.notes[:0] = list(al.lines)          # for an error's context; the result carries them apart
+    return Prepared(recording, model, path, cal, calibration, al, gnss_fixes(recording, config, al.t))
+
+
+def processed(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
+              cov_step_s: float, smooth: bool, log: Journal) -> RunResult:
+    """The steps of :func:`run_one`; ``log`` collects the notes and warnings as they come."""
+    t_wall = time.perf_counter()
+    prep = prepared(recording, config, cov_step_s, log)
+    recording, model, al, fixes = prep.recording, prep.model, prep.alignment, prep.fixes
+    n_al = len(al.lines)
+    mounting, m_notes, m_warnings = vehicle_mounting(recording, config, cov_step_s, run_one)
+    log.notes += m_notes
+    log.warnings += m_warnings
+    cal = prep.cal
+    aiding = Aiding(config, model.t, model.gyro, model.accel, model.noise.gyro_arw, model.noise.accel_vrw,
+                    recording.gnss, fixes.index, model.gaps, mounting,
+                    still=cal.still if (cal is not None and config.auto.standstill) else None,
+                    profile=model.profile)
+    imu_t = recording.imu.t
+    schedule = epochs(al.t, float(imu_t[-1]), *aiding.schedule(al.t, float(imu_t[-1]), fixes.t), imu_t)
+    n_epochs = sum(not e.coast for e in schedule) if progress is not None else 1
+    start = GaussianState(al.t, al.x, al.P)
+    recorder = RunRecorder(fixes, prep.path, start, al.index, filt.noise_report, velocity=aiding.has_velocity,
+                           smooth=smooth, progress=progress, n_epochs=n_epochs)
+    source = RunMeasurements(fixes, recording.gnss, np.asarray(config.gnss.lever_arm_m, dtype=float),
+                             recovery_reopening(config, al.P), aiding)
+    check = DivergenceCheck(recording, config, filt.name, al.t, log, source)
+    try:
+        state = run_epochs(filt, model, start, schedule, source, recorder, check)
+        check(state, state.t)
+    except RunRefused:
+        raise
+    except FilterDivergedError as exc:
+        raise check.diverged(recorder.t, exc.why or str(exc).removeprefix(f"{filt.name}: ")) from None
+    if progress is not None:
+        progress(1.0)
+    result = finished(recording, config, filt, prep, recorder, source, smooth, log)
+    return replace(result, runtime_s=time.perf_counter() - t_wall, notes=tuple(log.notes[n_al:]))
+
+
+class DivergenceCheck:
+    """The loop's :class:`~navpp.engine.loop.StateCheck`: a state that is not finite or whose
+    covariance lost positive definiteness stops the run with a refusal naming the time, the fault
+    and the last good epoch (``source.last_good``, else the alignment's time ``t_align``, s)."""
+
+    def __init__(self, recording: Recording, config: Config, filter_name: str, t_align: float, log: Journal,
+                 source: RunMeasurements) -> None:
+        self.recording, self.config, self.filter_name = recording, config, filter_name
+        self.t_align, self.log, self.source = t_align, log, source
+
+    def __call__(self, state: GaussianState, t: float) -> None:
+        fault = state_fault(state)
+        if fault is not None:
+            raise self.diverged(t, fault)
+
+    def diverged(self, t: float, why: str) -> RunRefused:
+        """The refusal of a filter that diverged at ``t`` (s) for the reason ``why``."""
+        last_good = self.source.last_good
+        good = (f"the last good epoch (accepted GNSS update) was t = {last_good:.3f} s" if last_good is not None
+                else f"no GNSS update had been accepted yet (alignment at t = {self.t_align:.3f} s)")
+        return refusal(self.recording, self.config, f"{self.filter_name} diverged at t = {t:.3f} s: {why}; {good}",
+                       self.log.notes, self.log.warnings, anyway=False)
+
+
+def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared, recorder: RunRecorder,
+             source: RunMeasurements, smooth: bool, log: Journal) -> RunResult:
+    """The result of a finished forward run: smoothed (with ``smooth``), converted to the
+    output's units, and judged (:mod:`navpp.engine.verdict`); a refusal for a run that is wrong."""
+    al, fixes = prep.alignment, prep.fixes
+    path = recorder.path[al.index:]
+    t_out = recording.imu.t[al.index:]
+    smoothed = None
+    if smooth:
+        smoothed = smoothed_output(recorder, prep.model, t_out, path, fixes.t, recording.t0_ns)
+    kt, k_prior, k_post = recorder.knot_arrays()
+    std_out = interpolated_std(t_out, kt[0], k_post[0], kt[1:], k_prior[1:], k_post[1:])
+    solution = solution_from_path(t_out, path, std_out, recording.t0_ns)
+    diag = recorder.diagnostics(fixes.t, filt.noise_report_labels())
+    log.warnings += alignment_findings(al.warnings)
+    aiding = source.aiding
+    log.warnings += recovery_warnings(recording.source, source.recoveries)
+    log.notes += veto_notes(aiding.vetoes)
+    headline, c_warnings = consistency_checks(recording.source, filt.name, config, fixes.t, recorder.nis,
+                                              recorder.accepted)
+    if headline is not None:
+        raise refusal(recording, config, headline, log.notes, log.warnings)
+    log.warnings += c_warnings
+    log.warnings += plausibility_checks(recording, config, filt.name, solution, smoothed, fixes, recorder.nu,
+                                        recorder.s_used, recorder.r_used, recorder.accepted, log.notes,
+                                        log.warnings)
+    log.warnings += aid_checks(recording.source, aiding.counts.as_dict())
+    if smoothed is not None and smoothed.breaks:
+        n = smoothed.breaks
+        log.warnings.append(Finding(
+            "smoothing-breaks",
+            f"{recording.source}: smoothing: {n} step{'s' if n > 1 else ''} the smoother carries no information "
+            "back across (a fix forced through the gate with the covariance re-anchored, or a prior covariance "
+            "that was not positive definite): the smoothed trajectory keeps the forward filter's jump there"))
+    return RunResult(solution, recorder.bias_history(fixes.t), al, diag, len(fixes), int((~recorder.accepted).sum()),
+                     0.0, 0.0, tuple(log.warnings), smoothed, (), aiding.counts.as_dict(),
+                     {**prep.calibration, "recoveries_s": [round(v, 3) for v in source.recoveries],
+                      "standstill_ended_early_s": [round(v, 3) for v in aiding.vetoes]})
+
+
+def smoothed_output(recorder: RunRecorder, model: InsModel, t_out: np.ndarray, path: np.ndarray,
+                    tg: np.ndarray, t0_ns: int) -> SmoothedRun:
+    """The recorder's forward run smoothed (:func:`~navpp.engine.output.smoothed_run`), its
+    runtime without the compilation of kernels on a cold cache; the recorder's store is emptied."""
+    from numba.core import event as numba_event
+
+    assert recorder.store is not None
+    with numba_event.install_recorder("numba:compile") as compiling:
+        smoothed = smoothed_run(recorder.store, model, t_out, path, recorder.epoch_node, tg, t0_ns)
+    recorder.store = None
+    return replace(smoothed, runtime_s=smoothed.runtime_s - compile_seconds(compiling.buffer))
+
+
+def recovery_warnings(source: str, recoveries: list[float]) -> list[Finding]:
+    """A warning when the INS had drifted from the GNSS and was re-aligned at ``recoveries`` (s)."""
+    if not recoveries:
+        return []
+    n = len(recoveries)
+    return [Finding("ins-recovered",
+                    f"{source}: the INS had drifted from the GNSS (a run of rejected fixes) {n} "
+                    f"time{'s' if n > 1 else ''}, at t = " + ", ".join(f"{v:.1f}" for v in recoveries[:10])
+                    + (" ..." if n > 10 else "") + " s: velocity re-aligned on the GNSS, attitude and gyro-bias "
+                    "uncertainty re-opened ([auto] recovery = false re-opens the position only)")]
+
+
+def veto_notes(vetoes: list[float]) -> list[str]:
+    """A note when ZUPT's consistency check ended standstills early, at ``vetoes`` (s)."""
+    if not vetoes:
+        return []
+    n = len(vetoes)
+    return [f"standstill ended early {n} time{'s' if n > 1 else ''}, at t = "
+            + ", ".join(f"{x:.1f}" for x in vetoes[:10]) + (" ..." if n > 10 else "")
+            + " s: ZUPT's velocity corrections kept one direction (a gentle start the IMU's spreads did not "
+            "show), so no more ZUPT or ZARU until the next stop"]

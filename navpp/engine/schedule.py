@@ -1,0 +1,103 @@
+"""The event schedule of a run: the GNSS fixes it uses and the epochs the filter stops at.
+
+An :class:`Epoch` is a time the filter predicts to: a GNSS epoch (its fix, perhaps with the
+constraint aids), an aid epoch between fixes (constraints only, :meth:`navpp.aiding.Aiding.schedule`),
+or a coasting stop, which only splits a long time update so that the output's 1-sigma and the
+smoother have a node at least every :data:`KNOT_S`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import Config
+from ..errors import InputError
+from ..recording import Recording
+
+#: Longest stretch without a covariance knot (a stop of the filter) for the output sigma, s.
+KNOT_S = 1.0
+
+
+@dataclass(frozen=True)
+class GnssFixes:
+    """The GNSS fixes a run uses, in time order: those after the alignment inside the IMU span.
+
+    index : (M,) their rows in the recording's GNSS; t : (M,) s; lat, lon : (M,) rad;
+    alt : (M,) m (ellipsoidal); var : (M, 3) prior variance ENU, m^2 (the log's per-fix 1-sigma,
+    else ``[gnss] default_std_m``, squared).
+    """
+
+    index: np.ndarray
+    t: np.ndarray
+    lat: np.ndarray
+    lon: np.ndarray
+    alt: np.ndarray
+    var: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+
+def gnss_fixes(recording: Recording, config: Config, t_start: float) -> GnssFixes:
+    """The fixes in ``(t_start, last IMU stamp]`` (s); InputError when there is none."""
+    gnss, imu = recording.gnss, recording.imu
+    sel = np.nonzero((gnss.t > t_start) & (gnss.t <= imu.t[-1]))[0]
+    if sel.size == 0:
+        raise InputError(f"{recording.source}: no GNSS fix inside the IMU span after alignment "
+                         f"(t = {t_start:.2f} .. {imu.t[-1]:.2f} s)")
+    std = (np.asarray(gnss.std_enu[sel], dtype=float) if gnss.std_enu is not None
+           else np.tile(np.asarray(config.gnss.default_std_m, dtype=float), (sel.size, 1)))
+    return GnssFixes(sel, gnss.t[sel], np.radians(gnss.lat_deg[sel]), np.radians(gnss.lon_deg[sel]),
+                     np.asarray(gnss.alt[sel], dtype=float), std ** 2)
+
+
+@dataclass(frozen=True)
+class Epoch:
+    """A time the filter stops at.
+
+    t : s.  index : the epoch's number among the measurement epochs (-1 for a coasting stop).
+    fix : index of the GNSS fix at ``t`` into :class:`GnssFixes` (-1: none).  constraints :
+    whether the constraint aids apply at ``t``.  sample : the IMU sample exactly at ``t`` (-1:
+    none).  coast : a coasting stop (no measurement).
+    """
+
+    t: float
+    index: int = -1
+    fix: int = -1
+    constraints: bool = False
+    sample: int = -1
+    coast: bool = False
+
+
+def coast_stops(t_from: float, t_to: float, knot_s: float = KNOT_S) -> list[Epoch]:
+    """Coasting stops from ``t_from`` towards ``t_to`` (s): one every ``knot_s`` while more than
+    ``1.5 knot_s`` remain."""
+    out = []
+    while t_to - t_from > 1.5 * knot_s:
+        t_from = t_from + knot_s
+        out.append(Epoch(t_from, coast=True))
+    return out
+
+
+def epochs(t_start: float, t_end: float, times: np.ndarray, fix: np.ndarray, constraints: np.ndarray,
+           imu_t: np.ndarray, knot_s: float = KNOT_S) -> list[Epoch]:
+    """The run's stops from the start state at ``t_start`` to the last IMU stamp ``t_end`` (s):
+    the measurement epochs (``times``, their fix index and constraint flag, as
+    :meth:`navpp.aiding.Aiding.schedule` gives them) with coasting stops between them and after
+    the last (a final stop at ``t_end`` when the last one is earlier).  ``imu_t`` are the IMU
+    stamps (s), to find the sample at each epoch."""
+    idx = np.minimum(np.searchsorted(imu_t, times), imu_t.shape[0] - 1)
+    sample = np.where(imu_t[idx] == times, idx, -1)
+    out: list[Epoch] = []
+    t_prev = t_start
+    for e in range(times.shape[0]):
+        t_e = float(times[e])
+        out += coast_stops(t_prev, t_e, knot_s)
+        out.append(Epoch(t_e, e, int(fix[e]), bool(constraints[e]), int(sample[e])))
+        t_prev = t_e
+    out += coast_stops(t_prev, t_end, knot_s)
+    if (out[-1].t if out else t_start) < t_end:
+        out.append(Epoch(t_end, coast=True))
+    return out

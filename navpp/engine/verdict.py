@@ -1,0 +1,191 @@
+"""Checks of a run's filter state and finished result, and the refusal they lead to.
+
+During the run, :func:`state_fault` says what is wrong with a filter state.  After it,
+:func:`consistency_checks` (the share of fixes the gate rejected, the innovations' size),
+:func:`plausibility_checks` (the solution against the prior GNSS sigma and the vehicle,
+:mod:`navpp.plausibility`) and :func:`aid_checks` (aids the gate rejected often) return
+:class:`~navpp.findings.Finding` warnings for a doubtful run; a run that is wrong becomes a
+:func:`refusal`: a :class:`~navpp.errors.RunRefused` of one line naming the likely cause, with
+the other causes among its warnings.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..config import Config
+from ..errors import RunRefused
+from ..filters.base import GaussianState
+from ..findings import Finding, code_of
+from ..recording import Recording, Solution
+from .results import SmoothedRun
+
+
+def state_fault(state: GaussianState) -> str | None:
+    """What is wrong with a filter state (non-finite state or covariance, a covariance that is
+    not positive definite on its diagonal), or None."""
+    if math.isfinite(float(state.x.sum()) + float(state.P.sum())) and float(np.diagonal(state.P).min()) > 0.0:
+        return None                     # the common case, in two reductions
+    if not np.all(np.isfinite(state.x)):
+        return "the state became non-finite (NaN or inf)"
+    if not np.all(np.isfinite(state.P)):
+        return "the covariance became non-finite (NaN or inf)"
+    if not np.all(np.diagonal(state.P) > 0.0):
+        return "the covariance lost positive definiteness (a variance <= 0)"
+    return None
+
+
+def causes_text(vehicle_mounting: bool = False, imu: bool = True) -> str:
+    """The usual causes of a filter and GNSS that disagree, as one clause: the IMU's units and
+    axes (with ``imu``), the vehicle mounting (with ``vehicle_mounting``), the lever arm, the time
+    bases and the GNSS standard deviations."""
+    parts = ["the IMU units and axes ([imu] mounting_rpy_deg)"] if imu else []
+    if vehicle_mounting:
+        parts.append('the vehicle mounting ([vehicle] mounting_rpy_deg = "auto" estimates it)')
+    parts += ["the lever arm", "the time bases ([gnss] time_offset_s)"]
+    return "check " + ", ".join(parts) + " and the GNSS standard deviations"
+
+
+def causes(config: Config, imu: bool = True) -> str:
+    """:func:`causes_text`, with the vehicle mounting when the non-holonomic constraint holds
+    the IMU's lateral velocity to zero on a configured mounting (a degree of yaw is 0.3 m/s of
+    side-slip at 60 km/h)."""
+    v = config.vehicle
+    return causes_text(v.type == "car" and v.nhc and not isinstance(v.mounting_rpy_deg, str), imu)
+
+
+CHI2_3_MEDIAN = 2.365973884375338     # median of the chi-square distribution with 3 dof
+
+#: What a warning the run gave says about the likely cause of a divergence, in the order tried:
+#: (the warning's finding code, the short cause with its setting).
+NOTICED_CAUSES = (
+    ("gyro-scale", "the gyro's unit or axes ([imu] gyro_units, mounting_rpy_deg)"),
+    ("gross-mounting", "the IMU's axes ([imu] mounting_rpy_deg)"),
+    ("imu-tilted", "the IMU's axes ([imu] mounting_rpy_deg)"),
+    ("clock-offset-applied", "the time bases ([gnss] time_offset_s)"),
+    ("imu-saturated", "a saturated IMU"),
+    ("gyro-rate-high", 'the gyro\'s unit ([imu] gyro_units = "deg/s"?)'),
+    ("imu-gap", "the IMU's gaps"),
+)
+
+
+def likely_cause(recording: Recording, config: Config, noticed: list[str]) -> tuple[str, list[str]]:
+    """The single most likely cause of a filter and GNSS that disagree, and the rest (for a
+    warning line): first the fixes themselves (all identical, radians), then what the run
+    noticed (the codes of its warnings), then the IMU's units and axes."""
+    from ..plausibility import fix_suspect
+
+    g = recording.gnss
+    suspect = fix_suspect(recording.source, g.lat_deg, g.lon_deg, g.alt, g.t, g.std_enu, config.vehicle.type)
+    if suspect is not None:
+        return suspect, [causes(config)]
+    codes = {code_of(w) for w in noticed}
+    for code, cause in NOTICED_CAUSES:
+        if code in codes:
+            return f"check {cause}", [causes(config)]
+    return "check the IMU's units and axes ([imu] mounting_rpy_deg)", [causes(config, imu=False)]
+
+
+def refusal(recording: Recording, config: Config, headline: str, notes: list[str], warnings: list[str],
+            cause: str | None = None, anyway: bool = True) -> RunRefused:
+    """A :class:`~navpp.errors.RunRefused` as one short line (source, what was seen, the likely
+    cause) with the run's warnings, the other causes and the way to write the trajectory anyway
+    as warnings after them (the CLI prints them first), and the run's notes."""
+    if cause is None:
+        cause, others = likely_cause(recording, config, warnings)
+    else:
+        others = [causes(config)]
+    extra = Finding("refusal-causes", f"{recording.source}: other causes to check: {'; '.join(others)}"
+                    + (" ([gnss] max_rejected_fraction = 1 writes the trajectory anyway)" if anyway else ""))
+    exc = RunRefused(f"{recording.source}: {headline}; likely: {cause}")
+    exc.warnings = (*warnings, extra)
+    exc.notes = tuple(notes)
+    return exc
+
+
+def consistency_checks(source: str, name: str, config: Config, tg: np.ndarray, nis: np.ndarray,
+                       accepted: np.ndarray) -> tuple[str | None, list[Finding]]:
+    """After the run: is the filter diverged, is it doubtful?
+
+    More than ``[gnss] max_rejected_fraction`` of the fixes failing the gate means the filter
+    and the GNSS disagree for good (wrong units, axes, lever arm, time base or standard
+    deviations): the returned headline (else None) is what the caller refuses the run with
+    (:func:`refusal`).  Above 5 %, or with the median NIS far above the chi-square median
+    (innovations larger than the filter predicts), a warning.
+    """
+    m = tg.shape[0]
+    rejected = int(np.count_nonzero(~accepted))
+    finite = nis[np.isfinite(nis)]
+    scale = math.sqrt(float(np.median(finite)) / CHI2_3_MEDIAN) if finite.size else 1.0
+    what = f"{rejected} of {m} GNSS fixes ({100.0 * rejected / max(m, 1):.0f}%) failed the innovation gate"
+    if m >= 20 and rejected > config.gnss.max_rejected_fraction * m:
+        first = float(tg[np.argmax(~accepted)])
+        return f"{name} diverged: {what} (first at t = {first:.1f} s; innovations {scale:.1f}x predicted)", []
+    warnings = []
+    if rejected > 0.05 * m:
+        warnings.append(Finding("gnss-rejected", f"{source}: {what}: the IMU and GNSS disagree; {causes(config)}"))
+    elif m >= 20 and scale > 1.5:
+        warnings.append(Finding("innovations-large",
+                                f"{source}: the GNSS innovations are {scale:.1f} times larger than the filter "
+                                "predicts: the GNSS standard deviations (or the IMU noise) are too optimistic"))
+    return None, warnings
+
+
+def plausibility_checks(recording: Recording, config: Config, name: str, solution: Solution,
+                        smoothed: SmoothedRun | None, fixes, nu: np.ndarray, s_used: np.ndarray,
+                        r_used: np.ndarray, accepted: np.ndarray, notes: list[str],
+                        warnings: list[str]) -> list[Finding]:
+    """Every filter's finished solution judged against the prior GNSS sigma and the vehicle
+    (:mod:`navpp.plausibility`), before anything is written: a refusal (one short line) for a
+    run that is wrong, warnings for a doubtful one.  ``fixes`` are the run's GNSS fixes
+    (:class:`~navpp.engine.schedule.GnssFixes`); ``nu``, ``s_used``, ``r_used``, ``accepted``
+    what the filter saw and did at each."""
+    from .. import plausibility as pl
+
+    src = recording.source
+    label = pl.std_name(src, recording.gnss.std_enu is not None)
+    found = pl.innovation_findings(name, label, fixes.t, nu, s_used, r_used, fixes.var, accepted,
+                                   config.gnss.gate_probability, config.gnss.max_rejected_fraction)
+    sols = [solution] + ([smoothed.solution] if smoothed is not None else [])
+    for sol in sols:
+        found += pl.solution_findings(name, config.vehicle.type, sol.t, sol.alt, sol.vel_enu, sol.std_enu, fixes.alt,
+                                      np.sqrt(fixes.var[:, 2]), config.gnss.gate_probability,
+                                      config.gnss.max_rejected_fraction < 1.0)
+    out: list[Finding] = []
+    for f in found:
+        if f.fatal:
+            raise refusal(recording, config, f.headline, notes, [*warnings, *out], f.cause)
+        line = f"{src}: {f.headline}: {f.cause}" if f.cause else f"{src}: {f.headline}"
+        out.append(Finding("solution-doubtful", line))
+    return out
+
+
+#: Share of an aid's updates the gate may reject before the run says the aid disagrees with the data.
+AID_REJECTED_WARN = 0.05
+#: What to check when an aid's updates fail the gate often, per aid kind.
+AID_HINTS = {
+    "nhc": "the vehicle's motion is not along its x axis: check [vehicle] mounting_rpy_deg (or set it to \"auto\") "
+           "and nhc_point_m, or raise nhc_std_mps (side slip)",
+    "zupt": "standstill was detected while the vehicle moved: raise [vehicle] still_accel_std_mps2 / "
+            "still_gyro_std_dps or turn zupt off",
+    "zaru": "standstill was detected while the vehicle turned: raise [vehicle] still_gyro_std_dps or turn zaru off",
+    "gnss_velocity": "the GNSS velocity disagrees with the IMU: check the lever arm, [gnss] time_offset_s and the "
+                     "velocity's standard deviations (default_vel_std_mps), or set use_velocity = false",
+}
+
+
+def aid_checks(source: str, updates: dict[str, dict[str, int]]) -> list[Finding]:
+    """A warning per aid the innovation gate rejected often (more than
+    :data:`AID_REJECTED_WARN` of its updates): the aid and the data disagree."""
+    out = []
+    for kind, hint in AID_HINTS.items():
+        c = updates.get(kind)
+        if not c:
+            continue
+        n = c["applied"] + c["rejected"]
+        if n >= 20 and c["rejected"] > AID_REJECTED_WARN * n:
+            out.append(Finding("aid-rejected", f"{source}: {c['rejected']} of {n} {kind} updates "
+                               f"({100.0 * c['rejected'] / n:.0f}%) failed the innovation gate: {hint}"))
+    return out
