@@ -17,6 +17,7 @@ import pytest
 from navpp.filters import GaussianState, get_filter
 from navpp.filters.aukf import AUKF, AUKFOptions, fading_factor
 from navpp.filters.linear import LinearMeasurement, LinearModel
+from navpp.filters.protocols import MeasurementBase
 from navpp.filters.sif import SIF, SIFOptions
 from navpp.filters.stochastic import (
     IterationAverage,
@@ -121,8 +122,8 @@ def test_aukf_update_equals_hand_computed_fading(predictions):
     np.testing.assert_allclose(new.P, P_ref, rtol=1e-8, atol=1e-10)
     # the record of Q restarts after an applied update
     state = filt.predict(new, model, (float(predictions), predictions + 1.0)).state
-    assert filt._Q_since_update is not None
-    np.testing.assert_array_equal(filt._Q_since_update, Q)
+    assert filt.adapter.Q_since_update is not None
+    np.testing.assert_array_equal(filt.adapter.Q_since_update, Q)
 
 
 def test_aukf_gate_sees_the_unfaded_innovation():
@@ -305,7 +306,7 @@ class _Pendulum:
 
 
 @dataclass(frozen=True)
-class _Range:
+class _Range(MeasurementBase):
     """z = sqrt(x0^2 + 1) + v (nonlinear measurement)."""
 
     z: np.ndarray
@@ -361,7 +362,7 @@ def test_sif_fourth_moment_converges_with_iterations():
     draw gets wrong (at random) and the iteration mean gets right; the CKF misses 2 s^4."""
 
     @dataclass(frozen=True)
-    class Square:
+    class Square(MeasurementBase):
         z: np.ndarray
         R: np.ndarray
 

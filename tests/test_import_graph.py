@@ -20,13 +20,7 @@ NAVPP = Path(__file__).resolve().parents[1] / "navpp"
 ALLOWED_EDGES: set[tuple[str, str]] = set()
 
 #: (importer, imported module, private name) still owned by other issue-16 work.
-ALLOWED_PRIVATE = {
-    ("navpp.filters.smoother", "navpp.filters.base", "_chol_solve"),
-    ("navpp.filters.smoother", "navpp.filters.base", "_cholesky"),
-    ("navpp.filters.vce", "navpp.filters.base", "_chol_solve"),
-    ("navpp.filters.vce", "navpp.filters.base", "_cholesky"),
-    ("navpp.filters.sif", "navpp.filters.sigma", "_factor"),
-}
+ALLOWED_PRIVATE: set[tuple[str, str, str]] = set()
 
 
 def modules(root: Path = NAVPP) -> dict[str, tuple[Path, bool]]:

@@ -18,6 +18,7 @@ from scipy import integrate, stats
 
 from navpp.filters import GaussianState, get_filter
 from navpp.filters.linear import LinearModel
+from navpp.filters.protocols import MeasurementBase
 from navpp.filters.rwckf import RWCKFOptions
 
 DT = 1.0
@@ -25,7 +26,7 @@ N_STATE = 4
 
 
 @dataclass(frozen=True)
-class RangeBearing:
+class RangeBearing(MeasurementBase):
     """z = (range m, bearing rad from north, clockwise) of the target position (E, N)."""
 
     t: float

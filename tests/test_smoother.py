@@ -159,7 +159,7 @@ def test_node_corrections_move_the_path_by_the_interpolated_error():
 
 
 def test_compiled_ins_mean_recursion_equals_the_generic_one():
-    """InsModel.rts_means (compiled) against the generic Python loop over model.plus / minus."""
+    """InsModel.rts_means (compiled) against the recursion written out over model.plus / minus."""
     from navpp.ins.model import InsModel, NoiseModel, plus
 
     rng = np.random.default_rng(4)
@@ -178,8 +178,16 @@ def test_compiled_ins_mean_recursion_equals_the_generic_one():
     a["D"] = 0.3 * rng.normal(size=(m, 15, 15))
     ins = InsModel(np.arange(3.0), np.zeros((3, 3)), np.zeros((3, 3)), NoiseModel(0, 0, 0, np.inf, 0, np.inf))
 
-    class Generic:                         # the same plus / minus, without the compiled recursion
+    class Generic:                         # the recursion written out over the same plus / minus
         plus, minus = staticmethod(ins.plus), staticmethod(ins.minus)
+
+        def rts_means(self, x_post, x_prior, gains, reset):
+            xs = np.empty_like(x_post)
+            xs[-1] = x_post[-1]
+            for k in range(len(x_post) - 2, -1, -1):
+                xs[k] = x_post[k] if reset[k + 1] else self.plus(x_post[k], gains[k + 1] @ self.minus(xs[k + 1],
+                                                                                                    x_prior[k + 1]))
+            return xs
 
     b = {k: v.copy() for k, v in a.items()}
     fast, slow = smooth_arrays(a, ins), smooth_arrays(b, Generic())

@@ -162,7 +162,7 @@ def run_series_of(rec, sol, diag, filt) -> RunSeries:
     factors = {k: np.asarray(v, dtype=float).reshape(len(diag.t), -1)[:, 0]
                for k, v in diag.adaptive.items()
                if k.startswith(FACTOR_PREFIXES) and np.asarray(v).reshape(len(diag.t), -1).shape[1] == 1}
-    adaptive = hasattr(filt, "adapter") or bool(factors)
+    adaptive = filt.adapts_noise or bool(factors)
     di = stride_indices(len(diag.t), _DIAG_POINTS)
     return RunSeries(east, north, err_t, err_h, cdf, adaptive,
                      np.asarray(diag.t, dtype=float)[di] if adaptive else None,

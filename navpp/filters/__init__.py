@@ -4,6 +4,7 @@
 """
 
 from . import aekf, aukf, ckf, ekf, rwckf, sif, ukf, vce_ckf  # noqa: F401  (register the filters)
-from .base import FILTERS, Filter, GaussianState, Innovation, Prediction, Update, get_filter, register
+from .base import FILTERS, Filter, get_filter, register
+from .states import GaussianState, Innovation, Prediction, Update
 
 __all__ = ["FILTERS", "Filter", "GaussianState", "Innovation", "Prediction", "Update", "get_filter", "register"]

@@ -1,7 +1,7 @@
 """Adaptive fading UKF (AUKF): the UKF whose prior is inflated when the innovation is too large.
 
 After the unscented measurement prediction (``nu``, ``Pzz`` *without* R as in
-:class:`~navpp.filters.base.MeasurementPrediction`, ``Pxz``), the fading factor is
+:class:`~navpp.filters.states.MeasurementPrediction`, ``Pxz``), the fading factor is
 
     ``lambda_k = min(max_fading, max(1, (nu^T nu - tr R) / tr(Pzz)))``
 
@@ -20,8 +20,8 @@ the posterior covariance is then ``P- - K S K^T`` about the inflated P-.  With `
 Readings and choices (the original is not at hand; ALGORITHMS.md "Paper 001's comparison
 filters"):
 
-- ``Q`` is the process noise added since the last applied update: the ``process_noise`` hook
-  records every Qd it hands to the time update, and the record is summed over all time updates
+- ``Q`` is the process noise added since the last applied update: the adaptation's
+  ``process_noise`` step records every Qd it hands to the time update, and the record is summed over all time updates
   between two applied measurement updates (the engine splits long GNSS gaps into 1 s
   predictions) and cleared after an applied update.  With one prediction per update, the
   normal case, ``P- - Q`` is exactly the propagated posterior; over a gap the sum neglects the
@@ -40,15 +40,14 @@ filters"):
 - ``detect_probability`` (default 0.999; 0 is ALGORITHMS.md's rule as written): with p > 0 the
   filter fades only when the unfaded NIS exceeds the chi-square quantile p (a fault-detection test before
   adapting, as in Hajiyev and Soken's adaptive filters as we understand them; their papers
-  are not at hand).  On the INS the rule as written fades on about 20 % of GNSS epochs,
-  because one epoch's ``nu^T nu`` scatters by several ``tr R`` when R dominates the
-  innovation: every fade multiplies the attitude and bias covariance too, which the position
-  fixes observe weakly (heading not at all while still), so those covariances ratchet up
-  until the sigma points span tens of degrees and the filter diverges (sample drive: heading
-  RMSE ~100 deg).  Tried and not enough: ``max_fading = 2``, a smoothed innovation covariance
-  (forgetting 0.95 / 0.99), no fading while still.  A detection test at p = 0.999 prevents it
-  (p = 0.99 does not), hence navpp's default; the rule as written stays one option away and
-  is reported next to it in the paper 001 benchmark.
+  are not at hand).  On the INS the rule as written fades on many GNSS epochs, because one
+  epoch's ``nu^T nu`` scatters by several ``tr R`` when R dominates the innovation: every
+  fade multiplies the attitude and bias covariance too, which the position fixes observe
+  weakly (heading not at all while still), so those covariances ratchet up until the sigma
+  points span tens of degrees and the filter diverges.  A detection test at p = 0.999 keeps
+  the fading to the innovations that are inconsistent with the UKF's prediction, hence
+  navpp's default; the rule as written stays one option away and is reported next to it in
+  the paper 001 benchmark (docs/papers.md gives the figures).
 
 ``noise_report()`` gives ``{"fading": array([lambda_k])}``: the factor applied at the last
 measurement update (1 when not fading, rejected or ``adapt = false``).
@@ -65,7 +64,11 @@ from typing import Any, ClassVar
 import numpy as np
 from scipy.special import chdtri
 
-from .base import GaussianState, MeasurementPrediction, register, symmetrise
+from .adaptation import Adaptation, Predictor
+from .base import register
+from .linalg import symmetrise
+from .protocols import Interval, Measurement, Model
+from .states import GaussianState, Innovation, MeasurementPrediction
 from .ukf import UKF, UKFOptions
 
 
@@ -105,6 +108,60 @@ def fading_factor(nu: np.ndarray, Pzz: np.ndarray, R: np.ndarray, max_fading: fl
     return float(min(max_fading, max(1.0, lam)))
 
 
+class Fading(Adaptation):
+    """The AUKF's fading adjustment as a filter's adaptation (see the module docstring).
+
+    Attributes
+    ----------
+    fading : lambda_k applied at the last measurement update (1: not faded).
+    Q_since_update : (n, n) the process noise added since the last applied update (None: none).
+    """
+
+    def __init__(self, options: AUKFOptions) -> None:
+        self.o = options
+        self.fading = 1.0
+        self.Q_since_update: np.ndarray | None = None
+
+    def report(self) -> dict[str, np.ndarray]:
+        return {"fading": np.array([self.fading])}
+
+    def _detect_threshold(self, m: int) -> float:
+        """chi-square(m) quantile ``detect_probability`` (-inf when 0: always test lambda)."""
+        p = self.o.detect_probability
+        return float(chdtri(m, 1.0 - p)) if p > 0.0 else -np.inf
+
+    def process_noise(self, model: Model, x: np.ndarray, interval: Interval) -> np.ndarray:
+        Q = model.process_noise(x, interval)
+        self.Q_since_update = Q.copy() if self.Q_since_update is None else self.Q_since_update + Q
+        return Q
+
+    def prepare(self, prior: GaussianState, meas: Measurement, raw: MeasurementPrediction,
+                R: np.ndarray, gate: float, predictor: Predictor) -> tuple[GaussianState, MeasurementPrediction]:
+        """The faded prior and its prediction when the innovation is too large, else the UKF's."""
+        self.fading = 1.0
+        if not self.o.adapt or not meas.adaptive:
+            return prior, raw
+        S = symmetrise(raw.Pzz + R)
+        nis = float(raw.nu @ np.linalg.solve(S, raw.nu))
+        if nis > gate:
+            return prior, raw                    # an outlier for the UKF: the gate decides, no fading
+        if nis <= self._detect_threshold(raw.nu.shape[0]):
+            return prior, raw                    # consistent with the UKF's own prediction: no fading
+        lam = fading_factor(raw.nu, raw.Pzz, R, self.o.max_fading)
+        if lam <= 1.0:
+            return prior, raw
+        Q = self.Q_since_update if self.Q_since_update is not None else np.zeros_like(prior.P)
+        faded = replace(prior, P=symmetrise(lam * (prior.P - Q) + Q))      # inflate the propagated part only
+        self.fading = lam
+        return faded, predictor(faded)                                       # points redrawn from the faded P
+
+    def corrected(self, prior: GaussianState, raw: MeasurementPrediction, innovation: Innovation,
+                  meas: Measurement) -> None:
+        """The next prior's propagated part starts after any applied update (an aid such as a
+        ZUPT too: the noise added before it is no longer inside what it left of P)."""
+        self.Q_since_update = None
+
+
 @register("aukf")
 class AUKF(UKF):
     """Adaptive fading UKF (see module docstring)."""
@@ -113,52 +170,12 @@ class AUKF(UKF):
     summary = "Adaptive fading UKF: the propagated prior is inflated by lambda when innovations are too large."
     Options = AUKFOptions
     oracle_options: ClassVar[dict[str, Any]] = {"adapt": False}
+    adapter: Fading
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self.fading = 1.0
-        self._Q_since_update: np.ndarray | None = None
-        self._faded_P: np.ndarray | None = None
+    def make_adapter(self) -> Fading:
+        return Fading(self.options)
 
-    def noise_report(self) -> dict[str, np.ndarray]:
-        return {"fading": np.array([self.fading])}
-
-    def _detect_threshold(self, m: int) -> float:
-        """chi-square(m) quantile ``detect_probability`` (-inf when 0: always test lambda)."""
-        p = self.options.detect_probability
-        return float(chdtri(m, 1.0 - p)) if p > 0.0 else -np.inf
-
-    def process_noise(self, model: Any, x: np.ndarray, interval: tuple[float, float]) -> np.ndarray:
-        Q = super().process_noise(model, x, interval)
-        self._Q_since_update = Q.copy() if self._Q_since_update is None else self._Q_since_update + Q
-        return Q
-
-    def predict_measurement(self, state: GaussianState, model: Any, meas: Any) -> MeasurementPrediction:
-        pred = super().predict_measurement(state, model, meas)
-        self.fading, self._faded_P = 1.0, None
-        if not self.options.adapt or not getattr(meas, "adaptive", True):
-            return pred
-        R = self.measurement_noise(meas, pred)
-        S = symmetrise(pred.Pzz + R)
-        nis = float(pred.nu @ np.linalg.solve(S, pred.nu))
-        if nis > self.gate_threshold(pred.nu.shape[0]):
-            return pred                      # an outlier for the UKF: the gate decides, no fading
-        if nis <= self._detect_threshold(pred.nu.shape[0]):
-            return pred                      # consistent with the UKF's own prediction: no fading
-        lam = fading_factor(pred.nu, pred.Pzz, R, self.options.max_fading)
-        if lam > 1.0:
-            Q = self._Q_since_update if self._Q_since_update is not None else np.zeros_like(state.P)
-            P = symmetrise(lam * (state.P - Q) + Q)              # inflate the propagated part only
-            self.fading, self._faded_P = lam, P
-            pred = super().predict_measurement(replace(state, P=P), model, meas)   # redraw points
-        return pred
-
-    def correct(self, state: GaussianState, model: Any, pred: MeasurementPrediction,
-                K: np.ndarray, S: np.ndarray, R: np.ndarray) -> GaussianState:
-        if self._faded_P is not None:
-            state = replace(state, P=self._faded_P)              # the prior the gain was made for
-            self._faded_P = None
-        # the next prior's "propagated part" starts here, after any applied update (an aid such
-        # as a ZUPT too: the noise added before it is no longer inside what it left of P)
-        self._Q_since_update = None
-        return super().correct(state, model, pred, K, S, R)
+    @property
+    def fading(self) -> float:
+        """lambda_k applied at the last measurement update."""
+        return self.adapter.fading

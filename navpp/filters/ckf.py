@@ -15,5 +15,5 @@ class CKF(SigmaPointFilter):
     paper = "paper 001 eqs 3-18; paper 003 eqs 19-34"
     summary = "Cubature Kalman filter: 2n points through the real strapdown, equal weights."
 
-    def rule(self) -> CubatureRule:
+    def make_rule(self) -> CubatureRule:
         return CubatureRule()

@@ -9,7 +9,10 @@ Groves (2013) ch. 14.
 
 from __future__ import annotations
 
-from .base import Filter, GaussianState, MeasurementPrediction, Prediction, register, symmetrise
+from .base import Filter, register
+from .linalg import symmetrise
+from .protocols import Interval, Measurement, Model
+from .states import GaussianState, MeasurementPrediction, Prediction
 
 
 @register("ekf")
@@ -17,14 +20,13 @@ class EKF(Filter):
     paper = "paper 002 section 2, eqs 1-3"
     summary = "Closed-loop error-state extended Kalman filter (the reference filter)."
 
-    def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> Prediction:
+    def time_update(self, state: GaussianState, model: Model, interval: Interval) -> Prediction:
         x, Phi, Qd = model.transition(state.x, interval)
-        PPhit = state.P @ Phi.T
+        PPhit = state.P @ Phi.T               # E[dx_k dx_k+1^T] = P Phi^T (the smoother's cross-covariance)
         P = Phi @ PPhit + Qd                  # P- = Phi P Phi^T + Qd
-        # E[dx_k dx_k+1^T] = P Phi^T (smoother)
         return Prediction(GaussianState(interval[1], x, symmetrise(P)), PPhit, x)
 
-    def predict_measurement(self, state: GaussianState, model, meas) -> MeasurementPrediction:
+    def predict_measurement(self, state: GaussianState, model: Model, meas: Measurement) -> MeasurementPrediction:
         H = meas.jacobian(state.x)
         PHt = state.P @ H.T
         return MeasurementPrediction(meas.innovation_at(state.x), H @ PHt, PHt, H)

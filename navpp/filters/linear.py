@@ -1,4 +1,4 @@
-"""Linear Gaussian models in the filter-core protocol.
+"""Linear Gaussian models in the filter-core protocols (:mod:`navpp.filters.protocols`).
 
 Used as the closed-form oracle for every registered filter (on a linear model each must
 reproduce the Kalman filter) and as the base of the papers' benchmark models.  States are
@@ -8,8 +8,11 @@ plain vectors, so ``plus``/``minus`` are addition and subtraction.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
+
+from .protocols import Interval, MeasurementBase
 
 
 class VectorSpace:
@@ -17,11 +20,26 @@ class VectorSpace:
 
     @staticmethod
     def plus(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
-        return x + dx
+        out: np.ndarray = x + dx
+        return out
 
     @staticmethod
     def minus(x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
-        return x1 - x0
+        out: np.ndarray = x1 - x0
+        return out
+
+    @staticmethod
+    def rts_means(x_post: np.ndarray, x_prior: np.ndarray, gains: np.ndarray, reset: np.ndarray) -> np.ndarray:
+        """The RTS smoother's mean recursion (:class:`~navpp.filters.protocols.SmoothableModel`)."""
+        m = x_post.shape[0]
+        xs = np.empty_like(x_post)
+        xs[m - 1] = x_post[m - 1]
+        for k in range(m - 2, -1, -1):
+            if reset[k + 1]:
+                xs[k] = x_post[k]
+                continue
+            xs[k] = x_post[k] + gains[k + 1] @ (xs[k + 1] - x_prior[k + 1])
+        return xs
 
 
 @dataclass(frozen=True)
@@ -37,19 +55,22 @@ class LinearModel(VectorSpace):
     Phi: np.ndarray
     Q: np.ndarray
     Q_groups: tuple[tuple[str, np.ndarray], ...] | None = None
+    #: every step's noise reaches the next measurement directly: VCE measures it per step
+    noise_share: ClassVar[str] = "step"
 
     @property
     def dim(self) -> int:
         return int(self.Phi.shape[0])
 
-    def transition(self, x: np.ndarray, interval) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def transition(self, x: np.ndarray, interval: Interval) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self.Phi @ x, self.Phi, self.Q
 
-    def process_noise(self, x: np.ndarray, interval) -> np.ndarray:
+    def process_noise(self, x: np.ndarray, interval: Interval) -> np.ndarray:
         return self.Q
 
-    def noise_groups(self, x: np.ndarray, interval) -> tuple[list[str], np.ndarray]:
-        """Q split by noise source: ``(names, Qs (G, n, n))`` with ``Qs.sum(0) == Q``.
+    def noise_groups(self, x: np.ndarray, interval: Interval, per: str = "") -> tuple[list[str], np.ndarray]:
+        """Q split by noise source: ``(names, Qs (G, n, n))`` with ``Qs.sum(0) == Q`` (one
+        grouping: ``per`` is ignored).
 
         ``Q_groups`` when given; otherwise one group per nonzero diagonal element of a
         diagonal Q (``q0``, ``q1``, ... by state index: paper 003's per-element factors), else
@@ -66,13 +87,14 @@ class LinearModel(VectorSpace):
             return [f"q{i}" for i in idx], Qs
         return ["Q"], Q[None, :, :].copy()
 
-    def propagate_points(self, x: np.ndarray, dX: np.ndarray, interval) -> tuple[np.ndarray, np.ndarray]:
+    def propagate_points(self, x: np.ndarray, dX: np.ndarray, interval: Interval) -> tuple[np.ndarray, np.ndarray]:
         return self.Phi @ x, dX @ self.Phi.T
 
 
 @dataclass(frozen=True)
-class LinearMeasurement:
-    """``z = H x + v``, ``v ~ N(0, R)``; z : (m,), H : (m, n), R : (m, m)."""
+class LinearMeasurement(MeasurementBase):
+    """``z = H x + v``, ``v ~ N(0, R)``; z : (m,), H : (m, n), R : (m, m).  The attributes of
+    :class:`~navpp.filters.protocols.MeasurementBase` (adaptive, forceable, no axes)."""
 
     t: float
     z: np.ndarray
@@ -80,10 +102,12 @@ class LinearMeasurement:
     R: np.ndarray
 
     def innovation_at(self, x: np.ndarray) -> np.ndarray:
-        return self.z - self.H @ x
+        nu: np.ndarray = self.z - self.H @ x
+        return nu
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         return self.H
 
     def predict_points(self, x: np.ndarray, dX: np.ndarray) -> np.ndarray:
-        return dX @ self.H.T
+        Z: np.ndarray = dX @ self.H.T
+        return Z

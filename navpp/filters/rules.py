@@ -10,15 +10,27 @@ References: cubature rule, paper 001 eqs 3-6 and paper 003 eqs 19-22 (Arasaratna
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
+
+#: error-space points dX (p, n), mean weights wm (p,), covariance weights wc (p,)
+Points = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+class SigmaRule(Protocol):
+    """Where the points of a sigma-point filter go and how they are weighted."""
+
+    def points(self, S: np.ndarray) -> Points:
+        """Points and weights for the covariance factor ``S`` (n, n), ``P = S S^T``."""
+        ...
 
 
 @dataclass(frozen=True)
 class CubatureRule:
     """Third-degree spherical-radial cubature: ``xi = +-sqrt(n) e_i``, weights ``1 / (2n)``."""
 
-    def points(self, S: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def points(self, S: np.ndarray) -> Points:
         n = S.shape[0]
         cols = np.sqrt(n) * S.T                  # row i = sqrt(n) S e_i
         dX = np.vstack([cols, -cols])
@@ -37,7 +49,7 @@ class UnscentedRule:
     beta: float = 2.0
     kappa: float = 0.0
 
-    def points(self, S: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def points(self, S: np.ndarray) -> Points:
         n = S.shape[0]
         lam = self.alpha ** 2 * (n + self.kappa) - n
         c = n + lam
@@ -63,4 +75,5 @@ class DirichletWeights:
 
     def draw(self, rng: np.random.Generator, m: int, size: int | None = None) -> np.ndarray:
         """One (m,) weight vector, or (size, m) when ``size`` is given."""
-        return rng.dirichlet(np.ones(m), size=size)
+        out: np.ndarray = rng.dirichlet(np.ones(m), size=size)
+        return out

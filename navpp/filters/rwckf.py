@@ -27,13 +27,15 @@ Readings (ALGORITHMS.md, "Randomly weighted CKF"):
   eqs 33-37 is about the means) and keeps the covariances at their cubature values: uniform
   weights, centred on the uniform (CKF) means, so the joint covariance of state and measurement
   is the CKF's and the update can never make P indefinite.  (Centring them on the
-  beta-weighted means, as navpp did first, adds the outer product of the mean shift to Pzz and
-  Pxz but not to P; against a near-perfect measurement such as a ZUPT that made
-  ``P - K S K^T`` indefinite: a -6e-3 m^2/s^2 velocity variance at the first stop of the
-  sample drive.)
+  beta-weighted means would add the outer product of the mean shift to Pzz and Pxz but not to
+  P; against a near-perfect measurement such as a ZUPT that makes ``P - K S K^T`` indefinite.)
 
 Because selection looks at the measurement, RWCKF's NIS/NEES are optimistic by construction.
 Randomness comes from one seeded generator (``seed``), so runs repeat exactly.
+
+The selection state (the kept time-update points, the weights chosen, the counts) lives in the
+filter's adaptation, :class:`DirichletWeighting`; the time update's points have to be kept
+there because the next measurement update receives only the prior.
 """
 
 from __future__ import annotations
@@ -43,9 +45,13 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .base import GaussianState, MeasurementPrediction, Update, register, symmetrise
+from .adaptation import Adaptation
+from .base import register
+from .linalg import nis_and_logdet, symmetrise
+from .protocols import Interval, Measurement, Model
 from .rules import CubatureRule, DirichletWeights
-from .sigma import SigmaPointFilter, combine_points
+from .sigma import PropagatedPoints, SigmaPointFilter, combine_points, factor, measurement_moments
+from .states import GaussianState, MeasurementPrediction, Prediction, Update
 
 SELECT = ("likelihood", "residual", "none")
 COVARIANCE = ("uniform", "random")
@@ -76,6 +82,60 @@ class RWCKFOptions:
             raise ValueError(f"seed must be an integer >= 0, got {self.seed!r}")
 
 
+Weights = np.ndarray | None          # an epoch's weight vector (2n,); None: the uniform (CKF) weights
+
+
+class DirichletWeighting(Adaptation):
+    """The RWCKF's weight selection state: the last time update's points, the weights chosen.
+
+    Attributes
+    ----------
+    chosen_uniform : epochs where the uniform vector won.
+    last_weights : (2n,) the weights chosen at the last epoch (None before).
+    epochs : measurement epochs so far.
+    """
+
+    def __init__(self, options: RWCKFOptions) -> None:
+        self.o = options
+        self.dirichlet = DirichletWeights()
+        self._kept: tuple[GaussianState, PropagatedPoints] | None = None
+        self.chosen_uniform = 0
+        self.last_weights: np.ndarray | None = None
+        self.epochs = 0
+
+    def keep(self, prior: GaussianState, points: PropagatedPoints) -> None:
+        """The points of the time update that produced ``prior``."""
+        self._kept = (prior, points)
+
+    def points_for(self, prior: GaussianState) -> PropagatedPoints | None:
+        """The kept points when ``prior`` is the kept time update's output, else None."""
+        return self._kept[1] if self._kept is not None and self._kept[0] is prior else None
+
+    def candidates(self, rng: np.random.Generator, m: int) -> list[Weights]:
+        """The epoch's candidate weight vectors over ``m`` points (drawn from ``rng``)."""
+        if self.o.weights == "uniform":
+            return [None]
+        if self.o.select == "none":
+            return [self.dirichlet.draw(rng, m)]
+        return [None, *self.dirichlet.draw(rng, m, self.o.candidates)]
+
+    def chose(self, beta: Weights, m: int) -> None:
+        """Record the epoch's choice; the kept points are used up."""
+        self._kept = None
+        self.last_weights = np.full(m, 1.0 / m) if beta is None else np.asarray(beta, dtype=float)
+        self.epochs += 1
+        self.chosen_uniform += beta is None
+
+    def report(self) -> dict[str, np.ndarray]:
+        """The weights chosen at the last epoch (``weights``, (2n,), points ``+sqrt(n) S e_i``
+        first, then the minus points) and the fraction of epochs so far where the uniform (CKF)
+        weights won the selection."""
+        out = {"uniform_chosen_fraction": np.array([self.chosen_uniform / max(self.epochs, 1)])}
+        if self.last_weights is not None:
+            out["weights"] = self.last_weights.copy()
+        return out
+
+
 @register("rwckf")
 class RWCKF(SigmaPointFilter):
     paper = "paper 001 eqs 22-32"
@@ -83,102 +143,25 @@ class RWCKF(SigmaPointFilter):
                "by the innovation likelihood.")
     Options = RWCKFOptions
     oracle_options: ClassVar[dict[str, Any]] = {"weights": "uniform"}
+    adapter: DirichletWeighting
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self._dirichlet = DirichletWeights()
-        self._beta: np.ndarray | None = None           # the epoch's weights (None: uniform)
-        self._pending: tuple | None = None             # (prior state, f(x), dY, Q) of the last time update
-        self.chosen_uniform = 0                        # epochs where the uniform vector won
-        self.last_weights: np.ndarray | None = None    # the weights chosen at the last epoch
-        self.epochs = 0
-
-    def rule(self) -> CubatureRule:
+    def make_rule(self) -> CubatureRule:
         return CubatureRule()
 
-    def weights_for(self, wm: np.ndarray, wc: np.ndarray, *, measurement: bool):
-        if not measurement or self._beta is None:
-            return wm, wc
-        return self._beta, (self._beta if self.options.covariance == "random" else wc)
+    def make_adapter(self) -> DirichletWeighting:
+        return DirichletWeighting(self.options)
 
-    def covariance_centre(self, wm: np.ndarray, wc: np.ndarray) -> np.ndarray:
-        return wm if self.options.covariance == "random" else wc
-
-    # time update: the template's (uniform weights); its points are kept for the epoch's weights
-    def after_predict(self, prior: GaussianState, x_ref: np.ndarray, dY: np.ndarray, Q: np.ndarray,
-                      wc: np.ndarray) -> None:
-        self._pending = (prior, x_ref, dY, Q, wc)
+    # time update: the CKF's (uniform weights); its points are kept for the epoch's weights
+    def time_update(self, state: GaussianState, model: Model, interval: Interval) -> Prediction:
+        points = self.propagate(state, model, interval)
+        out = self.combine(points, model, interval[1])
+        self.adapter.keep(out.state, points)
+        return out
 
     # measurement update: choose the epoch's weight vector, then the shared template ---------
-    def _candidates(self, m: int) -> list[np.ndarray | None]:
-        if self.options.weights == "uniform":
-            return [None]
-        if self.options.select == "none":
-            return [self._dirichlet.draw(self.rng, m)]
-        return [None, *self._dirichlet.draw(self.rng, m, self.options.candidates)]
-
-    def _prior_with(self, beta: np.ndarray | None, state: GaussianState, model) -> GaussianState:
-        """The epoch's prior under weights ``beta`` (the kept time-update points), or ``state``."""
-        pending = self._pending
-        if beta is None or pending is None or pending[0] is not state:
-            return state
-        _, x_ref, dY, Q, wc = pending
-        if self.options.covariance == "random":
-            return combine_points(model, state.t, x_ref, dY, beta, beta, Q)
-        return combine_points(model, state.t, x_ref, dY, beta, wc, Q, centre=wc)
-
-    def _score(self, pred: MeasurementPrediction, R: np.ndarray) -> float:
-        if self.options.select == "residual":
-            return float(pred.nu @ pred.nu)
-        L = np.linalg.cholesky(symmetrise(pred.Pzz + R))
-        w = np.linalg.solve(L, pred.nu)
-        return float(w @ w + 2.0 * np.log(np.diagonal(L)).sum())
-
-    def _scores(self, state: GaussianState, model, meas, betas: np.ndarray) -> np.ndarray:
-        """Selection score of every candidate weight vector (rows of ``betas``, (C, 2n)), all
-        candidates at once: one batched factorisation and one call of the measurement model.
-
-        Candidate c's prior is ``x_ref ⊞ M_c`` (``M_c = beta_c dY``) with its covariance; its
-        cubature points are taken relative to ``x_ref`` as ``x_ref ⊞ (M_c + dX)``, which equals
-        ``(x_ref ⊞ M_c) ⊞ dX`` except for the second-order composition of attitude errors.  The
-        chosen candidate's update itself goes through the exact template path.
-        """
-        n = state.P.shape[0]
-        m = 2 * n
-        C = betas.shape[0]
-        random_cov = self.options.covariance == "random"
-        pending = self._pending
-        if pending is not None and pending[0] is state:
-            _, x_ref, dY, Q, _wc = pending
-            M = betas @ dY                                            # (C, n) candidate means about x_ref
-            if random_cov:
-                dev = dY[None, :, :] - M[:, None, :]
-                P = np.einsum("ci,cij,cik->cjk", betas, dev, dev) + Q
-            else:                                                     # the CKF covariance, whatever the mean
-                P = np.broadcast_to(state.P, (C, n, n))
-        else:                                         # no kept time update: weights on the measurement only
-            x_ref, M = state.x, np.zeros((C, n))
-            P = np.broadcast_to(state.P, (C, n, n))
-        S = np.linalg.cholesky(0.5 * (P + np.swapaxes(P, 1, 2)))       # (C, n, n)
-        cols = np.sqrt(n) * np.swapaxes(S, 1, 2)                       # row i = sqrt(n) S e_i
-        dX = np.concatenate([cols, -cols], axis=1)                     # (C, m, n)
-        pts = np.concatenate([M, (M[:, None, :] + dX).reshape(C * m, n)])
-        Zall = meas.predict_points(x_ref, pts)
-        Z0, Z = Zall[:C], Zall[C:].reshape(C, m, -1) - Zall[:C, None, :]
-        z_hat = np.einsum("ci,cip->cp", betas, Z)
-        nu = meas.innovation_at(x_ref)[None, :] - Z0 - z_hat
-        if self.options.select == "residual":
-            return np.einsum("cp,cp->c", nu, nu)
-        wz = betas if random_cov else np.full((C, m), 1.0 / m)
-        dz = Z - (z_hat if random_cov else np.einsum("ci,cip->cp", wz, Z))[:, None, :]
-        Pzz = np.einsum("ci,cip,ciq->cpq", wz, dz, dz) + self.measurement_noise(meas, None)
-        L = np.linalg.cholesky(0.5 * (Pzz + np.swapaxes(Pzz, 1, 2)))
-        w = np.linalg.solve(L, nu[:, :, None])[:, :, 0]
-        return np.einsum("cp,cp->c", w, w) + 2.0 * np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1)
-
-    def update(self, state: GaussianState, model, meas) -> Update:
+    def update(self, state: GaussianState, model: Model, meas: Measurement) -> Update:
         m = 2 * state.P.shape[0]
-        cands = self._candidates(m)
+        cands = self.adapter.candidates(self.rng, m)
         best = cands[0]
         if len(cands) > 1:
             betas = np.vstack([np.full(m, 1.0 / m) if b is None else b for b in cands])
@@ -188,35 +171,89 @@ class RWCKF(SigmaPointFilter):
                 scores = np.array([self._score_one(b, state, model, meas) for b in cands])
             scores = np.where(np.isfinite(scores), scores, np.inf)
             best = cands[int(np.argmin(scores))]
-        best_state = self._prior_with(best, state, model)
-        self._beta = best
-        self._pending = None
-        self.last_weights = np.full(m, 1.0 / m) if best is None else np.asarray(best, dtype=float)
-        self.epochs += 1
-        self.chosen_uniform += best is None
-        try:
-            return super().update(best_state, model, meas)
-        finally:
-            self._beta = None
+        prior = self._prior_with(best, state, model)
+        self.adapter.chose(best, m)
 
-    def _score_one(self, beta, state: GaussianState, model, meas) -> float:
-        """One candidate's score through the template path (used when a batched factorisation
-        fails: a candidate that breaks definiteness is not a candidate)."""
-        self._beta = beta
+        def predictor(s: GaussianState) -> MeasurementPrediction:
+            return self.measure(s, meas, best)
+        return self.apply_measurement(prior, model, meas, predictor)
+
+    def _weights(self, beta: Weights, wm: np.ndarray,
+                 wc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Mean weights, covariance weights and the centre of the covariances (None: the mean)
+        of a measurement prediction under the epoch's weights ``beta``."""
+        if self.options.covariance == "random":
+            return (wm, wc, None) if beta is None else (beta, beta, None)
+        return (wm if beta is None else beta), wc, wc
+
+    def measure(self, state: GaussianState, meas: Measurement, beta: Weights) -> MeasurementPrediction:
+        """The cubature measurement prediction of ``meas`` about ``state`` under weights ``beta``."""
+        S = factor(state.P, state.t, self.name, self)
+        dX, wm0, wc0 = self.rule.points(S)
+        wm, wc, centre = self._weights(beta, wm0, wc0)
+        Z = meas.predict_points(state.x, dX)                          # h(x ⊞ dX_i) ⊟ h(x)
+        return measurement_moments(Z, dX, meas.innovation_at(state.x), wm, wc, centre)
+
+    def _prior_with(self, beta: Weights, state: GaussianState, model: Model) -> GaussianState:
+        """The epoch's prior under weights ``beta`` (the kept time-update points), or ``state``."""
+        p = self.adapter.points_for(state)
+        if beta is None or p is None:
+            return state
+        if self.options.covariance == "random":
+            return combine_points(model, state.t, p.x_ref, p.dY, beta, beta, p.Q)
+        return combine_points(model, state.t, p.x_ref, p.dY, beta, p.wc, p.Q, centre=p.wc)
+
+    def _score(self, pred: MeasurementPrediction, R: np.ndarray) -> float:
+        """Selection score: ``|nu|^2`` (residual) or ``nu' S^-1 nu + log det S`` (likelihood)."""
+        if self.options.select == "residual":
+            return float(pred.nu @ pred.nu)
+        nis, logdet, ok = nis_and_logdet(symmetrise(pred.Pzz + R), pred.nu)
+        if not ok:
+            raise np.linalg.LinAlgError("the candidate's innovation covariance is not positive definite")
+        return nis + logdet
+
+    def _scores(self, state: GaussianState, model: Model, meas: Measurement, betas: np.ndarray) -> np.ndarray:
+        """Selection score of every candidate weight vector (rows of ``betas``, (C, 2n)), with
+        one call of the measurement model for all candidates' points.
+
+        Candidate c's prior is ``x_ref ⊞ M_c`` (``M_c = beta_c dY``) with its covariance; its
+        cubature points are taken relative to ``x_ref`` as ``x_ref ⊞ (M_c + dX)``, which equals
+        ``(x_ref ⊞ M_c) ⊞ dX`` except for the second-order composition of attitude errors.  The
+        chosen candidate's update itself goes through the exact template path.
+        """
+        C, m = betas.shape
+        p = self.adapter.points_for(state)
+        if p is not None:
+            x_ref, M = p.x_ref, betas @ p.dY                          # (C, n) candidate means about x_ref
+        else:                                         # no kept time update: weights on the measurement only
+            x_ref, M = state.x, np.zeros((C, state.P.shape[0]))
+        points: list[np.ndarray] = []
+        for c in range(C):
+            if p is not None and self.options.covariance == "random":
+                P = combine_points(model, state.t, x_ref, p.dY, betas[c], betas[c], p.Q).P
+            elif c == 0:
+                P = state.P                                           # the CKF covariance, whatever the mean
+            else:
+                points.append(points[0])
+                continue
+            dX, _, wc = self.rule.points(np.linalg.cholesky(symmetrise(P)))
+            points.append(dX)
+        Zall = meas.predict_points(x_ref, np.concatenate([M, *(M[c] + points[c] for c in range(C))]))
+        nu_ref = meas.innovation_at(x_ref)
+        scores = np.empty(C)
+        for c in range(C):
+            Z = Zall[C + c * m:C + (c + 1) * m] - Zall[c]
+            wm, wcc, centre = self._weights(betas[c], wc, wc)
+            pred = measurement_moments(Z, points[c], nu_ref - Zall[c], wm, wcc, centre)
+            scores[c] = self._score(pred, meas.R)
+        return scores
+
+    def _score_one(self, beta: Weights, state: GaussianState, model: Model, meas: Measurement) -> float:
+        """One candidate's score through the template path (used when a candidate's covariance
+        cannot be factored in :meth:`_scores`: a candidate that breaks definiteness is not a
+        candidate)."""
         try:
             prior = self._prior_with(beta, state, model)
-            pred = self.adjust_prediction(self.predict_measurement(prior, model, meas))
-            return self._score(pred, self.measurement_noise(meas, pred))
+            return self._score(self.measure(prior, meas, beta), meas.R)
         except (np.linalg.LinAlgError, FloatingPointError):
             return np.inf
-        finally:
-            self._beta = None
-
-    def noise_report(self) -> dict[str, np.ndarray]:
-        """The weights chosen at the last epoch (``weights``, (2n,), points ``+sqrt(n) S e_i``
-        first, then the minus points) and the fraction of epochs so far where the uniform (CKF)
-        weights won the selection."""
-        out = {"uniform_chosen_fraction": np.array([self.chosen_uniform / max(self.epochs, 1)])}
-        if self.last_weights is not None:
-            out["weights"] = self.last_weights.copy()
-        return out

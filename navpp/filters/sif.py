@@ -18,9 +18,9 @@ components (i, k) by ``sd_i sd_k`` (``sd`` from the averaged covariance's diagon
 measure is dimensionless (radians, metres and m/s mix in the INS state), so ``tol = 0.01``
 means "every moment known to 1 % of its standard deviations".  The default ``tol = 1e-3``
 stops as soon as the moments agree to 0.1 % of a standard deviation: on a linear model (the rule
-is exact) and on the INS between GNSS epochs (0.2 s of propagation: the iterations differ by
-about 1e-6 sd) that is after ``min_iter`` = 2 iterations, 2.8x faster than always running 10
-on a 1-hour log with the same trajectory; ``tol = 0`` always runs ``max_iter`` iterations.  The draws for all
+is exact) and on the INS between GNSS epochs (a short propagation, where the iterations agree
+far better than that) that is after ``min_iter`` = 2 iterations; ``tol = 0`` always runs
+``max_iter`` iterations (docs/papers.md gives the run-time figures).  The draws for all
 ``max_iter`` iterations are taken from the Generator up front (one compiled call), so the random stream
 advances by the same amount per integral whatever ``tol`` stops at.
 
@@ -43,7 +43,7 @@ propagated.  Each iteration's own moments are exact for polynomials of degree <=
 linear model the filter is the Kalman filter for every draw.  (With a negative centre weight
 the estimate is not positive semi-definite by construction when f is strongly nonlinear; a
 covariance that lost definiteness is repaired and counted like any sigma-point filter's,
-``SigmaPointFilter.repairs``.)
+``SIF.repairs``.)
 
 References: J. Dunik, O. Straka, M. Simandl, "Stochastic integration filter", IEEE Trans.
 Automatic Control 58(6):1561-1566, 2013 (paper 001's ref [13], a comparison filter);
@@ -52,13 +52,17 @@ ALGORITHMS.md "Paper 001's comparison filters (AUKF, SIF)".
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 
-from .base import GaussianState, MeasurementPrediction, Prediction, register, symmetrise
-from .sigma import SigmaPointFilter, _factor
+from .base import Filter, register
+from .linalg import symmetrise
+from .protocols import Interval, Measurement, Model
+from .sigma import factor
+from .states import GaussianState, MeasurementPrediction, Prediction
 from .stochastic import IterationAverage, StochasticIntegrationRule
 
 
@@ -100,12 +104,17 @@ def _scaled_error(se: list[np.ndarray], scales: list[np.ndarray]) -> float:
 
 
 def _sd(P_diag: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.maximum(P_diag, 0.0))
+    sd: np.ndarray = np.sqrt(np.maximum(P_diag, 0.0))
+    return sd
 
 
 @register("sif")
-class SIF(SigmaPointFilter):
-    """Stochastic integration filter (see module docstring); ``self.rng`` drives every draw."""
+class SIF(Filter):
+    """Stochastic integration filter (see module docstring); ``self.rng`` drives every draw.
+
+    Attributes: ``iterations`` (2,), the iterations of the last time and measurement updates;
+    ``repairs``, covariances repaired by eigenvalue clipping.
+    """
 
     paper = "paper 001 (comparison filter); Dunik, Straka & Simandl 2013"
     summary = "Stochastic integration filter: randomised 3rd-degree rule averaged over iterations."
@@ -118,31 +127,31 @@ class SIF(SigmaPointFilter):
         options = options if options is not None else SIFOptions()
         super().__init__(options, gate_probability=gate_probability, reanchor_after_s=reanchor_after_s,
                          rng=rng if rng is not None else np.random.default_rng(options.seed))
-        self._rule = StochasticIntegrationRule()
-        #: iterations used by the last time update and the last measurement update
+        self.si_rule = StochasticIntegrationRule()
         self.iterations = np.zeros(2)
+        self.repairs = 0
 
     def noise_report(self) -> dict[str, np.ndarray]:
         """Iterations of the last time and measurement updates (constant when ``tol = 0``)."""
         return {"si_iterations": self.iterations.copy()}
 
-    def _done(self, acc: IterationAverage, scales) -> bool:
-        o = self.options
+    def _done(self, acc: IterationAverage, scales: Callable[[], list[np.ndarray]]) -> bool:
+        o: SIFOptions = self.options
         if acc.count >= o.max_iter:
             return True
         return o.tol > 0.0 and acc.count >= o.min_iter and _scaled_error(acc.standard_error(), scales()) <= o.tol
 
-    def predict(self, state: GaussianState, model, interval: tuple[float, float]) -> Prediction:
-        S = _factor(state.P, state.t, self.name, self)
+    def time_update(self, state: GaussianState, model: Model, interval: Interval) -> Prediction:
+        S = factor(state.P, state.t, self.name, self)
         n = S.shape[0]
         acc = IterationAverage()
-        x_ref = None
+        x_ref = state.x
 
-        def scales():
+        def scales() -> list[np.ndarray]:
             sd = _sd(np.diagonal(acc.mean[1]))
             return [sd, np.outer(sd, sd)]
 
-        xis, ws = self._rule.draws(self.rng, n, self.options.max_iter)
+        xis, ws = self.si_rule.draws(self.rng, n, self.options.max_iter)
         for xi, w in zip(xis, ws):
             # the centre point is the reference: its image f(x ⊞ 0) ⊟ f(x) is 0, not propagated
             dX = xi[1:] @ S.T
@@ -155,21 +164,21 @@ class SIF(SigmaPointFilter):
                 break
         mean, second, x_mean, cross = acc.mean
         self.iterations[0] = acc.count
-        P = second - np.outer(mean, mean) + self.process_noise(model, state.x, interval)
+        P = second - np.outer(mean, mean) + self.adapter.process_noise(model, state.x, interval)
         return Prediction(GaussianState(interval[1], model.plus(x_ref, mean), symmetrise(P)),
                           cross - np.outer(x_mean, mean), x_ref)
 
-    def predict_measurement(self, state: GaussianState, model, meas) -> MeasurementPrediction:
-        S = _factor(state.P, state.t, self.name, self)
+    def predict_measurement(self, state: GaussianState, model: Model, meas: Measurement) -> MeasurementPrediction:
+        S = factor(state.P, state.t, self.name, self)
         n = S.shape[0]
         sd_x = _sd(np.diagonal(state.P))
         acc = IterationAverage()
 
-        def scales():
+        def scales() -> list[np.ndarray]:
             sd_z = _sd(np.diagonal(acc.mean[1]))
             return [sd_z, np.outer(sd_z, sd_z), sd_x, np.outer(sd_x, sd_z)]
 
-        xis, ws = self._rule.draws(self.rng, n, self.options.max_iter)
+        xis, ws = self.si_rule.draws(self.rng, n, self.options.max_iter)
         for xi, w in zip(xis, ws):
             dX = xi[1:] @ S.T
             Z = meas.predict_points(state.x, dX)                   # h(x ⊞ dX_i) ⊟ h(x); centre: 0

@@ -31,12 +31,14 @@ hour of 5 Hz GNSS with 1 s coast knots on the 15-state INS: about 120 MB).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
-from numba import njit
 
 from ..errors import FilterDivergedError
-from .base import GaussianState, Prediction, _chol_solve, _cholesky
+from .linalg import chol_solve, cholesky, compiled
+from .protocols import SmoothableModel
+from .states import GaussianState, Prediction
 
 
 class ForwardStore:
@@ -57,7 +59,7 @@ class ForwardStore:
 
     def __init__(self, n_err: int, n_x: int) -> None:
         self.n_err, self.n_x = int(n_err), int(n_x)
-        self._nodes: dict[str, list] = {name: [] for name in self.FIELDS}
+        self._nodes: dict[str, list[Any]] = {name: [] for name in self.FIELDS}
 
     @property
     def n(self) -> int:
@@ -132,8 +134,8 @@ class Smoothed:
     repaired: int
 
 
-@njit(cache=True)
-def _backward_covariances(P_post, P_prior, D, reset, m):
+@compiled
+def _backward_covariances(P_post: np.ndarray, P_prior: np.ndarray, D: np.ndarray, reset: np.ndarray, m: int) -> int:
     """In place: ``P_post[k] <- P_k^s`` and ``D[k + 1] <- C_k`` for k = m-2 .. 0; returns the
     number of steps whose prior was not positive definite (then treated as a reset)."""
     bad = 0
@@ -141,12 +143,12 @@ def _backward_covariances(P_post, P_prior, D, reset, m):
         if reset[k + 1]:
             D[k + 1][:, :] = 0.0
             continue
-        L, ok = _cholesky(P_prior[k + 1])
+        L, ok = cholesky(P_prior[k + 1])
         if not ok:
             D[k + 1][:, :] = 0.0
             bad += 1
             continue
-        Ct = _chol_solve(L, np.ascontiguousarray(D[k + 1].T))      # P^-1 D^T = C^T (P symmetric)
+        Ct = chol_solve(L, np.ascontiguousarray(D[k + 1].T))      # P^-1 D^T = C^T (P symmetric)
         C = np.ascontiguousarray(Ct.T)
         dP = P_post[k + 1] - P_prior[k + 1]
         Ps = P_post[k] + C @ dP @ Ct
@@ -155,38 +157,23 @@ def _backward_covariances(P_post, P_prior, D, reset, m):
     return bad
 
 
-def rts_smooth(store: ForwardStore, model) -> Smoothed:
-    """Smooth the stored forward run (see the module docstring); empties the store.
-
-    ``model`` supplies ``plus`` / ``minus`` (⊞ / ⊟); a model whose ``rts_means`` is a compiled
-    kernel ``rts_means(x_post, x_prior, gains, reset) -> xs`` (the INS) runs the mean
-    recursion in it, others in Python.
-    """
+def rts_smooth(store: ForwardStore, model: SmoothableModel) -> Smoothed:
+    """Smooth the stored forward run (see the module docstring); empties the store.  The
+    model's ``rts_means`` runs the mean recursion (compiled on the INS)."""
     if store.n == 0:
         raise ValueError("rts_smooth: the store is empty")
     a = store.arrays()
     return smooth_arrays(a, model)
 
 
-def smooth_arrays(a: dict[str, np.ndarray], model) -> Smoothed:
+def smooth_arrays(a: dict[str, np.ndarray], model: SmoothableModel) -> Smoothed:
     """:func:`rts_smooth` on the packed nodes of :meth:`ForwardStore.arrays` (``a["P_post"]``
     becomes the smoothed covariance and ``a["D"]`` the gains, in place)."""
     m = a["t"].shape[0]
     reset = a["reset"]
     bad = _backward_covariances(a["P_post"], a["P_prior"], a["D"], reset, m)
     gains = a["D"]
-    x_post, x_prior = a["x_post"], a["x_prior"]
-    kernel = getattr(model, "rts_means", None)
-    if kernel is not None:
-        xs = kernel(x_post, x_prior, gains, reset)
-    else:
-        xs = np.empty_like(x_post)
-        xs[m - 1] = x_post[m - 1]
-        for k in range(m - 2, -1, -1):
-            if reset[k + 1]:
-                xs[k] = x_post[k]
-                continue
-            xs[k] = model.plus(x_post[k], gains[k + 1] @ model.minus(xs[k + 1], x_prior[k + 1]))
+    xs = model.rts_means(a["x_post"], a["x_prior"], gains, reset)
     if not (np.all(np.isfinite(xs)) and np.all(np.isfinite(a["P_post"]))):
         raise FilterDivergedError("RTS smoother: the smoothed state became non-finite")
     return Smoothed(a["t"], xs, a["P_post"], gains, int(reset[1:].sum()), int(bad))

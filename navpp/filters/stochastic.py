@@ -24,11 +24,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+
+from .linalg import compiled
 
 
-@njit(cache=True)
-def _haar_from_gaussian(G):
+@compiled
+def _haar_from_gaussian(G: np.ndarray) -> np.ndarray:
     """Orthonormalise the columns of ``G`` (n, n) by modified Gram-Schmidt, run twice.
 
     This is the QR factorisation ``G = U R`` with ``R``'s diagonal positive, i.e. numpy's QR
@@ -55,8 +56,8 @@ def _haar_from_gaussian(G):
     return U
 
 
-@njit(cache=True)
-def _si_draws(G, rho2):
+@compiled
+def _si_draws(G: np.ndarray, rho2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Standardised points (J, 2n + 1, n) and weights (J, 2n + 1) for J draws ``G`` (J, n, n),
     ``rho2`` (J,): row 0 the centre, rows 1..n ``rho U e_i``, rows n+1..2n their negatives."""
     J, n = G.shape[0], G.shape[1]

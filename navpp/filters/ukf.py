@@ -31,5 +31,5 @@ class UKF(SigmaPointFilter):
     summary = "Unscented Kalman filter (scaled: alpha, beta, kappa) through the real strapdown."
     Options = UKFOptions
 
-    def rule(self) -> UnscentedRule:
+    def make_rule(self) -> UnscentedRule:
         return UnscentedRule(self.options.alpha, self.options.beta, self.options.kappa)

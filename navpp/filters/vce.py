@@ -1,11 +1,11 @@
 """Helmert variance component estimation (VCE) of the process and measurement noise.
 
-A noise adapter in the sense of :mod:`navpp.filters.noise`: a separate piece that a filter
-plugs into its ``process_noise``, ``measurement_noise`` and ``after_update`` hooks (the
-VCE-CKF, :mod:`navpp.filters.vce_ckf`).  It relies on nothing but the model's
-``noise_groups(x, interval)`` (or, lacking it, ``process_noise``) and the
-:class:`~navpp.filters.base.Innovation` record, so the same code runs on the INS and on the
-papers' small benchmark models.
+A filter's adaptation (:class:`~navpp.filters.adaptation.Adaptation`; the VCE-CKF,
+:mod:`navpp.filters.vce_ckf`): it chooses the process noise of every time update and the R of
+every adaptive measurement, and learns after every applied update.  It relies on nothing but
+the model's noise groups (:class:`~navpp.filters.protocols.GroupedNoiseModel`; a model without
+them is one group, its ``process_noise``) and the :class:`~navpp.filters.states.Innovation`
+record, so the same code runs on the INS and on the papers' small benchmark models.
 
 Per accepted epoch (paper 003 eqs 37-39; ALGORITHMS.md "Helmert variance component
 estimation"), with the prior covariance ``P⁻`` (n, n), ``A = (P⁻)⁻¹`` (Cholesky solves),
@@ -45,8 +45,8 @@ sum restarts after every accepted (or forced) update; forced updates are not lea
 
 Propagated shares (``q_share = "propagated"``, the default on the INS): a group's noise reaches
 an innovation mostly through what it has added to ``P⁻`` over many time updates, not through the
-last step's ``U_g`` (on the INS at 5 Hz the step redundancy is about 1e-8, so the step form never
-moves Q).  Each group's share of the covariance, ``P_g``, is carried along like ``P`` itself:
+last step's ``U_g`` (on the INS at the GNSS rate the step redundancy is tiny, so the step form
+never moves Q).  Each group's share of the covariance, ``P_g``, is carried along like ``P`` itself:
 ``P_g ← Φ P_g Φᵀ + f_g U_g`` at every time update (``Φ = Cᵀ P⁻¹``, the statistically linearised
 transition from the update's cross-covariance) and ``P_g ← L P_g Lᵀ`` at every applied update
 (``L = I − Pxz S⁻¹ Pxzᵀ A``, aids included; a forced update restarts the shares).  Then
@@ -58,31 +58,30 @@ benchmarks, where every step's noise reaches the measurement, keep it).
 Pooling (paper 003 cites Wang 2009 for it): a single epoch's estimate is one squared residual,
 far too noisy to use raw.
 
-Identifiability (measured, see tests/test_vce.py): on one epoch VCE sees only the innovation
-``d``, so it tells the groups apart only through the different *shapes* their noise gives ``S``.
-With a scalar measurement every group's correction is the same ``d²/S`` (tested), so VCE can
-only rescale Q and R together until the innovations are consistent; along the curve of
-consistent (Q, R) nothing pulls it to the truth.  In a 2-D constant-velocity simulation with
-the position measured (each axis scalar), Q started at 3x and R at 4x the truth went to the
-ceiling (Q) and to about 0.65 (R).  Measuring position and velocity separates them only weakly
-(from 3x/4x: q about 2.5x, velocity R about 0.55x); two sensors on the same position separate
-them well (factors within about 30 % of the truth, the convergence test).  On the INS at 5 Hz
-the process-noise groups have a redundancy of about 1e-8 per epoch (a 0.2 s step's noise barely
-reaches the position innovation directly), so ``min_redundancy`` keeps Q at its prior and only
-R is learnt.
+Identifiability (tests/test_vce.py): on one epoch VCE sees only the innovation ``d``, so it
+tells the groups apart only through the different *shapes* their noise gives ``S``.  With a
+scalar measurement every group's correction is the same ``d²/S`` (tested), so VCE can only
+rescale Q and R together until the innovations are consistent; along the curve of consistent
+(Q, R) nothing pulls it to the truth.  Measuring position and velocity separates them only
+weakly; two sensors on the same position separate them well (the convergence test).  On the
+INS at the GNSS rate the process-noise groups have a tiny redundancy per epoch (a short step's
+noise barely reaches the position innovation directly), so ``min_redundancy`` keeps Q at its
+prior and only R is learnt (docs/papers.md gives the measured figures).
 
 References: paper 003 eqs 6-18 and 35-39; ALGORITHMS.md; Wang (2009) as cited by paper 003.
 """
 
 from __future__ import annotations
 
-import inspect
 from dataclasses import dataclass
-from typing import Any
+from typing import cast
 
 import numpy as np
 
-from .base import _chol_solve, _cholesky
+from .adaptation import Adaptation
+from .linalg import chol_solve, cholesky
+from .protocols import GroupedNoiseModel, Interval, Measurement, Model
+from .states import GaussianState, Innovation, MeasurementPrediction, Prediction
 
 ADAPT_CHOICES = ("QR", "Q", "R", "none")
 Q_GROUP_CHOICES = ("triad", "axis")
@@ -165,16 +164,10 @@ class VCEEpoch:
         return float(self.r_x + self.r_g.sum() + self.r_z.sum())
 
 
-def _accepts_per(model: Any) -> bool:
-    try:
-        return "per" in inspect.signature(model.noise_groups).parameters
-    except (TypeError, ValueError):
-        return False
-
-
-class HelmertVCE:
-    """State of the estimator: configured noise groups accumulated since the last update,
-    factors, and the window of per-epoch numbers (see the module docstring).
+class HelmertVCE(Adaptation):
+    """Helmert VCE as a filter's adaptation.  State of the estimator: configured noise groups
+    accumulated since the last update, factors, and the window of per-epoch numbers (see the
+    module docstring).
 
     Attributes
     ----------
@@ -184,7 +177,10 @@ class HelmertVCE:
         first measurement.
     last : the last learnt :class:`VCEEpoch` (None before).
     skipped : epochs not learnt from because ``P⁻`` or ``S`` was not positive definite.
+    r_axes : names of the measurement elements of the last adaptive measurement.
     """
+
+    adapts_noise = True
 
     def __init__(self, options: VCEOptions) -> None:
         self.o = options
@@ -196,34 +192,33 @@ class HelmertVCE:
         self._U: np.ndarray | None = None         # (G, n, n) unit groups summed since the last update
         self._Q_total: np.ndarray | None = None   # (n, n) process noise used since the last update
         self._R_given: np.ndarray | None = None
-        self._per: bool | None = None
+        self.r_axes: tuple[str, ...] = ()
+        self._grouped: bool | None = None        # the model has noise groups (decided at the first predict)
         self.propagated = options.q_share == "propagated"   # "auto" decided at the first predict
         self._Pg: np.ndarray | None = None       # (G, n, n) each group's share of P (propagated mode)
-        self._pending: np.ndarray | None = None  # (G, n, n) this time update's f_g U_g, not yet propagated
+        self._step_noise: np.ndarray | None = None   # (G, n, n) f_g U_g of the running time update
         W = options.window
         self._k = 0                                # accepted epochs learnt from
         self._q_num = self._q_red = np.zeros((W, 0))
         self._z_num = self._z_red = np.zeros((W, 0))
 
     # time update ---------------------------------------------------------------------------
-    def _groups(self, model: Any, x: np.ndarray, interval: tuple[float, float]) -> tuple[list[str], np.ndarray]:
-        if not hasattr(model, "noise_groups"):
+    def _groups(self, model: Model, x: np.ndarray, interval: Interval) -> tuple[list[str], np.ndarray]:
+        """The model's noise groups; a model without groups is one group, its process noise."""
+        if self._grouped is None:
+            self._grouped = isinstance(model, GroupedNoiseModel)
+            if self._grouped and self.o.q_share == "auto":
+                self.propagated = cast(GroupedNoiseModel, model).noise_share == "propagated"
+        if not self._grouped:
             return ["Q"], np.asarray(model.process_noise(x, interval), dtype=float)[None]
-        if self._per is None:
-            self._per = _accepts_per(model)
-            if self.o.q_share == "auto":
-                self.propagated = self._per
-        if self._per:
-            names, Qs = model.noise_groups(x, interval, per=self.o.q_groups)
-        else:
-            names, Qs = model.noise_groups(x, interval)
+        names, Qs = cast(GroupedNoiseModel, model).noise_groups(x, interval, per=self.o.q_groups)
         return list(names), np.asarray(Qs, dtype=float)
 
-    def process_noise(self, model: Any, x: np.ndarray, interval: tuple[float, float]) -> np.ndarray:
+    def process_noise(self, model: Model, x: np.ndarray, interval: Interval) -> np.ndarray:
         """Process noise (n, n) for a time update over ``interval``: ``Σ_g f_g U_g`` when Q is
         adapted, else the model's own; the groups are accumulated until the next update."""
         if not self.o.adapt_q:
-            Q = np.asarray(model.process_noise(x, interval), dtype=float)
+            Q: np.ndarray = np.asarray(model.process_noise(x, interval), dtype=float)
             self._Q_total = Q.copy() if self._Q_total is None else self._Q_total + Q
             return Q
         names, Us = self._groups(model, x, interval)
@@ -237,32 +232,36 @@ class HelmertVCE:
             raise ValueError(f"VCE: the model's noise groups changed from {self.q_group_names} to {names}")
         self._U = Us.copy() if self._U is None else self._U + Us
         if self.propagated:
-            self._pending = self.q_factor[:, None, None] * Us
+            self._step_noise = self.q_factor[:, None, None] * Us
         Q = np.einsum("g,gij->ij", self.q_factor, Us)
         Q = 0.5 * (Q + Q.T)
         self._Q_total = Q.copy() if self._Q_total is None else self._Q_total + Q
         return Q
+
+    def predicted(self, before: GaussianState, prediction: Prediction) -> None:
+        """Propagated mode: carry the groups' shares through the time update just made."""
+        self.propagate(before.P, prediction.cross_cov)
 
     def propagate(self, P_before: np.ndarray, cross: np.ndarray) -> None:
         """Propagated mode: carry each group's share of P through a time update,
         ``P_g <- Phi P_g Phi^T + f_g U_g``, with the statistically linearised transition
         ``Phi = C^T P^-1`` from the update's cross-covariance ``C = E[dx_k dx_k+1^T]`` and the
         covariance ``P`` before it."""
-        if not self.propagated or self._pending is None:
+        if not self.propagated or self._step_noise is None:
             return
-        pending, self._pending = self._pending, None
-        L, ok = _cholesky(np.ascontiguousarray(P_before, dtype=float))
+        pending, self._step_noise = self._step_noise, None
+        L, ok = cholesky(np.ascontiguousarray(P_before, dtype=float))
         if not ok:
             self._Pg = None
             return
-        phi = _chol_solve(L, np.ascontiguousarray(cross, dtype=float)).T          # (n, n)
+        phi = chol_solve(L, np.ascontiguousarray(cross, dtype=float)).T          # (n, n)
         if self._Pg is None:
             self._Pg = pending
         else:
             Pg = phi @ self._Pg @ phi.T + pending
             self._Pg = 0.5 * (Pg + np.transpose(Pg, (0, 2, 1)))
 
-    def corrected(self, P_prior: np.ndarray, Pxz: np.ndarray, S: np.ndarray, *, reset: bool = False) -> None:
+    def shrink_shares(self, P_prior: np.ndarray, Pxz: np.ndarray, S: np.ndarray, *, reset: bool = False) -> None:
         """Propagated mode: after any applied update (GNSS or an aid), each group's share of P
         shrinks like P itself, ``P_g <- L P_g L^T`` with ``L = I - Pxz S^-1 Pxz^T P^-1`` (the
         statistically linearised ``I - K H``); a re-anchored (forced) update restarts them."""
@@ -271,19 +270,39 @@ class HelmertVCE:
         if reset:
             self._Pg = None
             return
-        LP, okP = _cholesky(np.ascontiguousarray(P_prior, dtype=float))
-        LS, okS = _cholesky(np.ascontiguousarray(S, dtype=float))
+        LP, okP = cholesky(np.ascontiguousarray(P_prior, dtype=float))
+        LS, okS = cholesky(np.ascontiguousarray(S, dtype=float))
         if not (okP and okS):
             self._Pg = None
             return
-        B = _chol_solve(LP, np.ascontiguousarray(Pxz, dtype=float))                 # A Pxz (n, m)
-        KH = np.ascontiguousarray(Pxz, dtype=float) @ _chol_solve(LS, np.ascontiguousarray(B.T))   # (n, n)
+        B = chol_solve(LP, np.ascontiguousarray(Pxz, dtype=float))                 # A Pxz (n, m)
+        KH = np.ascontiguousarray(Pxz, dtype=float) @ chol_solve(LS, np.ascontiguousarray(B.T))   # (n, n)
         L = np.eye(KH.shape[0]) - KH
         Pg = L @ self._Pg @ L.T
         self._Pg = 0.5 * (Pg + np.transpose(Pg, (0, 2, 1)))
 
     # measurement update --------------------------------------------------------------------
-    def measurement_noise(self, R_given: np.ndarray) -> np.ndarray:
+    def measurement_noise(self, meas: Measurement, raw: MeasurementPrediction) -> np.ndarray:
+        """R for an adaptive measurement: its R scaled per axis (:meth:`scaled_noise`)."""
+        self.r_axes = meas.axes
+        return self.scaled_noise(meas.R)
+
+    def corrected(self, prior: GaussianState, raw: MeasurementPrediction, innovation: Innovation,
+                  meas: Measurement) -> None:
+        """After an applied update: learn from an adaptive one, then shrink the groups' shares
+        (every applied update, aids included; a forced one restarts them)."""
+        if meas.adaptive:
+            self.learn(prior.P, innovation.nu, innovation.S, innovation.Pxz, forced=innovation.forced)
+        self.shrink_shares(prior.P, innovation.Pxz, innovation.S, reset=innovation.forced)
+
+    def labels(self) -> dict[str, list[str]]:
+        """``q_factor``: the group names; ``r_factor``: the axes of the last adaptive measurement."""
+        labels = {"q_factor": list(self.q_group_names or [])}
+        if self.r_axes:
+            labels["r_factor"] = list(self.r_axes)
+        return labels
+
+    def scaled_noise(self, R_given: np.ndarray) -> np.ndarray:
         """R (m, m) for this update: the given R scaled per axis, ``D R D``, ``D = diag(√f)``."""
         R_given = np.asarray(R_given, dtype=float)
         self._R_given = R_given
@@ -315,18 +334,18 @@ class HelmertVCE:
         unknown and the measurement numbers are normalised by 1).
         """
         # compiled Cholesky solves (base.py): tiny matrices, no BLAS threading in the loop
-        LP, okP = _cholesky(np.ascontiguousarray(P_prior, dtype=float))
-        LS, okS = _cholesky(np.ascontiguousarray(S, dtype=float))
+        LP, okP = cholesky(np.ascontiguousarray(P_prior, dtype=float))
+        LS, okS = cholesky(np.ascontiguousarray(S, dtype=float))
         if not (okP and okS):
             return None
         n, m = Pxz.shape
-        B = _chol_solve(LP, np.ascontiguousarray(Pxz, dtype=float))             # A Pxz (n, m)
-        w = _chol_solve(LS, np.asarray(nu, dtype=float).reshape(-1, 1))[:, 0]   # S⁻¹ d
+        B = chol_solve(LP, np.ascontiguousarray(Pxz, dtype=float))             # A Pxz (n, m)
+        w = chol_solve(LS, np.asarray(nu, dtype=float).reshape(-1, 1))[:, 0]   # S⁻¹ d
         y = B @ w                                       # A K d
-        M = B @ _chol_solve(LS, np.ascontiguousarray(B.T))   # A Pxz S⁻¹ Pxzᵀ A  (n, n)
+        M = B @ chol_solve(LS, np.ascontiguousarray(B.T))   # A Pxz S⁻¹ Pxzᵀ A  (n, n)
         M = 0.5 * (M + M.T)
         D = Pxz.T @ B                                   # Pxzᵀ A Pxz  (m, m)
-        T = _chol_solve(LS, np.ascontiguousarray(0.5 * (D + D.T))).T   # Pxzᵀ A K
+        T = chol_solve(LS, np.ascontiguousarray(0.5 * (D + D.T))).T   # Pxzᵀ A K
         v_z = T @ nu - nu
         r_z = 1.0 - np.diagonal(T)
         Q_total = self._Q_total if self._Q_total is not None else np.zeros((n, n))

@@ -552,6 +552,8 @@ class InsModel:
 
     #: the smoother's mean recursion, compiled (:func:`rts_means`)
     rts_means = staticmethod(rts_means)
+    #: VCE's process-noise groups reach the fixes through many time updates (filters.protocols)
+    noise_share: ClassVar[str] = "propagated"
 
     def _path_out(self) -> np.ndarray:
         """The (N, PATH_SIZE) array the strapdown records the nominal into."""
@@ -661,6 +663,8 @@ class GnssPosition:
     reopen_std: np.ndarray | None = None
     axes: ClassVar[tuple[str, ...]] = ("e", "n", "u")     # names of the measurement's elements
     kind: ClassVar[str] = "gnss_position"
+    adaptive: ClassVar[bool] = True       # adaptive filters learn their noise from it
+    forceable: ClassVar[bool] = True      # forced in after a run of gate rejections (re-anchored)
 
     def innovation_at(self, x: np.ndarray) -> np.ndarray:
         """Fix minus predicted antenna position at nominal ``x``, local ENU m (3,)."""

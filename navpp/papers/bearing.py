@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..filters.linear import LinearModel
+from ..filters.protocols import MeasurementBase
 from .angles import wrap_angle
 from .montecarlo import Case, collect, diverged_note, monte_carlo, rmse, rmse_curve
 from .registry import BenchResult, Row, register_benchmark
@@ -29,7 +30,7 @@ BEARING_R_SCALE = 4.0
 
 
 @dataclass(frozen=True)
-class BearingMeasurement:
+class BearingMeasurement(MeasurementBase):
     """Bearing (rad) from ``sensor`` (2,) to the position ``(x[0], x[1])``:
     ``z = atan2(x1 - sy, x0 - sx) + v`` (paper 003 eq 41, four-quadrant); R (1, 1).
     Innovations and point differences are wrapped into (-pi, pi]."""

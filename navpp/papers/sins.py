@@ -37,6 +37,7 @@ from ..engine.loop import EpochOutcome, run_epochs
 from ..engine.schedule import Epoch
 from ..errors import ConfigError, FilterDivergedError
 from ..filters import GaussianState, Update
+from ..filters.protocols import MeasurementBase
 from ..ins.attitude import dcm_to_quat, rph_to_dcm
 from ..ins.model import POS, VEL, InsModel, NoiseModel, gnss_innovation, minus, plus
 from .filter_spec import make_bench_filter
@@ -209,7 +210,7 @@ def gps_times(sc: Paper002Scenario) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class GnssPositionVelocity:
+class GnssPositionVelocity(MeasurementBase):
     """GNSS position and velocity fix (antenna at the IMU) as a measurement of the 15-state model.
 
     Residual (6,): position fix minus INS position in local ENU metres about the nominal

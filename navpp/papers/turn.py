@@ -10,10 +10,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
 from ..filters.linear import VectorSpace
+from ..filters.protocols import MeasurementBase
 from .angles import wrap_angle
 from .montecarlo import Case, collect, diverged_note, monte_carlo, rmse, rmse_curve
 from .registry import BenchResult, Row, register_benchmark
@@ -58,6 +60,7 @@ class CoordinatedTurnModel(VectorSpace):
 
     q1: float
     q2: float
+    noise_share: ClassVar[str] = "step"       # VCE measures the groups per step (filters.protocols)
 
     @staticmethod
     def f(X: np.ndarray, T: float) -> np.ndarray:
@@ -83,7 +86,7 @@ class CoordinatedTurnModel(VectorSpace):
             [0.0, 0.0, 0.0, 0.0, 1.0],
         ])
 
-    def noise_groups(self, x: np.ndarray, interval) -> tuple[list[str], np.ndarray]:
+    def noise_groups(self, x: np.ndarray, interval, per: str = "") -> tuple[list[str], np.ndarray]:
         """``(["q1", "q2"], Qs (2, 5, 5))``, summing to :meth:`process_noise`."""
         T = float(interval[1] - interval[0])
         M = np.array([[T ** 3 / 3, T ** 2 / 2], [T ** 2 / 2, T]])
@@ -106,7 +109,7 @@ class CoordinatedTurnModel(VectorSpace):
 
 
 @dataclass(frozen=True)
-class RangeBearingMeasurement:
+class RangeBearingMeasurement(MeasurementBase):
     """Range (m) and bearing (rad) of ``(x[0], x[2])`` from the origin (paper 003 eq 43, bearing
     four-quadrant); z (2,), R (2, 2).  Bearing differences wrapped into (-pi, pi]."""
 

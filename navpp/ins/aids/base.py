@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, ClassVar, Protocol, cast
 import numpy as np
 from numba import njit
 
+from ...filters.protocols import MeasurementBase
 from ..model import plus
 
 if TYPE_CHECKING:
@@ -72,14 +73,15 @@ def points_kernel(model: Dispatcher[ModelKernel]) -> Dispatcher[PointsKernel]:
 
 
 @dataclass(frozen=True)
-class Aid:
+class Aid(MeasurementBase):
     """An aiding measurement at time ``t`` (s): value ``z`` (k,), covariance ``R`` (k, k), and
     the parameters ``p`` its model needs (documented per aid).
 
     Class attributes: ``kind`` (name in counts and diagnostics), ``axes`` (names of the
     elements), ``adaptive = False`` (adaptive filters learn their noise from the GNSS position
     only and use an aid's ``R`` as given), ``forceable = False`` (an aid the gate rejects is
-    dropped, never forced in after a run of rejections as a GNSS fix is).
+    dropped, never forced in after a run of rejections as a GNSS fix is); no re-anchoring
+    (:class:`~navpp.filters.protocols.MeasurementBase`).
     """
 
     t: float

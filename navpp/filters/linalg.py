@@ -1,0 +1,116 @@
+"""Small dense linear algebra of the filter core, compiled: Cholesky factor and solves, the
+Kalman gain with the NIS, the Joseph-form and sigma-point posterior covariances.
+
+Matrices are tiny (n = 15 states, m <= 3 measurement elements on the INS), so hand-written
+loops compiled by numba beat LAPACK calls through numpy; they run without BLAS threading.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, TypeVar, cast
+
+import numpy as np
+from numba import njit
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def compiled(fn: F) -> F:
+    """``numba.njit(cache=True)`` keeping the function's signature for type checkers."""
+    return cast(F, njit(cache=True)(fn))
+
+
+def symmetrise(P: np.ndarray) -> np.ndarray:
+    """``(P + P^T) / 2``."""
+    out: np.ndarray = 0.5 * (P + P.T)
+    return out
+
+
+@compiled
+def chol_solve(L: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Solve ``(L L^T) X = B`` for lower-triangular ``L`` (m, m), ``B`` (m, k)."""
+    m, k = B.shape
+    Y = np.empty((m, k))
+    for c in range(k):
+        for i in range(m):
+            s = B[i, c]
+            for j in range(i):
+                s -= L[i, j] * Y[j, c]
+            Y[i, c] = s / L[i, i]
+        for i in range(m - 1, -1, -1):
+            s = Y[i, c]
+            for j in range(i + 1, m):
+                s -= L[j, i] * Y[j, c]
+            Y[i, c] = s / L[i, i]
+    return Y
+
+
+@compiled
+def cholesky(S: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Lower Cholesky factor of ``S`` and whether ``S`` is (numerically) positive definite."""
+    m = S.shape[0]
+    L = np.zeros((m, m))
+    for j in range(m):
+        d = S[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:            # also catches NaN
+            return L, False
+        L[j, j] = np.sqrt(d)
+        for i in range(j + 1, m):
+            v = S[i, j]
+            for k in range(j):
+                v -= L[i, k] * L[j, k]
+            L[i, j] = v / L[j, j]
+    return L, True
+
+
+@compiled
+def gain_and_nis(Pxz: np.ndarray, S: np.ndarray, nu: np.ndarray) -> tuple[np.ndarray, float, bool]:
+    """Kalman gain ``K = Pxz S^-1`` and ``nis = nu^T S^-1 nu`` by Cholesky solves; ``ok`` is
+    False when S is not positive definite (K and nis are then meaningless)."""
+    L, ok = cholesky(S)
+    if not ok:
+        return np.zeros_like(Pxz), np.inf, False
+    Kt = chol_solve(L, np.ascontiguousarray(Pxz.T))
+    w = chol_solve(L, nu.reshape(-1, 1))[:, 0].copy()
+    return Kt.T.copy(), float(nu @ w), True
+
+
+@compiled
+def joseph(P: np.ndarray, K: np.ndarray, H: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Joseph-form posterior ``(I - K H) P (I - K H)^T + K R K^T``, symmetrised."""
+    I_KH = np.eye(P.shape[0]) - K @ H
+    Pn = I_KH @ P @ I_KH.T + K @ R @ K.T
+    out: np.ndarray = 0.5 * (Pn + Pn.T)
+    return out
+
+
+@compiled
+def sigma_posterior(P: np.ndarray, K: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """Posterior ``P - K S K^T`` of a filter without a Jacobian, symmetrised."""
+    Pn = P - K @ S @ K.T
+    out: np.ndarray = 0.5 * (Pn + Pn.T)
+    return out
+
+
+@compiled
+def nis_and_logdet(S: np.ndarray, nu: np.ndarray) -> tuple[float, float, bool]:
+    """``nu^T S^-1 nu`` and ``log det S`` by a Cholesky factor of ``S`` (m, m); ``ok`` is False
+    when S is not positive definite (both values are then inf)."""
+    L, ok = cholesky(S)
+    if not ok:
+        return np.inf, np.inf, False
+    m = nu.shape[0]
+    w = np.empty(m)
+    nis = 0.0
+    logdet = 0.0
+    for i in range(m):
+        s = nu[i]
+        for j in range(i):
+            s -= L[i, j] * w[j]
+        w[i] = s / L[i, i]
+        nis += w[i] * w[i]
+        logdet += 2.0 * np.log(L[i, i])
+    return nis, logdet, True
