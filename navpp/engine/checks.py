@@ -220,7 +220,6 @@ def check_gyro_scale(recording: Recording, config: Config, up_s: np.ndarray, enu
 
 def alignment_findings(warnings: tuple[str, ...] | list[str]) -> list[Finding]:
     """The alignment's warnings (:attr:`navpp.ins.alignment.Alignment.warnings`) as findings: a
-    :class:`~navpp.findings.Finding` passes as it is; a plain line gets the code ``"imu-tilted"``
-    when it reports a still IMU's tilt, else ``""``."""
-    return [w if isinstance(w, Finding) else Finding("imu-tilted" if w.startswith("the IMU is tilted by") else "", w)
-            for w in warnings]
+    :class:`~navpp.findings.Finding` (e.g. ``"imu-tilted"``) passes as it is; a plain line gets the
+    code ``""``."""
+    return [w if isinstance(w, Finding) else Finding("", w) for w in warnings]

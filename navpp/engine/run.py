@@ -161,7 +161,7 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     except RunRefused:
         raise
     except FilterDivergedError as exc:
-        raise check.diverged(recorder.t, exc.why or str(exc).removeprefix(f"{filt.name}: ")) from None
+        raise check.diverged(recorder.t, exc.why or str(exc)) from None
     if progress is not None:
         progress(1.0)
     result = finished(recording, config, filt, prep, recorder, source, smooth, log)

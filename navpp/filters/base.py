@@ -211,8 +211,8 @@ class Filter:
         S = symmetrise(pred.Pzz + R)
         K, nis, ok = gain_and_nis(pred.Pxz, S, pred.nu)
         if not ok:
-            raise FilterDivergedError(
-                f"{self.name}: innovation covariance is not positive definite at t={state.t:.3f} s")
+            raise FilterDivergedError.in_filter(
+                self.name, f"innovation covariance is not positive definite at t={state.t:.3f} s")
         return S, K, nis
 
     def _reanchored(self, state: GaussianState, meas: Measurement, pred: MeasurementPrediction, R: np.ndarray,
@@ -231,7 +231,7 @@ class Filter:
         x = model.plus(state.x, K @ pred.nu)
         P = joseph(state.P, K, pred.H, R) if pred.H is not None else sigma_posterior(state.P, K, S)
         if not (np.isfinite(x.sum()) and np.isfinite(P.sum())):
-            raise FilterDivergedError(f"{self.name}: state became non-finite at t={state.t:.3f} s")
+            raise FilterDivergedError.in_filter(self.name, f"state became non-finite at t={state.t:.3f} s")
         return GaussianState(state.t, x, P)
 
 

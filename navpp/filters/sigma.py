@@ -36,12 +36,12 @@ def factor(P: np.ndarray, t: float, name: str, filt: RepairCounter | None = None
     (without one, such a P is a divergence)."""
     P = symmetrise(P)
     if not np.all(np.isfinite(P)):
-        raise FilterDivergedError(f"{name}: covariance is not finite at t={t:.3f} s (not positive definite)")
+        raise FilterDivergedError.in_filter(name, f"covariance is not finite at t={t:.3f} s (not positive definite)")
     try:
         return np.linalg.cholesky(P)
     except np.linalg.LinAlgError:
         if filt is None:
-            raise FilterDivergedError(f"{name}: covariance is not positive definite at t={t:.3f} s") from None
+            raise FilterDivergedError.in_filter(name, f"covariance is not positive definite at t={t:.3f} s") from None
     vals, vecs = np.linalg.eigh(P)
     floor = max(float(vals.max()), 1e-300) * 1e-12
     filt.repairs += 1

@@ -24,6 +24,7 @@ import numpy as np
 
 from .. import geodesy
 from ..errors import InputError
+from ..findings import Finding
 from .aids.standstill import quiet_blocks
 from .attitude import dcm_to_quat, rph_to_dcm
 from .calibrate import gnss_speed_at, spans
@@ -325,9 +326,9 @@ def _levelling(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, first_fix: fl
         level_how = "static levelling"
         start = i0
         if max(abs(roll), abs(pitch)) > math.radians(TILT_WARN_DEG):
-            warnings.append(f"the IMU is tilted by roll {math.degrees(roll):+.1f} deg, "
-                            f"pitch {math.degrees(pitch):+.1f} deg at rest: "
-                            "if its axes are not forward-left-up (e.g. FRD), set [imu] mounting_rpy_deg")
+            warnings.append(Finding("imu-tilted", f"the IMU is tilted by roll {math.degrees(roll):+.1f} deg, "
+                                    f"pitch {math.degrees(pitch):+.1f} deg at rest: "
+                                    "if its axes are not forward-left-up (e.g. FRD), set [imu] mounting_rpy_deg"))
     else:
         start = min(int(np.searchsorted(t, first_fix)), len(t) - 1)
         if settings.up_b is not None:
