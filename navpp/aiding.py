@@ -204,7 +204,7 @@ class Aiding:
         ``ZUPT_Z`` sigmas on an axis) is velocity building up: the vehicle is pulling away gently
         (too smoothly for the standstill detector), and the rest of this still run gets no ZUPT or
         ZARU (``vetoes`` records when)."""
-        if getattr(meas, "kind", "") != "zupt" or self._run_id is None:
+        if meas.kind != "zupt" or self._run_id is None:
             return
         i = int(np.clip(np.searchsorted(self.t, inn.t), 0, self.t.shape[0] - 1))
         run = int(self._run_id[i])

@@ -304,6 +304,10 @@ class ImuConfig:
         pitch, yaw about x, y, z.
     gyro_units : str. Units of the logged angular rate: ``"rad/s"`` or ``"deg/s"``.
     accel_units : str. Units of the logged specific force: ``"m/s^2"`` or ``"g"``.
+    gyro_range_rps : float, rad/s, > 0, or None. The gyro's measurement range (datasheet full
+        scale); samples reaching it are reported as saturated.  None: not checked (saturation is
+        then found from values repeated at a channel's extreme only).
+    accel_range_mps2 : float, m/s^2, > 0, or None. The accelerometer's range, likewise.
     """
 
     preset: str = DEFAULT_PRESET
@@ -318,6 +322,8 @@ class ImuConfig:
     mounting_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
     gyro_units: str = "rad/s"
     accel_units: str = "m/s^2"
+    gyro_range_rps: float | None = None
+    accel_range_mps2: float | None = None
 
     def __post_init__(self) -> None:
         preset = _as_choice("imu", "preset", self.preset, PRESET_NAMES)
@@ -341,6 +347,8 @@ class ImuConfig:
         _set(self, "mounting_rpy_deg", mounting)
         _as_choice("imu", "gyro_units", self.gyro_units, GYRO_UNITS)
         _as_choice("imu", "accel_units", self.accel_units, ACCEL_UNITS)
+        _fix_optional_float(self, "imu", "gyro_range_rps", minimum=0.0, strict_min=True)
+        _fix_optional_float(self, "imu", "accel_range_mps2", minimum=0.0, strict_min=True)
 
     @property
     def gyro_scale(self) -> float:

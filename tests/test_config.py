@@ -437,3 +437,11 @@ def test_python_construction_is_validated() -> None:
     with pytest.raises(ConfigError, match="lever_arm_m"):
         GnssConfig(lever_arm_m=(0.0, 0.0))  # type: ignore[arg-type]
     assert GnssConfig(default_std_m=[1, 2]).default_std_m == (1.0, 1.0, 2.0)  # type: ignore[arg-type]
+
+
+def test_imu_ranges_are_optional_and_positive() -> None:
+    cfg = config_from_dict({"imu": {"gyro_range_rps": 34.9, "accel_range_mps2": 156.9}}, "test")
+    assert (cfg.imu.gyro_range_rps, cfg.imu.accel_range_mps2) == (34.9, 156.9)
+    assert config_from_dict({}, "test").imu.gyro_range_rps is None
+    with pytest.raises(ConfigError, match=r"\[imu\] accel_range_mps2"):
+        config_from_dict({"imu": {"accel_range_mps2": 0.0}}, "test")

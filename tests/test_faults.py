@@ -9,7 +9,6 @@ time, the filter and the last good epoch, and nothing is written).
 from __future__ import annotations
 
 from dataclasses import replace
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -185,7 +184,7 @@ def test_saturated_samples_are_warned_with_times(sim):
     gyro = rec.imu.gyro.copy()
     gyro[i, 2] = 2.2
     ranged = replace(rec, imu=ImuData(rec.imu.t, gyro, rec.imu.accel))
-    cfg = SimpleNamespace(imu=SimpleNamespace(gyro_range_rps=2.18, accel_range_mps2=None))
+    cfg = config_from_dict({"imu": {"gyro_range_rps": 2.18}}, "test")
     w = engine.check_data(ranged, cfg)
     assert len(w) == 1 and "IMU gyro: 1 sample look" in w[0] and "configured range" in w[0]
     assert engine.check_data(rec, _cfg()) == []            # a clean drive: nothing

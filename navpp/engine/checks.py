@@ -156,10 +156,10 @@ def check_data(recording: Recording, config: Config | None = None) -> list[Findi
     """
     imu = recording.imu
     src = recording.source
-    imu_cfg = getattr(config, "imu", None)
+    gyro_range = None if config is None else config.imu.gyro_range_rps
+    accel_range = None if config is None else config.imu.accel_range_mps2
     out = imu_gaps(src, imu.t)
-    out += saturation(src, imu.t, imu.gyro, imu.accel, getattr(imu_cfg, "gyro_range_rps", None),
-                       getattr(imu_cfg, "accel_range_mps2", None))
+    out += saturation(src, imu.t, imu.gyro, imu.accel, gyro_range, accel_range)
     out += overlap(src, imu.t, recording.gnss.t)
     return out
 

@@ -24,6 +24,7 @@ from ..engine.loop import EpochOutcome, run_epochs
 from ..engine.schedule import Epoch
 from ..errors import ConfigError, FilterDivergedError
 from ..filters import Filter, GaussianState
+from ..filters.vce import HelmertVCE
 from .filter_spec import make_bench_filter
 from .simulated import OneMeasurementPerEpoch, Recorder, measurement_epochs
 
@@ -100,9 +101,8 @@ def run_filter(filt: Filter, case: Case) -> Track:
     except FilterDivergedError as exc:
         return Track(rec.x, rec.P, _stack_reports(rec.reports, N), time.perf_counter() - t0, str(exc))
     seconds = time.perf_counter() - t0
-    pooled = getattr(getattr(filt, "adapter", None), "pooled_redundancy", None)    # read-only diagnostic
-    diagnostics = ({f"redundancy_{k}": np.asarray(v, dtype=float) for k, v in pooled().items()}
-                   if callable(pooled) else {})
+    diagnostics = ({f"redundancy_{k}": np.asarray(v, dtype=float) for k, v in filt.adapter.pooled_redundancy().items()}
+                   if isinstance(filt.adapter, HelmertVCE) else {})
     return Track(rec.x, rec.P, _stack_reports(rec.reports, N), seconds, None, diagnostics)
 
 

@@ -37,6 +37,7 @@ from ..engine.loop import EpochOutcome, run_epochs
 from ..engine.schedule import Epoch
 from ..errors import ConfigError, FilterDivergedError
 from ..filters import GaussianState, Update
+from ..filters.noise import SageHusaAdapter
 from ..filters.protocols import MeasurementBase
 from ..ins.attitude import dcm_to_quat, rph_to_dcm
 from ..ins.model import POS, VEL, InsModel, NoiseModel, gnss_innovation, minus, plus
@@ -371,8 +372,7 @@ def run_filter(name: str, sc: Paper002Scenario, sim: SinsRun, seed: int = 0) -> 
         run_epochs(filt, model, state, measurement_epochs(sim.t_gps), OneMeasurementPerEpoch(fixes), rec)
     except FilterDivergedError as exc:
         return FilterRun(rec.err, rec.std, rec.r_std, rec.r_last, str(exc))
-    adapter = getattr(filt, "adapter", None)
-    r_final = getattr(adapter, "R", None)
+    r_final = filt.adapter.R if isinstance(filt.adapter, SageHusaAdapter) else None
     return FilterRun(rec.err, rec.std, rec.r_std, np.array(rec.r_last if r_final is None else r_final))
 
 
