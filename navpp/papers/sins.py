@@ -41,6 +41,17 @@ from ..filters.noise import SageHusaAdapter
 from ..filters.protocols import MeasurementBase
 from ..ins.attitude import dcm_to_quat, rph_to_dcm
 from ..ins.model import POS, VEL, InsModel, NoiseModel, gnss_innovation, minus, plus
+from ..ins.state import (
+    NOMINAL_BA,
+    NOMINAL_BG,
+    NOMINAL_Q,
+    NOMINAL_SIZE,
+    NOMINAL_VEL,
+    X_H,
+    X_LAT,
+    X_LON,
+    X_VE,
+)
 from .filter_spec import make_bench_filter
 from .registry import BenchResult, Row, register_benchmark
 from .simulated import OneMeasurementPerEpoch, Recorder, measurement_epochs
@@ -176,13 +187,13 @@ def truth_states(sc: Paper002Scenario, t: np.ndarray) -> np.ndarray:
     lat, lon0, h = sc.lat_deg * DEG_TO_RAD, sc.lon_deg * DEG_TO_RAD, sc.h_m
     _, rn = geodesy.radii(lat)
     q = dcm_to_quat(rph_to_dcm(0.0, 0.0, sc.heading_deg * DEG_TO_RAD))
-    x = np.zeros((t.size, 16))
-    x[:, 0:4] = q
-    x[:, 4] = sc.speed_east_mps
-    x[:, 7] = lat
+    x = np.zeros((t.size, NOMINAL_SIZE))
+    x[:, NOMINAL_Q] = q
+    x[:, X_VE] = sc.speed_east_mps
+    x[:, X_LAT] = lat
     lon = lon0 + sc.speed_east_mps / ((rn + h) * math.cos(lat)) * t
-    x[:, 8] = (lon + math.pi) % (2.0 * math.pi) - math.pi
-    x[:, 9] = h
+    x[:, X_LON] = (lon + math.pi) % (2.0 * math.pi) - math.pi
+    x[:, X_H] = h
     return x
 
 
@@ -229,7 +240,7 @@ class GnssPositionVelocity(MeasurementBase):
     def innovation_at(self, x: np.ndarray) -> np.ndarray:
         d = np.empty(6)
         d[0:3] = gnss_innovation(x, self.lat, self.lon, self.h, np.zeros(3))
-        d[3:6] = self.vel_enu - x[4:7]
+        d[3:6] = self.vel_enu - x[NOMINAL_VEL]
         return d
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
@@ -243,8 +254,8 @@ class GnssPositionVelocity(MeasurementBase):
         dX = np.ascontiguousarray(dX, dtype=float)
         Z = np.empty((dX.shape[0], 6))
         for k in range(dX.shape[0]):
-            Z[k, 0:3] = minus(plus(x, dX[k]), x)[6:9]
-        Z[:, 3:6] = dX[:, 3:6]
+            Z[k, 0:3] = minus(plus(x, dX[k]), x)[POS]
+        Z[:, 3:6] = dX[:, VEL]
         return Z
 
 
@@ -290,22 +301,22 @@ def simulate_run(sc: Paper002Scenario, rng: np.random.Generator) -> SinsRun:
 
     p0_std = sc.p0_std()
     x_true0 = truth_states(sc, np.zeros(1))[0]
-    x_true0[10:13], x_true0[13:16] = bg, ba
+    x_true0[NOMINAL_BG], x_true0[NOMINAL_BA] = bg, ba
     # the filter starts at truth ⊟ dx0 so that truth = x0 ⊞ dx0 with dx0 ~ N(0, P0)
     dx0 = rng.standard_normal(15) * p0_std
     x0 = _start_from(x_true0, dx0)
 
     tg = gps_times(sc)
     truth = truth_states(sc, tg)
-    truth[:, 10:13], truth[:, 13:16] = bg, ba
+    truth[:, NOMINAL_BG], truth[:, NOMINAL_BA] = bg, ba
     e_pos = rng.standard_normal((tg.size, 3)) * sc.gps_pos_std_m
     e_vel = rng.standard_normal((tg.size, 3)) * sc.gps_vel_std_mps
-    rm, rn = geodesy.radii(truth[:, 7])
-    h = truth[:, 9]
-    z_pos = np.column_stack([truth[:, 7] + e_pos[:, 1] / (rm + h),
-                             truth[:, 8] + e_pos[:, 0] / ((rn + h) * np.cos(truth[:, 7])),
+    rm, rn = geodesy.radii(truth[:, X_LAT])
+    h = truth[:, X_H]
+    z_pos = np.column_stack([truth[:, X_LAT] + e_pos[:, 1] / (rm + h),
+                             truth[:, X_LON] + e_pos[:, 0] / ((rn + h) * np.cos(truth[:, X_LAT])),
                              h + e_pos[:, 2]])
-    z_vel = truth[:, 4:7] + e_vel
+    z_vel = truth[:, NOMINAL_VEL] + e_vel
     return SinsRun(t, gyro, accel, tg, z_pos, z_vel, truth, x0, np.diag(p0_std ** 2), bg, ba)
 
 
