@@ -84,11 +84,21 @@ def _group_members(pgid: int) -> list[int]:
     return alive
 
 
+def _default_dispositions() -> None:
+    """In the child, before exec: SIGINT and SIGTERM at their defaults, as for a command typed in
+    a terminal.  A test run started in the background of a script (``pytest &``) ignores SIGINT,
+    every child inherits that, and navpp rightly keeps an ignored signal ignored
+    (:func:`navpp.interrupts.install`), so the trial would measure the launcher, not navpp."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def _run_trial(trial: Trial, out: Path) -> str:
     before = snapshot(out)
     env = dict(os.environ, PYTHONPATH=str(ROOT), COLUMNS="200")
     proc = subprocess.Popen([sys.executable, "-m", "navpp", *trial.argv], env=env, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=_default_dispositions)
     try:
         time.sleep(trial.delay_s)
         if proc.poll() is None:
