@@ -36,6 +36,7 @@ def _comparable(row) -> str:
                        row.reference, list(row.warnings), m], sort_keys=True)
 
 
+@pytest.mark.slow     # the heaviest default test (two clusters' runs); the default run keeps test_local_cluster_*
 def test_dask_rows_equal_the_local_executors_bit_for_bit(scheduler, sim_log_dir, tmp_path):
     broken = tmp_path / "broken"
     broken.mkdir()
