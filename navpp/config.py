@@ -34,6 +34,14 @@ from types import MappingProxyType
 from typing import Any, Final
 
 from navpp.errors import ConfigError
+from navpp.units import (  # the datasheet-unit factors the config converts with, re-exported
+    DEG_PER_H_TO_RAD_PER_S,
+    DEG_PER_SQRT_H_TO_RAD_PER_SQRT_S,
+    DEG_TO_RAD,
+    MG_TO_MPS2,
+    MPS_PER_SQRT_H_TO_MPS_PER_SQRT_S,
+    STANDARD_GRAVITY,
+)
 
 __all__ = [
     "ACCEL_UNITS",
@@ -66,20 +74,6 @@ __all__ = [
     "parse_formats",
 ]
 
-# --------------------------------------------------------------------------- unit factors
-
-STANDARD_GRAVITY: Final[float] = 9.80665
-"""Conventional standard gravity g0, m/s^2 (the g of "mg" and of ``accel_units = "g"``)."""
-DEG_TO_RAD: Final[float] = math.pi / 180.0
-"""deg -> rad."""
-DEG_PER_SQRT_H_TO_RAD_PER_SQRT_S: Final[float] = DEG_TO_RAD / 60.0
-"""Angle random walk: deg/sqrt(h) -> rad/sqrt(s)  (sqrt(3600 s) = 60 sqrt(s))."""
-MPS_PER_SQRT_H_TO_MPS_PER_SQRT_S: Final[float] = 1.0 / 60.0
-"""Velocity random walk: m/s/sqrt(h) -> m/s/sqrt(s)."""
-DEG_PER_H_TO_RAD_PER_S: Final[float] = DEG_TO_RAD / 3600.0
-"""Gyro bias: deg/h -> rad/s."""
-MG_TO_MPS2: Final[float] = STANDARD_GRAVITY * 1e-3
-"""Accelerometer bias: mg -> m/s^2."""
 MAX_LEVER_ARM_M: Final[float] = 100.0
 """Longest plausible IMU-to-antenna lever arm (large ships); longer ones are unit mistakes."""
 

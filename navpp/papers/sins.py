@@ -52,6 +52,7 @@ from ..ins.state import (
     X_LON,
     X_VE,
 )
+from ..units import DEG_PER_H_TO_RAD_PER_S, DEG_PER_SQRT_H_TO_RAD_PER_SQRT_S, DEG_TO_RAD, STANDARD_GRAVITY
 from .filter_spec import make_bench_filter
 from .registry import BenchResult, Row, register_benchmark
 from .simulated import OneMeasurementPerEpoch, Recorder, measurement_epochs
@@ -66,12 +67,6 @@ TITLE = "Paper 002 SINS/GPS simulation (400 s, 200 m/s east, GPS 6.5 m / 0.46 m/
 
 STEADY_AFTER_S = 100.0   #: start of the "steady state" figures in the notes, s
 
-# Unit factors, the values of navpp.config's (this package does not import the application's
-# configuration).
-STANDARD_GRAVITY = 9.80665                     #: g0, m/s^2 (the paper's "g")
-DEG_TO_RAD = math.pi / 180.0                   #: deg -> rad
-DEG_PER_H_TO_RAD_PER_S = DEG_TO_RAD / 3600.0   #: gyro bias, deg/h -> rad/s
-DEG_PER_SQRT_H_TO_RAD_PER_SQRT_S = DEG_TO_RAD / 60.0   #: angle random walk, deg/sqrt(h) -> rad/sqrt(s)
 ARCMIN_TO_RAD = DEG_TO_RAD / 60.0              #: arcmin -> rad
 UG_PER_SQRT_HZ_TO_MPS_PER_SQRT_S = STANDARD_GRAVITY * 1e-6   #: VRW, ug/sqrt(Hz) -> m/s^2/sqrt(Hz) = m/s/sqrt(s)
 
