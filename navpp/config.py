@@ -428,6 +428,10 @@ def check_outages(value: object, what: str = "[gnss] outages") -> tuple[tuple[fl
     return tuple(out)
 
 
+#: ``[gnss] error_model`` choices (:class:`GnssConfig`).
+GNSS_ERROR_MODELS = ("auto", "white", "gauss-markov")
+
+
 @dataclass(frozen=True)
 class GnssConfig:
     """``[gnss]``: antenna lever arm, default measurement noise and outlier gate.
@@ -452,6 +456,20 @@ class GnssConfig:
         window (s from the log start, the first IMU sample) are removed before filtering and
         the metrics report each window separately; ``navpp process --gnss-outage`` replaces them.
         Applied by ``navpp process`` / :func:`navpp.api.process` and by ``navpp compare``.
+    error_model : str, default ``"auto"``. How the fixes' errors behave in time: ``"white"``
+        (independent from fix to fix), ``"gauss-markov"`` (a first-order Gauss-Markov error of
+        correlation time ``corr_time_s`` carried as three extra filter states, ENU m, plus white
+        noise) or ``"auto"`` (white, unless the innovations of the run are correlated over
+        several seconds: then the run is repeated with the Gauss-Markov model and the notes say
+        so).
+    corr_time_s : float, s, > 0, default 60. Correlation time of the Gauss-Markov GNSS error.
+    correlated_share : float in (0, 1), default 0.8. Share of each fix's variance (its sigma
+        squared) that is the correlated part; the rest is white.  With the Gauss-Markov model
+        the white part is the fix's R and the correlated part's stationary 1-sigma is
+        ``sqrt(correlated_share)`` times the median sigma of the log's fixes (per ENU axis).
+    std_scale : float, > 0, default 1. Multiplies the position 1-sigma columns of the log
+        (``std_e, std_n, std_u``, a NavSatFix covariance's square roots) before use: for a
+        receiver whose reported accuracy is known to be optimistic or pessimistic.
     """
 
     lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -463,9 +481,17 @@ class GnssConfig:
     max_rejected_fraction: float = 0.25
     outages: tuple[tuple[float, float], ...] = ()
     use_velocity: bool = True
+    error_model: str = "auto"
+    corr_time_s: float = 60.0
+    correlated_share: float = 0.8
+    std_scale: float = 1.0
 
     def __post_init__(self) -> None:
         _as_bool("gnss", "use_velocity", self.use_velocity)
+        _as_choice("gnss", "error_model", self.error_model, GNSS_ERROR_MODELS)
+        _fix_float(self, "gnss", "corr_time_s", minimum=0.0, strict_min=True)
+        _fix_float(self, "gnss", "correlated_share", minimum=0.0, maximum=1.0, strict_min=True, strict_max=True)
+        _fix_float(self, "gnss", "std_scale", minimum=0.0, strict_min=True)
         _set(self, "outages", check_outages(self.outages))
         _set(self, "lever_arm_m", _as_vector("gnss", "lever_arm_m", self.lever_arm_m, 3))
         if math.hypot(*self.lever_arm_m) > MAX_LEVER_ARM_M:
