@@ -37,6 +37,7 @@ CODES: dict[str, str] = {
     "aid-rejected": "an aid's updates failed the innovation gate often",
     "smoothing-breaks": "steps the smoother carries no information back across",
     "refusal-causes": "the other causes to check when a run is refused",
+    "gnss-errors-correlated": "the GNSS innovations are correlated over seconds while the fixes are taken as white",
 }
 
 

@@ -10,6 +10,7 @@ and judge the result (:mod:`navpp.engine.output`, :mod:`navpp.engine.verdict`).
 
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, replace
 from typing import Any
@@ -23,10 +24,12 @@ from ..filters.base import Filter, GaussianState
 from ..findings import Finding
 from ..gnss_jumps import check_gnss_jumps
 from ..ins.alignment import Alignment, align
+from ..ins.gnss_error import GnssErrorModel, innovation_correlation
 from ..ins.model import InsModel
 from ..recording import Recording
 from .checks import alignment_findings, check_data, check_imu_plausible
 from .loop import run_epochs
+from .gnss_error import correlation_finding, correlation_note, gnss_error_settings
 from .measurements import RunMeasurements, recovery_reopening
 from .mounting import vehicle_mounting
 from .output import compile_seconds, interpolated_std, smoothed_run, solution_from_path
@@ -87,7 +90,32 @@ def run_one(recording: Recording, config: Config, filt: Filter, progress: Progre
             cov_step_s: float, smooth: bool = False) -> RunResult:
     """One run over a recording without unbridgeable gaps; a failure carries what the run had
     noted and warned about so far (:meth:`navpp.errors.NavppError.with_context`), so the user
-    sees the likely cause first."""
+    sees the likely cause first.
+
+    ``[gnss] error_model = "auto"``: the run takes the fixes' errors as white; when its
+    innovations are correlated over several seconds (:func:`~navpp.ins.gnss_error.innovation_correlation`)
+    it is run again, from the start and with a fresh copy of the filter, with the Gauss-Markov
+    GNSS error states, and the notes say so.  ``"white"``: the same measurement gives a warning
+    naming the setting."""
+    mode = config.gnss.error_model
+    spare = copy.deepcopy(filt) if mode == "auto" else None
+    first_config = replace(config, gnss=replace(config.gnss, error_model="white")) if mode == "auto" else config
+    result = _run_logged(recording, first_config, filt, progress, cov_step_s, smooth)
+    if mode == "gauss-markov":
+        return result
+    d = result.diagnostics
+    corr = innovation_correlation(d.t, d.nu, d.accepted)
+    if not corr.correlated:
+        return result
+    if spare is None:
+        return replace(result, warnings=(*result.warnings, correlation_finding(recording.source, corr)))
+    gm_config = replace(config, gnss=replace(config.gnss, error_model="gauss-markov"))
+    again = _run_logged(recording, gm_config, spare, progress, cov_step_s, smooth)
+    return replace(again, notes=(correlation_note(corr, gm_config), *again.notes))
+
+
+def _run_logged(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
+                cov_step_s: float, smooth: bool) -> RunResult:
     log = Journal([], [])
     try:
         return processed(recording, config, filt, progress, cov_step_s, smooth, log)
@@ -149,14 +177,23 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     imu_t = recording.imu.t
     schedule = epochs(al.t, float(imu_t[-1]), *aiding.schedule(al.t, float(imu_t[-1]), fixes.t), imu_t)
     n_epochs = sum(not e.coast for e in schedule) if progress is not None else 1
+    gm = gnss_error_settings(config, fixes)
+    fmodel: InsModel | GnssErrorModel = model
     start = GaussianState(al.t, al.x, al.P)
+    if gm is not None:
+        fmodel = GnssErrorModel(model, gm)
+        start = GaussianState(al.t, *fmodel.start(al.x, al.P))
+        log.notes.append(f"GNSS errors modelled as Gauss-Markov (tau {gm.tau_s:g} s, 1-sigma "
+                         + " / ".join(f"{v:.2f}" for v in gm.sigma_enu) + " m ENU) plus white noise "
+                         f"({1.0 - config.gnss.correlated_share:.0%} of each fix's variance)")
     recorder = RunRecorder(fixes, prep.path, start, al.index, filt.noise_report, velocity=aiding.has_velocity,
                            smooth=smooth, progress=progress, n_epochs=n_epochs)
     source = RunMeasurements(fixes, recording.gnss, np.asarray(config.gnss.lever_arm_m, dtype=float),
-                             recovery_reopening(config, al.P), aiding)
+                             recovery_reopening(config, al.P), aiding, model=fmodel,
+                             r_share=1.0 if gm is None else 1.0 - config.gnss.correlated_share)
     check = DivergenceCheck(recording, config, filt.name, al.t, log, source)
     try:
-        state = run_epochs(filt, model, start, schedule, source, recorder, check)
+        state = run_epochs(filt, fmodel, start, schedule, source, recorder, check)
         check(state, state.t)
     except RunRefused:
         raise
@@ -164,7 +201,7 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
         raise check.diverged(recorder.t, exc.why or str(exc)) from None
     if progress is not None:
         progress(1.0)
-    result = finished(recording, config, filt, prep, recorder, source, smooth, log)
+    result = finished(recording, config, filt, prep, recorder, source, smooth, log, fmodel)
     return replace(result, runtime_s=time.perf_counter() - t_wall, notes=tuple(log.notes[n_al:]))
 
 
@@ -193,15 +230,17 @@ class DivergenceCheck:
 
 
 def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared, recorder: RunRecorder,
-             source: RunMeasurements, smooth: bool, log: Journal) -> RunResult:
-    """The result of a finished forward run: smoothed (with ``smooth``), converted to the
-    output's units, and judged (:mod:`navpp.engine.verdict`); a refusal for a run that is wrong."""
+             source: RunMeasurements, smooth: bool, log: Journal, fmodel: Any = None) -> RunResult:
+    """The result of a finished forward run: smoothed (with ``smooth``) on the filter's model
+    ``fmodel`` (default the INS), converted to the output's units, and judged
+    (:mod:`navpp.engine.verdict`); a refusal for a run that is wrong."""
     al, fixes = prep.alignment, prep.fixes
     path = recorder.path[al.index:]
     t_out = recording.imu.t[al.index:]
     smoothed = None
     if smooth:
-        smoothed = smoothed_output(recorder, prep.model, t_out, path, fixes.t, recording.t0_ns)
+        smoothed = smoothed_output(recorder, prep.model if fmodel is None else fmodel, t_out, path, fixes.t,
+                                   recording.t0_ns)
     kt, k_prior, k_post = recorder.knot_arrays()
     std_out = interpolated_std(t_out, kt[0], k_post[0], kt[1:], k_prior[1:], k_post[1:])
     solution = solution_from_path(t_out, path, std_out, recording.t0_ns)
@@ -232,7 +271,7 @@ def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared,
                       "standstill_ended_early_s": [round(v, 3) for v in aiding.vetoes]})
 
 
-def smoothed_output(recorder: RunRecorder, model: InsModel, t_out: np.ndarray, path: np.ndarray,
+def smoothed_output(recorder: RunRecorder, model: Any, t_out: np.ndarray, path: np.ndarray,
                     tg: np.ndarray, t0_ns: int) -> SmoothedRun:
     """The recorder's forward run smoothed (:func:`~navpp.engine.output.smoothed_run`), its
     runtime without the compilation of kernels on a cold cache; the recorder's store is emptied."""
