@@ -11,11 +11,13 @@ and judge the result (:mod:`navpp.engine.output`, :mod:`navpp.engine.verdict`).
 from __future__ import annotations
 
 import copy
+import math
 import time
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from scipy.special import chdtri
 
 from ..aiding import Aiding
 from ..config import Config
@@ -24,14 +26,20 @@ from ..filters.base import Filter, GaussianState
 from ..findings import Finding
 from ..gnss_jumps import check_gnss_jumps
 from ..ins.alignment import Alignment, align
-from ..ins.gnss_error import GnssErrorModel, innovation_correlation
+from ..ins.gnss_error import Correlation, GnssErrorModel, GnssErrorSettings, innovation_correlation
 from ..ins.model import InsModel
 from ..recording import Recording
 from .checks import alignment_findings, check_data, check_imu_plausible
+from .gnss_error import (
+    LikelihoodRecorder,
+    correlation_finding,
+    correlation_note,
+    gnss_error_choice,
+    residual_finding,
+)
 from .loop import run_epochs
-from .gnss_error import correlation_finding, correlation_note, gnss_error_settings
 from .measurements import RunMeasurements, recovery_reopening
-from .mounting import vehicle_mounting
+from .mounting import first_pass_filter, vehicle_mounting
 from .output import compile_seconds, interpolated_std, smoothed_run, solution_from_path
 from .prepare import alignment_settings, calibrated, mounting_matrix, noise_model, timing_fixes
 from .recorder import RunRecorder, new_path
@@ -101,17 +109,48 @@ def run_one(recording: Recording, config: Config, filt: Filter, progress: Progre
     spare = copy.deepcopy(filt) if mode == "auto" else None
     first_config = replace(config, gnss=replace(config.gnss, error_model="white")) if mode == "auto" else config
     result = _run_logged(recording, first_config, filt, progress, cov_step_s, smooth)
-    if mode == "gauss-markov":
-        return result
     d = result.diagnostics
     corr = innovation_correlation(d.t, d.nu, d.accepted)
+    result = _with_correlation(result, corr)
+    if mode == "gauss-markov":
+        if corr.correlated:
+            tau = result.calibration.get("gnss_error", {}).get("corr_time_s", float("nan"))
+            result = replace(result, warnings=(*result.warnings, residual_finding(recording.source, corr, tau)))
+        return result
     if not corr.correlated:
         return result
     if spare is None:
-        return replace(result, warnings=(*result.warnings, correlation_finding(recording.source, corr)))
+        return replace(result, warnings=(*result.warnings, correlation_finding(
+            recording.source, corr, learnt_r_ratio(d.r_std, recording, config) if filt.adapts_noise else None)))
     gm_config = replace(config, gnss=replace(config.gnss, error_model="gauss-markov"))
     again = _run_logged(recording, gm_config, spare, progress, cov_step_s, smooth)
-    return replace(again, notes=(correlation_note(corr, gm_config), *again.notes))
+    d2 = again.diagnostics
+    after = innovation_correlation(d2.t, d2.nu, d2.accepted)
+    again = replace(_with_correlation(again, after), notes=(correlation_note(corr), *again.notes))
+    again.calibration["gnss_error"]["detected_by"] = {"lag_s": corr.lag_s, "rho": round(corr.rho, 4),
+                                                      "pairs": corr.pairs}
+    if after.correlated:
+        tau = again.calibration["gnss_error"]["corr_time_s"]
+        again = replace(again, warnings=(*again.warnings, residual_finding(recording.source, after, tau)))
+    return again
+
+
+def _with_correlation(result: RunResult, corr: Correlation) -> RunResult:
+    """``result`` with the innovations' lag correlation in its calibration figures (metrics.json)."""
+    return replace(result, calibration={**result.calibration, "gnss_innovation_correlation": {
+        "lag_s": corr.lag_s, "rho": round(corr.rho, 4), "pairs": corr.pairs, "threshold": round(corr.threshold, 4)}})
+
+
+def learnt_r_ratio(r_std: np.ndarray, recording: Recording, config: Config) -> float | None:
+    """The median 1-sigma an adaptive filter used for the fixes over the median the log (or
+    ``[gnss] default_std_m``) gives, horizontal axes; None when it cannot be told."""
+    gnss = recording.gnss
+    prior = (np.asarray(gnss.std_enu, dtype=float)[:, :2] if gnss.std_enu is not None
+             else np.asarray(config.gnss.default_std_m, dtype=float)[None, :2])
+    used = np.asarray(r_std, dtype=float)[:, :2]
+    if not (np.any(np.isfinite(used)) and np.any(np.isfinite(prior))):
+        return None
+    return float(np.nanmedian(used) / (np.nanmedian(prior) * config.gnss.std_scale))
 
 
 def _run_logged(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
@@ -170,27 +209,45 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     log.notes += m_notes
     log.warnings += m_warnings
     cal = prep.cal
-    aiding = Aiding(config, model.t, model.gyro, model.accel, model.noise.gyro_arw, model.noise.accel_vrw,
-                    recording.gnss, fixes.index, model.gaps, mounting,
-                    still=cal.still if (cal is not None and config.auto.standstill) else None,
-                    profile=model.profile)
+
+    def new_aiding() -> Aiding:
+        return Aiding(config, model.t, model.gyro, model.accel, model.noise.gyro_arw, model.noise.accel_vrw,
+                      recording.gnss, fixes.index, model.gaps, mounting,
+                      still=cal.still if (cal is not None and config.auto.standstill) else None,
+                      profile=model.profile)
+
+    aiding = new_aiding()
     imu_t = recording.imu.t
     schedule = epochs(al.t, float(imu_t[-1]), *aiding.schedule(al.t, float(imu_t[-1]), fixes.t), imu_t)
     n_epochs = sum(not e.coast for e in schedule) if progress is not None else 1
-    gm = gnss_error_settings(config, fixes)
+    reopen = recovery_reopening(config, al.P)
+    lever = np.asarray(config.gnss.lever_arm_m, dtype=float)
+
+    def score(settings: GnssErrorSettings, share: float) -> float:
+        """-2 log-likelihood of the fixes under a Gauss-Markov candidate: one EKF pass."""
+        fm = GnssErrorModel(model, settings)
+        scorer = LikelihoodRecorder(float(chdtri(3, 1.0 - config.gnss.gate_probability))
+                                    if config.gnss.gate_probability > 0.0 else math.inf)
+        src = RunMeasurements(fixes, recording.gnss, lever, reopen, new_aiding(), model=fm, r_share=1.0 - share)
+        try:
+            run_epochs(first_pass_filter(config), fm, GaussianState(al.t, *fm.start(al.x, al.P)), schedule, src,
+                       scorer)
+        except FilterDivergedError:
+            return math.inf
+        return scorer.total
+
+    choice = gnss_error_choice(config, fixes, score)
     fmodel: InsModel | GnssErrorModel = model
     start = GaussianState(al.t, al.x, al.P)
-    if gm is not None:
-        fmodel = GnssErrorModel(model, gm)
+    if choice is not None:
+        fmodel = GnssErrorModel(model, choice.settings)
         start = GaussianState(al.t, *fmodel.start(al.x, al.P))
-        log.notes.append(f"GNSS errors modelled as Gauss-Markov (tau {gm.tau_s:g} s, 1-sigma "
-                         + " / ".join(f"{v:.2f}" for v in gm.sigma_enu) + " m ENU) plus white noise "
-                         f"({1.0 - config.gnss.correlated_share:.0%} of each fix's variance)")
+        log.notes.append(choice.note())
+        prep.calibration["gnss_error"] = choice.report()
     recorder = RunRecorder(fixes, prep.path, start, al.index, filt.noise_report, velocity=aiding.has_velocity,
                            smooth=smooth, progress=progress, n_epochs=n_epochs)
-    source = RunMeasurements(fixes, recording.gnss, np.asarray(config.gnss.lever_arm_m, dtype=float),
-                             recovery_reopening(config, al.P), aiding, model=fmodel,
-                             r_share=1.0 if gm is None else 1.0 - config.gnss.correlated_share)
+    source = RunMeasurements(fixes, recording.gnss, lever, reopen, aiding, model=fmodel,
+                             r_share=1.0 if choice is None else 1.0 - choice.share)
     check = DivergenceCheck(recording, config, filt.name, al.t, log, source)
     try:
         state = run_epochs(filt, fmodel, start, schedule, source, recorder, check)

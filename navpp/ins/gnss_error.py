@@ -68,7 +68,8 @@ class GnssErrorSettings:
     @property
     def variance(self) -> np.ndarray:
         """Stationary variance per ENU axis, m^2 (3,)."""
-        return np.square(np.asarray(self.sigma_enu))
+        var: np.ndarray = np.square(np.asarray(self.sigma_enu))
+        return var
 
     def decay(self, dt: float) -> float:
         """``exp(-dt / tau)`` over ``dt`` s."""
@@ -227,6 +228,8 @@ class Padded:
         self.inner = inner
 
     def __getattr__(self, name: str) -> Any:      # kind, axes, adaptive, forceable, t, R, ...
+        if name == "inner":                       # not set yet (copy, pickle): no recursion
+            raise AttributeError(name)
         return getattr(self.inner, name)
 
     def innovation_at(self, x: np.ndarray) -> np.ndarray:
@@ -269,10 +272,11 @@ class GnssPositionGM(Padded):
 
     def predict_points(self, x: np.ndarray, dX: np.ndarray) -> np.ndarray:
         dX = np.asarray(dX)
-        return super().predict_points(x, dX) + dX[:, GM]
+        Z: np.ndarray = super().predict_points(x, dX) + dX[:, GM]
+        return Z
 
     def reanchor(self, P: np.ndarray, nu: np.ndarray, R: np.ndarray) -> np.ndarray | None:
-        Pr = self.inner.reanchor(P, nu, R)
+        Pr: np.ndarray | None = self.inner.reanchor(P, nu, R)
         if Pr is None:
             return None
         Pr[GM, :] = 0.0
