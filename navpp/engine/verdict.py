@@ -78,7 +78,8 @@ def likely_cause(recording: Recording, config: Config, noticed: list[str]) -> tu
     from ..plausibility import fix_suspect
 
     g = recording.gnss
-    suspect = fix_suspect(recording.source, g.lat_deg, g.lon_deg, g.alt, g.t, g.std_enu, config.vehicle.type)
+    std = None if g.std_enu is None else np.asarray(g.std_enu, dtype=float) * config.gnss.std_scale
+    suspect = fix_suspect(recording.source, g.lat_deg, g.lon_deg, g.alt, g.t, std, config.vehicle.type)
     if suspect is not None:
         return suspect, [causes(config)]
     codes = {code_of(w) for w in noticed}
@@ -140,12 +141,16 @@ def plausibility_checks(recording: Recording, config: Config, name: str, solutio
     """Every filter's finished solution judged against the prior GNSS sigma and the vehicle
     (:mod:`navpp.plausibility`), before anything is written: a refusal (one short line) for a
     run that is wrong, warnings for a doubtful one.  ``fixes`` are the run's GNSS fixes
-    (:class:`~navpp.engine.schedule.GnssFixes`); ``nu``, ``s_used``, ``r_used``, ``accepted``
-    what the filter saw and did at each."""
+    (:class:`~navpp.engine.schedule.GnssFixes`: their ``var`` is the prior R, the log's sigmas
+    already times ``[gnss] std_scale``); ``nu``, ``s_used``, ``r_used``, ``accepted`` what the
+    filter saw and did at each."""
     from .. import plausibility as pl
 
     src = recording.source
-    label = pl.std_name(src, recording.gnss.std_enu is not None)
+    has_std = recording.gnss.std_enu is not None
+    label = pl.std_name(src, has_std)
+    if has_std and config.gnss.std_scale != 1.0:
+        label += f" times [gnss] std_scale = {config.gnss.std_scale:g}"
     found = pl.innovation_findings(name, label, fixes.t, nu, s_used, r_used, fixes.var, accepted,
                                    config.gnss.gate_probability, config.gnss.max_rejected_fraction)
     sols = [solution] + ([smoothed.solution] if smoothed is not None else [])
