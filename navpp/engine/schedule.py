@@ -73,7 +73,7 @@ def std_scale_notes(recording: Recording, config: Config, std_enu: np.ndarray | 
     if std_enu is None or std_enu.shape[0] == 0:
         return (f"[gnss] std_scale = {scale:g} not applied: the log has no position sigmas, and "
                 f"[gnss] default_std_m = {list(config.gnss.default_std_m)} m is used as configured",)
-    med = np.median(np.asarray(std_enu, dtype=float), axis=0)
+    med = np.nanmedian(np.asarray(std_enu, dtype=float), axis=0)
     was = ", ".join(f"{v:.3g}" for v in med)
     now = ", ".join(f"{v:.3g}" for v in med * scale)
     return (f"GNSS position sigmas scaled by {scale:g} ([gnss] std_scale): {std_name(recording.source, True)} "
