@@ -30,12 +30,6 @@ from navpp.simulate import SimulationSpec, simulate
 DURATION_S = 200.0
 REAL_WALK = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "walk_0827"
 
-#: The run's notes, the alignment's sigmas and the velocity check reach a run through three lines in
-#: navpp/engine/run.py, which the lead owns (patch handed over with issue 17's report): until they
-#: are in, these tests fail as expected; strict, so that they say when the marks can go.
-needs_wiring = pytest.mark.xfail(strict=True, reason="needs the navpp/engine/run.py wiring of issue 17 point 3")
-
-
 def _recording(seed: int = 0, **spec):
     return simulate(SimulationSpec(duration_s=DURATION_S, still_s=30.0, seed=seed, **spec)).recording()
 
@@ -98,7 +92,6 @@ def test_without_std_scale_the_small_sigmas_ruin_the_run(scale_runs):
     assert np.linalg.norm(_rmse_enu(rec, small.solution)) > 3.0 * np.linalg.norm(_rmse_enu(rec, truth.solution))
 
 
-@needs_wiring
 def test_std_scale_run_is_the_true_sigma_run(scale_runs):
     # the alignment's initial position covariance must take the scaled sigmas too (without them the
     # altitude of this drive differs by up to 9 m from the oracle's)
@@ -160,7 +153,6 @@ def test_velocity_innovations_show_a_default_sigma_10x_too_small(seed):
     assert velocity_sigma_checks("sim", cfg, False, res.diagnostics.vel_nis) == []
 
 
-@needs_wiring
 def test_run_warns_and_names_default_vel_std_mps():
     try:
         warnings = _run(_velocity_recording(1.0, 0), _config()).warnings

@@ -44,9 +44,9 @@ from .output import compile_seconds, interpolated_std, smoothed_run, solution_fr
 from .prepare import alignment_settings, calibrated, mounting_matrix, noise_model, timing_fixes
 from .recorder import RunRecorder, new_path
 from .results import RunResult, SmoothedRun
-from .schedule import GnssFixes, epochs, gnss_fixes
+from .schedule import GnssFixes, epochs, gnss_fixes, with_prior_std
 from .segments import ProgressFn, imu_segments, run_segments
-from .verdict import aid_checks, consistency_checks, plausibility_checks, refusal, state_fault
+from .verdict import aid_checks, consistency_checks, plausibility_checks, refusal, state_fault, velocity_sigma_checks
 
 
 def run(recording: Recording, config: Config, filt: Filter, *, progress: ProgressFn | None = None,
@@ -165,7 +165,8 @@ def _run_logged(recording: Recording, config: Config, filt: Filter, progress: Pr
 
 def prepared(recording: Recording, config: Config, cov_step_s: float, log: Journal) -> Prepared:
     """Check the data, fix its timing, rotate and calibrate the IMU, build the model, align."""
-    check_gnss_jumps(recording, config.vehicle.type, config.gnss.default_std_m, config.gnss.reanchor_after_s)
+    check_gnss_jumps(recording, config.vehicle.type, config.gnss.default_std_m, config.gnss.reanchor_after_s,
+                     config.gnss.std_scale)
     log.warnings += check_imu_plausible(recording)
     calibration: dict = {}
     recording, t_notes, t_warnings = timing_fixes(recording, config, calibration)
@@ -185,7 +186,8 @@ def prepared(recording: Recording, config: Config, cov_step_s: float, log: Journ
     model = InsModel(imu.t, gyro, accel, noise_model(config, noise), cov_step_s=cov_step_s, path=path,
                      profile=profile)
     try:
-        al = align(model.t, model.gyro, model.accel, gnss, alignment_settings(config, noise, cal))
+        al = align(model.t, model.gyro, model.accel, with_prior_std(gnss, config),
+                   alignment_settings(config, noise, cal))
     except InputError as exc:  # alignment knows the data, not where it came from
         from ..plausibility import fix_suspect
 
@@ -205,6 +207,7 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     prep = prepared(recording, config, cov_step_s, log)
     recording, model, al, fixes = prep.recording, prep.model, prep.alignment, prep.fixes
     n_al = len(al.lines)
+    log.notes += fixes.notes
     mounting, m_notes, m_warnings = vehicle_mounting(recording, config, cov_step_s, run_one)
     log.notes += m_notes
     log.warnings += m_warnings
@@ -306,6 +309,8 @@ def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared,
     aiding = source.aiding
     log.warnings += recovery_warnings(recording.source, source.recoveries)
     log.notes += veto_notes(aiding.vetoes)
+    log.warnings += velocity_sigma_checks(recording.source, config, recording.gnss.std_vel_enu is not None,
+                                          diag.vel_nis)
     headline, c_warnings = consistency_checks(recording.source, filt.name, config, fixes.t, recorder.nis,
                                               recorder.accepted)
     if headline is not None:
