@@ -15,7 +15,7 @@ import pytest
 
 from navpp import api, engine
 from navpp.config import config_from_dict
-from navpp.engine.gnss_error import SHARES, estimate, gnss_error_choice, settings_for
+from navpp.engine.gnss_error import SHARES, estimate, gnss_error_choice, innovation_score, settings_for
 from navpp.engine.schedule import GnssFixes
 from navpp.errors import ConfigError
 from navpp.ins.gnss_error import (
@@ -246,6 +246,17 @@ def test_given_values_are_kept_and_white_has_no_states():
     assert settings_for(_fixes(), 10.0, SHARES[0]).sigma_enu[2] == pytest.approx(3.0 * math.sqrt(SHARES[0]))
 
 
+def test_innovation_score_is_the_gaussian_log_likelihood():
+    """Closed form: sum of NIS + log det S, the NIS capped at the 3-dof gate quantile, fixes
+    without a covariance skipped."""
+    S = np.array([np.diag([1.0, 2.0, 3.0]), 4.0 * np.eye(3), np.full((3, 3), np.nan)])
+    nis = np.array([2.5, 100.0, 1.0])
+    cap = 21.10751       # chi-square 3 dof at 0.9999
+    expected = 2.5 + math.log(6.0) + cap + math.log(64.0)
+    assert innovation_score(nis, S, 0.9999) == pytest.approx(expected, rel=1e-6)
+    assert innovation_score(nis[:2], S[:2], 0.0) == pytest.approx(2.5 + math.log(6.0) + 100.0 + math.log(64.0))
+
+
 # ------------------------------------------------------------------------ runs
 
 
@@ -307,6 +318,23 @@ def test_auto_leaves_a_white_log_alone():
     np.testing.assert_array_equal(auto.solution.lat_deg, white.solution.lat_deg)
     assert not any("Gauss-Markov" in n for n in auto.notes)
     assert auto.calibration["gnss_innovation_correlation"]["rho"] < 0.1
+
+
+def test_auto_keeps_the_white_run_when_the_model_explains_the_fixes_worse(correlated_log, monkeypatch):
+    """The repeat's innovation score decides: made worse than the white run's (the oracle: the
+    white run itself), the white run is returned with a warning that says so."""
+    import importlib
+
+    run_module = importlib.import_module("navpp.engine.run")     # the module, not engine.run the function
+    scores = [100.0, 200.0]           # white run first, then the Gauss-Markov repeat
+    monkeypatch.setattr(run_module, "innovation_score", lambda *a: scores.pop(0) if scores else 0.0)
+    cfg = {"corr_time_s": 60.0, "correlated_share": 0.8}
+    kept = _run(correlated_log, "ekf", cfg)
+    assert not scores
+    white = _run(correlated_log, "ekf", {**cfg, "error_model": "white"})
+    np.testing.assert_array_equal(kept.solution.lat_deg, white.solution.lat_deg)
+    assert "gnss_error" not in kept.calibration
+    assert any(getattr(w, "code", "") == "gnss-errors-correlated" and "white run is kept" in w for w in kept.warnings)
 
 
 @pytest.mark.slow

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.special import chdtri
 
 from ..config import Config
 from ..findings import Finding
@@ -149,9 +150,29 @@ def gnss_error_choice(config: Config, fixes: GnssFixes, score: Scorer) -> GnssEr
     return estimate(fixes, score, tau0, share0)
 
 
+def gate_cap(gate_probability: float) -> float:
+    """The NIS cap of the score: the 3-dof gate quantile (inf without a gate)."""
+    return float(chdtri(3, 1.0 - gate_probability)) if gate_probability > 0.0 else math.inf
+
+
+def fix_score(nis: float, S: np.ndarray, cap: float) -> float:
+    """One fix's share of ``-2 log L`` (without the constant): ``min(nis, cap) + log det S``."""
+    sign, logdet = np.linalg.slogdet(S)
+    return min(float(nis), cap) + (float(logdet) if sign > 0 else math.inf)
+
+
+def innovation_score(nis: np.ndarray, S: np.ndarray, gate_probability: float) -> float:
+    """``-2 log L`` of a run's GNSS position innovations (NIS (M,), innovation covariances
+    (M, 3, 3); fixes without one skipped): how likely the fixes were under the filter's own
+    predictions.  Two runs over the same fixes compare by it: the lower explains them better."""
+    cap = gate_cap(gate_probability)
+    ok = np.isfinite(nis) & np.all(np.isfinite(S), axis=(1, 2))
+    return float(sum(fix_score(n, s, cap) for n, s in zip(nis[ok], S[ok])))
+
+
 class LikelihoodRecorder:
     """A loop recorder that only scores the GNSS position innovations: ``total`` = the sum of
-    ``min(nis, cap) + log det S`` over the fixes (``cap`` the gate's NIS threshold)."""
+    :func:`fix_score` over the fixes (``cap`` the gate's NIS threshold, :func:`gate_cap`)."""
 
     def __init__(self, cap: float) -> None:
         self.cap, self.total, self.n = cap, 0.0, 0
@@ -162,9 +183,7 @@ class LikelihoodRecorder:
     def updated(self, epoch: Any, meas: Any, update: Any) -> None:
         if meas.kind != "gnss_position":
             return
-        inn = update.innovation
-        sign, logdet = np.linalg.slogdet(inn.S)
-        self.total += min(float(inn.nis), self.cap) + (float(logdet) if sign > 0 else math.inf)
+        self.total += fix_score(update.innovation.nis, update.innovation.S, self.cap)
         self.n += 1
 
     def epoch_done(self, epoch: Any, outcome: Any) -> None:
@@ -180,6 +199,16 @@ def correlation_note(corr: Correlation) -> str:
     """The note of an ``"auto"`` run that switched the Gauss-Markov model on."""
     return (f"{_measured(corr)}: the fixes' errors last longer than one fix, so the run was repeated with "
             "Gauss-Markov GNSS error states ([gnss] error_model = \"auto\"; \"white\" keeps them white)")
+
+
+def kept_white_finding(source: str, corr: Correlation, filter_name: str, white: float, gm: float) -> Finding:
+    """The warning of an ``"auto"`` run whose Gauss-Markov repeat explained the fixes worse: the
+    white run is kept, and its sigma is too small."""
+    return Finding("gnss-errors-correlated",
+                   f"{source}: {_measured(corr)}; the run was repeated with Gauss-Markov GNSS error states, but "
+                   f"{filter_name} explained the fixes worse with them (-2 log-likelihood of the innovations "
+                   f"{gm:.0f} against {white:.0f} white), so the white run is kept: it follows the slow GNSS error "
+                   "and its sigma is too small (error_model = \"gauss-markov\" forces the states)")
 
 
 def correlation_finding(source: str, corr: Correlation, r_ratio: float | None = None) -> Finding:
@@ -205,5 +234,5 @@ def residual_finding(source: str, corr: Correlation, tau_s: float) -> Finding:
 
 
 __all__ = ["PRIOR_SHARE", "PRIOR_TAU_S", "SHARES", "TAU_RANGE_S", "GnssErrorChoice", "LikelihoodRecorder",
-           "correlation_finding", "correlation_note", "estimate", "gnss_error_choice", "residual_finding",
-           "settings_for"]
+           "correlation_finding", "correlation_note", "estimate", "fix_score", "gate_cap", "gnss_error_choice",
+           "innovation_score", "kept_white_finding", "residual_finding", "settings_for"]

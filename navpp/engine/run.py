@@ -17,7 +17,6 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy.special import chdtri
 
 from ..aiding import Aiding
 from ..config import Config
@@ -34,7 +33,10 @@ from .gnss_error import (
     LikelihoodRecorder,
     correlation_finding,
     correlation_note,
+    gate_cap,
     gnss_error_choice,
+    innovation_score,
+    kept_white_finding,
     residual_finding,
 )
 from .loop import run_epochs
@@ -129,6 +131,11 @@ def run_one(recording: Recording, config: Config, filt: Filter, progress: Progre
     again = replace(_with_correlation(again, after), notes=(correlation_note(corr), *again.notes))
     again.calibration["gnss_error"]["detected_by"] = {"lag_s": corr.lag_s, "rho": round(corr.rho, 4),
                                                       "pairs": corr.pairs}
+    white_score, gm_score = result.calibration["gnss_innovation_score"], again.calibration["gnss_innovation_score"]
+    if not gm_score < white_score:
+        # the filter explains the fixes no better with the model (its own adaptation fights it)
+        return replace(result, warnings=(*result.warnings, kept_white_finding(recording.source, corr, filt.name,
+                                                                                 white_score, gm_score)))
     if after.correlated:
         tau = again.calibration["gnss_error"]["corr_time_s"]
         again = replace(again, warnings=(*again.warnings, residual_finding(recording.source, after, tau)))
@@ -229,8 +236,7 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     def score(settings: GnssErrorSettings, share: float) -> float:
         """-2 log-likelihood of the fixes under a Gauss-Markov candidate: one EKF pass."""
         fm = GnssErrorModel(model, settings)
-        scorer = LikelihoodRecorder(float(chdtri(3, 1.0 - config.gnss.gate_probability))
-                                    if config.gnss.gate_probability > 0.0 else math.inf)
+        scorer = LikelihoodRecorder(gate_cap(config.gnss.gate_probability))
         src = RunMeasurements(fixes, recording.gnss, lever, reopen, new_aiding(), model=fm, r_share=1.0 - share)
         try:
             run_epochs(first_pass_filter(config), fm, GaussianState(al.t, *fm.start(al.x, al.P)), schedule, src,
@@ -330,7 +336,9 @@ def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared,
     return RunResult(solution, recorder.bias_history(fixes.t), al, diag, len(fixes), int((~recorder.accepted).sum()),
                      0.0, 0.0, tuple(log.warnings), smoothed, (), aiding.counts.as_dict(),
                      {**prep.calibration, "recoveries_s": [round(v, 3) for v in source.recoveries],
-                      "standstill_ended_early_s": [round(v, 3) for v in aiding.vetoes]})
+                      "standstill_ended_early_s": [round(v, 3) for v in aiding.vetoes],
+                      "gnss_innovation_score": round(innovation_score(recorder.nis, recorder.s_used,
+                                                                      config.gnss.gate_probability), 2)})
 
 
 def smoothed_output(recorder: RunRecorder, model: Any, t_out: np.ndarray, path: np.ndarray,
