@@ -311,6 +311,18 @@ def test_the_model_removes_the_correlation_and_makes_sigma_honest(correlated_log
     assert h_c == pytest.approx(h_g, rel=0.02)
 
 
+def test_white_with_an_adaptive_filter_says_it_learnt_a_smaller_r(correlated_log):
+    """AEKF told to take correlated fixes as white: the warning names the setting and says that
+    the R it learnt is below the fixes' sigma (the oracle: the R it recorded, against the log's)."""
+    res = _run(correlated_log, "aekf", {"error_model": "white"})
+    warning = next(w for w in res.warnings if getattr(w, "code", "") == "gnss-errors-correlated")
+    assert 'error_model = "white"' in warning and "learnt an R of" in warning
+    ratio = float(warning.split("learnt an R of ")[1].split(" times")[0])
+    used = np.nanmedian(res.diagnostics.r_std[:, :2])
+    logged = np.nanmedian(correlated_log.gnss.std_enu[:, :2])
+    assert ratio == pytest.approx(used / logged, abs=0.01) and ratio < 0.9
+
+
 def test_auto_leaves_a_white_log_alone():
     rec = simulate(SimulationSpec(duration_s=300.0, seed=2)).recording()
     auto = _run(rec, "ekf", {})

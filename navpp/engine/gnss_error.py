@@ -10,7 +10,7 @@ candidate).  The search starts at 60 s and 0.8, walks tau by factors of 2 while 
 improves, then the share over :data:`SHARES`, then tau once more, and takes the vertex of the
 parabola in log tau through the best point and its neighbours.  On simulated drives the score's
 minimum sits at the simulator's tau and share (tau 60 s: 60; tau 120 s: 120; share 0.8 against
-0.5 and 0.95); docs/filters.md gives the figures.
+0.5 and 0.95); docs/ins.md gives the figures.
 """
 
 from __future__ import annotations

@@ -111,7 +111,7 @@ class VCEOptions:
         error states (``[gnss] error_model``) is part of the fixes' noise model, and one position
         innovation sees it and the white R the same way, so VCE cannot tell them apart; left free
         it runs to ``ceiling`` and the filter follows the fixes again (measured in
-        docs/filters.md).  The white R keeps its factors.
+        docs/ins.md).  The white R keeps its factors.
     """
 
     window: int = 50
