@@ -53,12 +53,17 @@ def prior_std_enu(std_enu: np.ndarray | None, config: Config, n: int) -> np.ndar
 
 
 def with_prior_std(gnss: GnssData, config: Config) -> GnssData:
-    """``gnss`` with its position 1-sigma times ``[gnss] std_scale`` (``gnss`` itself when the
-    scale is 1 or the log has none), for the readers of a whole :class:`~navpp.recording.GnssData`
-    that must see the sigmas the filter uses (the alignment's initial position covariance)."""
-    if gnss.std_enu is None or config.gnss.std_scale == 1.0:
-        return gnss
-    return replace(gnss, std_enu=np.asarray(gnss.std_enu, dtype=float) * config.gnss.std_scale)
+    """``gnss`` with the sigmas the filter uses, for the readers of a whole
+    :class:`~navpp.recording.GnssData` (the alignment's initial position covariance and heading
+    from the track, the calibration's GNSS speed): the position 1-sigma times ``[gnss]
+    std_scale``, and a velocity 1-sigma of ``[gnss] default_vel_std_mps`` where the log has
+    velocity without one (``gnss`` itself when nothing changes)."""
+    changes: dict = {}
+    if gnss.std_enu is not None and config.gnss.std_scale != 1.0:
+        changes["std_enu"] = np.asarray(gnss.std_enu, dtype=float) * config.gnss.std_scale
+    if gnss.vel_enu is not None and gnss.std_vel_enu is None:
+        changes["std_vel_enu"] = np.full(np.shape(gnss.vel_enu), config.gnss.default_vel_std_mps)
+    return replace(gnss, **changes) if changes else gnss
 
 
 def std_scale_notes(recording: Recording, config: Config, std_enu: np.ndarray | None) -> tuple[str, ...]:
