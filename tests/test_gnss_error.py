@@ -349,6 +349,21 @@ def test_auto_keeps_the_white_run_when_the_model_explains_the_fixes_worse(correl
     assert any(getattr(w, "code", "") == "gnss-errors-correlated" and "white run is kept" in w for w in kept.warnings)
 
 
+def test_auto_does_not_add_the_states_to_a_filter_with_a_random_mean(correlated_log, monkeypatch):
+    """A filter whose update moves the mean randomly (RWCKF's flag, set here on the EKF so the
+    white EKF run is the oracle) keeps the white model under "auto", with a warning that says why;
+    RWCKF itself carries the flag."""
+    from navpp.filters import get_filter
+    from navpp.filters.ekf import EKF
+
+    assert get_filter("rwckf").random_mean and not get_filter("ckf").random_mean
+    monkeypatch.setattr(EKF, "random_mean", True)
+    res = _run(correlated_log, "ekf", {})
+    white = _run(correlated_log, "ekf", {"error_model": "white"})
+    np.testing.assert_array_equal(res.solution.lat_deg, white.solution.lat_deg)
+    assert any("random amounts" in w for w in res.warnings)
+
+
 @pytest.mark.slow
 def test_auto_gains_on_an_ensemble_of_correlated_drives():
     """Five correlated 16-minute drives (tau 60 s, the simulator's 0.8 share), default config

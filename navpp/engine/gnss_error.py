@@ -211,17 +211,25 @@ def kept_white_finding(source: str, corr: Correlation, filter_name: str, white: 
                    "and its sigma is too small (error_model = \"gauss-markov\" forces the states)")
 
 
-def correlation_finding(source: str, corr: Correlation, r_ratio: float | None = None) -> Finding:
-    """The warning of a run told to take the fixes as white whose innovations say otherwise;
-    ``r_ratio``: the median R an adaptive filter learnt over the log's, when below 1."""
+def correlation_finding(source: str, corr: Correlation, r_ratio: float | None = None,
+                        random_filter: str | None = None) -> Finding:
+    """The warning of a run that takes the fixes as white while its innovations say otherwise:
+    told so (``error_model = "white"``), or ``random_filter``, a filter whose random mean shifts
+    the Gauss-Markov states would accumulate; ``r_ratio``: the median R an adaptive filter learnt
+    over the log's, when below 1."""
     shrunk = ""
     if r_ratio is not None and r_ratio < 0.9:
         shrunk = (f"; the adaptive filter learnt an R of {r_ratio:.2f} times the fixes' sigma from those nearly equal "
                   "innovations, so it follows them even more closely")
+    if random_filter is not None:
+        why = (f"{random_filter} moves its mean by random amounts its covariance does not carry, which the "
+               "Gauss-Markov GNSS error states would accumulate, so they are not added ([gnss] error_model = "
+               "\"gauss-markov\" forces them; a filter without random weights, e.g. ekf or ckf, models the error)")
+    else:
+        why = "[gnss] error_model = \"white\" takes them as independent; set error_model = \"auto\" or \"gauss-markov\""
     return Finding("gnss-errors-correlated",
-                   f"{source}: {_measured(corr)}, but [gnss] error_model = \"white\" takes them as independent: the "
-                   f"filter follows the slow GNSS error and its sigma is too small{shrunk}; set error_model = "
-                   "\"auto\" or \"gauss-markov\"")
+                   f"{source}: {_measured(corr)}: the filter follows the slow GNSS error and its sigma is too "
+                   f"small{shrunk}; {why}")
 
 
 def residual_finding(source: str, corr: Correlation, tau_s: float) -> Finding:

@@ -121,9 +121,10 @@ def run_one(recording: Recording, config: Config, filt: Filter, progress: Progre
         return result
     if not corr.correlated:
         return result
-    if spare is None:
+    if spare is None or filt.random_mean:
         return replace(result, warnings=(*result.warnings, correlation_finding(
-            recording.source, corr, learnt_r_ratio(d.r_std, recording, config) if filt.adapts_noise else None)))
+            recording.source, corr, learnt_r_ratio(d.r_std, recording, config) if filt.adapts_noise else None,
+            filt.name if filt.random_mean else None)))
     gm_config = replace(config, gnss=replace(config.gnss, error_model="gauss-markov"))
     again = _run_logged(recording, gm_config, spare, progress, cov_step_s, smooth)
     d2 = again.diagnostics
