@@ -305,6 +305,12 @@ def test_the_model_removes_the_correlation_and_makes_sigma_honest(correlated_log
     d = gm.diagnostics
     assert not innovation_correlation(d.t, d.nu, d.accepted).correlated
     assert set(d.states) == {f"gnss_error_{a}{s}" for a in "enu" for s in ("", "_std")}
+    from navpp.io.writers import diagnostics_columns
+
+    names, cols, _ = diagnostics_columns(d)      # diagnostics.csv and the MCAP diagnostics' names
+    k = names.index("gnss_error_e")
+    np.testing.assert_array_equal(cols[k], d.states["gnss_error_e"][:, 0])
+    assert "gnss_error_u_std" in names
     assert gm.calibration["gnss_error"]["corr_time_s"] == 60.0 and not gm.calibration["gnss_error"]["estimated"]
     ckf = _run(rec, "ckf", gm_cfg)
     h_c, _ = _err_over_sigma(ckf.solution, rec.reference)
