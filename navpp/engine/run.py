@@ -221,9 +221,9 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     log.warnings += m_warnings
     cal = prep.cal
 
-    def new_aiding() -> Aiding:
+    def new_aiding(sel: np.ndarray = fixes.index) -> Aiding:
         return Aiding(config, model.t, model.gyro, model.accel, model.noise.gyro_arw, model.noise.accel_vrw,
-                      recording.gnss, fixes.index, model.gaps, mounting,
+                      recording.gnss, sel, model.gaps, mounting,
                       still=cal.still if (cal is not None and config.auto.standstill) else None,
                       profile=model.profile)
 
@@ -233,19 +233,7 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     n_epochs = sum(not e.coast for e in schedule) if progress is not None else 1
     reopen = recovery_reopening(config, al.P)
     lever = np.asarray(config.gnss.lever_arm_m, dtype=float)
-
-    def score(settings: GnssErrorSettings, share: float) -> float:
-        """-2 log-likelihood of the fixes under a Gauss-Markov candidate: one EKF pass."""
-        fm = GnssErrorModel(model, settings)
-        scorer = LikelihoodRecorder(gate_cap(config.gnss.gate_probability))
-        src = RunMeasurements(fixes, recording.gnss, lever, reopen, new_aiding(), model=fm, r_share=1.0 - share)
-        try:
-            run_epochs(first_pass_filter(config), fm, GaussianState(al.t, *fm.start(al.x, al.P)), schedule, src,
-                       scorer)
-        except FilterDivergedError:
-            return math.inf
-        return scorer.total
-
+    score = estimation_scorer(config, model, recording, al, fixes, new_aiding, reopen, lever)
     choice = gnss_error_choice(config, fixes, score)
     fmodel: InsModel | GnssErrorModel = model
     start = GaussianState(al.t, al.x, al.P)
@@ -270,6 +258,38 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
         progress(1.0)
     result = finished(recording, config, filt, prep, recorder, source, smooth, log, fmodel)
     return replace(result, runtime_s=time.perf_counter() - t_wall, notes=tuple(log.notes[n_al:]))
+
+
+#: The GNSS error model's estimation passes use one fix per this many seconds at most: the
+#: errors they weigh last tens of seconds, and a pass over 1 Hz fixes costs a fraction of one over
+#: 5-10 Hz (measured in docs/ins.md).
+ESTIMATION_FIX_INTERVAL_S = 1.0
+
+
+def estimation_scorer(config: Config, model: InsModel, recording: Recording, al: Alignment, fixes: GnssFixes,
+                      new_aiding: Any, reopen: np.ndarray | None, lever: np.ndarray) -> Any:
+    """The score of a Gauss-Markov candidate (:mod:`navpp.engine.gnss_error`): ``-2 log L`` of
+    the fixes' innovations in one pass of the plain EKF over the run's epochs, with the fixes thinned
+    to one per :data:`ESTIMATION_FIX_INTERVAL_S` (``new_aiding(sel)``: the run's aids over the fixes
+    ``sel``)."""
+    dt = float(np.median(np.diff(fixes.t))) if len(fixes) > 1 else ESTIMATION_FIX_INTERVAL_S
+    k = max(1, int(round(ESTIMATION_FIX_INTERVAL_S / dt))) if dt > 0.0 else 1
+    sub = GnssFixes(fixes.index[::k], fixes.t[::k], fixes.lat[::k], fixes.lon[::k], fixes.alt[::k], fixes.var[::k])
+    t_end = float(recording.imu.t[-1])
+    schedule = epochs(al.t, t_end, *new_aiding(sub.index).schedule(al.t, t_end, sub.t), recording.imu.t)
+
+    def score(settings: GnssErrorSettings, share: float) -> float:
+        fm = GnssErrorModel(model, settings)
+        scorer = LikelihoodRecorder(gate_cap(config.gnss.gate_probability))
+        src = RunMeasurements(sub, recording.gnss, lever, reopen, new_aiding(sub.index), model=fm,
+                              r_share=1.0 - share)
+        try:
+            run_epochs(first_pass_filter(config), fm, GaussianState(al.t, *fm.start(al.x, al.P)), schedule, src,
+                       scorer)
+        except FilterDivergedError:
+            return math.inf
+        return scorer.total
+    return score
 
 
 class DivergenceCheck:
