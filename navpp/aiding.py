@@ -4,7 +4,9 @@ The measurement models live in :mod:`navpp.ins.aids`, one per file; this module 
 the configuration and the data, at which times they apply:
 
 - **GNSS velocity** at every GNSS epoch whose fix carries a velocity (``[gnss] use_velocity``),
-  with the log's velocity sigma or ``[gnss] default_vel_std_mps``, after the position update.
+  with the log's velocity sigma or ``[gnss] default_vel_std_mps``, after the position update
+  (when the default is used, :func:`navpp.engine.verdict.velocity_sigma_checks` warns if the
+  velocity innovations show it far off, with the value they suggest).
 - **Constraints** (NHC for ``[vehicle] type = "car"``; ZUPT and ZARU while still) on a grid at
   ``[vehicle] rate_hz``: a grid time within half a period of a GNSS epoch rides on that epoch;
   the others are epochs of their own, so the constraints keep working through GNSS outages.

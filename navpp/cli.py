@@ -428,6 +428,9 @@ def simulate(
     gnss_error: Annotated[str, typer.Option(help="GNSS error model: white or correlated.",
                                             callback=_require(lambda v: v in ("white", "correlated"),
                                                               "'white' or 'correlated'"))] = "white",
+    gnss_corr_time: Annotated[float, typer.Option(
+        help="Correlation time of the correlated GNSS error (--gnss-error correlated), s.",
+        callback=_require(_finite(0.0, strict=True), "a finite number of seconds > 0"))] = 120.0,
     lever_arm: Annotated[str | None, typer.Option(
         help="Antenna lever arm in body FLU, m: 'x,y,z'.  [default: 0,0,0]")] = None,
     still: Annotated[float, typer.Option(help="Initial still period, s (at most half of --duration).",
@@ -460,7 +463,8 @@ def simulate(
         from . import api
 
         kwargs = dict(duration_s=duration, imu_rate_hz=imu_rate, gnss_rate_hz=gnss_rate, preset=preset, seed=seed,
-                      gnss_std_h_m=gnss_std_h, gnss_std_u_m=gnss_std_u, gnss_error=gnss_error, still_s=still)
+                      gnss_std_h_m=gnss_std_h, gnss_std_u_m=gnss_std_u, gnss_error=gnss_error, still_s=still,
+                      gnss_corr_time_s=gnss_corr_time)
         if realism is not None:
             kwargs["realism"] = realism
             for option, name in _BUNDLE_OPTIONS.items():   # the bundle's value unless given

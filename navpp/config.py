@@ -462,11 +462,14 @@ class GnssConfig:
         noise) or ``"auto"`` (white, unless the innovations of the run are correlated over
         several seconds: then the run is repeated with the Gauss-Markov model and the notes say
         so).
-    corr_time_s : float, s, > 0, default 60. Correlation time of the Gauss-Markov GNSS error.
-    correlated_share : float in (0, 1), default 0.8. Share of each fix's variance (its sigma
-        squared) that is the correlated part; the rest is white.  With the Gauss-Markov model
+    corr_time_s : float, s, > 0, or ``"auto"`` (default). Correlation time of the Gauss-Markov
+        GNSS error; ``"auto"``: estimated from the log (the value whose innovations are most likely,
+        :mod:`navpp.engine.gnss_error`), starting from 60 s.
+    correlated_share : float in (0, 1) or ``"auto"`` (default). Share of each fix's variance (its
+        sigma squared) that is the correlated part; the rest is white.  With the Gauss-Markov model
         the white part is the fix's R and the correlated part's stationary 1-sigma is
         ``sqrt(correlated_share)`` times the median sigma of the log's fixes (per ENU axis).
+        ``"auto"``: estimated with ``corr_time_s``, starting from 0.8.
     std_scale : float, > 0, default 1. Multiplies the position 1-sigma columns of the log
         (``std_e, std_n, std_u``, a NavSatFix covariance's square roots) before use: for a
         receiver whose reported accuracy is known to be optimistic or pessimistic.
@@ -482,15 +485,21 @@ class GnssConfig:
     outages: tuple[tuple[float, float], ...] = ()
     use_velocity: bool = True
     error_model: str = "auto"
-    corr_time_s: float = 60.0
-    correlated_share: float = 0.8
+    corr_time_s: float | str = "auto"
+    correlated_share: float | str = "auto"
     std_scale: float = 1.0
 
     def __post_init__(self) -> None:
         _as_bool("gnss", "use_velocity", self.use_velocity)
         _as_choice("gnss", "error_model", self.error_model, GNSS_ERROR_MODELS)
-        _fix_float(self, "gnss", "corr_time_s", minimum=0.0, strict_min=True)
-        _fix_float(self, "gnss", "correlated_share", minimum=0.0, maximum=1.0, strict_min=True, strict_max=True)
+        for key, what, bounds in (("corr_time_s", "a number of s > 0", dict(minimum=0.0, strict_min=True)),
+                                  ("correlated_share", "a number in (0, 1)",
+                                   dict(minimum=0.0, maximum=1.0, strict_min=True, strict_max=True))):
+            value = getattr(self, key)
+            if isinstance(value, str) and value != "auto":
+                raise ConfigError(f"[gnss] {key} must be {what} or \"auto\", got {value!r}")
+            if value != "auto":
+                _fix_float(self, "gnss", key, **bounds)
         _fix_float(self, "gnss", "std_scale", minimum=0.0, strict_min=True)
         _set(self, "outages", check_outages(self.outages))
         _set(self, "lever_arm_m", _as_vector("gnss", "lever_arm_m", self.lever_arm_m, 3))

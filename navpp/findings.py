@@ -35,8 +35,10 @@ CODES: dict[str, str] = {
     "innovations-large": "the GNSS innovations are larger than the filter predicts",
     "solution-doubtful": "the finished solution is doubtful against the prior GNSS sigma or the vehicle",
     "aid-rejected": "an aid's updates failed the innovation gate often",
+    "gnss-velocity-sigma": "the GNSS velocity innovations show [gnss] default_vel_std_mps far off",
     "smoothing-breaks": "steps the smoother carries no information back across",
     "refusal-causes": "the other causes to check when a run is refused",
+    "gnss-errors-correlated": "the GNSS innovations are correlated over seconds while the fixes are taken as white",
 }
 
 

@@ -44,10 +44,12 @@ def _consistent(p: np.ndarray, t: np.ndarray, s: np.ndarray, i: int, j: np.ndarr
     return dist <= vmax * np.abs(t[j] - t[i]) + JUMP_SIGMAS * np.hypot(s[i], s[j])
 
 
-def check_gnss_jumps(recording: Recording, vehicle_type: str, default_std_m, reanchor_after_s: float) -> None:
+def check_gnss_jumps(recording: Recording, vehicle_type: str, default_std_m, reanchor_after_s: float,
+                     std_scale: float = 1.0) -> None:
     """Raise InputError when the GNSS fixes inside the IMU span jump by more than any motion
     explains and stay displaced for longer than ``reanchor_after_s`` (s); see the module
-    docstring.  Outliers and short bursts are left to the innovation gate."""
+    docstring.  Outliers and short bursts are left to the innovation gate.  The log's sigmas are
+    taken times ``std_scale`` (``[gnss] std_scale``), as the filter takes them."""
     gnss, imu = recording.gnss, recording.imu
     if len(gnss) < 2 or len(imu) < 2:
         return
@@ -57,7 +59,7 @@ def check_gnss_jumps(recording: Recording, vehicle_type: str, default_std_m, rea
     t = np.asarray(gnss.t[inside], dtype=float)
     p = geodesy.geodetic_to_ecef(np.radians(gnss.lat_deg[inside]), np.radians(gnss.lon_deg[inside]),
                                  np.asarray(gnss.alt[inside], dtype=float))
-    std = (np.asarray(gnss.std_enu[inside], dtype=float) if gnss.std_enu is not None
+    std = (np.asarray(gnss.std_enu[inside], dtype=float) * std_scale if gnss.std_enu is not None
            else np.tile(np.asarray(default_std_m, dtype=float), (inside.size, 1)))
     s = np.linalg.norm(std, axis=1)
     vmax = MAX_SPEED_MPS.get(vehicle_type, MAX_SPEED_MPS["none"])

@@ -417,3 +417,15 @@ def test_diagnostics_name_the_groups_and_record_the_r_that_was_used(sim_log_dir,
     for i, axis in enumerate("enu"):
         expected = given[1:, i] * np.sqrt(df[f"r_factor_{axis}"].to_numpy()[:-1])
         np.testing.assert_allclose(df[f"r_std_{axis}"].to_numpy()[1:][ok], expected[ok], rtol=2e-4, atol=2e-4)
+
+
+def test_fixed_groups_keep_their_factor():
+    """``q_fixed``: the group's factor stays at the configured 1 (Q configured 3x the truth),
+    while the same run without it moves the factor towards the truth."""
+    fixed = _two_sensor_run(0, n_epochs=400, q_fixed=["q"])
+    free = _two_sensor_run(0, n_epochs=400)
+    assert np.all(fixed[:, 0] == 3.0)
+    assert free[-1, 0] < 2.0
+    assert VCEOptions().q_fixed == ("gnss_error",)
+    with pytest.raises(ValueError, match="q_fixed"):
+        VCEOptions(q_fixed="gnss_error")

@@ -22,6 +22,7 @@ from ..aiding import Aiding
 from ..config import Config
 from ..filters.base import GaussianState, Update
 from ..ins.model import ATT, BG, VEL, GnssPosition
+from ..ins.state import N_ERR, NOMINAL_SIZE
 from ..ins.strapdown import NOMINAL_VEL
 from ..recording import GnssData
 from .schedule import Epoch, GnssFixes
@@ -92,14 +93,20 @@ class RunMeasurements:
     lever_arm_b : GNSS antenna lever arm, body FLU, m.
     reopen : :func:`recovery_reopening` (None: no recovery).
     aiding : the run's aids (their counts and consistency checks are kept up to date here).
+    model : the filter's model when it is not the 15-state INS (the INS with the GNSS error states,
+        :class:`~navpp.ins.gnss_error.GnssErrorModel`): every measurement is carried to it with
+        its ``measurement`` and the aids see the INS part of the state.
+    r_share : the share of each fix's variance that is white (its R): 1 with white fix errors.
 
     ``last_good`` is the time (s) of the last accepted fix (None: none yet); ``recoveries`` the
     times of the forced fixes that re-aligned a drifted INS.
     """
 
     def __init__(self, fixes: GnssFixes, gnss: GnssData, lever_arm_b: np.ndarray, reopen: np.ndarray | None,
-                 aiding: Aiding) -> None:
+                 aiding: Aiding, *, model: Any = None, r_share: float = 1.0) -> None:
         self.fixes, self.gnss, self.lever, self.reopen, self.aiding = fixes, gnss, lever_arm_b, reopen, aiding
+        self.wrap = getattr(model, "measurement", None)
+        self.r_share = float(r_share)
         self.last_good: float | None = None
         self.recoveries: list[float] = []
         self._rejected_nis: list[float] = []    # NIS of the fixes rejected since the last accepted one
@@ -107,17 +114,22 @@ class RunMeasurements:
 
     def measurements(self, epoch: Epoch, stage: int, state: GaussianState) -> Sequence[Any] | None:
         if stage == 0:
-            return self.fix_measurements(epoch) if epoch.fix >= 0 else ()
-        if stage == 1:
-            return self.aiding.constraint_measurements(epoch.t, state.x, state.P) if epoch.constraints else ()
-        return None
+            out = self.fix_measurements(epoch) if epoch.fix >= 0 else []
+        elif stage == 1:
+            out = (self.aiding.constraint_measurements(epoch.t, state.x[:NOMINAL_SIZE],
+                                                              np.ascontiguousarray(state.P[:N_ERR, :N_ERR]))
+                   if epoch.constraints else [])
+        else:
+            return None
+        return out if self.wrap is None else [self.wrap(m) for m in out]
 
     def fix_measurements(self, epoch: Epoch) -> list[Any]:
         """The position fix of ``epoch`` and its velocity (when there is one)."""
         k, f = epoch.fix, self.fixes
         self._drift = self.reopen is not None and drifting(np.asarray(self._rejected_nis, dtype=float))
-        out: list[Any] = [GnssPosition(epoch.t, float(f.lat[k]), float(f.lon[k]), float(f.alt[k]), np.diag(f.var[k]),
-                                       self.lever, self.reopen if self._drift else None)]
+        out: list[Any] = [GnssPosition(epoch.t, float(f.lat[k]), float(f.lon[k]), float(f.alt[k]),
+                                       np.diag(f.var[k] * self.r_share), self.lever,
+                                       self.reopen if self._drift else None)]
         vmeas = self.aiding.velocity(k, epoch.t)
         if vmeas is not None:
             out.append(vmeas)
@@ -127,7 +139,7 @@ class RunMeasurements:
         inn, state = update.innovation, update.state
         self.aiding.counts.add(meas.kind, inn.accepted)
         if meas.kind != "gnss_position":
-            self.aiding.observed(meas, inn)
+            self.aiding.observed(getattr(meas, "inner", meas), inn)
             return state
         if inn.accepted:
             self.last_good = epoch.t

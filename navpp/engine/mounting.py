@@ -38,7 +38,9 @@ def vehicle_mounting(recording: Recording, config: Config, cov_step_s: float, ru
         return None, [], []
     from ..ins.aids.mounting import estimate_mounting
 
-    first = replace(config, vehicle=replace(veh, nhc=False))
+    gnss = config.gnss   # the first pass only needs the attitude: no second pass for correlated fixes
+    first = replace(config, vehicle=replace(veh, nhc=False),
+                    gnss=replace(gnss, error_model="white") if gnss.error_model == "auto" else gnss)
     pre = run_pass(recording, first, first_pass_filter(config), None, cov_step_s, False)
     sol = pre.solution
     est = estimate_mounting(sol.t, sol.vel_enu, sol.rph_deg)

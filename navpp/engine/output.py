@@ -12,8 +12,9 @@ import time
 import numpy as np
 from numba import njit
 
+from ..filters.protocols import SmoothableModel
 from ..filters.smoother import ForwardStore, smooth_arrays
-from ..ins.model import BA, BG, POS, InsModel, apply_node_corrections
+from ..ins.model import BA, BG, POS, apply_node_corrections
 from ..ins.strapdown import NOMINAL_BA, NOMINAL_BG
 from ..recording import Solution
 from .results import BiasHistory, SmoothedRun
@@ -35,7 +36,7 @@ def compile_seconds(events) -> float:
     return total
 
 
-def smoothed_run(store: ForwardStore, model: InsModel, t_out: np.ndarray, path: np.ndarray,
+def smoothed_run(store: ForwardStore, model: SmoothableModel, t_out: np.ndarray, path: np.ndarray,
                  epoch_node: np.ndarray, tg: np.ndarray, t0_ns: int) -> SmoothedRun:
     """Smooth the stored forward run and bring it to the IMU rate.
 

@@ -19,6 +19,7 @@ from ..ins.attitude import rpy_deg_to_dcm
 from ..ins.model import NoiseModel
 from ..recording import Recording
 from .checks import check_gyro_scale
+from .schedule import with_prior_std
 
 
 def mounting_matrix(rpy_deg: tuple[float, float, float]) -> np.ndarray:
@@ -75,7 +76,7 @@ def calibrated(recording: Recording, config: Config, gyro: np.ndarray, accel: np
     noise = config.imu.noise()
     if not (auto.standstill or auto.noise or auto.biases or auto.mounting):
         return gyro, accel, noise, None, [], []
-    imu, gnss = recording.imu, recording.gnss
+    imu, gnss = recording.imu, with_prior_std(recording.gnss, config)
 
     def measure(g, a):
         return calibrate(imu.t, g, a, gnss, gyro_arw=noise.gyro_arw, accel_vrw=noise.accel_vrw,

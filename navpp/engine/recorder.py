@@ -18,8 +18,9 @@ import numpy as np
 
 from ..filters.base import GaussianState, Prediction, Update
 from ..filters.smoother import ForwardStore
+from ..ins.gnss_error import GM, GM_STATE_NAMES, NOMINAL_GM
 from ..ins.model import BA, BG, POS
-from ..ins.strapdown import NOMINAL_BA, NOMINAL_BG, PATH_SIZE
+from ..ins.strapdown import NOMINAL_BA, NOMINAL_BG, NOMINAL_SIZE, PATH_SIZE
 from .loop import EpochOutcome
 from .results import BiasHistory, Diagnostics
 from .schedule import Epoch, GnssFixes
@@ -65,6 +66,8 @@ class RunRecorder:
         self.adaptive: dict[str, np.ndarray] = {}
         self.bias = np.empty((m, 6))
         self.bias_var = np.empty((m, 6))
+        # the GNSS error states after each fix (ENU m) and their variance, when the model has them
+        self.gnss_error = np.full((m, 6), np.nan) if start.x.shape[0] > NOMINAL_SIZE else None
         # GNSS velocity: innovation (M, 3) m/s, NIS (M,), applied (M,: 1, 0, NaN without one)
         self.vel = (np.full((m, 3), np.nan), np.full(m, np.nan), np.full(m, np.nan)) if velocity else None
         self.noise_report = noise_report
@@ -128,6 +131,9 @@ class RunRecorder:
             self.bias[k, 3:] = state.x[NOMINAL_BA]
             self.bias_var[k, :3] = state.P.diagonal()[BG]
             self.bias_var[k, 3:] = state.P.diagonal()[BA]
+            if self.gnss_error is not None:
+                self.gnss_error[k, :3] = state.x[NOMINAL_GM]
+                self.gnss_error[k, 3:] = state.P.diagonal()[GM]
         if self.progress is not None and epoch.index % self.tick == 0:
             self.progress(epoch.index / self.n_epochs)
 
@@ -148,8 +154,15 @@ class RunRecorder:
             else:
                 named[key] = values
         vel_nu, vel_nis, vel_accepted = self.vel if self.vel is not None else (None, None, None)
+        states: dict[str, np.ndarray] = {}
+        if self.gnss_error is not None:
+            std = np.sqrt(np.maximum(self.gnss_error[:, 3:], 0.0))
+            for i, name in enumerate(GM_STATE_NAMES):
+                states[name] = self.gnss_error[:, [i]]
+            for i, name in enumerate(GM_STATE_NAMES):
+                states[name + "_std"] = std[:, [i]]
         return Diagnostics(t, self.nu, self.nis, self.accepted, self.forced, self.r_std, named, vel_nu, vel_nis,
-                           vel_accepted)
+                           vel_accepted, states)
 
     def bias_history(self, t: np.ndarray) -> BiasHistory:
         """The biases after each fix at the fix times ``t`` (s), with their 1-sigma."""

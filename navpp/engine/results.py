@@ -29,6 +29,9 @@ class Diagnostics:
     vel_nu: np.ndarray | None = None          # (M, 3) GNSS velocity innovation, ENU m/s (NaN: none)
     vel_nis: np.ndarray | None = None         # (M,) its NIS
     vel_accepted: np.ndarray | None = None    # (M,) 1 applied, 0 rejected, NaN no velocity
+    #: extra filter states after each fix, name -> (M, 1): with the Gauss-Markov GNSS error model
+    #: ``gnss_error_e/n/u`` (ENU m) and their 1-sigma ``gnss_error_e_std`` ...
+    states: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,8 @@ and judge the result (:mod:`navpp.engine.output`, :mod:`navpp.engine.verdict`).
 
 from __future__ import annotations
 
+import copy
+import math
 import time
 from dataclasses import dataclass, replace
 from typing import Any
@@ -23,19 +25,30 @@ from ..filters.base import Filter, GaussianState
 from ..findings import Finding
 from ..gnss_jumps import check_gnss_jumps
 from ..ins.alignment import Alignment, align
+from ..ins.gnss_error import Correlation, GnssErrorModel, GnssErrorSettings, innovation_correlation
 from ..ins.model import InsModel
 from ..recording import Recording
 from .checks import alignment_findings, check_data, check_imu_plausible
+from .gnss_error import (
+    LikelihoodRecorder,
+    correlation_finding,
+    correlation_note,
+    gate_cap,
+    gnss_error_choice,
+    innovation_score,
+    kept_white_finding,
+    residual_finding,
+)
 from .loop import run_epochs
 from .measurements import RunMeasurements, recovery_reopening
-from .mounting import vehicle_mounting
+from .mounting import first_pass_filter, vehicle_mounting
 from .output import compile_seconds, interpolated_std, smoothed_run, solution_from_path
 from .prepare import alignment_settings, calibrated, mounting_matrix, noise_model, timing_fixes
 from .recorder import RunRecorder, new_path
 from .results import RunResult, SmoothedRun
-from .schedule import GnssFixes, epochs, gnss_fixes
+from .schedule import GnssFixes, epochs, gnss_fixes, with_prior_std
 from .segments import ProgressFn, imu_segments, run_segments
-from .verdict import aid_checks, consistency_checks, plausibility_checks, refusal, state_fault
+from .verdict import aid_checks, consistency_checks, plausibility_checks, refusal, state_fault, velocity_sigma_checks
 
 
 def run(recording: Recording, config: Config, filt: Filter, *, progress: ProgressFn | None = None,
@@ -87,7 +100,69 @@ def run_one(recording: Recording, config: Config, filt: Filter, progress: Progre
             cov_step_s: float, smooth: bool = False) -> RunResult:
     """One run over a recording without unbridgeable gaps; a failure carries what the run had
     noted and warned about so far (:meth:`navpp.errors.NavppError.with_context`), so the user
-    sees the likely cause first."""
+    sees the likely cause first.
+
+    ``[gnss] error_model = "auto"``: the run takes the fixes' errors as white; when its
+    innovations are correlated over several seconds (:func:`~navpp.ins.gnss_error.innovation_correlation`)
+    it is run again, from the start and with a fresh copy of the filter, with the Gauss-Markov
+    GNSS error states, and the notes say so.  ``"white"``: the same measurement gives a warning
+    naming the setting."""
+    mode = config.gnss.error_model
+    spare = copy.deepcopy(filt) if mode == "auto" else None
+    first_config = replace(config, gnss=replace(config.gnss, error_model="white")) if mode == "auto" else config
+    result = _run_logged(recording, first_config, filt, progress, cov_step_s, smooth)
+    d = result.diagnostics
+    corr = innovation_correlation(d.t, d.nu, d.accepted)
+    result = _with_correlation(result, corr)
+    if mode == "gauss-markov":
+        if corr.correlated:
+            tau = result.calibration.get("gnss_error", {}).get("corr_time_s", float("nan"))
+            result = replace(result, warnings=(*result.warnings, residual_finding(recording.source, corr, tau)))
+        return result
+    if not corr.correlated:
+        return result
+    if spare is None or filt.random_mean:
+        return replace(result, warnings=(*result.warnings, correlation_finding(
+            recording.source, corr, learnt_r_ratio(d.r_std, recording, config) if filt.adapts_noise else None,
+            filt.name if filt.random_mean else None)))
+    gm_config = replace(config, gnss=replace(config.gnss, error_model="gauss-markov"))
+    again = _run_logged(recording, gm_config, spare, progress, cov_step_s, smooth)
+    d2 = again.diagnostics
+    after = innovation_correlation(d2.t, d2.nu, d2.accepted)
+    again = replace(_with_correlation(again, after), notes=(correlation_note(corr), *again.notes))
+    again.calibration["gnss_error"]["detected_by"] = {"lag_s": corr.lag_s, "rho": round(corr.rho, 4),
+                                                      "pairs": corr.pairs}
+    white_score, gm_score = result.calibration["gnss_innovation_score"], again.calibration["gnss_innovation_score"]
+    if not gm_score < white_score:
+        # the filter explains the fixes no better with the model (its own adaptation fights it)
+        return replace(result, warnings=(*result.warnings, kept_white_finding(recording.source, corr, filt.name,
+                                                                                 white_score, gm_score)))
+    if after.correlated:
+        tau = again.calibration["gnss_error"]["corr_time_s"]
+        again = replace(again, warnings=(*again.warnings, residual_finding(recording.source, after, tau)))
+    return again
+
+
+def _with_correlation(result: RunResult, corr: Correlation) -> RunResult:
+    """``result`` with the innovations' lag correlation in its calibration figures (metrics.json)."""
+    return replace(result, calibration={**result.calibration, "gnss_innovation_correlation": {
+        "lag_s": corr.lag_s, "rho": round(corr.rho, 4), "pairs": corr.pairs, "threshold": round(corr.threshold, 4)}})
+
+
+def learnt_r_ratio(r_std: np.ndarray, recording: Recording, config: Config) -> float | None:
+    """The median 1-sigma an adaptive filter used for the fixes over the median the log (or
+    ``[gnss] default_std_m``) gives, horizontal axes; None when it cannot be told."""
+    gnss = recording.gnss
+    prior = (np.asarray(gnss.std_enu, dtype=float)[:, :2] if gnss.std_enu is not None
+             else np.asarray(config.gnss.default_std_m, dtype=float)[None, :2])
+    used = np.asarray(r_std, dtype=float)[:, :2]
+    if not (np.any(np.isfinite(used)) and np.any(np.isfinite(prior))):
+        return None
+    return float(np.nanmedian(used) / (np.nanmedian(prior) * config.gnss.std_scale))
+
+
+def _run_logged(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
+                cov_step_s: float, smooth: bool) -> RunResult:
     log = Journal([], [])
     try:
         return processed(recording, config, filt, progress, cov_step_s, smooth, log)
@@ -98,7 +173,8 @@ def run_one(recording: Recording, config: Config, filt: Filter, progress: Progre
 
 def prepared(recording: Recording, config: Config, cov_step_s: float, log: Journal) -> Prepared:
     """Check the data, fix its timing, rotate and calibrate the IMU, build the model, align."""
-    check_gnss_jumps(recording, config.vehicle.type, config.gnss.default_std_m, config.gnss.reanchor_after_s)
+    check_gnss_jumps(recording, config.vehicle.type, config.gnss.default_std_m, config.gnss.reanchor_after_s,
+                     config.gnss.std_scale)
     log.warnings += check_imu_plausible(recording)
     calibration: dict = {}
     recording, t_notes, t_warnings = timing_fixes(recording, config, calibration)
@@ -118,7 +194,8 @@ def prepared(recording: Recording, config: Config, cov_step_s: float, log: Journ
     model = InsModel(imu.t, gyro, accel, noise_model(config, noise), cov_step_s=cov_step_s, path=path,
                      profile=profile)
     try:
-        al = align(model.t, model.gyro, model.accel, gnss, alignment_settings(config, noise, cal))
+        al = align(model.t, model.gyro, model.accel, with_prior_std(gnss, config),
+                   alignment_settings(config, noise, cal))
     except InputError as exc:  # alignment knows the data, not where it came from
         from ..plausibility import fix_suspect
 
@@ -138,25 +215,40 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     prep = prepared(recording, config, cov_step_s, log)
     recording, model, al, fixes = prep.recording, prep.model, prep.alignment, prep.fixes
     n_al = len(al.lines)
+    log.notes += fixes.notes
     mounting, m_notes, m_warnings = vehicle_mounting(recording, config, cov_step_s, run_one)
     log.notes += m_notes
     log.warnings += m_warnings
     cal = prep.cal
-    aiding = Aiding(config, model.t, model.gyro, model.accel, model.noise.gyro_arw, model.noise.accel_vrw,
-                    recording.gnss, fixes.index, model.gaps, mounting,
-                    still=cal.still if (cal is not None and config.auto.standstill) else None,
-                    profile=model.profile)
+
+    def new_aiding(sel: np.ndarray = fixes.index) -> Aiding:
+        return Aiding(config, model.t, model.gyro, model.accel, model.noise.gyro_arw, model.noise.accel_vrw,
+                      recording.gnss, sel, model.gaps, mounting,
+                      still=cal.still if (cal is not None and config.auto.standstill) else None,
+                      profile=model.profile)
+
+    aiding = new_aiding()
     imu_t = recording.imu.t
     schedule = epochs(al.t, float(imu_t[-1]), *aiding.schedule(al.t, float(imu_t[-1]), fixes.t), imu_t)
     n_epochs = sum(not e.coast for e in schedule) if progress is not None else 1
+    reopen = recovery_reopening(config, al.P)
+    lever = np.asarray(config.gnss.lever_arm_m, dtype=float)
+    score = estimation_scorer(config, model, recording, al, fixes, new_aiding, reopen, lever)
+    choice = gnss_error_choice(config, fixes, score)
+    fmodel: InsModel | GnssErrorModel = model
     start = GaussianState(al.t, al.x, al.P)
+    if choice is not None:
+        fmodel = GnssErrorModel(model, choice.settings)
+        start = GaussianState(al.t, *fmodel.start(al.x, al.P))
+        log.notes.append(choice.note())
+        prep.calibration["gnss_error"] = choice.report()
     recorder = RunRecorder(fixes, prep.path, start, al.index, filt.noise_report, velocity=aiding.has_velocity,
                            smooth=smooth, progress=progress, n_epochs=n_epochs)
-    source = RunMeasurements(fixes, recording.gnss, np.asarray(config.gnss.lever_arm_m, dtype=float),
-                             recovery_reopening(config, al.P), aiding)
+    source = RunMeasurements(fixes, recording.gnss, lever, reopen, aiding, model=fmodel,
+                             r_share=1.0 if choice is None else 1.0 - choice.share)
     check = DivergenceCheck(recording, config, filt.name, al.t, log, source)
     try:
-        state = run_epochs(filt, model, start, schedule, source, recorder, check)
+        state = run_epochs(filt, fmodel, start, schedule, source, recorder, check)
         check(state, state.t)
     except RunRefused:
         raise
@@ -164,8 +256,40 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
         raise check.diverged(recorder.t, exc.why or str(exc)) from None
     if progress is not None:
         progress(1.0)
-    result = finished(recording, config, filt, prep, recorder, source, smooth, log)
+    result = finished(recording, config, filt, prep, recorder, source, smooth, log, fmodel)
     return replace(result, runtime_s=time.perf_counter() - t_wall, notes=tuple(log.notes[n_al:]))
+
+
+#: The GNSS error model's estimation passes use one fix per this many seconds at most: the
+#: errors they weigh last tens of seconds, and a pass over 1 Hz fixes costs a fraction of one over
+#: 5-10 Hz (measured in docs/ins.md).
+ESTIMATION_FIX_INTERVAL_S = 1.0
+
+
+def estimation_scorer(config: Config, model: InsModel, recording: Recording, al: Alignment, fixes: GnssFixes,
+                      new_aiding: Any, reopen: np.ndarray | None, lever: np.ndarray) -> Any:
+    """The score of a Gauss-Markov candidate (:mod:`navpp.engine.gnss_error`): ``-2 log L`` of
+    the fixes' innovations in one pass of the plain EKF over the run's epochs, with the fixes thinned
+    to one per :data:`ESTIMATION_FIX_INTERVAL_S` (``new_aiding(sel)``: the run's aids over the fixes
+    ``sel``)."""
+    dt = float(np.median(np.diff(fixes.t))) if len(fixes) > 1 else ESTIMATION_FIX_INTERVAL_S
+    k = max(1, int(round(ESTIMATION_FIX_INTERVAL_S / dt))) if dt > 0.0 else 1
+    sub = GnssFixes(fixes.index[::k], fixes.t[::k], fixes.lat[::k], fixes.lon[::k], fixes.alt[::k], fixes.var[::k])
+    t_end = float(recording.imu.t[-1])
+    schedule = epochs(al.t, t_end, *new_aiding(sub.index).schedule(al.t, t_end, sub.t), recording.imu.t)
+
+    def score(settings: GnssErrorSettings, share: float) -> float:
+        fm = GnssErrorModel(model, settings)
+        scorer = LikelihoodRecorder(gate_cap(config.gnss.gate_probability))
+        src = RunMeasurements(sub, recording.gnss, lever, reopen, new_aiding(sub.index), model=fm,
+                              r_share=1.0 - share)
+        try:
+            run_epochs(first_pass_filter(config), fm, GaussianState(al.t, *fm.start(al.x, al.P)), schedule, src,
+                       scorer)
+        except FilterDivergedError:
+            return math.inf
+        return scorer.total
+    return score
 
 
 class DivergenceCheck:
@@ -193,15 +317,17 @@ class DivergenceCheck:
 
 
 def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared, recorder: RunRecorder,
-             source: RunMeasurements, smooth: bool, log: Journal) -> RunResult:
-    """The result of a finished forward run: smoothed (with ``smooth``), converted to the
-    output's units, and judged (:mod:`navpp.engine.verdict`); a refusal for a run that is wrong."""
+             source: RunMeasurements, smooth: bool, log: Journal, fmodel: Any = None) -> RunResult:
+    """The result of a finished forward run: smoothed (with ``smooth``) on the filter's model
+    ``fmodel`` (default the INS), converted to the output's units, and judged
+    (:mod:`navpp.engine.verdict`); a refusal for a run that is wrong."""
     al, fixes = prep.alignment, prep.fixes
     path = recorder.path[al.index:]
     t_out = recording.imu.t[al.index:]
     smoothed = None
     if smooth:
-        smoothed = smoothed_output(recorder, prep.model, t_out, path, fixes.t, recording.t0_ns)
+        smoothed = smoothed_output(recorder, prep.model if fmodel is None else fmodel, t_out, path, fixes.t,
+                                   recording.t0_ns)
     kt, k_prior, k_post = recorder.knot_arrays()
     std_out = interpolated_std(t_out, kt[0], k_post[0], kt[1:], k_prior[1:], k_post[1:])
     solution = solution_from_path(t_out, path, std_out, recording.t0_ns)
@@ -210,6 +336,8 @@ def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared,
     aiding = source.aiding
     log.warnings += recovery_warnings(recording.source, source.recoveries)
     log.notes += veto_notes(aiding.vetoes)
+    log.warnings += velocity_sigma_checks(recording.source, config, recording.gnss.std_vel_enu is not None,
+                                          diag.vel_nis)
     headline, c_warnings = consistency_checks(recording.source, filt.name, config, fixes.t, recorder.nis,
                                               recorder.accepted)
     if headline is not None:
@@ -229,10 +357,12 @@ def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared,
     return RunResult(solution, recorder.bias_history(fixes.t), al, diag, len(fixes), int((~recorder.accepted).sum()),
                      0.0, 0.0, tuple(log.warnings), smoothed, (), aiding.counts.as_dict(),
                      {**prep.calibration, "recoveries_s": [round(v, 3) for v in source.recoveries],
-                      "standstill_ended_early_s": [round(v, 3) for v in aiding.vetoes]})
+                      "standstill_ended_early_s": [round(v, 3) for v in aiding.vetoes],
+                      "gnss_innovation_score": round(innovation_score(recorder.nis, recorder.s_used,
+                                                                      config.gnss.gate_probability), 2)})
 
 
-def smoothed_output(recorder: RunRecorder, model: InsModel, t_out: np.ndarray, path: np.ndarray,
+def smoothed_output(recorder: RunRecorder, model: Any, t_out: np.ndarray, path: np.ndarray,
                     tg: np.ndarray, t0_ns: int) -> SmoothedRun:
     """The recorder's forward run smoothed (:func:`~navpp.engine.output.smoothed_run`), its
     runtime without the compilation of kernels on a cold cache; the recorder's store is emptied."""

@@ -8,13 +8,13 @@ smoother have a node at least every :data:`KNOT_S`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..config import Config
 from ..errors import InputError
-from ..recording import Recording
+from ..recording import GnssData, Recording
 
 #: Longest stretch without a covariance knot (a stop of the filter) for the output sigma, s.
 KNOT_S = 1.0
@@ -25,8 +25,10 @@ class GnssFixes:
     """The GNSS fixes a run uses, in time order: those after the alignment inside the IMU span.
 
     index : (M,) their rows in the recording's GNSS; t : (M,) s; lat, lon : (M,) rad;
-    alt : (M,) m (ellipsoidal); var : (M, 3) prior variance ENU, m^2 (the log's per-fix 1-sigma,
-    else ``[gnss] default_std_m``, squared).
+    alt : (M,) m (ellipsoidal); var : (M, 3) prior variance ENU, m^2: the log's per-fix 1-sigma
+    times ``[gnss] std_scale``, else ``[gnss] default_std_m`` (never scaled), squared.  Every
+    check against "the prior R" uses ``var``.  notes : what the run notes about how ``var`` was
+    formed (:func:`std_scale_notes`).
     """
 
     index: np.ndarray
@@ -35,22 +37,67 @@ class GnssFixes:
     lon: np.ndarray
     alt: np.ndarray
     var: np.ndarray
+    notes: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
 
 
+def prior_std_enu(std_enu: np.ndarray | None, config: Config, n: int) -> np.ndarray:
+    """The position 1-sigma (n, 3) ENU m the filter's prior R is made of: the log's ``std_enu``
+    (n, 3) m times ``[gnss] std_scale``, or, when the log has none (None), ``[gnss] default_std_m``
+    as configured (std_scale does not apply to it: it is the user's own figure)."""
+    if std_enu is None:
+        return np.tile(np.asarray(config.gnss.default_std_m, dtype=float), (n, 1))
+    return np.asarray(std_enu, dtype=float) * config.gnss.std_scale
+
+
+def with_prior_std(gnss: GnssData, config: Config) -> GnssData:
+    """``gnss`` with the sigmas the filter uses, for the readers of a whole
+    :class:`~navpp.recording.GnssData` (the alignment's initial position covariance and heading
+    from the track, the calibration's GNSS speed): the position 1-sigma times ``[gnss]
+    std_scale``, and a velocity 1-sigma of ``[gnss] default_vel_std_mps`` where the log has
+    velocity without one (``gnss`` itself when nothing changes)."""
+    changes: dict = {}
+    if gnss.std_enu is not None and config.gnss.std_scale != 1.0:
+        changes["std_enu"] = np.asarray(gnss.std_enu, dtype=float) * config.gnss.std_scale
+    if gnss.vel_enu is not None and gnss.std_vel_enu is None:
+        changes["std_vel_enu"] = np.full(np.shape(gnss.vel_enu), config.gnss.default_vel_std_mps)
+    return replace(gnss, **changes) if changes else gnss
+
+
+def std_scale_notes(recording: Recording, config: Config, std_enu: np.ndarray | None) -> tuple[str, ...]:
+    """The run's note when ``[gnss] std_scale`` is not 1: the log's position sigmas scaled (with
+    their medians before and after, ENU m, of the fixes ``std_enu`` (n, 3) m the run uses), or not
+    applied because the log has none."""
+    scale = config.gnss.std_scale
+    if scale == 1.0:
+        return ()
+    from ..plausibility import std_name
+
+    if std_enu is None or std_enu.shape[0] == 0:
+        return (f"[gnss] std_scale = {scale:g} not applied: the log has no position sigmas, and "
+                f"[gnss] default_std_m = {list(config.gnss.default_std_m)} m is used as configured",)
+    med = np.nanmedian(np.asarray(std_enu, dtype=float), axis=0)
+    was = ", ".join(f"{v:.3g}" for v in med)
+    now = ", ".join(f"{v:.3g}" for v in med * scale)
+    return (f"GNSS position sigmas scaled by {scale:g} ([gnss] std_scale): {std_name(recording.source, True)} "
+            f"(median E, N, U {was} m) used as {now} m",)
+
+
 def gnss_fixes(recording: Recording, config: Config, t_start: float) -> GnssFixes:
-    """The fixes in ``(t_start, last IMU stamp]`` (s); InputError when there is none."""
+    """The fixes in ``(t_start, last IMU stamp]`` (s); InputError when there is none.  Their
+    variances are :func:`prior_std_enu` squared: the log's sigmas times ``[gnss] std_scale``, else
+    ``[gnss] default_std_m`` unscaled."""
     gnss, imu = recording.gnss, recording.imu
     sel = np.nonzero((gnss.t > t_start) & (gnss.t <= imu.t[-1]))[0]
     if sel.size == 0:
         raise InputError(f"{recording.source}: no GNSS fix inside the IMU span after alignment "
                          f"(t = {t_start:.2f} .. {imu.t[-1]:.2f} s)")
-    std = (np.asarray(gnss.std_enu[sel], dtype=float) if gnss.std_enu is not None
-           else np.tile(np.asarray(config.gnss.default_std_m, dtype=float), (sel.size, 1)))
+    logged = None if gnss.std_enu is None else np.asarray(gnss.std_enu[sel], dtype=float)
+    std = prior_std_enu(logged, config, sel.size)
     return GnssFixes(sel, gnss.t[sel], np.radians(gnss.lat_deg[sel]), np.radians(gnss.lon_deg[sel]),
-                     np.asarray(gnss.alt[sel], dtype=float), std ** 2)
+                     np.asarray(gnss.alt[sel], dtype=float), std ** 2, std_scale_notes(recording, config, logged))
 
 
 @dataclass(frozen=True)

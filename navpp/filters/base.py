@@ -86,6 +86,10 @@ class Filter:
     #: options under which the filter is the plain Kalman filter (adaptation off): the oracle
     #: tests run every registered filter with these against the closed-form update
     oracle_options: ClassVar[dict[str, Any]] = {}
+    #: the update moves the mean by a random amount the covariance does not carry (random
+    #: weights): long-memory states such as the Gauss-Markov GNSS error accumulate it, so the
+    #: engine's ``error_model = "auto"`` does not add them to such a filter (docs/ins.md)
+    random_mean: ClassVar[bool] = False
 
     def __init__(self, options: Any = None, *, gate_probability: float = 0.0,
                  reanchor_after_s: float = 10.0, rng: np.random.Generator | None = None) -> None:

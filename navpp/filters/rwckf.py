@@ -143,6 +143,7 @@ class RWCKF(SigmaPointFilter):
                "by the innovation likelihood.")
     Options = RWCKFOptions
     oracle_options: ClassVar[dict[str, Any]] = {"weights": "uniform"}
+    random_mean: ClassVar[bool] = True      # eqs 24 and 26 (see the module docstring)
     adapter: DirichletWeighting
 
     def make_rule(self) -> CubatureRule:

@@ -106,6 +106,12 @@ class VCEOptions:
         of the prior covariance, carried through every time update and measurement (see the
         module docstring); ``"auto"``: propagated on the INS (a model whose ``noise_groups``
         takes ``per``), step elsewhere.
+    q_fixed : names of process-noise groups whose factor stays 1 (their noise is used and
+        counted, not estimated).  Default ``("gnss_error",)``: the drive of the Gauss-Markov GNSS
+        error states (``[gnss] error_model``) is part of the fixes' noise model, and one position
+        innovation sees it and the white R the same way, so VCE cannot tell them apart; left free
+        it runs to ``ceiling`` and the filter follows the fixes again (measured in
+        docs/ins.md).  The white R keeps its factors.
     """
 
     window: int = 50
@@ -115,8 +121,12 @@ class VCEOptions:
     ceiling: float = 10.0
     q_groups: str = "triad"
     q_share: str = "auto"
+    q_fixed: tuple[str, ...] = ("gnss_error",)
 
     def __post_init__(self) -> None:
+        if isinstance(self.q_fixed, str) or not all(isinstance(g, str) for g in self.q_fixed):
+            raise ValueError(f"q_fixed must be a list of group names, got {self.q_fixed!r}")
+        object.__setattr__(self, "q_fixed", tuple(self.q_fixed))
         if isinstance(self.window, bool) or int(self.window) != self.window or self.window < 1:
             raise ValueError(f"window must be an integer number of epochs >= 1, got {self.window!r}")
         object.__setattr__(self, "window", int(self.window))
@@ -186,6 +196,7 @@ class HelmertVCE(Adaptation):
         self.o = options
         self.q_group_names: list[str] | None = None
         self.q_factor = np.zeros(0)
+        self._q_fixed = np.zeros(0, dtype=bool)
         self.r_factor: np.ndarray | None = None
         self.last: VCEEpoch | None = None
         self.skipped = 0
@@ -226,6 +237,7 @@ class HelmertVCE(Adaptation):
             self.q_group_names = names
             G = len(names)
             self.q_factor = np.ones(G)
+            self._q_fixed = np.array([name in self.o.q_fixed for name in names], dtype=bool)
             self._q_num = np.zeros((self.o.window, G))
             self._q_red = np.zeros((self.o.window, G))
         elif names != self.q_group_names:
@@ -385,6 +397,7 @@ class HelmertVCE(Adaptation):
                 self._q_num[slot], self._q_red[slot] = e.q_num, e.r_g
                 old_f = self.q_factor
                 self.q_factor = self._pooled(self._q_num, self._q_red, self.q_factor)
+                self.q_factor[self._q_fixed] = old_f[self._q_fixed]
                 if self.propagated and self._Pg is not None:
                     # each share is linear in its factor
                     self._Pg = self._Pg * (self.q_factor / old_f)[:, None, None]

@@ -336,8 +336,10 @@ def write_trajectory_csv(path: str | os.PathLike[str], sol: Solution, *, t0_s: f
 def adaptive_columns(diagnostics: Any) -> tuple[list[str], np.ndarray]:
     """Names and (M, K) values of every per-epoch quantity beyond the fixed GNSS-position fields:
     the GNSS velocity update of the epoch when the run had one (``nu_ve, nu_vn, nu_vu`` m/s,
-    ``nis_vel``, ``vel_accepted``; nan where a fix had no velocity), then every adaptive quantity
-    in ``diagnostics.adaptive``.
+    ``nis_vel``, ``vel_accepted``; nan where a fix had no velocity), then the extra filter states
+    of ``diagnostics.states`` (the GNSS error states ``gnss_error_e/n/u`` and their 1-sigma, ENU m,
+    with the Gauss-Markov GNSS error model), then every adaptive quantity in
+    ``diagnostics.adaptive``.
 
     An adaptive entry ``name -> (M, k)`` gives ``name`` when k is 1, else ``name_0 ..
     name_<k-1>``: the column names of ``diagnostics.csv`` (and of the MCAP diagnostics' ``names``).
@@ -351,7 +353,7 @@ def adaptive_columns(diagnostics: Any) -> tuple[list[str], np.ndarray]:
         cols.append(np.column_stack([np.asarray(vel_nu, dtype=np.float64).reshape(m, 3),
                                      np.asarray(diagnostics.vel_nis, dtype=np.float64).reshape(m),
                                      np.asarray(diagnostics.vel_accepted, dtype=np.float64).reshape(m)]))
-    for key, values in getattr(diagnostics, "adaptive", {}).items():
+    for key, values in [*getattr(diagnostics, "states", {}).items(), *getattr(diagnostics, "adaptive", {}).items()]:
         v = np.asarray(values, dtype=np.float64).reshape(m, -1)
         names += [key] if v.shape[1] == 1 else [f"{key}_{i}" for i in range(v.shape[1])]
         cols.append(v)
