@@ -160,6 +160,14 @@ class AugmentedInsModel:
     def has(self, name: str) -> bool:
         return name in self._offset
 
+    def state_labels(self) -> list[tuple[str, int, int]]:
+        """Every extra element: (label, error-state index, nominal index), in order."""
+        out = []
+        for b in self.blocks:
+            e, n = self.err_slice(b.name), self.nominal_slice(b.name)
+            out += [(label, e.start + i, n.start + i) for i, label in enumerate(b.labels)]
+        return out
+
     # ⊞ / ⊟ -----------------------------------------------------------------------------------
     @staticmethod
     def plus(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
