@@ -254,7 +254,7 @@ def _read_odometry(odo_path: Path, t0_ns: int, imu_span: tuple[float, float], wa
     if "std_yaw_rate" in cols and "yaw_rate" not in cols:
         raise InputError(f"{odo_path}: line 1 (header), column 'std_yaw_rate' given without 'yaw_rate'")
     odo = _read_table(odo_path, header, cols, warnings)
-    _check_positive(odo, ("std_speed", "std_yaw_rate"), "the configured odometry sigma")
+    _check_positive(odo, ("std_speed", "std_yaw_rate"), "[odometry] std_mps")
     fast = np.abs(odo.data["speed"]) > MAX_ODOMETRY_SPEED_MPS
     if fast.any():
         k = int(np.argmax(fast))
