@@ -451,6 +451,14 @@ def simulate(
     gnss_gap_start: Annotated[float | None, typer.Option(
         help="Start of the GNSS gap, s after the first sample.  [default: the first turn]",
         callback=_require(_finite(0.0), "a finite number of seconds >= 0"))] = None,
+    odometry: Annotated[bool, typer.Option("--odometry", help="Write wheel odometry (odometry.csv: forward speed, "
+                                           "0.02 m/s noise).")] = False,
+    odometry_scale_error: Annotated[float, typer.Option(
+        help="Odometer scale error, % (it reads 1 + PCT/100 times the true speed; with --odometry).",
+        callback=_require(_finite(-50.0, 50.0), "a number of % within -50..50"))] = 0.0,
+    odometry_rate: Annotated[float, typer.Option(
+        help="Odometry rate, Hz (with --odometry).",
+        callback=_require(_finite(0.0, 1000.0, strict=True), "a number of Hz within 0..1000, > 0"))] = 10.0,
 ) -> None:
     """Simulate a car-like drive and write it as a CSV log with its reference."""
     from rich.console import Console
@@ -481,6 +489,8 @@ def simulate(
             kwargs["gnss_gap_s"] = gnss_gap
         if gnss_gap_start is not None:
             kwargs["gnss_gap_start_s"] = gnss_gap_start
+        if odometry:
+            kwargs.update(odometry=True, odometry_scale_error_pct=odometry_scale_error, odometry_rate_hz=odometry_rate)
         try:
             path = api.simulate_log(out, **kwargs)
         except ValueError as exc:
@@ -499,7 +509,7 @@ def simulate(
                  else f"the {realism} still period {spec.still_s:g} s")
               + f" is more than half of --duration {duration:g} s")
     typer.echo(f"wrote {path}/imu.csv, gnss.csv, reference.csv, navpp.toml"
-               + (", realism.json" if spec.realistic else ""))
+               + (", odometry.csv" if spec.odometry else "") + (", realism.json" if spec.realistic else ""))
 
 
 @app.command("inspect")
