@@ -9,9 +9,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .config import Config
 from .errors import InputError
+
+if TYPE_CHECKING:
+    from .io.ros import LogContents
 
 
 @dataclass(frozen=True)
@@ -107,7 +111,7 @@ def inspect(log: str | Path, *, config: str | Path | Config | None = None
     return kind, rows, tuple(contents.warnings)
 
 
-def _velocity_roles(contents) -> dict[str, str]:
+def _velocity_roles(contents: LogContents) -> dict[str, str]:
     """Roles of the Twist and Odometry topics: ``odometry`` (wheel odometry, the automatic choice),
     ``GNSS velocity``, or why not used (:func:`navpp.io.detect.odometry_verdict`)."""
     from .io.detect import choose_odometry_topic, gnss_velocity_topics, odometry_verdict

@@ -291,7 +291,7 @@ def _odometry_data(contents: LogContents, topic: str, time_source: str, t0_ns: i
     _finite_rows(cols, ["speed (linear.x)", "yaw rate (angular.z)"][:len(cols)], what, stamps)
     keep = _ordered(stamps, np.column_stack(cols), what, [])
 
-    def std(var) -> np.ndarray | None:
+    def std(var: np.ndarray | None) -> np.ndarray | None:
         if var is None:
             return None
         v = np.asarray(var, float)[keep]
