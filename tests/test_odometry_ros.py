@@ -122,6 +122,8 @@ def test_odometry_topic_none_and_explicit(logs, kind):
     # the GNSS velocity TwistStamped chosen explicitly as odometry: then it is not GNSS velocity
     as_odom = read_log(logs[kind], cfg, odometry_topic="/gnss/vel")
     assert as_odom.odometry is not None and as_odom.gnss.vel_enu is None
+    assert any("not in a vehicle frame" in w for w in as_odom.warnings)
+    assert not any("vehicle frame" in w for w in chosen.warnings)
 
 
 def test_inspect_lists_the_odometry_role(logs):
@@ -214,3 +216,12 @@ def test_choice_rejects_wrong_frame_and_rate_and_refuses_to_guess():
     topic, note = choose_odometry_topic(two, None)
     assert topic is None and "--odometry-topic" in note
     assert choose_odometry_topic(two, "/b/wheel/odom")[0] == "/b/wheel/odom"
+
+
+def test_compare_takes_the_odometry_topic_option(logs, tmp_path):
+    out = CliRunner().invoke(app, ["compare", str(logs["mcap"]), "--filters", "ekf", "--odometry-topic", "none",
+                                   "--out", str(tmp_path / "c"), "--quiet"])
+    assert out.exit_code == 0, out.output
+    bad = CliRunner().invoke(app, ["compare", str(logs["mcap"]), "--filters", "ekf", "--odometry-topic", "/nope",
+                                   "--out", str(tmp_path / "d"), "--quiet"])
+    assert bad.exit_code == 1 and "'/nope'" in bad.output

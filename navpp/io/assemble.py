@@ -22,7 +22,7 @@ import numpy as np
 from ..errors import InputError
 from ..findings import with_code
 from ..recording import GnssData, ImuData, OdometryData, Recording, ReferenceData, lone_stamp, order_samples
-from .detect import choose_odometry_topic, gnss_velocity_topics
+from .detect import choose_odometry_topic, gnss_velocity_topics, in_vehicle_frame
 from .ros import FIX_TYPE, IMU_TYPE, FixMessages, LogContents
 
 GAP_FACTOR = 2.5
@@ -48,6 +48,10 @@ def choose_topic(contents: LogContents, msgtype: str, role: str, option: str, gi
         raise InputError(f"{contents.source}: several {msgtype} topics could be the {role}: "
                          f"{', '.join(candidates)}; choose one with {option}")
     return candidates[0] if candidates else None
+
+
+def _type_of(contents: LogContents, topic: str) -> str:
+    return next((t.msgtype for t in contents.topics if t.topic == topic), "")
 
 
 def _stamp_text(ns) -> str:
@@ -238,6 +242,11 @@ def _assemble(contents: LogContents, *, imu_topic: str | None = None, gnss_topic
     if odom_note.startswith("odometry: not used"):
         warnings.append(f"{src}: {odom_note}")
     odometry = _odometry_data(contents, odom_name, time_source, t0_ns) if odom_name else None
+    odom_msgs = contents.twist.get(odom_name) if odom_name else None
+    if odom_name and odom_msgs is not None and not in_vehicle_frame(odom_msgs, _type_of(contents, odom_name)):
+        warnings.append(f"{src}: odometry topic {odom_name!r} (--odometry-topic) is not in a vehicle frame "
+                        f"(frame {odom_msgs.child_frame_id or odom_msgs.frame_id!r}): its linear.x is used as the "
+                        "forward speed anyway")
     twists = gnss_velocity_topics(contents, odom_name)
     if len(twists) == 1 and twists[0] in contents.twist:
         tw = contents.twist[twists[0]]
