@@ -225,3 +225,32 @@ def test_compare_takes_the_odometry_topic_option(logs, tmp_path):
     bad = CliRunner().invoke(app, ["compare", str(logs["mcap"]), "--filters", "ekf", "--odometry-topic", "/nope",
                                    "--out", str(tmp_path / "d"), "--quiet"])
     assert bad.exit_code == 1 and "'/nope'" in bad.output
+
+
+def test_vehicle_frame_twist_is_odometry_and_the_gnss_twist_stays_velocity(drive, tmp_path):
+    """Two Twist topics: a TwistStamped in base_link (wheel odometry, 20 Hz) and the writers'
+    TwistWithCovarianceStamped in frame gnss (GNSS velocity): each gets its own role."""
+    od = drive.odometry
+    assert od is not None
+    st = roswrite.stamps_ns(drive, od.t)
+    vel = np.column_stack([od.speed, np.zeros_like(od.speed), np.zeros_like(od.speed)])
+    orig = roswrite._streams
+
+    def streams(r, encoding, opts):
+        return [*orig(r, encoding, opts),
+                roswrite._Stream("/base/twist", roswrite._TWIST_STAMPED, st,
+                                 roswrite.encode_twist(st, vel, encoding=encoding, frame_id="base_link"))]
+
+    path = tmp_path / "twist.mcap"
+    roswrite._streams = streams
+    try:
+        roswrite.write_mcap_ros2(replace(drive, odometry=None), path)
+    finally:
+        roswrite._streams = orig
+    rec = read_log(path, load_config(None))
+    assert rec.odometry is not None and rec.odometry.source == "/base/twist"
+    assert np.array_equal(rec.odometry.speed, od.speed)
+    assert rec.odometry.std_speed is None                   # TwistStamped has no covariance
+    assert np.array_equal(rec.gnss.vel_enu, drive.gnss.vel_enu)
+    roles = {r.name: r.role for r in inspect(path)[1]}
+    assert roles == {"/imu/data": "IMU", "/gnss/fix": "GNSS", "/gnss/vel": "GNSS velocity", "/base/twist": "odometry"}
