@@ -254,3 +254,17 @@ def test_vehicle_frame_twist_is_odometry_and_the_gnss_twist_stays_velocity(drive
     assert np.array_equal(rec.gnss.vel_enu, drive.gnss.vel_enu)
     roles = {r.name: r.role for r in inspect(path)[1]}
     assert roles == {"/imu/data": "IMU", "/gnss/fix": "GNSS", "/gnss/vel": "GNSS velocity", "/base/twist": "odometry"}
+
+
+def test_missing_variances_give_no_std(drive, tmp_path):
+    """Twist covariance 0 (unknown) in one message: no std column (the config's sigma applies),
+    never a NaN sigma."""
+    od = drive.odometry
+    assert od is not None
+    std = np.array(od.std_speed)
+    std[5] = 0.0
+    path = tmp_path / "partial.mcap"
+    roswrite.write_mcap_ros2(replace(drive, odometry=replace(od, std_speed=std)), path)
+    rec = read_log(path, load_config(None))
+    assert rec.odometry is not None and rec.odometry.std_speed is None
+    assert np.array_equal(rec.odometry.std_yaw_rate, od.std_yaw_rate)

@@ -285,8 +285,8 @@ def _assemble(contents: LogContents, *, imu_topic: str | None = None, gnss_topic
 def _odometry_data(contents: LogContents, topic: str, time_source: str, t0_ns: int) -> OdometryData:
     """The odometry topic as :class:`OdometryData` on the IMU's time base (s from ``t0_ns``, the
     same [time] source; no GNSS time offset): speed = the twist's linear x (m/s, vehicle frame),
-    yaw rate = its angular z (rad/s); std from covariance elements 0 / 35 where > 0 (NaN where a
-    message gives none; None when no message does); source = the topic.  Out-of-order and
+    yaw rate = its angular z (rad/s); std from covariance elements 0 / 35 when every message gives
+    one > 0 (else None: the config's default sigma applies); source = the topic.  Out-of-order and
     repeated stamps follow :func:`_ordered` (their warnings are dropped: an optional aid); a
     non-finite value is an InputError."""
     msgs = contents.twist.get(topic)
@@ -304,8 +304,7 @@ def _odometry_data(contents: LogContents, topic: str, time_source: str, t0_ns: i
         if var is None:
             return None
         v = np.asarray(var, float)[keep]
-        ok = np.isfinite(v) & (v > 0)
-        return np.where(ok, np.sqrt(np.where(ok, v, 1.0)), np.nan) if ok.any() else None
+        return np.sqrt(v) if bool(np.all(np.isfinite(v) & (v > 0))) else None
 
     return OdometryData((stamps[keep] - t0_ns) * 1e-9, cols[0][keep], cols[1][keep] if len(cols) > 1 else None,
                         std(None if msgs.cov_diag is None else msgs.cov_diag[:, 0]), std(msgs.var_yaw_rate),
