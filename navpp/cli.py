@@ -155,6 +155,9 @@ def process(
         help="GNSS topic (sensor_msgs/NavSatFix) when a ROS log has several.")] = None,
     reference_topic: Annotated[str | None, typer.Option(
         help="A NavSatFix topic of the log to use as the reference (e.g. a DGPS receiver).")] = None,
+    odometry_topic: Annotated[str | None, typer.Option(
+        help="Wheel odometry topic (nav_msgs/Odometry, TwistStamped or TwistWithCovarianceStamped in the vehicle "
+             "frame), or none for no odometry.  [default: chosen by frame and rate; the notes say which]")] = None,
     gnss: Annotated[Path | None, typer.Option(
         "--gnss", help="RTKLIB solution file (.pos) replacing or supplying the log's GNSS.")] = None,
     out: Annotated[Path | None, typer.Option(
@@ -193,7 +196,8 @@ def process(
             res = api.process(log, filter_name=filter, config=config, reference=reference, out_dir=out,
                               output_rate_hz=output_rate, progress=prog, imu_topic=imu_topic,
                               gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss,
-                              formats=formats, embed_input=embed_input, gnss_outages=gnss_outage, smooth=smooth)
+                              formats=formats, embed_input=embed_input, gnss_outages=gnss_outage, smooth=smooth,
+                              odometry_topic=odometry_topic)
     except NavppError as exc:
         _fail(str(exc), exc)
         return
@@ -214,6 +218,8 @@ def compare(
     imu_topic: Annotated[str | None, typer.Option(help="IMU topic for ROS logs with several.")] = None,
     gnss_topic: Annotated[str | None, typer.Option(help="GNSS topic for ROS logs with several.")] = None,
     reference_topic: Annotated[str | None, typer.Option(help="A NavSatFix topic to use as the reference.")] = None,
+    odometry_topic: Annotated[str | None, typer.Option(
+        help="Wheel odometry topic for ROS logs, or none.  [default: chosen by frame and rate]")] = None,
     out: Annotated[Path, typer.Option(help="Directory for summary.csv, report.md, report.html and the figures, "
                                       "created if needed.")] = Path("navpp-out/compare"),
     jobs: Annotated[int, typer.Option("--jobs", "-j", help="Worker processes: runs (log x filter) in parallel.",
@@ -266,7 +272,8 @@ def compare(
         try:
             with _Progress(quiet or json_out) as prog:
                 result = cmp.compare(logs, names, config=config, reference=reference, imu_topic=imu_topic,
-                                     gnss_topic=gnss_topic, reference_topic=reference_topic, jobs=jobs,
+                                     gnss_topic=gnss_topic, reference_topic=reference_topic,
+                                     odometry_topic=odometry_topic, jobs=jobs,
                                      out_dir=out, progress=prog, smooth=smooth, executor=executor,
                                      scheduler=scheduler, time_limit_s=time_limit)
         except BaseException:
