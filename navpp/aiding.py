@@ -209,6 +209,16 @@ class Aiding:
                 return speed_allows(speed, float(np.sqrt(self.vel_var[j].sum())), self.settings)
         return True
 
+    def _odometer_still(self, t: float) -> bool:
+        """The odometer's speed at ``t`` allows standing still (as the GNSS speed must,
+        :func:`~navpp.ins.aids.standstill.speed_allows`); True without an odometer reading: a
+        turning wheel vetoes a standstill the IMU's quiet would otherwise declare (a smooth
+        glide, a vehicle on a ferry)."""
+        odo = self.odometer(t)
+        if odo is None:
+            return True
+        return speed_allows(abs(float(odo.z[0])), float(np.sqrt(odo.R[0, 0])), self.settings)
+
     def observed(self, meas, inn) -> None:
         """What an applied constraint saw.  ZUPT's innovations at rest are white; a run of them
         that keeps one direction (the mean of the last ``ZUPT_RUN`` normalised innovations beyond
@@ -272,7 +282,7 @@ class Aiding:
             return out
         speed = float(np.linalg.norm(x[4:7]))
         speed_std = float(np.sqrt(max(np.trace(P[VEL, VEL]), 0.0)))
-        if not (speed_allows(speed, speed_std, self.settings) and self._gnss_still(t)):
+        if not (speed_allows(speed, speed_std, self.settings) and self._gnss_still(t) and self._odometer_still(t)):
             return out
         if self.zupt:
             out.append(ZeroVelocity.at(t, self.zupt_std))

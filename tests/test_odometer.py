@@ -118,3 +118,18 @@ def test_odometer_estimates_its_scale_and_bridges_an_outage(drive):
     assert with_odo.updates["odometer"]["applied"] > 1000
     assert _end_error(with_odo, rec, 460.0) < 0.5 * _end_error(without, rec, 460.0)
     assert BLOCK_NAME == "odometer_scale"
+
+
+def test_a_turning_wheel_vetoes_a_standstill(drive):
+    """The first 60 s are still: with the true odometry (zero speed) ZUPT runs as without an
+    odometer; an odometer that reads 1 m/s there vetoes it (the oracle: the run without odometry)."""
+    odo = _odometry_from_truth(drive, 0.0, 0.01, 2)
+    moving = odo.speed.copy()
+    moving[odo.t < 55.0] = 1.0
+    cfg = config_from_dict({"imu": {"preset": "automotive"}}, "test")
+    runs = {name: engine.run(replace(drive, odometry=o), cfg, api.make_filter("ekf", cfg))
+            for name, o in (("none", None), ("true", odo), ("moving", replace(odo, speed=moving)))}
+    zupt = {name: r.updates.get("zupt", {}).get("applied", 0) for name, r in runs.items()}
+    print(zupt)
+    assert zupt["none"] > 100 and abs(zupt["true"] - zupt["none"]) <= 0.05 * zupt["none"]
+    assert zupt["moving"] < 0.5 * zupt["none"]
