@@ -115,6 +115,14 @@ def test_odometer_estimates_its_scale_and_bridges_an_outage(drive):
     print(f"scale {scale[-1]:.5f} +- {sigma[-1]:.5f}; outage end {_end_error(with_odo, rec, 460.0):.2f} m with, "
           f"{_end_error(without, rec, 460.0):.2f} m without; counts {with_odo.updates.get('odometer')}")
     assert abs(scale[-1] - 0.02) < 0.003
+    from navpp.io.writers import diagnostics_columns
+
+    d = with_odo.diagnostics
+    names, cols, decimals = diagnostics_columns(d)      # diagnostics.csv and the MCAP diagnostics
+    k = names.index("nu_odo")
+    np.testing.assert_array_equal(cols[k], d.odo_nu)
+    assert np.count_nonzero(np.isfinite(d.odo_nu)) > 500 and decimals[k] == 4
+    assert np.nanmean(d.odo_nis) < 3.0             # a consistent 1-element NIS averages 1
     assert with_odo.updates["odometer"]["applied"] > 1000
     assert _end_error(with_odo, rec, 460.0) < 0.5 * _end_error(without, rec, 460.0)
     assert BLOCK_NAME == "odometer_scale"
