@@ -25,12 +25,13 @@ import numpy as np
 
 from .config import Config
 from .ins.aids import GnssVelocity, NonHolonomic, ZeroRate, ZeroVelocity
+from .ins.aids.odometer import OdometerSpeed
 from .ins.aids.standstill import StandstillSettings, speed_allows, still_mask
 from .ins.attitude import rpy_deg_to_dcm
 from .ins.model import VEL
 
 #: Aid kinds in the order they are reported (the GNSS position first).
-KINDS = ("gnss_position", "gnss_velocity", "zupt", "zaru", "nhc")
+KINDS = ("gnss_position", "gnss_velocity", "zupt", "zaru", "nhc", "odometer")
 
 #: ZUPT's consistency check (:meth:`Aiding.observed`): the last this many innovations, and the
 #: sigmas their mean may reach on an axis (white innovations: false alarm ~1e-6 per test).
@@ -89,7 +90,7 @@ class Aiding:
     def __init__(self, config: Config, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gyro_arw: float,
                  accel_vrw: float, gnss, sel: np.ndarray, gaps: np.ndarray | None = None,
                  mounting_rpy_deg: tuple[float, float, float] | None = None, still: np.ndarray | None = None,
-                 profile=None) -> None:
+                 profile=None, odometry=None) -> None:
         veh = config.vehicle
         self.profile = profile            # the data's noise (navpp.ins.calibrate.NoiseProfile) or None
         self.t, self.gyro = t, gyro
@@ -124,6 +125,14 @@ class Aiding:
             ok = np.all(np.isfinite(v), axis=1) & np.all(np.isfinite(var) & (var > 0.0), axis=1)
             self.vel, self.vel_var, self.vel_ok = v, var, ok
             self.vel_t = np.asarray(gnss.t, dtype=float)[sel]
+        # the odometer: the log's speed (m/s, vehicle x) and its 1-sigma, when [odometry] use
+        self.odo = odometry if (odometry is not None and config.odometry.use and len(odometry) >= 2) else None
+        if self.odo is not None:
+            o = self.odo
+            self.odo_std = (np.asarray(o.std_speed, dtype=float) if o.std_speed is not None
+                            else np.full(len(o), config.odometry.std_mps))
+            self.odo_point = np.asarray(config.odometry.lever_arm_m, dtype=float)
+            self.odo_gap = 2.0 * float(np.median(np.diff(o.t)))     # longest interval read across, s
         self.counts = AidCounts.empty()
         self._last_constraint_t: float | None = None
         # the still runs, numbered (ZUPT's own consistency check stops a run that is not still)
@@ -135,7 +144,7 @@ class Aiding:
 
     @property
     def constraints(self) -> bool:
-        return self.nhc or self.zupt or self.zaru
+        return self.nhc or self.zupt or self.zaru or self.odo is not None
 
     @property
     def has_velocity(self) -> bool:
@@ -167,7 +176,7 @@ class Aiding:
         cons = np.concatenate([on_fix, np.ones(int(alone.sum()), bool)])
         order = np.argsort(times, kind="stable")
         times, fix, cons = times[order], fix[order], cons[order]
-        if not self.nhc:               # ZUPT / ZARU only: no constraint epoch where the IMU is not still
+        if not (self.nhc or self.odo is not None):   # ZUPT / ZARU only: none where the IMU is not still
             i = np.clip(np.searchsorted(self.t, times), 0, self.t.shape[0] - 1)
             cons &= self.still[i]
             keep = (fix >= 0) | cons
@@ -200,6 +209,16 @@ class Aiding:
                 return speed_allows(speed, float(np.sqrt(self.vel_var[j].sum())), self.settings)
         return True
 
+    def _odometer_still(self, t: float) -> bool:
+        """The odometer's speed at ``t`` allows standing still (as the GNSS speed must,
+        :func:`~navpp.ins.aids.standstill.speed_allows`); True without an odometer reading: a
+        turning wheel vetoes a standstill the IMU's quiet would otherwise declare (a smooth
+        glide, a vehicle on a ferry)."""
+        odo = self.odometer(t)
+        if odo is None:
+            return True
+        return speed_allows(abs(float(odo.z[0])), float(np.sqrt(odo.R[0, 0])), self.settings)
+
     def observed(self, meas, inn) -> None:
         """What an applied constraint saw.  ZUPT's innovations at rest are white; a run of them
         that keeps one direction (the mean of the last ``ZUPT_RUN`` normalised innovations beyond
@@ -224,6 +243,25 @@ class Aiding:
                 self.vetoes.append(float(inn.t))
                 self._zupt_z = []
 
+    def odometer(self, t: float) -> OdometerSpeed | None:
+        """The odometer's speed at ``t`` (linear between the two samples around it, when they are
+        at most two median periods apart), None without one."""
+        if self.odo is None:
+            return None
+        o = self.odo
+        j = int(np.searchsorted(o.t, t))
+        if j <= 0 or j >= len(o) or o.t[j] - o.t[j - 1] > self.odo_gap:
+            if 0 <= j < len(o) and o.t[j] == t:
+                return OdometerSpeed.at(t, float(o.speed[j]), float(self.odo_std[j]), self.c_vb, self._gyro_at(t),
+                                        self.odo_point)
+            return None
+        w = (t - o.t[j - 1]) / (o.t[j] - o.t[j - 1])
+        speed = (1.0 - w) * o.speed[j - 1] + w * o.speed[j]
+        std = max(self.odo_std[j - 1], self.odo_std[j])
+        if not (np.isfinite(speed) and np.isfinite(std) and std > 0.0):
+            return None
+        return OdometerSpeed.at(t, float(speed), float(std), self.c_vb, self._gyro_at(t), self.odo_point)
+
     def constraint_measurements(self, t: float, x: np.ndarray, P: np.ndarray) -> list:
         """The constraints that apply at epoch ``t`` given the prior (nominal ``x``, covariance
         ``P``): NHC for a car; ZUPT and ZARU when the IMU around ``t`` is still and the speeds
@@ -232,6 +270,9 @@ class Aiding:
         t_prev, self._last_constraint_t = self._last_constraint_t, t
         if self.nhc:
             out.append(NonHolonomic.at(t, self.nhc_std, self.c_vb, self._gyro_at(t), self.nhc_point))
+        odo = self.odometer(t)
+        if odo is not None:
+            out.append(odo)
         if not (self.zupt or self.zaru):
             return out
         i = int(np.clip(np.searchsorted(self.t, t), 0, self.t.shape[0] - 1))
@@ -241,7 +282,7 @@ class Aiding:
             return out
         speed = float(np.linalg.norm(x[4:7]))
         speed_std = float(np.sqrt(max(np.trace(P[VEL, VEL]), 0.0)))
-        if not (speed_allows(speed, speed_std, self.settings) and self._gnss_still(t)):
+        if not (speed_allows(speed, speed_std, self.settings) and self._gnss_still(t) and self._odometer_still(t)):
             return out
         if self.zupt:
             out.append(ZeroVelocity.at(t, self.zupt_std))

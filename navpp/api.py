@@ -311,7 +311,7 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
             reference_topic: str | None = None, gnss_file: str | Path | None = None,
             formats: str | Sequence[str] | None = None, embed_input: bool = False,
             gnss_outages: Sequence[tuple[float, float]] | None = None,
-            smooth: bool | None = None) -> ProcessResult:
+            smooth: bool | None = None, odometry_topic: str | None = None) -> ProcessResult:
     """Read a log, run one filter, write trajectory (and metrics with a reference).
 
     ``navpp.process`` is this function.  Example::
@@ -325,6 +325,10 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     log : a CSV log directory (imu.csv, gnss.csv, optional reference.csv), an MCAP file, a
         ROS 1 bag or a ROS 2 bag directory.
     imu_topic, gnss_topic, reference_topic : topic choices for ROS logs (see :func:`read_log`).
+    odometry_topic : the wheel odometry topic of a ROS log (``nav_msgs/Odometry``, ``TwistStamped``
+        or ``TwistWithCovarianceStamped`` in the vehicle frame); None chooses automatically
+        (:func:`navpp.io.detect.choose_odometry_topic`; the run's notes say which), ``"none"``
+        leaves the log's odometry out (any log kind).
     gnss_file : an RTKLIB .pos file replacing or supplying the log's GNSS.
     filter_name : registry name (``navpp filters``).
     config : a TOML path or a :class:`Config`; None looks for ``navpp.toml`` in the log
@@ -371,7 +375,7 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     plan = _plan(Path(log), filter_name=filter_name, config=config, reference=reference, out_dir=out_dir,
                  output_rate_hz=output_rate_hz, write=write, gnss_file=gnss_file, formats=formats,
                  embed_input=embed_input, gnss_outages=gnss_outages, smooth=smooth,
-                 topics=(imu_topic, gnss_topic, reference_topic))
+                 topics=(imu_topic, gnss_topic, reference_topic, odometry_topic))
     with claimed_out_dir(plan.out, plan.out_label, OUTPUT_FILES) if write else nullcontext():
         return _run(plan, progress)
 
@@ -383,8 +387,8 @@ class _Plan:
     ``rate_hz`` the output rate (Hz, None: every IMU sample) and ``rate_what`` where it came
     from (for messages); ``windows`` the simulated GNSS outages ``(start_s, duration_s)``;
     ``out_label`` how the output directory is named in messages; ``inputs`` the (device,
-    inode) of every file the run reads (empty without ``write``); ``topics`` the IMU, GNSS and
-    reference topic choices.
+    inode) of every file the run reads (empty without ``write``); ``topics`` the IMU, GNSS,
+    reference and odometry topic choices.
     """
 
     log: Path
@@ -394,7 +398,7 @@ class _Plan:
     filt: Any
     reference: str | Path | None
     gnss_file: str | Path | None
-    topics: tuple[str | None, str | None, str | None]
+    topics: tuple[str | None, str | None, str | None, str | None]
     rate_hz: float | None
     rate_what: str
     formats: tuple[str, ...]
@@ -410,7 +414,7 @@ class _Plan:
 def _plan(log: Path, *, filter_name: str, config: str | Path | Config | None, reference: str | Path | None,
           out_dir: str | Path | None, output_rate_hz: float | None, write: bool, gnss_file: str | Path | None,
           formats: str | Sequence[str] | None, embed_input: bool, gnss_outages: Sequence[tuple[float, float]] | None,
-          smooth: bool | None, topics: tuple[str | None, str | None, str | None]) -> _Plan:
+          smooth: bool | None, topics: tuple[str | None, str | None, str | None, str | None]) -> _Plan:
     """Check every option of :func:`process` (in this order: config, output rate, formats,
     outages, filter, output directory against the inputs); the first problem raises."""
     cfg = config if isinstance(config, Config) else resolve_config(log, config)
@@ -443,10 +447,11 @@ def _read(plan: _Plan, progress: Callable[[str, float], None] | None) -> tuple[R
     against the output rate.  Returns the recording and one dict per outage window."""
     if progress:
         progress("reading", 0.0)
-    imu_topic, gnss_topic, reference_topic = plan.topics
+    imu_topic, gnss_topic, reference_topic, odometry_topic = plan.topics
     rec = read_log(plan.log, plan.cfg, reference=plan.reference,
                    progress=(lambda f: progress("reading", f)) if progress else None, imu_topic=imu_topic,
-                   gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=plan.gnss_file)
+                   gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=plan.gnss_file,
+                   odometry_topic=odometry_topic)
     if progress:
         progress("reading", 1.0)
     rec, outages = apply_outages(rec, plan.windows, str(plan.log))
@@ -499,7 +504,7 @@ def _run(plan: _Plan, progress: Callable[[str, float], None] | None) -> ProcessR
     cfg = plan.cfg
     notes = tuple(cfg.notes) + tuple(result.notes) + tuple(result.alignment.lines) + tuple(
         f"GNSS outage {o['start_s']:g}-{o['end_s']:g} s ({o['duration_s']:g} s from the log start): "
-        f"{o['gnss_removed']} fixes removed, the INS coasts" for o in outages)
+        f"{o['gnss_removed']} fixes removed, the INS coasts" for o in outages) + odometry_note(rec)
     warnings = (tuple(rec.warnings) + tuple(result.warnings) + tuple(forced_fix_warnings(rec, cfg, result))
                 + tuple(reference_checks(rec, cfg, metrics)))
     if plan.smooth:
@@ -507,6 +512,16 @@ def _run(plan: _Plan, progress: Callable[[str, float], None] | None) -> ProcessR
                   f"{result.smoothed.runtime_s:.2f} s; trajectory_forward.csv holds the forward solution",)
     return ProcessResult(plan.filter_name, rec, sol_out, result, metrics, plan.out, tuple(files), cfg, notes,
                          warnings, tuple(outages), fwd_out)
+
+
+def odometry_note(rec: Recording) -> tuple[str, ...]:
+    """The run's note on its odometry input: which stream (topic or file), samples and rate."""
+    od = rec.odometry
+    if od is None or len(od) == 0:
+        return ()
+    dt = np.diff(od.t)
+    rate = f", {1.0 / float(np.median(dt)):.3g} Hz" if dt.size and float(np.median(dt)) > 0 else ""
+    return (f"odometry: {od.source} ({len(od)} samples{rate})",)
 
 
 def run_metrics(rec: Recording, cfg: Config, result: Any, solution: Solution, *, filter_name: str, log: str,

@@ -155,6 +155,9 @@ def process(
         help="GNSS topic (sensor_msgs/NavSatFix) when a ROS log has several.")] = None,
     reference_topic: Annotated[str | None, typer.Option(
         help="A NavSatFix topic of the log to use as the reference (e.g. a DGPS receiver).")] = None,
+    odometry_topic: Annotated[str | None, typer.Option(
+        help="Wheel odometry topic (nav_msgs/Odometry, TwistStamped or TwistWithCovarianceStamped in the vehicle "
+             "frame), or none for no odometry.  [default: chosen by frame and rate; the notes say which]")] = None,
     gnss: Annotated[Path | None, typer.Option(
         "--gnss", help="RTKLIB solution file (.pos) replacing or supplying the log's GNSS.")] = None,
     out: Annotated[Path | None, typer.Option(
@@ -193,7 +196,8 @@ def process(
             res = api.process(log, filter_name=filter, config=config, reference=reference, out_dir=out,
                               output_rate_hz=output_rate, progress=prog, imu_topic=imu_topic,
                               gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss,
-                              formats=formats, embed_input=embed_input, gnss_outages=gnss_outage, smooth=smooth)
+                              formats=formats, embed_input=embed_input, gnss_outages=gnss_outage, smooth=smooth,
+                              odometry_topic=odometry_topic)
     except NavppError as exc:
         _fail(str(exc), exc)
         return
@@ -214,6 +218,8 @@ def compare(
     imu_topic: Annotated[str | None, typer.Option(help="IMU topic for ROS logs with several.")] = None,
     gnss_topic: Annotated[str | None, typer.Option(help="GNSS topic for ROS logs with several.")] = None,
     reference_topic: Annotated[str | None, typer.Option(help="A NavSatFix topic to use as the reference.")] = None,
+    odometry_topic: Annotated[str | None, typer.Option(
+        help="Wheel odometry topic for ROS logs, or none.  [default: chosen by frame and rate]")] = None,
     out: Annotated[Path, typer.Option(help="Directory for summary.csv, report.md, report.html and the figures, "
                                       "created if needed.")] = Path("navpp-out/compare"),
     jobs: Annotated[int, typer.Option("--jobs", "-j", help="Worker processes: runs (log x filter) in parallel.",
@@ -266,7 +272,8 @@ def compare(
         try:
             with _Progress(quiet or json_out) as prog:
                 result = cmp.compare(logs, names, config=config, reference=reference, imu_topic=imu_topic,
-                                     gnss_topic=gnss_topic, reference_topic=reference_topic, jobs=jobs,
+                                     gnss_topic=gnss_topic, reference_topic=reference_topic,
+                                     odometry_topic=odometry_topic, jobs=jobs,
                                      out_dir=out, progress=prog, smooth=smooth, executor=executor,
                                      scheduler=scheduler, time_limit_s=time_limit)
         except BaseException:
@@ -451,6 +458,14 @@ def simulate(
     gnss_gap_start: Annotated[float | None, typer.Option(
         help="Start of the GNSS gap, s after the first sample.  [default: the first turn]",
         callback=_require(_finite(0.0), "a finite number of seconds >= 0"))] = None,
+    odometry: Annotated[bool, typer.Option("--odometry", help="Write wheel odometry (odometry.csv: forward speed, "
+                                           "0.02 m/s noise).")] = False,
+    odometry_scale_error: Annotated[float, typer.Option(
+        help="Odometer scale error, % (it reads 1 + PCT/100 times the true speed; with --odometry).",
+        callback=_require(_finite(-50.0, 50.0), "a number of % within -50..50"))] = 0.0,
+    odometry_rate: Annotated[float, typer.Option(
+        help="Odometry rate, Hz (with --odometry).",
+        callback=_require(_finite(0.0, 1000.0, strict=True), "a number of Hz within 0..1000, > 0"))] = 10.0,
 ) -> None:
     """Simulate a car-like drive and write it as a CSV log with its reference."""
     from rich.console import Console
@@ -481,6 +496,8 @@ def simulate(
             kwargs["gnss_gap_s"] = gnss_gap
         if gnss_gap_start is not None:
             kwargs["gnss_gap_start_s"] = gnss_gap_start
+        if odometry:
+            kwargs.update(odometry=True, odometry_scale_error_pct=odometry_scale_error, odometry_rate_hz=odometry_rate)
         try:
             path = api.simulate_log(out, **kwargs)
         except ValueError as exc:
@@ -499,7 +516,7 @@ def simulate(
                  else f"the {realism} still period {spec.still_s:g} s")
               + f" is more than half of --duration {duration:g} s")
     typer.echo(f"wrote {path}/imu.csv, gnss.csv, reference.csv, navpp.toml"
-               + (", realism.json" if spec.realistic else ""))
+               + (", odometry.csv" if spec.odometry else "") + (", realism.json" if spec.realistic else ""))
 
 
 @app.command("inspect")

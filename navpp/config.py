@@ -65,6 +65,7 @@ __all__ = [
     "ImuConfig",
     "ImuNoise",
     "InitConfig",
+    "OdometryConfig",
     "OutputConfig",
     "TimeConfig",
     "VehicleConfig",
@@ -734,12 +735,42 @@ def parse_formats(value: object, what: str) -> tuple[str, ...]:
     return tuple(dict.fromkeys(raw))
 
 
+@dataclass(frozen=True)
+class OdometryConfig:
+    """``[odometry]``: the vehicle's own speed (wheel odometry, CAN wheel speed) as an aid.
+
+    Attributes
+    ----------
+    use : bool, default true. Use the log's odometry (``odometry.csv``, an odometry topic) when it has one.
+    lever_arm_m : (3,) float, m. The odometry point (the wheel axle's centre) in body FLU, from the IMU.
+    std_mps : float, m/s, > 0, default 0.05. The speed's 1-sigma when the log has none.
+    scale_sigma : float, > 0, default 0.03. Prior 1-sigma of the odometer's scale-factor error
+        (0.03 = 3 %: a wheel radius or tyre pressure a little off); the filter estimates it.
+    scale_walk_per_sqrt_h : float, >= 0, default 0.002. How fast the scale factor may drift, per
+        square-root hour (tyres warming, load).
+    """
+
+    use: bool = True
+    lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    std_mps: float = 0.05
+    scale_sigma: float = 0.03
+    scale_walk_per_sqrt_h: float = 0.002
+
+    def __post_init__(self) -> None:
+        _as_bool("odometry", "use", self.use)
+        _set(self, "lever_arm_m", _as_vector("odometry", "lever_arm_m", self.lever_arm_m, 3))
+        _fix_float(self, "odometry", "std_mps", minimum=0.0, strict_min=True)
+        _fix_float(self, "odometry", "scale_sigma", minimum=0.0, strict_min=True)
+        _fix_float(self, "odometry", "scale_walk_per_sqrt_h", minimum=0.0)
+
+
 _SECTIONS: Final[dict[str, type]] = {
     "imu": ImuConfig,
     "gnss": GnssConfig,
     "time": TimeConfig,
     "init": InitConfig,
     "vehicle": VehicleConfig,
+    "odometry": OdometryConfig,
     "output": OutputConfig,
     "auto": AutoConfig,
 }
@@ -753,7 +784,7 @@ class Config:
 
     Attributes
     ----------
-    imu, gnss, time, init, vehicle, output, auto : the section dataclasses.
+    imu, gnss, time, init, vehicle, odometry, output, auto : the section dataclasses.
     filters : read-only mapping ``name -> options`` holding the raw ``[filter.<name>]``
         tables (nested tables read-only, lists as tuples); each filter validates its own.
     source : str. Where the configuration came from: a file path or ``"built-in defaults"``.
@@ -765,6 +796,7 @@ class Config:
     time: TimeConfig = field(default_factory=TimeConfig)
     init: InitConfig = field(default_factory=InitConfig)
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
+    odometry: OdometryConfig = field(default_factory=OdometryConfig)
     output: OutputConfig = field(default_factory=OutputConfig)
     auto: AutoConfig = field(default_factory=AutoConfig)
     filters: Mapping[str, Mapping[str, Any]] = field(

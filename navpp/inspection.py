@@ -9,9 +9,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .config import Config
 from .errors import InputError
+
+if TYPE_CHECKING:
+    from .io.ros import LogContents
 
 
 @dataclass(frozen=True)
@@ -59,7 +63,7 @@ def inspect(log: str | Path, *, config: str | Path | Config | None = None
     import pandas as pd
 
     from .io.detect import list_topics, log_kind, read_topics
-    from .io.ros import FIX_TYPE, IMU_TYPE, SUPPORTED_TYPES, TWIST_COV_TYPE, TWIST_TYPE
+    from .io.ros import FIX_TYPE, IMU_TYPE, SUPPORTED_TYPES
 
     path = Path(log)
     kind, where = log_kind(path)
@@ -86,7 +90,7 @@ def inspect(log: str | Path, *, config: str | Path | Config | None = None
     contents = read_topics(kind, where, wanted)
     n_imu = sum(t.msgtype == IMU_TYPE for t in topics)
     n_fix = sum(t.msgtype == FIX_TYPE for t in topics)
-    n_twist = sum(t.msgtype in (TWIST_COV_TYPE, TWIST_TYPE) for t in topics)
+    velocity_roles = _velocity_roles(contents)
     for t in topics:
         msgs = contents.imu.get(t.topic) or contents.fix.get(t.topic) or contents.twist.get(t.topic)
         if msgs is not None:
@@ -101,9 +105,31 @@ def inspect(log: str | Path, *, config: str | Path | Config | None = None
             role = "IMU" if n_imu == 1 else "IMU? (choose with --imu-topic)"
         elif t.msgtype == FIX_TYPE:
             role = "GNSS" if n_fix == 1 else "GNSS or reference? (--gnss-topic / --reference-topic)"
-        elif t.msgtype in (TWIST_COV_TYPE, TWIST_TYPE):
-            role = "GNSS velocity" if n_twist == 1 else "not used (several velocity topics)"
         else:
-            role = ""
+            role = velocity_roles.get(t.topic, "")
         rows.append(StreamSummary(t.topic, t.msgtype, t.count, rate, first, last, gaps, largest, dup, role))
     return kind, rows, tuple(contents.warnings)
+
+
+def _velocity_roles(contents: LogContents) -> dict[str, str]:
+    """Roles of the Twist and Odometry topics: ``odometry`` (wheel odometry, the automatic choice),
+    ``GNSS velocity``, or why not used (:func:`navpp.io.detect.odometry_verdict`)."""
+    from .io.detect import choose_odometry_topic, gnss_velocity_topics, odometry_verdict
+    from .io.ros import ODOMETRY_TYPES
+
+    chosen, _ = choose_odometry_topic(contents, None)
+    velocity = gnss_velocity_topics(contents, chosen)
+    roles: dict[str, str] = {}
+    for t in contents.topics:
+        if t.msgtype not in ODOMETRY_TYPES:
+            continue
+        verdict = odometry_verdict(t.topic, t.msgtype, contents.twist.get(t.topic))
+        if t.topic == chosen:
+            roles[t.topic] = "odometry"
+        elif t.topic in velocity:
+            roles[t.topic] = "GNSS velocity" if len(velocity) == 1 else "not used (several velocity topics)"
+        elif not verdict:          # a candidate, but several equally good ones
+            roles[t.topic] = "odometry? (choose with --odometry-topic)"
+        else:
+            roles[t.topic] = f"not used ({verdict})"
+    return roles

@@ -30,8 +30,9 @@ def apply_outages(rec: Recording, windows: Sequence[tuple[float, float]],
     Returns
     -------
     The recording without the fixes at ``start <= t <= start + duration`` of any window (its
-    IMU and reference untouched), and one dict per window: ``start_s``, ``duration_s``,
-    ``end_s``, ``gnss_removed`` (fixes inside that window; overlapping windows count a fix in each).
+    IMU, odometry and reference untouched: an outage is of the GNSS only), and one dict per
+    window: ``start_s``, ``duration_s``, ``end_s``, ``gnss_removed`` (fixes inside that window;
+    overlapping windows count a fix in each).
 
     Raises
     ------

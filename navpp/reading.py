@@ -38,12 +38,14 @@ def resolve_config(log: Path, config_path: str | Path | None) -> Config:
 def read_log(log: str | Path, config: Config, *, reference: str | Path | None = None,
              progress: Callable[[float], None] | None = None, imu_topic: str | None = None,
              gnss_topic: str | None = None, reference_topic: str | None = None,
-             gnss_file: str | Path | None = None) -> Recording:
+             gnss_file: str | Path | None = None, odometry_topic: str | None = None) -> Recording:
     """Read any supported log into a validated :class:`Recording`.
 
     CSV log directories, MCAP files (ROS 2 or ROS 1 encoded), ROS 1 bags and ROS 2 bag
     directories; the reader is chosen by content.  ``gnss_file`` (an RTKLIB .pos) replaces or
-    supplies the log's GNSS; ``reference`` (a CSV) or ``reference_topic`` gives the reference.
+    supplies the log's GNSS; ``reference`` (a CSV) or ``reference_topic`` gives the reference;
+    ``odometry_topic`` the wheel odometry topic of a ROS log (None: the automatic choice of
+    :func:`navpp.io.detect.choose_odometry_topic`); ``"none"`` leaves any log's odometry out.
     """
     from dataclasses import replace
 
@@ -53,14 +55,18 @@ def read_log(log: str | Path, config: Config, *, reference: str | Path | None = 
     path = Path(log)
     kind, where = log_kind(path)
     if kind == "csv":
-        if imu_topic or gnss_topic or reference_topic:
-            raise ConfigError(f"{path}: --imu-topic, --gnss-topic and --reference-topic apply to ROS logs, "
-                              "not to a CSV log")
+        no_odometry = odometry_topic is not None and odometry_topic.lower() == "none"
+        if imu_topic or gnss_topic or reference_topic or (odometry_topic and not no_odometry):
+            raise ConfigError(f"{path}: --imu-topic, --gnss-topic, --reference-topic and --odometry-topic apply to "
+                              "ROS logs, not to a CSV log (--odometry-topic none does: no odometry)")
         rec = csv_io.read_csv_log(where, reference=reference, time_base=config.time.base,
                                   gyro_units=config.imu.gyro_units, accel_units=config.imu.accel_units,
                                   time_offset_s=config.gnss.time_offset_s, progress=progress)
+        if no_odometry and rec.odometry is not None:
+            rec = replace(rec, odometry=None)
     else:
-        rec = _read_ros_log(kind, where, config, imu_topic, gnss_topic, reference_topic, gnss_file is not None)
+        rec = _read_ros_log(kind, where, config, imu_topic, gnss_topic, reference_topic, gnss_file is not None,
+                            odometry_topic)
         if reference is None and reference_topic is None:
             reference = companion(path, csv_io.REFERENCE_FILE)       # e.g. drive.reference.csv
         if reference is not None:
@@ -76,10 +82,10 @@ def read_log(log: str | Path, config: Config, *, reference: str | Path | None = 
 
 
 def _read_ros_log(kind: str, path: Path, config: Config, imu_topic: str | None, gnss_topic: str | None,
-                  reference_topic: str | None, gnss_from_file: bool) -> Recording:
+                  reference_topic: str | None, gnss_from_file: bool, odometry_topic: str | None = None) -> Recording:
     from .io.assemble import choose_topic, recording_from_log
     from .io.detect import list_topics, read_topics
-    from .io.ros import FIX_TYPE, IMU_TYPE, TWIST_COV_TYPE, TWIST_TYPE, LogContents
+    from .io.ros import FIX_TYPE, IMU_TYPE, ODOMETRY_TYPES, VELOCITY_TYPES, LogContents
 
     topics = list_topics(kind, path)
     index = LogContents(str(path), topics)
@@ -87,18 +93,23 @@ def _read_ros_log(kind: str, path: Path, config: Config, imu_topic: str | None, 
     if not gnss_from_file:
         wanted.append(choose_topic(index, FIX_TYPE, "GNSS", "--gnss-topic", gnss_topic,
                                    (reference_topic,) if reference_topic else ()))
-        twists = [t.topic for t in topics if t.msgtype in (TWIST_COV_TYPE, TWIST_TYPE)]
-        if len(twists) == 1:
-            wanted.append(twists[0])
+        # every velocity topic: its frame tells GNSS velocity from wheel odometry
+        wanted += [t.topic for t in topics if t.msgtype in VELOCITY_TYPES]
+    if odometry_topic is None:
+        wanted += [t.topic for t in topics if t.msgtype in ODOMETRY_TYPES]
+    elif odometry_topic.lower() != "none":
+        known = {t.topic: t.msgtype for t in topics}     # a missing or wrong one: the assembler says so
+        wanted.append(odometry_topic if known.get(odometry_topic) in ODOMETRY_TYPES else None)
     if reference_topic:
         wanted.append(choose_topic(index, FIX_TYPE, "reference", "--reference-topic", reference_topic))
-    contents = read_topics(kind, path, [w for w in wanted if w])
+    contents = read_topics(kind, path, list(dict.fromkeys(w for w in wanted if w)))
     if gnss_from_file and not any(t.msgtype == FIX_TYPE for t in contents.topics):
         contents = _with_placeholder_fix(contents)
     return recording_from_log(contents, imu_topic=imu_topic, gnss_topic=gnss_topic, reference_topic=reference_topic,
                               time_source=config.time.source, time_base=config.time.base,
                               default_std_m=config.gnss.default_std_m, gyro_scale=config.imu.gyro_scale,
-                              accel_scale=config.imu.accel_scale, time_offset_s=config.gnss.time_offset_s)
+                              accel_scale=config.imu.accel_scale, time_offset_s=config.gnss.time_offset_s,
+                              odometry_topic=odometry_topic)
 
 
 def _with_placeholder_fix(contents):

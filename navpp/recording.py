@@ -244,6 +244,40 @@ class GnssData:
 
 
 @dataclass(frozen=True)
+class OdometryData:
+    """The vehicle's own speed: wheel odometry (ROS ``nav_msgs/Odometry``, ``TwistStamped``), CAN
+    wheel speeds, ``odometry.csv``.
+
+    Attributes
+    ----------
+    t : (K,) float, s relative to ``t0_ns``.
+    speed : (K,) float, m/s, forward speed along the vehicle's x axis (FLU) at the odometry point.
+    yaw_rate : (K,) float or None, rad/s, about the vehicle's z axis (up).
+    std_speed : (K,) float or None, m/s, 1-sigma of ``speed`` as given by the log.
+    std_yaw_rate : (K,) float or None, rad/s, 1-sigma of ``yaw_rate`` as given by the log.
+    source : where it came from (a topic name, a file), for messages.
+    """
+
+    t: np.ndarray
+    speed: np.ndarray
+    yaw_rate: np.ndarray | None = None
+    std_speed: np.ndarray | None = None
+    std_yaw_rate: np.ndarray | None = None
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        k = self.t.shape[0]
+        for name in ("speed", "yaw_rate", "std_speed", "std_yaw_rate"):
+            a = getattr(self, name)
+            if a is not None and a.shape != (k,):
+                raise ValueError(f"OdometryData.{name} has shape {a.shape}, expected ({k},)")
+        _readonly(self.t, self.speed, self.yaw_rate, self.std_speed, self.std_yaw_rate)
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+
+@dataclass(frozen=True)
 class ReferenceData:
     """Reference trajectory (e.g. DGPS/RTK or simulated truth) of the body origin.
 
@@ -287,6 +321,8 @@ class Recording:
     reference: ReferenceData | None = None
     source: str = ""
     warnings: tuple[str, ...] = field(default_factory=tuple)
+    #: wheel odometry / vehicle speed when the log has it (:class:`OdometryData`)
+    odometry: OdometryData | None = None
 
     def absolute_time(self, t_rel: np.ndarray) -> np.ndarray:
         """Relative seconds -> float seconds on the log's own time base."""

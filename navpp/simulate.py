@@ -96,6 +96,27 @@ the bundle's value with one, else 125 Hz, 5 Hz, automotive, 60 s, 1.8 m, 2.5 m.
   missing; the start is ``gnss_gap_start_s`` or the start of the first turn at least
   :data:`GAP_EARLIEST_S` into the log and after the still period.
 
+Odometry
+--------
+``odometry=True`` writes a wheel odometer (``odometry.csv``) at ``odometry_rate_hz``: the true
+forward speed ``v`` of the body origin along the vehicle x axis (the vehicle frame is the body
+frame here: a simulated mounting rotates the IMU only; with no side slip ``v = s``), read as::
+
+    speed = (1 + e) * (v + slip) + n,   e = odometry_scale_error_pct / 100,  n ~ N(0, odometry_std_mps)
+
+then rounded to multiples of ``odometry_quantum_mps`` (0: not quantised).  Slip: under hard
+forward acceleration ``a = dv/dt`` the wheels spin (braking: they skid),
+``slip = odometry_slip * sign(a) * max(0, |a| - 2 m/s^2)`` m/s (:data:`ODOMETRY_SLIP_THRESHOLD_MPS2`),
+never below ``-v`` (a locked wheel stops).  The drive cycle reaches 2.25 m/s^2 pulling away and
+3.3 m/s^2 braking from 20 m/s.  ``odometry_yaw_rate=True`` adds the true yaw rate of the vehicle
+w.r.t. the Earth about its z axis (rad/s, up; negative in a right turn) plus white noise
+``odometry_yaw_rate_std_rps``.  The written ``std_speed`` is ``hypot(std, quantum / sqrt(12))``
+(left out when 0), ``std_yaw_rate`` the yaw-rate noise.  Stamps are on the IMU's clock (true time
++ ``imu_time_offset_s``).  The noise is drawn from a fourth stream of the seed (speed, then yaw
+rate), so turning odometry on leaves the IMU, GNSS and effects exactly as they were; the truth
+is in :attr:`Simulation.sensor_errors` (``odometry_*``), the scale error also in ``navpp.toml``'s
+comment and ``realism.json``.
+
 Order: ideal IMU -> mounting -> sensor errors and vibration -> stale rows -> stamps.  With
 ``errors=False`` the sensor errors and the vibration are off; mounting, stale rows, clock offset,
 start and gap still apply.  :func:`write_csv_log` writes what was applied (the true biases,
@@ -127,7 +148,7 @@ from scipy.signal import lfilter
 from navpp.errors import ConfigError
 from navpp.geodesy import E2, OMEGA_E, A, gravity, radii
 from navpp.ins.attitude import rph_to_dcm, rpy_deg_to_dcm
-from navpp.recording import GnssData, ImuData, Recording, ReferenceData
+from navpp.recording import GnssData, ImuData, OdometryData, Recording, ReferenceData
 
 G0 = 9.80665  #: standard gravity, m/s^2 (mg conversion and the roll lean law)
 LEAN_GAIN = 0.03  #: roll = -LEAN_GAIN * lateral acceleration / G0 (rad); leans outward
@@ -273,6 +294,15 @@ class SimulationSpec:
     start_in_motion: bool = False
     gnss_gap_s: float | None = None
     gnss_gap_start_s: float | None = None
+    # -- wheel odometry (module docstring, "Odometry"); off by default ----------------------
+    odometry: bool = False
+    odometry_rate_hz: float = 10.0
+    odometry_scale_error_pct: float = 0.0
+    odometry_std_mps: float = 0.02
+    odometry_quantum_mps: float = 0.0
+    odometry_slip: float = 0.0
+    odometry_yaw_rate: bool = False
+    odometry_yaw_rate_std_rps: float = 0.002
 
     def __post_init__(self) -> None:
         if self.realism is not None and self.realism not in REALISM_BUNDLES:
@@ -285,6 +315,7 @@ class SimulationSpec:
             if name not in _PLAIN_DEFAULTS and getattr(self, name) is None:
                 object.__setattr__(self, name, value)
         self._check_realism()
+        self._check_odometry()
         lever = tuple(float(x) for x in self.lever_arm_m)
         if len(lever) != 3:
             raise ConfigError(f"simulate: lever_arm_m needs 3 numbers (body FLU, m), got {self.lever_arm_m!r}")
@@ -361,6 +392,22 @@ class SimulationSpec:
             raise ConfigError(f"simulate: gnss_gap_s must be >= 0 s, got {self.gnss_gap_s!r}")
         if self.gnss_gap_start_s is not None and not number("gnss_gap_start_s", self.gnss_gap_start_s) >= 0.0:
             raise ConfigError(f"simulate: gnss_gap_start_s must be >= 0 s, got {self.gnss_gap_start_s!r}")
+
+    def _check_odometry(self) -> None:
+        """Validate the odometry fields (module docstring, "Odometry")."""
+        for name in ("odometry", "odometry_yaw_rate"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ConfigError(f"simulate: {name} must be true or false, got {getattr(self, name)!r}")
+        for name, lo, hi, strict in (("odometry_rate_hz", 0.0, 1000.0, True),
+                                     ("odometry_scale_error_pct", -50.0, 50.0, False),
+                                     ("odometry_std_mps", 0.0, 10.0, False),
+                                     ("odometry_quantum_mps", 0.0, 10.0, False), ("odometry_slip", 0.0, 10.0, False),
+                                     ("odometry_yaw_rate_std_rps", 0.0, 10.0, False)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                    or not math.isfinite(value) or not lo <= value <= hi or (strict and value == lo):
+                within = f"within {'(' if strict else '['}{lo:g}, {hi:g}]"
+                raise ConfigError(f"simulate: {name} must be a finite number {within}, got {value!r}")
 
     @property
     def still_effective_s(self) -> float:
@@ -835,6 +882,13 @@ class Simulation:
     mounting the logged ``imu`` is in the sensor axes and its errors (``sensor_errors``) too.
     ``imu.t`` are the written stamps (true time + ``imu_time_offset_s``).  ``realism``: the
     real-world effects applied (see :func:`realism_json`), None when none is on.
+
+    ``odometry`` is the logged wheel odometry (``spec.odometry``; module docstring, "Odometry"),
+    stamped like ``imu``; its truth is in ``sensor_errors``: ``odometry_scale_error`` (ratio, the
+    odometer reads ``1 + e`` times the wheel speed), ``odometry_true_speed`` (K,) m/s forward speed
+    of the body origin along the vehicle (body) x axis, ``odometry_true_yaw_rate`` (K,) rad/s about
+    the vehicle z axis (w.r.t. the Earth), ``odometry_slip_mps`` (K,) m/s, at the true times
+    ``odometry_true_t`` (K,) s.
     """
 
     imu: ImuData
@@ -846,12 +900,13 @@ class Simulation:
     sensor_errors: dict = field(repr=False)
     trajectory: Trajectory | None = field(default=None, repr=False, compare=False)
     realism: dict | None = field(default=None, repr=False)
+    odometry: OdometryData | None = None
 
     def recording(self) -> Recording:
         """The simulated log as a :class:`~navpp.recording.Recording` (unix time base)."""
         sp = self.spec
         return Recording(imu=self.imu, gnss=self.gnss, t0_ns=self.t0_ns, time_base="unix",
-                         reference=self.reference,
+                         reference=self.reference, odometry=self.odometry,
                          source=f"navpp.simulate(duration={sp.duration_s:g} s, preset={sp.preset}, seed={sp.seed})")
 
 
@@ -872,10 +927,14 @@ def simulate(spec: SimulationSpec) -> Simulation:
     Simulation
     """
     traj = Trajectory.from_spec(spec)
-    streams = np.random.SeedSequence(spec.seed).spawn(3)  # IMU (0,), GNSS (1,), real-world effects (2,)
+    # IMU (0,), GNSS (1,), real-world effects (2,), odometry (3,): spawn keys are fixed, so the
+    # fourth child leaves the first three (and every log without odometry) as they were
+    streams = np.random.SeedSequence(spec.seed).spawn(4)
     imu_rng, gnss_rng = (np.random.default_rng(s) for s in streams[:2])
     imu, truth_imu, err, applied = _simulate_imu(spec, traj, imu_rng, streams[2])
     gnss, errors = _simulate_gnss(spec, traj, gnss_rng, err)
+    odometry, odo_truth = _simulate_odometry(spec, traj, np.random.default_rng(streams[3]))
+    errors.update(odo_truth)
     if applied is not None:
         gnss, applied["gnss_gap"] = _gnss_gap(spec, traj, gnss)
         if applied["gnss_gap"] is not None:
@@ -894,6 +953,7 @@ def simulate(spec: SimulationSpec) -> Simulation:
         sensor_errors=errors,
         trajectory=traj,
         realism=applied,
+        odometry=odometry,
     )
 
 
@@ -979,6 +1039,45 @@ def _simulate_reference(spec: SimulationSpec, traj: Trajectory) -> ReferenceData
     return ReferenceData(t=t_ref, lat_deg=np.degrees(sr["lat"]), lon_deg=np.degrees(sr["lon"]),
                          alt=sr["h"], vel_enu=sr["vel_enu"], rph_deg=rph_deg,
                          source="navpp.simulate truth (body origin)")
+
+
+#: Odometry slip (module docstring, "Odometry"): beyond this forward acceleration the wheels slip, m/s^2.
+ODOMETRY_SLIP_THRESHOLD_MPS2 = 2.0
+
+
+def _simulate_odometry(spec: SimulationSpec, traj: Trajectory,
+                       rng: np.random.Generator) -> tuple[OdometryData | None, dict]:
+    """The wheel odometry of ``spec`` (None when off) and its truth for ``sensor_errors``
+    (:class:`Simulation`).  Draws from ``rng`` in a fixed order: speed noise, yaw-rate noise."""
+    if not spec.odometry:
+        return None, {}
+    t = _sample_times(spec.duration_s, spec.odometry_rate_hz)
+    st = traj.state(t)
+    rph = st["rph"]
+    mat_nb = rph_to_dcm(rph[:, 0], rph[:, 1], rph[:, 2])
+    speed = _rotate_t(mat_nb, st["vel_enu"])[:, 0]             # body (= vehicle) x, m/s
+    a_fwd = _rotate_t(mat_nb, st["accel_enu"])[:, 0]           # d speed / dt, m/s^2
+    w_en = transport_rate_enu_batch(st["lat"], st["h"], st["vel_enu"])
+    yaw_rate = (body_rate_from_rph(rph, st["rph_dot"]) + _rotate_t(mat_nb, w_en))[:, 2]   # w_eb_b z, rad/s
+    excess = np.maximum(0.0, np.abs(a_fwd) - ODOMETRY_SLIP_THRESHOLD_MPS2)
+    slip = np.maximum(spec.odometry_slip * np.sign(a_fwd) * excess, -speed)   # a locked wheel stops
+    scale = spec.odometry_scale_error_pct * 1e-2
+    measured = (1.0 + scale) * (speed + slip) + rng.standard_normal(t.size) * spec.odometry_std_mps
+    q = spec.odometry_quantum_mps
+    if q > 0.0:
+        measured = q * np.round(measured / q)
+    yaw = std_yaw = None
+    if spec.odometry_yaw_rate:
+        yaw = yaw_rate + rng.standard_normal(t.size) * spec.odometry_yaw_rate_std_rps
+        if spec.odometry_yaw_rate_std_rps > 0.0:
+            std_yaw = np.full(t.size, spec.odometry_yaw_rate_std_rps)
+    sigma = math.hypot(spec.odometry_std_mps, q / math.sqrt(12.0))   # white noise and quantisation
+    offset = spec.imu_time_offset_s or 0.0                            # on the IMU's clock
+    odo = OdometryData(t=t + offset if offset else t, speed=measured, yaw_rate=yaw,
+                       std_speed=np.full(t.size, sigma) if sigma > 0.0 else None, std_yaw_rate=std_yaw,
+                       source="navpp.simulate odometry")
+    return odo, {"odometry_scale_error": scale, "odometry_true_speed": speed, "odometry_true_yaw_rate": yaw_rate,
+                 "odometry_slip_mps": slip, "odometry_true_t": t}
 
 
 #: Vibration (module docstring): the mount's oscillation, Hz, its damping ratio, and the share of
@@ -1192,6 +1291,27 @@ def _table(t0_unix: float, t: np.ndarray, header: list[str], columns: list[tuple
         yield (row * (b - a)) % tuple(data.ravel().tolist())
 
 
+def _odometry_table(t0_unix: float, odo: OdometryData) -> Iterator[str]:
+    """``odometry.csv``: ``t, speed[, yaw_rate][, std_speed][, std_yaw_rate]``, t as in imu.csv."""
+    header, cols = ["t", "speed"], [(odo.speed, "%.17g")]
+    for name in ("yaw_rate", "std_speed", "std_yaw_rate"):
+        col = getattr(odo, name)
+        if col is not None:
+            header.append(name)
+            cols.append((col, "%.17g"))
+    return _table(t0_unix, odo.t, header, cols)
+
+
+def _odometry_comment(sp: SimulationSpec) -> list[str]:
+    """navpp.toml comment lines describing the simulated odometry (its truth included), or []."""
+    if not sp.odometry:
+        return []
+    return [f"# odometry.csv: forward speed along the vehicle x axis at {sp.odometry_rate_hz:g} Hz on the IMU clock, "
+            f"scale error {sp.odometry_scale_error_pct:+g} % (truth), noise {sp.odometry_std_mps:g} m/s, "
+            f"quantum {sp.odometry_quantum_mps:g} m/s, slip {sp.odometry_slip:g} s"
+            + (f", yaw rate {sp.odometry_yaw_rate_std_rps:g} rad/s noise" if sp.odometry_yaw_rate else "") + "."]
+
+
 def _toml(sim: Simulation) -> str:
     sp = sim.spec
     if sp.realism is not None:
@@ -1206,6 +1326,7 @@ def _toml(sim: Simulation) -> str:
         + (f", velocity {sp.gnss_std_vel_mps:g} m/s" if sp.gnss_velocity else "") + ".",
         f"# imu.csv, gnss.csv, reference.csv: t in unix seconds (first IMU sample {sp.t0_unix:.6f});",
         "# reference.csv is the exact truth of the body (IMU) origin.",
+        *_odometry_comment(sp),
         "",
     ]
     if sp.preset != "ideal":
@@ -1228,6 +1349,7 @@ def _toml_realism(sim: Simulation) -> str:
         "# car drive with the effects of a real log; what the run has to find is in realism.json.",
         "# imu.csv, gnss.csv, reference.csv: t in unix seconds; reference.csv is the exact truth of the",
         "# body (vehicle) origin at true times.",
+        *_odometry_comment(sp),
         "",
         "[gnss]",
         f"lever_arm_m = [{lever}]",
@@ -1251,12 +1373,20 @@ def realism_json(sim: Simulation) -> dict:
         "gnss_std_h_m": sp.gnss_std_h_m, "gnss_std_u_m": sp.gnss_std_u_m, "lever_arm_m": list(sp.lever_arm_m),
     }
     out.update(sim.realism)
+    if sp.odometry:
+        out["odometry"] = {"scale_error_pct": sp.odometry_scale_error_pct, "rate_hz": sp.odometry_rate_hz,
+                           "std_mps": sp.odometry_std_mps, "quantum_mps": sp.odometry_quantum_mps,
+                           "slip_s": sp.odometry_slip, "slip_threshold_mps2": ODOMETRY_SLIP_THRESHOLD_MPS2,
+                           "yaw_rate_std_rps": sp.odometry_yaw_rate_std_rps if sp.odometry_yaw_rate else None,
+                           "model": "speed = (1 + scale_error) * (forward speed + slip) + white noise, then "
+                                    "quantised; stamps on the IMU clock (imu_time_offset_s applies)"}
     return out
 
 
 def write_csv_log(sim: Simulation, out_dir: str | os.PathLike) -> None:
     """Write ``imu.csv``, ``gnss.csv``, ``reference.csv`` and ``navpp.toml`` into ``out_dir``,
-    and ``realism.json`` (:func:`realism_json`) when a real-world effect is on.
+    ``odometry.csv`` when the spec has odometry, and ``realism.json`` (:func:`realism_json`) when
+    a real-world effect is on.
 
     Times are absolute (``spec.t0_unix + t``, 6 decimals, exact to the microsecond); IMU
     values are written with 17 significant digits (round-trip exact).  Each file is written
@@ -1293,6 +1423,8 @@ def write_csv_log(sim: Simulation, out_dir: str | os.PathLike) -> None:
     _write_atomic(out / "reference.csv", _table(
         t0, r.t, ["t", "lat", "lon", "alt", "ve", "vn", "vu", "roll", "pitch", "heading"], cols))
 
+    if sim.odometry is not None:
+        _write_atomic(out / "odometry.csv", _odometry_table(t0, sim.odometry))
     _write_atomic(out / "navpp.toml", [_toml(sim)])
     if sim.realism is not None:
         _write_atomic(out / "realism.json", [json.dumps(realism_json(sim), indent=1) + "\n"])

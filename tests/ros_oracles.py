@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from navpp.io.ros import FIX_TYPE, IMU_TYPE, TWIST_COV_TYPE
+from navpp.io.ros import FIX_TYPE, IMU_TYPE, ODOM_TYPE, TWIST_COV_TYPE
 
 
 def ros2_name(msgtype: str) -> str:
@@ -38,12 +38,15 @@ def expected_from_objects(msgtype: str, msgs: list) -> dict[str, np.ndarray]:
         out["alt"] = np.array([m.altitude for m in msgs])
         out["cov"] = np.array([list(m.position_covariance) for m in msgs]).reshape(-1, 9)
         out["cov_type"] = np.array([m.position_covariance_type for m in msgs], dtype=np.uint8)
-    elif msgtype == TWIST_COV_TYPE:
+    elif msgtype in (TWIST_COV_TYPE, ODOM_TYPE):
         out["vel"] = np.array([xyz(m.twist.twist.linear) for m in msgs]).reshape(-1, 3)
+        out["angular"] = np.array([xyz(m.twist.twist.angular) for m in msgs]).reshape(-1, 3)
         out["cov_diag"] = np.array([[m.twist.covariance[k] for k in (0, 7, 14)]
                                     for m in msgs]).reshape(-1, 3)
+        out["var_yaw_rate"] = np.array([m.twist.covariance[35] for m in msgs])
     else:
         out["vel"] = np.array([xyz(m.twist.linear) for m in msgs]).reshape(-1, 3)
+        out["angular"] = np.array([xyz(m.twist.angular) for m in msgs]).reshape(-1, 3)
     return out
 
 

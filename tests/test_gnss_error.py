@@ -139,7 +139,7 @@ def test_forced_fix_restarts_the_block():
 def test_other_measurements_are_padded():
     x = _nominal()
     inner = _fix(x)
-    meas = Padded(inner)
+    meas = Padded(inner, 18)
     H = meas.jacobian(x)
     assert H.shape == (3, 18) and not H[:, N_ERR:].any()
     np.testing.assert_array_equal(meas.innovation_at(x), inner.innovation_at(x[:NOMINAL_SIZE].copy()))

@@ -33,6 +33,7 @@ from navpp.io.messages import (
 from navpp.io.ros import (
     FIX_TYPE,
     IMU_TYPE,
+    ODOM_TYPE,
     SUPPORTED_TYPES,
     TWIST_COV_TYPE,
     TWIST_TYPE,
@@ -90,6 +91,11 @@ def make_message(msgtype: str, i: int, rng: np.random.Generator, frame_id: str,
     twist = {"linear": vec(0), "angular": vec(3)}
     if msgtype == TWIST_COV_TYPE:
         return {"header": header, "twist": {"twist": twist, "covariance": arr(36, 6)}}
+    if msgtype == ODOM_TYPE:  # a second string (child_frame_id) of 0..6 characters moves the fields
+        pose = {"position": vec(42), "orientation": {"x": _f(rng, i, 45), "y": 0.0, "z": 0.0, "w": 1.0}}
+        return {"header": header, "child_frame_id": "base_link"[: (i * 3) % 7],
+                "pose": {"pose": pose, "covariance": arr(36, 46)},
+                "twist": {"twist": twist, "covariance": arr(36, 6)}}
     return {"header": header, "twist": twist}
 
 

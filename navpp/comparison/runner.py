@@ -142,7 +142,7 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
             imu_topic: str | None = None, gnss_topic: str | None = None, reference_topic: str | None = None,
             report: bool = True, progress: ProgressFn | None = None, smooth: bool = False,
             executor: str = "local", scheduler: str | None = None,
-            time_limit_s: float = DEFAULT_TIME_LIMIT_S) -> CompareResult:
+            time_limit_s: float = DEFAULT_TIME_LIMIT_S, odometry_topic: str | None = None) -> CompareResult:
     """Run every filter on every log; rows in (log, filter) order.
 
     Parameters
@@ -157,7 +157,8 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
     jobs : worker processes, >= 1; 1 runs everything in this process (Dask: the LocalCluster size).
     out_dir : write ``summary.csv`` and (with ``report``) ``report.md``, ``report.html`` and the
         PNG figures there (the directory must exist); None writes nothing.
-    imu_topic, gnss_topic, reference_topic : topic choices for ROS logs.
+    imu_topic, gnss_topic, reference_topic, odometry_topic : topic choices for ROS logs
+        (``odometry_topic="none"``: no odometry, any log).
     report : collect the plot series and, with ``out_dir``, write the report.
     progress : ``progress(stage, fraction)``: stages ``"reading <log>"``, ``"<log> <filter>"`` and
         ``"all runs"`` (fraction of runs finished).
@@ -196,7 +197,8 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
                      scheduler=scheduler, time_limit_s=time_limit_s)
     tasks = [RunTask(i * len(names) + j, log, name, None if config is None else str(config),
                      None if reference is None else str(reference), imu_topic, gnss_topic, reference_topic,
-                     report, report and j == 0, bool(smooth), time_limit_s=float(time_limit_s))
+                     report, report and j == 0, bool(smooth), time_limit_s=float(time_limit_s),
+                     odometry_topic=odometry_topic)
              for i, log in enumerate(log_names) for j, name in enumerate(names)]
     out = Path(out_dir) if out_dir is not None else None
     labels = [x for n in names for x in ((n, smoothed_name(n)) if smooth else (n,))]

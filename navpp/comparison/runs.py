@@ -47,6 +47,7 @@ class RunTask:
     smooth: bool = False        # also smooth the run: a second row, "<filter>+rts"
     path: str | None = None     # where to read the log (absolute for remote workers); None: ``log``
     time_limit_s: float = 0.0   # the watchdog's s per 100,000 IMU samples (:func:`watchdog_limit_s`); 0: off
+    odometry_topic: str | None = None   # --odometry-topic (None: automatic, "none": off)
 
 
 @dataclass(frozen=True)
@@ -78,7 +79,8 @@ class RecordingCache:
         removed) of the task's log; the read error again (a NavppError) for an unreadable one."""
         from .. import api
 
-        key = (task.log, task.config, task.reference, task.imu_topic, task.gnss_topic, task.reference_topic)
+        key = (task.log, task.config, task.reference, task.imu_topic, task.gnss_topic, task.reference_topic,
+               task.odometry_topic)
         if key != self.key:
             self.key, self.value = None, None          # free the previous recording first
             log = Path(task.path or task.log)
@@ -89,6 +91,7 @@ class RecordingCache:
                 with Watchdog(limit):
                     rec = api.read_log(log, cfg, reference=task.reference, imu_topic=task.imu_topic,
                                        gnss_topic=task.gnss_topic, reference_topic=task.reference_topic,
+                                       odometry_topic=task.odometry_topic,
                                        progress=(lambda f: progress(label, f)) if progress else None)
                 if progress:
                     progress(label, 1.0)

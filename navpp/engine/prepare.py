@@ -203,7 +203,8 @@ def timing_fixes(recording: Recording, config: Config,
 def dropped_stale_rows(recording: Recording, notes: list[str], warnings: list[Finding],
                        info: dict | None) -> Recording:
     """The recording without its stale IMU rows (:func:`navpp.ins.timing_estimates.find_stale_rows`);
-    a warning when rows are dropped, a note when repeats are no more than chance."""
+    a warning when rows are dropped, a note when repeats are no more than chance.  The odometry
+    and GNSS are untouched (the kept IMU rows keep their stamps)."""
     from ..ins.timing_estimates import find_stale_rows
     from ..recording import ImuData
 
@@ -230,7 +231,8 @@ def clock_offset_fixed(recording: Recording, up: np.ndarray, enu: np.ndarray, no
                        warnings: list[Finding], info: dict | None) -> Recording:
     """The recording with the IMU-GNSS clock offset applied to the GNSS stamps when the estimate
     (:func:`navpp.ins.timing_estimates.estimate_clock_offset`, the gyro about the sensor's ``up``
-    against the course rate of the GNSS track ``enu`` (M, 3) m) is sure of it; a note otherwise."""
+    against the course rate of the GNSS track ``enu`` (M, 3) m) is sure of it; a note otherwise.
+    The odometry is on the IMU's clock (the same logger): the offset is not applied to it."""
     from ..ins.timing_estimates import estimate_clock_offset, velocity_from_positions
 
     imu, gnss, src = recording.imu, recording.gnss, recording.source

@@ -18,9 +18,8 @@ import numpy as np
 
 from ..filters.base import GaussianState, Prediction, Update
 from ..filters.smoother import ForwardStore
-from ..ins.gnss_error import GM, GM_STATE_NAMES, NOMINAL_GM
 from ..ins.model import BA, BG, POS
-from ..ins.strapdown import NOMINAL_BA, NOMINAL_BG, NOMINAL_SIZE, PATH_SIZE
+from ..ins.strapdown import NOMINAL_BA, NOMINAL_BG, PATH_SIZE
 from .loop import EpochOutcome
 from .results import BiasHistory, Diagnostics
 from .schedule import Epoch, GnssFixes
@@ -51,7 +50,8 @@ class RunRecorder:
 
     def __init__(self, fixes: GnssFixes, path: np.ndarray, start: GaussianState, start_sample: int,
                  noise_report: Callable[[], dict[str, np.ndarray]], *, velocity: bool, smooth: bool,
-                 progress: ProgressFn | None = None, n_epochs: int = 1) -> None:
+                 progress: ProgressFn | None = None, n_epochs: int = 1,
+                 extra_states: list[tuple[str, int, int]] | None = None, odometer: bool = False) -> None:
         m = len(fixes)
         self.path = path
         self.n_path = path.shape[1]
@@ -66,10 +66,14 @@ class RunRecorder:
         self.adaptive: dict[str, np.ndarray] = {}
         self.bias = np.empty((m, 6))
         self.bias_var = np.empty((m, 6))
-        # the GNSS error states after each fix (ENU m) and their variance, when the model has them
-        self.gnss_error = np.full((m, 6), np.nan) if start.x.shape[0] > NOMINAL_SIZE else None
+        # the model's extra states after each fix (the GNSS error, ENU m; the odometer's scale) and
+        # their variance: (label, error index, nominal index) each
+        self.extra = list(extra_states or [])
+        self.extra_values = np.full((m, 2 * len(self.extra)), np.nan) if self.extra else None
         # GNSS velocity: innovation (M, 3) m/s, NIS (M,), applied (M,: 1, 0, NaN without one)
         self.vel = (np.full((m, 3), np.nan), np.full(m, np.nan), np.full(m, np.nan)) if velocity else None
+        # the odometer's update at a GNSS epoch: innovation (M,) m/s, NIS, applied (1, 0, NaN without one)
+        self.odo = (np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan)) if odometer else None
         self.noise_report = noise_report
         self.t = start.t            # time of the last state the loop made, s
         # covariance knots for the output's 1-sigma: flat (t, prior E/N/U variance, posterior E/N/U
@@ -113,6 +117,8 @@ class RunRecorder:
                 if name not in self.adaptive:
                     self.adaptive[name] = np.full((len(self.nis), np.size(value)), np.nan)
                 self.adaptive[name][k] = value
+        elif meas.kind == "odometer" and self.odo is not None and k >= 0:
+            self.odo[0][k], self.odo[1][k], self.odo[2][k] = inn.nu[0], inn.nis, float(inn.accepted)
         elif meas.kind == "gnss_velocity" and self.vel is not None:
             self.vel[0][k], self.vel[1][k], self.vel[2][k] = inn.nu, inn.nis, float(inn.accepted)
 
@@ -131,9 +137,11 @@ class RunRecorder:
             self.bias[k, 3:] = state.x[NOMINAL_BA]
             self.bias_var[k, :3] = state.P.diagonal()[BG]
             self.bias_var[k, 3:] = state.P.diagonal()[BA]
-            if self.gnss_error is not None:
-                self.gnss_error[k, :3] = state.x[NOMINAL_GM]
-                self.gnss_error[k, 3:] = state.P.diagonal()[GM]
+            if self.extra_values is not None:
+                n = len(self.extra)
+                for j, (_, ie, ix) in enumerate(self.extra):
+                    self.extra_values[k, j] = state.x[ix]
+                    self.extra_values[k, n + j] = state.P[ie, ie]
         if self.progress is not None and epoch.index % self.tick == 0:
             self.progress(epoch.index / self.n_epochs)
 
@@ -155,14 +163,16 @@ class RunRecorder:
                 named[key] = values
         vel_nu, vel_nis, vel_accepted = self.vel if self.vel is not None else (None, None, None)
         states: dict[str, np.ndarray] = {}
-        if self.gnss_error is not None:
-            std = np.sqrt(np.maximum(self.gnss_error[:, 3:], 0.0))
-            for i, name in enumerate(GM_STATE_NAMES):
-                states[name] = self.gnss_error[:, [i]]
-            for i, name in enumerate(GM_STATE_NAMES):
-                states[name + "_std"] = std[:, [i]]
+        if self.extra_values is not None:
+            n = len(self.extra)
+            std = np.sqrt(np.maximum(self.extra_values[:, n:], 0.0))
+            for j, (label, _, _) in enumerate(self.extra):
+                states[label] = self.extra_values[:, [j]]
+            for j, (label, _, _) in enumerate(self.extra):
+                states[label + "_std"] = std[:, [j]]
+        odo_nu, odo_nis, odo_accepted = self.odo if self.odo is not None else (None, None, None)
         return Diagnostics(t, self.nu, self.nis, self.accepted, self.forced, self.r_std, named, vel_nu, vel_nis,
-                           vel_accepted, states)
+                           vel_accepted, states, odo_nu, odo_nis, odo_accepted)
 
     def bias_history(self, t: np.ndarray) -> BiasHistory:
         """The biases after each fix at the fix times ``t`` (s), with their 1-sigma."""

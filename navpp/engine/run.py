@@ -24,7 +24,9 @@ from ..errors import FilterDivergedError, InputError, NavppError, RunRefused
 from ..filters.base import Filter, GaussianState
 from ..findings import Finding
 from ..gnss_jumps import check_gnss_jumps
+from ..ins.aids.odometer import scale_block
 from ..ins.alignment import Alignment, align
+from ..ins.augmented import AugmentedInsModel, StateBlock
 from ..ins.gnss_error import Correlation, GnssErrorModel, GnssErrorSettings, innovation_correlation
 from ..ins.model import InsModel
 from ..recording import Recording
@@ -225,7 +227,7 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
         return Aiding(config, model.t, model.gyro, model.accel, model.noise.gyro_arw, model.noise.accel_vrw,
                       recording.gnss, sel, model.gaps, mounting,
                       still=cal.still if (cal is not None and config.auto.standstill) else None,
-                      profile=model.profile)
+                      profile=model.profile, odometry=recording.odometry)
 
     aiding = new_aiding()
     imu_t = recording.imu.t
@@ -233,17 +235,24 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     n_epochs = sum(not e.coast for e in schedule) if progress is not None else 1
     reopen = recovery_reopening(config, al.P)
     lever = np.asarray(config.gnss.lever_arm_m, dtype=float)
-    score = estimation_scorer(config, model, recording, al, fixes, new_aiding, reopen, lever)
+    more = (scale_block(config.odometry.scale_sigma, config.odometry.scale_walk_per_sqrt_h),) \
+        if aiding.odo is not None else ()
+    score = estimation_scorer(config, model, recording, al, fixes, new_aiding, reopen, lever, more)
     choice = gnss_error_choice(config, fixes, score)
-    fmodel: InsModel | GnssErrorModel = model
+    fmodel: InsModel | AugmentedInsModel = model
     start = GaussianState(al.t, al.x, al.P)
     if choice is not None:
-        fmodel = GnssErrorModel(model, choice.settings)
-        start = GaussianState(al.t, *fmodel.start(al.x, al.P))
+        fmodel = GnssErrorModel(model, choice.settings, more)
         log.notes.append(choice.note())
         prep.calibration["gnss_error"] = choice.report()
+    elif more:
+        fmodel = AugmentedInsModel(model, more)
+    if isinstance(fmodel, AugmentedInsModel):
+        start = GaussianState(al.t, *fmodel.start(al.x, al.P))
     recorder = RunRecorder(fixes, prep.path, start, al.index, filt.noise_report, velocity=aiding.has_velocity,
-                           smooth=smooth, progress=progress, n_epochs=n_epochs)
+                           smooth=smooth, progress=progress, n_epochs=n_epochs,
+                           extra_states=fmodel.state_labels() if isinstance(fmodel, AugmentedInsModel) else None,
+                           odometer=aiding.odo is not None)
     source = RunMeasurements(fixes, recording.gnss, lever, reopen, aiding, model=fmodel,
                              r_share=1.0 if choice is None else 1.0 - choice.share)
     check = DivergenceCheck(recording, config, filt.name, al.t, log, source)
@@ -267,7 +276,8 @@ ESTIMATION_FIX_INTERVAL_S = 1.0
 
 
 def estimation_scorer(config: Config, model: InsModel, recording: Recording, al: Alignment, fixes: GnssFixes,
-                      new_aiding: Any, reopen: np.ndarray | None, lever: np.ndarray) -> Any:
+                      new_aiding: Any, reopen: np.ndarray | None, lever: np.ndarray,
+                      more: tuple[StateBlock, ...] = ()) -> Any:
     """The score of a Gauss-Markov candidate (:mod:`navpp.engine.gnss_error`): ``-2 log L`` of
     the fixes' innovations in one pass of the plain EKF over the run's epochs, with the fixes thinned
     to one per :data:`ESTIMATION_FIX_INTERVAL_S` (``new_aiding(sel)``: the run's aids over the fixes
@@ -279,7 +289,7 @@ def estimation_scorer(config: Config, model: InsModel, recording: Recording, al:
     schedule = epochs(al.t, t_end, *new_aiding(sub.index).schedule(al.t, t_end, sub.t), recording.imu.t)
 
     def score(settings: GnssErrorSettings, share: float) -> float:
-        fm = GnssErrorModel(model, settings)
+        fm = GnssErrorModel(model, settings, more)
         scorer = LikelihoodRecorder(gate_cap(config.gnss.gate_probability))
         src = RunMeasurements(sub, recording.gnss, lever, reopen, new_aiding(sub.index), model=fm,
                               r_share=1.0 - share)

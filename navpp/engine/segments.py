@@ -61,16 +61,18 @@ def rows(obj: Any, keep: np.ndarray | slice) -> Any:
 
 
 def segment(recording: Recording, i0: int, i1: int) -> Recording:
-    """The recording restricted to IMU rows ``[i0, i1)`` and the fixes and reference epochs inside
-    their time span (same time base, same ``t0_ns``)."""
+    """The recording restricted to IMU rows ``[i0, i1)`` and the fixes, odometry rows and reference
+    epochs inside their time span ``t[i0] <= t <= t[i1 - 1]`` s (same time base, same ``t0_ns``)."""
     t = recording.imu.t
     a, b = float(t[i0]), float(t[i1 - 1])
     imu = rows(recording.imu, slice(i0, i1))
     gnss = rows(recording.gnss, (recording.gnss.t >= a) & (recording.gnss.t <= b))
-    ref = recording.reference
+    ref, odo = recording.reference, recording.odometry
     if ref is not None:
         ref = rows(ref, (ref.t >= a) & (ref.t <= b))
-    return replace(recording, imu=imu, gnss=gnss, reference=ref)
+    if odo is not None:
+        odo = rows(odo, (odo.t >= a) & (odo.t <= b))
+    return replace(recording, imu=imu, gnss=gnss, reference=ref, odometry=odo)
 
 
 def concat(parts: list, cls: type) -> Any:

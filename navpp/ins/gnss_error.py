@@ -29,12 +29,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
-from numba import njit
 
-from .model import InsModel, minus, plus
+from .augmented import AugmentedInsModel, Padded, StateBlock, ins_part, minus_aug, plus_aug, rts_means_aug
+from .model import InsModel
 from .state import N_ERR, NOMINAL_SIZE, POS
 
 #: error-state slice of the GNSS error block (ENU m), after the 15 INS error states
@@ -75,194 +75,68 @@ class GnssErrorSettings:
         """``exp(-dt / tau)`` over ``dt`` s."""
         return math.exp(-max(dt, 0.0) / self.tau_s)
 
-
-@njit(cache=True)
-def plus_gm(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
-    """``x ⊞ dx`` on the augmented state: (19,) ⊞ (18,) -> (19,); the INS part by
-    :func:`navpp.ins.model.plus`, the GNSS error additively."""
-    y = plus(x, dx[:N_ERR])
-    for i in range(3):
-        y[NOMINAL_SIZE + i] = x[NOMINAL_SIZE + i] + dx[N_ERR + i]
-    return y
+    def block(self) -> StateBlock:
+        """The error as a block of the augmented INS (:mod:`navpp.ins.augmented`)."""
+        return StateBlock("gnss_error", tuple(GM_STATE_NAMES), self.tau_s, self.sigma_enu)
 
 
-@njit(cache=True)
-def minus_gm(x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
-    """``x1 ⊟ x0`` on the augmented state, (18,)."""
-    dx = np.empty(N_ERR + 3)
-    dx[:N_ERR] = minus(x1, x0)
-    for i in range(3):
-        dx[N_ERR + i] = x1[NOMINAL_SIZE + i] - x0[NOMINAL_SIZE + i]
-    return dx
+#: ``x ⊞ dx`` / ``x1 ⊟ x0`` / the smoother's mean recursion on the augmented state (19 / 18 elements
+#: with the GNSS error alone; any number of extra elements, :mod:`navpp.ins.augmented`)
+plus_gm = plus_aug
+minus_gm = minus_aug
+rts_means_gm = rts_means_aug
 
 
-@njit(cache=True)
-def rts_means_gm(x_post: np.ndarray, x_prior: np.ndarray, gains: np.ndarray, reset: np.ndarray) -> np.ndarray:
-    """The smoother's mean recursion on the augmented nominal (as :func:`navpp.ins.model.rts_means`):
-    (M, 19) states, gains (M, 18, 18)."""
-    m = x_post.shape[0]
-    xs = np.empty_like(x_post)
-    xs[m - 1] = x_post[m - 1]
-    for k in range(m - 2, -1, -1):
-        if reset[k + 1]:
-            xs[k] = x_post[k]
-        else:
-            xs[k] = plus_gm(x_post[k], gains[k + 1] @ minus_gm(xs[k + 1], x_prior[k + 1]))
-    return xs
+class GnssErrorModel(AugmentedInsModel):
+    """An :class:`~navpp.ins.model.InsModel` with the Gauss-Markov GNSS error appended first
+    (module docstring; :data:`GM`, :data:`NOMINAL_GM`), then any ``more`` blocks (e.g. the
+    odometer's scale factor).  ``settings``: the error's time constant and stationary sigma."""
 
-
-def _ins_part(x: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(x[:NOMINAL_SIZE])
-
-
-class GnssErrorModel:
-    """An :class:`~navpp.ins.model.InsModel` with the Gauss-Markov GNSS error appended (module
-    docstring): 18 error elements, 19 nominal.  ``ins`` is the wrapped model (its path is the
-    run's IMU-rate path); ``settings`` the error's time constant and stationary sigma."""
-
-    #: VCE: the INS noise groups reach the fixes through many time updates
-    noise_share: ClassVar[str] = "propagated"
-
-    def __init__(self, ins: InsModel, settings: GnssErrorSettings) -> None:
-        self.ins, self.settings = ins, settings
-        self.dim = N_ERR_GM
+    def __init__(self, ins: InsModel, settings: GnssErrorSettings, more: tuple[StateBlock, ...] = ()) -> None:
+        super().__init__(ins, (settings.block(), *more))
+        self.settings = settings
         self._var = settings.variance
 
-    # ⊞ / ⊟ -----------------------------------------------------------------------------------
-    @staticmethod
-    def plus(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
-        return plus_gm(x, np.ascontiguousarray(dx, dtype=float))
-
-    @staticmethod
-    def minus(x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
-        return minus_gm(x1, x0)
-
-    rts_means = staticmethod(rts_means_gm)
-
-    # propagation -----------------------------------------------------------------------------
     def _block(self, interval: tuple[float, float]) -> tuple[float, np.ndarray]:
         """(decay a, Qd diagonal (3,)) of the GNSS error over ``interval``."""
         a = self.settings.decay(interval[1] - interval[0])
         return a, self._var * (1.0 - a * a)
 
-    def _nominal(self, xn_ins: np.ndarray, x: np.ndarray, a: float) -> np.ndarray:
-        out = np.empty(NOMINAL_SIZE_GM)
-        out[:NOMINAL_SIZE] = xn_ins
-        out[NOMINAL_GM] = a * x[NOMINAL_GM]
-        return out
-
-    def _augmented(self, M15: np.ndarray, diag3: np.ndarray) -> np.ndarray:
-        M = np.zeros((N_ERR_GM, N_ERR_GM))
-        M[:N_ERR, :N_ERR] = M15
-        M[GM, GM] = np.diag(diag3)
-        return M
-
-    def transition(self, x: np.ndarray, interval: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The INS's transition with the GNSS error's decay and drive appended."""
-        xn, Phi, Qd = self.ins.transition(_ins_part(x), interval)
-        a, q = self._block(interval)
-        return self._nominal(xn, x, a), self._augmented(Phi, np.full(3, a)), self._augmented(Qd, q)
-
-    def process_noise(self, x: np.ndarray, interval: tuple[float, float]) -> np.ndarray:
-        """Qd (18, 18) over the interval."""
-        _, q = self._block(interval)
-        return self._augmented(self.ins.process_noise(_ins_part(x), interval), q)
-
-    def propagate_points(self, x: np.ndarray, dX: np.ndarray, interval: tuple[float, float]
-                         ) -> tuple[np.ndarray, np.ndarray]:
-        """The INS's points through the strapdown; the GNSS error part decays linearly."""
-        dX = np.asarray(dX, dtype=float)
-        xn, dY = self.ins.propagate_points(_ins_part(x), np.ascontiguousarray(dX[:, :N_ERR]), interval)
-        a, _ = self._block(interval)
-        out = np.empty((dX.shape[0], N_ERR_GM))
-        out[:, :N_ERR] = dY
-        out[:, N_ERR:] = a * dX[:, N_ERR:]
-        return self._nominal(xn, x, a), out
-
-    def noise_groups(self, x: np.ndarray, interval: tuple[float, float], per: str = "triad"
-                     ) -> tuple[list[str], np.ndarray]:
-        """The INS's noise groups (padded to 18) and one more, ``gnss_error``: the drive of the
-        GNSS error block (variance component estimation may scale it like the others)."""
-        names, Qs = self.ins.noise_groups(_ins_part(x), interval, per)
-        out = np.zeros((len(names) + 1, N_ERR_GM, N_ERR_GM))
-        if len(names):
-            out[:-1, :N_ERR, :N_ERR] = Qs
-        _, q = self._block(interval)
-        out[-1, GM, GM] = np.diag(q)
-        return [*names, "gnss_error"], out
-
-    # start -----------------------------------------------------------------------------------
     def start(self, x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The augmented start state from the INS's (16,) ``x`` and (15, 15) ``P``: the GNSS
-        error estimate zero with its stationary variance.  The start position came from the fixes,
-        so its error holds the (unknown) GNSS error with the opposite sign: the position variance
-        grows by ``sigma_c^2`` and the two blocks correlate by ``-sigma_c^2`` (the Schur complement
-        is the INS's own position variance, so the result stays positive definite)."""
-        xa = np.zeros(NOMINAL_SIZE_GM)
-        xa[:NOMINAL_SIZE] = x[:NOMINAL_SIZE]
-        Pa = np.zeros((N_ERR_GM, N_ERR_GM))
-        Pa[:N_ERR, :N_ERR] = P
+        """The augmented start (:meth:`AugmentedInsModel.start`) with the GNSS error correlated
+        to the position: the start position came from the fixes, so its error holds the (unknown)
+        GNSS error with the opposite sign: the position variance grows by ``sigma_c^2`` and the
+        two blocks correlate by ``-sigma_c^2`` (the Schur complement is the INS's own position
+        variance, so the result stays positive definite)."""
+        xa, Pa = super().start(x, P)
         v = np.diag(self._var)
         Pa[POS, POS] += v
         Pa[POS, GM] = -v
         Pa[GM, POS] = -v
-        Pa[GM, GM] = v
         return xa, Pa
 
     def measurement(self, meas: Any) -> Any:
-        """``meas`` of the 15-element model as a measurement of this one: the GNSS position fix
-        with the error in its prediction, anything else padded (:class:`Padded`)."""
+        """The GNSS position fix with the error in its prediction, the rest as
+        :meth:`AugmentedInsModel.measurement` builds them."""
         from .model import GnssPosition
 
         if isinstance(meas, GnssPosition):
-            return GnssPositionGM(meas, self._var)
-        return Padded(meas)
-
-
-class Padded:
-    """A measurement of the 15-element INS model on the augmented one: the same innovation and
-    R, zero Jacobian columns for the GNSS error, its points taken on the INS part; every other
-    attribute is the wrapped measurement's (``inner``)."""
-
-    def __init__(self, inner: Any) -> None:
-        self.inner = inner
-
-    def __getattr__(self, name: str) -> Any:      # kind, axes, adaptive, forceable, t, R, ...
-        if name == "inner":                       # not set yet (copy, pickle): no recursion
-            raise AttributeError(name)
-        return getattr(self.inner, name)
-
-    def innovation_at(self, x: np.ndarray) -> np.ndarray:
-        nu: np.ndarray = self.inner.innovation_at(_ins_part(x))
-        return nu
-
-    def jacobian(self, x: np.ndarray) -> np.ndarray:
-        H15 = self.inner.jacobian(_ins_part(x))
-        H = np.zeros((H15.shape[0], N_ERR_GM))
-        H[:, :N_ERR] = H15
-        return H
-
-    def predict_points(self, x: np.ndarray, dX: np.ndarray) -> np.ndarray:
-        Z: np.ndarray = self.inner.predict_points(_ins_part(x), np.ascontiguousarray(np.asarray(dX)[:, :N_ERR]))
-        return Z
-
-    def reanchor(self, P: np.ndarray, nu: np.ndarray, R: np.ndarray) -> np.ndarray | None:
-        out: np.ndarray | None = self.inner.reanchor(P, nu, R)
-        return out
+            return GnssPositionGM(meas, self._var, self.dim)
+        return super().measurement(meas)
 
 
 class GnssPositionGM(Padded):
     """The GNSS position fix with the Gauss-Markov error: ``z = antenna + b + w``; the
-    innovation is the INS's minus the estimated ``b``, ``H = [H_ins, I]``, R the white part.
+    innovation is the INS's minus the estimated ``b``, ``H = [H_ins, I, 0]``, R the white part.
     A forced fix re-anchors the position as the INS's fix does and restarts the GNSS error block
     from its stationary variance, uncorrelated with the rest (a jump is not the slow error)."""
 
-    def __init__(self, inner: Any, variance: np.ndarray) -> None:
-        super().__init__(inner)
+    def __init__(self, inner: Any, variance: np.ndarray, n: int = N_ERR_GM) -> None:
+        super().__init__(inner, n)
         self.variance = variance
 
     def innovation_at(self, x: np.ndarray) -> np.ndarray:
-        nu: np.ndarray = self.inner.innovation_at(_ins_part(x)) - x[NOMINAL_GM]
+        nu: np.ndarray = self.inner.innovation_at(ins_part(x)) - x[NOMINAL_GM]
         return nu
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:

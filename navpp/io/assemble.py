@@ -3,7 +3,9 @@
 Role detection: the IMU topic is the one ``sensor_msgs/Imu`` topic (``--imu-topic`` picks
 among several), the GNSS topic the one ``sensor_msgs/NavSatFix`` topic that is not the
 reference (``--gnss-topic`` picks), GNSS velocity the one Twist topic if there is exactly
-one.  Message semantics (ROS REP-145 and the message definitions):
+one that is not in a vehicle frame, wheel odometry the topic
+:func:`navpp.io.detect.choose_odometry_topic` picks (``--odometry-topic`` chooses, ``none`` disables).
+Message semantics (ROS REP-145 and the message definitions):
 
 - stamps: header stamps by default (``[time] source = "header"``), record times with "log";
 - NavSatFix ``status < 0`` (no fix) and NaN positions are dropped and counted;
@@ -19,8 +21,9 @@ import numpy as np
 
 from ..errors import InputError
 from ..findings import with_code
-from ..recording import GnssData, ImuData, Recording, ReferenceData, lone_stamp, order_samples
-from .ros import FIX_TYPE, IMU_TYPE, TWIST_COV_TYPE, TWIST_TYPE, FixMessages, LogContents
+from ..recording import GnssData, ImuData, OdometryData, Recording, ReferenceData, lone_stamp, order_samples
+from .detect import choose_odometry_topic, gnss_velocity_topics, in_vehicle_frame
+from .ros import FIX_TYPE, IMU_TYPE, FixMessages, LogContents
 
 GAP_FACTOR = 2.5
 
@@ -45,6 +48,10 @@ def choose_topic(contents: LogContents, msgtype: str, role: str, option: str, gi
         raise InputError(f"{contents.source}: several {msgtype} topics could be the {role}: "
                          f"{', '.join(candidates)}; choose one with {option}")
     return candidates[0] if candidates else None
+
+
+def _type_of(contents: LogContents, topic: str) -> str:
+    return next((t.msgtype for t in contents.topics if t.topic == topic), "")
 
 
 def _stamp_text(ns) -> str:
@@ -147,7 +154,8 @@ def _fixes(fix: FixMessages, source: str, what: str, default_std: tuple[float, f
 def recording_from_log(contents: LogContents, *, imu_topic: str | None = None, gnss_topic: str | None = None,
                        reference_topic: str | None = None, time_source: str = "header",
                        time_base: str = "unix", default_std_m=(2.0, 2.0, 4.0),
-                       gyro_scale: float = 1.0, accel_scale: float = 1.0, time_offset_s: float = 0.0) -> Recording:
+                       gyro_scale: float = 1.0, accel_scale: float = 1.0, time_offset_s: float = 0.0,
+                       odometry_topic: str | None = None) -> Recording:
     """Pick the roles, apply the message semantics, validate, and build the Recording.
 
     ``time_offset_s`` (s, ``[gnss] time_offset_s``) is added to every GNSS fix stamp (not to
@@ -159,7 +167,8 @@ def recording_from_log(contents: LogContents, *, imu_topic: str | None = None, g
     try:
         return _assemble(contents, imu_topic=imu_topic, gnss_topic=gnss_topic, reference_topic=reference_topic,
                          time_source=time_source, time_base=time_base, default_std_m=default_std_m,
-                         gyro_scale=gyro_scale, accel_scale=accel_scale, time_offset_s=time_offset_s)
+                         gyro_scale=gyro_scale, accel_scale=accel_scale, time_offset_s=time_offset_s,
+                         odometry_topic=odometry_topic)
     except InputError as exc:
         cut = with_code(contents.warnings, "recording-cut-off")
         if not cut:
@@ -199,7 +208,8 @@ def _imu_data(contents: LogContents, imu_name: str, time_source: str, gyro_scale
 def _assemble(contents: LogContents, *, imu_topic: str | None = None, gnss_topic: str | None = None,
               reference_topic: str | None = None, time_source: str = "header",
               time_base: str = "unix", default_std_m=(2.0, 2.0, 4.0),
-              gyro_scale: float = 1.0, accel_scale: float = 1.0, time_offset_s: float = 0.0) -> Recording:
+              gyro_scale: float = 1.0, accel_scale: float = 1.0, time_offset_s: float = 0.0,
+              odometry_topic: str | None = None) -> Recording:
     src = contents.source
     warnings = list(contents.warnings)
     imu_name = choose_topic(contents, IMU_TYPE, "IMU", "--imu-topic", imu_topic)
@@ -228,7 +238,16 @@ def _assemble(contents: LogContents, *, imu_topic: str | None = None, gnss_topic
         raise InputError(f"{what}: no fix inside the IMU time span ({t0_ns * 1e-9:.3f} .. "
                          f"{(t0_ns * 1e-9 + t_imu[-1]):.3f} s); check the stamps of both topics")
     vel = std_vel = None
-    twists = topics_of_type(contents, TWIST_COV_TYPE) + topics_of_type(contents, TWIST_TYPE)
+    odom_name, odom_note = choose_odometry_topic(contents, odometry_topic)
+    if odom_note.startswith("odometry: not used"):
+        warnings.append(f"{src}: {odom_note}")
+    odometry = _odometry_data(contents, odom_name, time_source, t0_ns) if odom_name else None
+    odom_msgs = contents.twist.get(odom_name) if odom_name else None
+    if odom_name and odom_msgs is not None and not in_vehicle_frame(odom_msgs, _type_of(contents, odom_name)):
+        warnings.append(f"{src}: odometry topic {odom_name!r} (--odometry-topic) is not in a vehicle frame "
+                        f"(frame {odom_msgs.child_frame_id or odom_msgs.frame_id!r}): its linear.x is used as the "
+                        "forward speed anyway")
+    twists = gnss_velocity_topics(contents, odom_name)
     if len(twists) == 1 and twists[0] in contents.twist:
         tw = contents.twist[twists[0]]
         tw_ns = _stamps(tw, time_source) + round(float(time_offset_s) * 1e9)   # same receiver
@@ -260,4 +279,33 @@ def _assemble(contents: LogContents, *, imu_topic: str | None = None, gnss_topic
         reference = ReferenceData((r_ns - t0_ns) * 1e-9, rcols["lat_deg"], rcols["lon_deg"], rcols["alt"],
                                   source=f"{src}:{reference_topic}")
     return Recording(imu=imu_data, gnss=gnss, t0_ns=t0_ns, time_base=time_base, reference=reference,
-                     source=src, warnings=tuple(warnings))
+                     source=src, warnings=tuple(warnings), odometry=odometry)
+
+
+def _odometry_data(contents: LogContents, topic: str, time_source: str, t0_ns: int) -> OdometryData:
+    """The odometry topic as :class:`OdometryData` on the IMU's time base (s from ``t0_ns``, the
+    same [time] source; no GNSS time offset): speed = the twist's linear x (m/s, vehicle frame),
+    yaw rate = its angular z (rad/s); std from covariance elements 0 / 35 when every message gives
+    one > 0 (else None: the config's default sigma applies); source = the topic.  Out-of-order and
+    repeated stamps follow :func:`_ordered` (their warnings are dropped: an optional aid); a
+    non-finite value is an InputError."""
+    msgs = contents.twist.get(topic)
+    what = f"{contents.source}: topic {topic!r} (odometry; --odometry-topic none leaves it out)"
+    if msgs is None or msgs.stamp_ns.shape[0] == 0:
+        raise InputError(f"{what}: no message")
+    stamps = _stamps(msgs, time_source, what)
+    cols = [np.asarray(msgs.vel, float)[:, 0]]
+    if msgs.angular is not None:
+        cols.append(np.asarray(msgs.angular, float)[:, 2])
+    _finite_rows(cols, ["speed (linear.x)", "yaw rate (angular.z)"][:len(cols)], what, stamps)
+    keep = _ordered(stamps, np.column_stack(cols), what, [])
+
+    def std(var: np.ndarray | None) -> np.ndarray | None:
+        if var is None:
+            return None
+        v = np.asarray(var, float)[keep]
+        return np.sqrt(v) if bool(np.all(np.isfinite(v) & (v > 0))) else None
+
+    return OdometryData((stamps[keep] - t0_ns) * 1e-9, cols[0][keep], cols[1][keep] if len(cols) > 1 else None,
+                        std(None if msgs.cov_diag is None else msgs.cov_diag[:, 0]), std(msgs.var_yaw_rate),
+                        source=topic)

@@ -1,4 +1,4 @@
-"""CSV logs: a directory holding ``imu.csv`` and ``gnss.csv`` (and optionally ``reference.csv``).
+"""CSV logs: a directory holding ``imu.csv`` and ``gnss.csv`` (optionally ``reference.csv``, ``odometry.csv``).
 
 Schemas (header row required, comma separated, extra columns ignored and named once in a
 warning; see ``INTERFACES.md``):
@@ -12,6 +12,10 @@ warning; see ``INTERFACES.md``):
   ``fix``, ``num_sats``.  Each triple is all or none.
 - ``reference.csv``: ``t, lat, lon, alt``; optional ``ve, vn, vu``; optional
   ``roll, pitch, heading`` (deg).
+- ``odometry.csv`` (optional, read when present): ``t, speed`` (m/s, forward along the vehicle's
+  x axis); optional ``yaw_rate`` (rad/s about the vehicle's z axis, up), ``std_speed`` (m/s) and
+  ``std_yaw_rate`` (rad/s), 1-sigma.  Its stamps are on the IMU's clock (same time base, same
+  ``t0_ns``; ``time_offset_s`` is not added to them).
 
 Time: ``t`` is float seconds on the log's time base (``unix``, ``gpst`` or ``relative``), in
 any float form (plain, e-notation, ``+``, blanks).  Stamps are read as the exact integer
@@ -38,13 +42,14 @@ import numpy as np
 import pandas as pd
 
 from navpp.errors import ConfigError, InputError
-from navpp.recording import GnssData, ImuData, Recording, ReferenceData, lone_stamp
+from navpp.recording import GnssData, ImuData, OdometryData, Recording, ReferenceData, lone_stamp
 
 __all__ = ["increments_to_rates", "is_csv_log", "read_csv_log", "read_reference_csv"]
 
 IMU_FILE = "imu.csv"
 GNSS_FILE = "gnss.csv"
 REFERENCE_FILE = "reference.csv"
+ODOMETRY_FILE = "odometry.csv"
 
 TIME_BASES = ("unix", "gpst", "relative")
 GYRO_UNITS = {"rad/s": 1.0, "deg/s": np.pi / 180.0}
@@ -58,6 +63,10 @@ _IMU_INCREMENT_COLS = ("dthx", "dthy", "dthz", "dvx", "dvy", "dvz")
 _GNSS_REQUIRED = ("t", "lat", "lon", "alt")
 _GNSS_GROUPS = (("std_e", "std_n", "std_u"), ("ve", "vn", "vu"), ("std_ve", "std_vn", "std_vu"))
 _GNSS_SINGLES = ("fix", "num_sats")
+_ODO_REQUIRED = ("t", "speed")
+_ODO_SINGLES = ("yaw_rate", "std_speed", "std_yaw_rate")
+#: A wheel speed above this (m/s, 360 km/h) is not a ground vehicle's speed in m/s (km/h? mm/s?).
+MAX_ODOMETRY_SPEED_MPS = 100.0
 _REF_REQUIRED = ("t", "lat", "lon", "alt")
 _REF_GROUPS = (("ve", "vn", "vu"), ("roll", "pitch", "heading"))
 _MAX_NAMES_SHOWN = 20
@@ -95,12 +104,14 @@ def read_csv_log(
     Parameters
     ----------
     path : directory holding ``imu.csv`` and ``gnss.csv``.  A ``reference.csv`` in it is read
-        too unless ``reference`` names another file.
+        too unless ``reference`` names another file; an ``odometry.csv`` in it becomes
+        ``Recording.odometry``.
     reference : reference trajectory CSV to use instead of ``path/reference.csv``.
     time_base : ``"unix"``, ``"gpst"`` or ``"relative"``: what the ``t`` columns count.
     gyro_units : ``"rad/s"`` or ``"deg/s"`` (for increments: rad or deg).
     accel_units : ``"m/s^2"`` or ``"g"`` (for increments: m/s or g*s).
-    time_offset_s : s, added to every GNSS stamp (receiver latency correction).
+    time_offset_s : s, added to every GNSS stamp (receiver latency correction); not to the
+        odometry, which is on the IMU's clock.
 
     Returns
     -------
@@ -130,6 +141,9 @@ def read_csv_log(
     warnings: list[str] = []
     imu_data, t0_ns, imu_span = _read_imu(log_dir / IMU_FILE, gyro_scale, accel_scale, warnings, progress)
     gnss_data = _read_gnss(log_dir / GNSS_FILE, t0_ns, imu_span, time_offset_s, warnings)
+    odo_data = None
+    if (log_dir / ODOMETRY_FILE).exists():
+        odo_data = _read_odometry(log_dir / ODOMETRY_FILE, t0_ns, imu_span, warnings)
     ref_data: ReferenceData | None = None
     if reference is not None:
         ref_data = read_reference_csv(reference, t0_ns, warnings_out=warnings)
@@ -144,6 +158,7 @@ def read_csv_log(
         reference=ref_data,
         source=str(path),
         warnings=tuple(warnings),
+        odometry=odo_data,
     )
 
 
@@ -211,7 +226,7 @@ def _read_gnss(gnss_path: Path, t0_ns: int, imu_span: tuple[float, float], time_
         raise _need_more(gnss, "at least 1 GNSS fix is needed")
     t_gnss = gnss.col("t") + float(time_offset_s)
     _gap_warning(gnss.path.name, t_gnss, gnss.lines, warnings)
-    _check_gnss_span(gnss, t_gnss, imu_span, time_offset_s, warnings)
+    _check_span(gnss, t_gnss, imu_span, time_offset_s, warnings)
     return GnssData(
         t=(gnss.data["t_ns"] + round(float(time_offset_s) * 1e9) - t0_ns) * 1e-9,
         lat_deg=gnss.col("lat"),
@@ -225,23 +240,58 @@ def _read_gnss(gnss_path: Path, t0_ns: int, imu_span: tuple[float, float], time_
     )
 
 
-def _check_gnss_span(gnss: _Table, t_gnss: np.ndarray, imu_span: tuple[float, float], time_offset_s: float,
-                     warnings: list[str]) -> None:
-    """Fixes (``t_gnss``, s, offset applied) outside the IMU's first..last stamp: a warning; all of
-    them outside: an error (the time bases of the two files disagree)."""
+def _read_odometry(odo_path: Path, t0_ns: int, imu_span: tuple[float, float], warnings: list[str]) -> OdometryData:
+    """``odometry.csv`` as :class:`OdometryData`, ``t`` relative to ``t0_ns`` (the first IMU stamp).
+
+    The stamps are taken to be on the IMU's clock: ``[gnss] time_offset_s`` (a GNSS latency) is
+    not added to them.  Validated like ``gnss.csv``: non-numeric, NaN or infinite cells, stamps
+    going backwards, stamps not in seconds, standard deviations <= 0, ``std_yaw_rate`` without
+    ``yaw_rate``, a speed over :data:`MAX_ODOMETRY_SPEED_MPS` and every row outside the IMU span
+    are errors naming the line and column; duplicate stamps (dropped), gaps, rows outside the IMU
+    span and extra columns are warnings."""
+    header = _read_header(odo_path)
+    cols = _select_columns(odo_path, header, _ODO_REQUIRED, (), _ODO_SINGLES)
+    if "std_yaw_rate" in cols and "yaw_rate" not in cols:
+        raise InputError(f"{odo_path}: line 1 (header), column 'std_yaw_rate' given without 'yaw_rate'")
+    odo = _read_table(odo_path, header, cols, warnings)
+    _check_positive(odo, ("std_speed", "std_yaw_rate"), "[odometry] std_mps")
+    fast = np.abs(odo.data["speed"]) > MAX_ODOMETRY_SPEED_MPS
+    if fast.any():
+        k = int(np.argmax(fast))
+        raise InputError(f"{odo_path}: line {odo.lines[k]}, column 'speed': {float(odo.data['speed'][k])!r} m/s is "
+                         f"over {MAX_ODOMETRY_SPEED_MPS:g} m/s: not a vehicle speed in m/s (km/h?)")
+    _check_lone_stamp(odo)
+    odo = _check_time(_with_ns(odo, header), warnings)
+    _check_rate(odo, odo.data["t"], "odometry", 0.2, 10_000.0)
+    _gap_warning(odo.path.name, odo.data["t"], odo.lines, warnings)
+    _check_span(odo, odo.data["t"], imu_span, 0.0, warnings, "odometry rows")
+    return OdometryData(
+        t=(odo.data["t_ns"] - t0_ns) * 1e-9,
+        speed=odo.col("speed"),
+        yaw_rate=odo.col("yaw_rate") if "yaw_rate" in cols else None,
+        std_speed=odo.col("std_speed") if "std_speed" in cols else None,
+        std_yaw_rate=odo.col("std_yaw_rate") if "std_yaw_rate" in cols else None,
+        source=str(odo_path),
+    )
+
+
+def _check_span(table: _Table, t: np.ndarray, imu_span: tuple[float, float], time_offset_s: float,
+                warnings: list[str], rows: str = "fixes") -> None:
+    """Rows (``t``, s, offset applied) outside the IMU's first..last stamp: a warning; all of them
+    outside: an error (the time bases of the two files disagree).  ``rows`` names them."""
     t_first, t_last = imu_span
-    n_before = int(np.count_nonzero(t_gnss < t_first))
-    n_after = int(np.count_nonzero(t_gnss > t_last))
-    if n_before + n_after == gnss.n:
+    n_before = int(np.count_nonzero(t < t_first))
+    n_after = int(np.count_nonzero(t > t_last))
+    if n_before + n_after == table.n:
         raise InputError(
-            f"{gnss.path}: column 't': all {gnss.n} fixes (t={float(t_gnss[0])!r}..{float(t_gnss[-1])!r}"
+            f"{table.path}: column 't': all {table.n} {rows} (t={float(t[0])!r}..{float(t[-1])!r}"
             + (f", after adding time_offset_s={time_offset_s!r}" if time_offset_s else "")
             + f") lie outside the IMU time span t={t_first!r}..{t_last!r}; check the time bases of "
-            f"{IMU_FILE} and {GNSS_FILE}"
+            f"{IMU_FILE} and {table.path.name}"
         )
     if n_before or n_after:
         warnings.append(
-            f"{gnss.path.name}: {n_before + n_after} of {gnss.n} fixes lie outside the IMU time span "
+            f"{table.path.name}: {n_before + n_after} of {table.n} {rows} lie outside the IMU time span "
             f"t={t_first!r}..{t_last!r} ({n_before} before, {n_after} after"
             + (f", after adding time_offset_s={time_offset_s!r}" if time_offset_s else "")
             + "); kept, but the engine ignores them"
@@ -764,8 +814,9 @@ def _check_range(table: _Table, name: str, lo: float, hi: float, text: str, *, u
         )
 
 
-def _check_positive(table: _Table, names: Sequence[str]) -> None:
-    """Standard deviations must be > 0: a zero claims a perfect fix and breaks the filter."""
+def _check_positive(table: _Table, names: Sequence[str], default: str = "[gnss] default_std_m") -> None:
+    """Standard deviations must be > 0: a zero claims a perfect fix and breaks the filter.
+    ``default`` names what is used when the column is left out."""
     names = [c for c in names if c in table.data]
     if not names:
         return
@@ -776,7 +827,7 @@ def _check_positive(table: _Table, names: Sequence[str]) -> None:
         what = "negative" if value < 0 else "zero"
         raise InputError(
             f"{table.path}: line {table.lines[row]}, column {names[j]!r}: {what} standard deviation "
-            f"{value!r}; it must be > 0 (leave the column out to use [gnss] default_std_m)"
+            f"{value!r}; it must be > 0 (leave the column out to use {default})"
         )
 
 

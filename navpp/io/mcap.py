@@ -1,5 +1,6 @@
 """MCAP reader: ROS 2 (CDR) and ROS 1 encoded ``sensor_msgs/Imu``, ``sensor_msgs/NavSatFix``,
-``geometry_msgs/TwistWithCovarianceStamped`` / ``TwistStamped`` into :class:`LogContents`.
+``geometry_msgs/TwistWithCovarianceStamped`` / ``TwistStamped`` and ``nav_msgs/Odometry`` (its
+twist: wheel odometry) into :class:`LogContents` (Twist and Odometry topics in ``twist``).
 
 The ``mcap`` package reads the summary (for :func:`list_topics`) and parses Schema and Channel
 records; the bulk of the file (Message records, in chunks or at top level) is scanned by a
@@ -586,12 +587,13 @@ def _read_with_library(path: Path, topics: set[str] | None) -> LogContents:
     reg.check_wanted()
     out: dict[str, dict[str, Any]] = {"imu": {}, "fix": {}, "twist": {}}
     for topic, decoder in reg.decoders.items():
+        children: list[str] = []
         table, stamps, frame_ids = decode_with_library(
             decoder.msgtype, decoder.encoding, payloads.get(topic, []),
-            schema_name=decoder.schema_name, schema_text=decoder.schema_text)
+            schema_name=decoder.schema_name, schema_text=decoder.schema_text, child_frame_ids=children)
         msgs = build_messages(decoder.msgtype, topic, table, stamps,
                                np.asarray(logs.get(topic, []), dtype=np.int64),
-                               frame_ids[0] if frame_ids else "")
+                               frame_ids[0] if frame_ids else "", children[0] if children else "")
         kind = "imu" if decoder.msgtype == IMU_TYPE else "fix" if decoder.msgtype == FIX_TYPE else "twist"
         out[kind][topic] = msgs
     return LogContents(source=source, topics=reg.topic_infos(), imu=out["imu"], fix=out["fix"],
@@ -612,7 +614,8 @@ def read_mcap(path: str | os.PathLike[str], topics: Iterable[str] | None = None,
     topics :
         Topics to decode; ``None`` decodes every topic of a supported type
         (``sensor_msgs/Imu``, ``sensor_msgs/NavSatFix``,
-        ``geometry_msgs/TwistWithCovarianceStamped``, ``geometry_msgs/TwistStamped``).
+        ``geometry_msgs/TwistWithCovarianceStamped``, ``geometry_msgs/TwistStamped``,
+        ``nav_msgs/Odometry``).
         ``LogContents.topics`` lists every topic of the file either way.
     engine :
         ``"fast"`` (bulk scan and decode) or ``"library"`` (``mcap``'s per-message iteration and

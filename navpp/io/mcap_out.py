@@ -69,9 +69,11 @@ else (CSV, ROS 1 bag, ROS 2 bag, a ROS 1 encoded MCAP, or an MCAP whose topic do
 recording's data, e.g. GNSS replaced by ``--gnss FILE.pos``) is encoded from the Recording:
 ``sensor_msgs/msg/Imu`` on ``/imu/data`` (frame ``imu_link``), ``sensor_msgs/msg/NavSatFix``
 on ``/gnss/fix`` (frame ``gnss``) and, with GNSS velocity,
-``geometry_msgs/msg/TwistWithCovarianceStamped`` on ``/gnss/vel``, exactly as
-:func:`navpp.io.roswrite.write_mcap_ros2` writes them (navpp reads them back as the same
-arrays).  The copied topics are identified by content: the recording's IMU stamps (header or
+``geometry_msgs/msg/TwistWithCovarianceStamped`` on ``/gnss/vel`` and, with wheel odometry
+(``Recording.odometry``), ``nav_msgs/msg/Odometry`` on ``/wheel/odom`` (child frame
+``base_link``), exactly as :func:`navpp.io.roswrite.write_mcap_ros2` writes them (navpp reads
+them back as the same arrays).  The odometry topic of an MCAP input is copied like the IMU's.
+The copied topics are identified by content: the recording's IMU stamps (header or
 log) and GNSS positions must all be found in the topic; a topic the copy cannot take whole (the
 last, partial chunk of a cut-off recording, which navpp's reader still decodes) is encoded too.
 
@@ -148,6 +150,7 @@ _ALL_TOPICS = {**TOPICS, **FORWARD_TOPICS}
 EMBED_IMU_TOPIC = "/imu/data"
 EMBED_GNSS_TOPIC = "/gnss/fix"
 EMBED_GNSS_VEL_TOPIC = "/gnss/vel"
+EMBED_ODOMETRY_TOPIC = "/wheel/odom"
 
 #: Chunk compressions :func:`write_trajectory_mcap` takes ("none": uncompressed chunks).
 COMPRESSIONS = ("zstd", "lz4", "none")
@@ -323,15 +326,43 @@ def _encoded_gnss(recording: Recording, with_velocity: bool) -> list[_Stream]:
     return out
 
 
+def _encoded_odometry(recording: Recording) -> list[_Stream]:
+    """``recording.odometry`` as ``nav_msgs/msg/Odometry`` on :data:`EMBED_ODOMETRY_TOPIC` (as
+    :func:`navpp.io.roswrite.write_mcap_ros2` writes it); none without odometry."""
+    od = recording.odometry
+    if od is None or len(od) == 0:
+        return []
+    return [_ros2_stream(EMBED_ODOMETRY_TOPIC, "nav_msgs/msg/Odometry", roswrite.stamps_ns(recording, od.t),
+                         lambda st, r: _odometry_rows(recording, r, st))]
+
+
+def _odometry_rows(recording: Recording, rows: slice, stamps: np.ndarray) -> np.ndarray:
+    """Packed ``nav_msgs/Odometry`` of ``recording.odometry`` rows: speed (m/s) as linear x, yaw
+    rate (rad/s) as angular z, their variances as twist covariance [0] / [35] (0 when not given)."""
+    od = recording.odometry
+    assert od is not None
+    n = stamps.size
+    linear, angular, var = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 6))
+    linear[:, 0] = od.speed[rows]
+    if od.yaw_rate is not None:
+        angular[:, 2] = od.yaw_rate[rows]
+    for col, std in ((0, od.std_speed), (5, od.std_yaw_rate)):
+        if std is not None:
+            var[:, col] = np.nan_to_num(np.square(std[rows]), nan=0.0)
+    quat = np.broadcast_to(np.array([0.0, 0.0, 0.0, 1.0]), (n, 4))
+    return roswrite.pack_odometry(stamps, np.zeros((n, 3)), quat, linear, angular, encoding="cdr",
+                                  frame_id="odom", child_frame_id="base_link", twist_var=var)
+
+
 def _input_streams(recording: Recording, input_log: str | os.PathLike[str] | None) -> list[_Stream]:
-    """The input's IMU and GNSS: copied from an MCAP input where possible, else encoded."""
+    """The input's IMU, GNSS and odometry: copied from an MCAP input where possible, else encoded."""
     if input_log is not None:
         from navpp.io.detect import log_kind
 
         kind, where = log_kind(Path(input_log))
         if kind == "mcap":
             return _mcap_input_streams(where, recording)
-    return [_encoded_imu(recording), *_encoded_gnss(recording, with_velocity=True)]
+    return [_encoded_imu(recording), *_encoded_gnss(recording, with_velocity=True), *_encoded_odometry(recording)]
 
 
 def _reference_topic(recording: Recording) -> str | None:
@@ -354,15 +385,20 @@ def _contains_all(have: np.ndarray, values: np.ndarray) -> bool:
 
 def _mcap_input_streams(path: Path, recording: Recording) -> list[_Stream]:
     """Find the MCAP topics the recording's IMU and GNSS came from; copy them or encode."""
+    from navpp.io.detect import gnss_velocity_topics
     from navpp.io.mcap import list_topics, read_mcap
-    from navpp.io.ros import FIX_TYPE, IMU_TYPE, TWIST_COV_TYPE, TWIST_TYPE
+    from navpp.io.ros import FIX_TYPE, IMU_TYPE, ODOMETRY_TYPES, VELOCITY_TYPES
 
     infos = list_topics(path)
     cdr = [t for t in infos if t.encoding == "cdr"]
     exclude = _reference_topic(recording)
     imu_cands = [t.topic for t in cdr if t.msgtype == IMU_TYPE]
     fix_cands = [t.topic for t in cdr if t.msgtype == FIX_TYPE and t.topic != exclude]
-    contents = read_mcap(path, imu_cands + fix_cands) if imu_cands or fix_cands else None
+    od = recording.odometry
+    odom_cands = [t.topic for t in cdr if od is not None and t.topic == od.source and t.msgtype in ODOMETRY_TYPES]
+    vel_cands = [t.topic for t in infos if t.msgtype in VELOCITY_TYPES]
+    decode = list(dict.fromkeys(imu_cands + fix_cands + odom_cands + vel_cands))
+    contents = read_mcap(path, decode) if decode else None
 
     imu_topic = None
     gnss_topic = None
@@ -379,12 +415,19 @@ def _mcap_input_streams(path: Path, recording: Recording) -> list[_Stream]:
             if _contains_all(fix.lat_deg, g.lat_deg) and _contains_all(fix.lon_deg, g.lon_deg):
                 gnss_topic = topic
                 break
+    odom_topic = None
+    if contents is not None and od is not None and odom_cands:
+        msgs = contents.twist[odom_cands[0]]
+        want = roswrite.stamps_ns(recording, od.t)
+        if _contains_all(msgs.stamp_ns, want) or _contains_all(msgs.log_ns, want):
+            odom_topic = odom_cands[0]
     vel_topic = None
-    twists = [t for t in infos if t.msgtype in (TWIST_COV_TYPE, TWIST_TYPE)]
-    if gnss_topic is not None and g.vel_enu is not None and len(twists) == 1 and twists[0].encoding == "cdr":
-        vel_topic = twists[0].topic
+    twists = gnss_velocity_topics(contents, od.source if od is not None else None) if contents is not None else []
+    encodings = {t.topic: t.encoding for t in infos}
+    if gnss_topic is not None and g.vel_enu is not None and len(twists) == 1 and encodings[twists[0]] == "cdr":
+        vel_topic = twists[0]
 
-    copied = [t for t in (imu_topic, gnss_topic, vel_topic) if t is not None]
+    copied = [t for t in (imu_topic, gnss_topic, vel_topic, odom_topic) if t is not None]
     streams = _copy_topics(path, copied) if copied else []
     # a cut-off file: the reader may have decoded messages a copy cannot take whole; encode instead
     expected = {t.topic: t.count for t in infos}
@@ -392,13 +435,16 @@ def _mcap_input_streams(path: Path, recording: Recording) -> list[_Stream]:
     if gnss_topic in short:
         short.add(vel_topic)
     streams = [s for s in streams if s.topic not in short]
-    imu_topic, gnss_topic, vel_topic = (None if t in short else t for t in (imu_topic, gnss_topic, vel_topic))
+    imu_topic, gnss_topic, vel_topic, odom_topic = (None if t in short else t
+                                                    for t in (imu_topic, gnss_topic, vel_topic, odom_topic))
     if imu_topic is None:
         streams.append(_encoded_imu(recording))
     if gnss_topic is None:
         streams += _encoded_gnss(recording, with_velocity=True)
     elif vel_topic is None and g.vel_enu is not None:
         streams += _encoded_gnss(recording, with_velocity=True)[1:]
+    if odom_topic is None:
+        streams += _encoded_odometry(recording)
     return streams
 
 

@@ -47,6 +47,7 @@ from navpp.errors import InputError
 from navpp.io.ros import (
     FIX_TYPE,
     IMU_TYPE,
+    ODOM_TYPE,
     SUPPORTED_TYPES,
     TWIST_COV_TYPE,
     TWIST_TYPE,
@@ -134,13 +135,22 @@ _LAYOUTS: dict[str, _Layout] = {
     ), n_cols=14, int_cols=(0, 13)),
     TWIST_COV_TYPE: _Layout((
         _Field("twist.twist.linear", 8, 3, 0, 3),
-        _Field("twist.twist.angular", 8, 3),
-        _Field("twist.covariance", 8, 36, 3, 15),  # elements 0, 7, 14: the linear diagonal
-    ), n_cols=18),
+        _Field("twist.twist.angular", 8, 3, 3, 3),
+        _Field("twist.covariance", 8, 36, 6, 36),  # 0, 7, 14: linear diagonal; 35: yaw rate
+    ), n_cols=42),
     TWIST_TYPE: _Layout((
         _Field("twist.linear", 8, 3, 0, 3),
-        _Field("twist.angular", 8, 3),
-    ), n_cols=3),
+        _Field("twist.angular", 8, 3, 3, 3),
+    ), n_cols=6),
+    # The same output columns as TWIST_COV_TYPE; size 0 marks a string (u32 length + bytes).
+    ODOM_TYPE: _Layout((
+        _Field("child_frame_id", 0, 1),
+        _Field("pose.pose", 8, 7),
+        _Field("pose.covariance", 8, 36),
+        _Field("twist.twist.linear", 8, 3, 0, 3),
+        _Field("twist.twist.angular", 8, 3, 3, 3),
+        _Field("twist.covariance", 8, 36, 6, 36),
+    ), n_cols=42),
 }
 
 # --------------------------------------------------------------------------- the kernel
@@ -194,6 +204,14 @@ def _decode_kernel(buf, starts, lengths, cdr, f_size, f_count, f_col, f_nout,
         ok = True
         for f in range(n_fields):
             size = f_size[f]
+            if size == 0:  # a string: u32 length (4-aligned in CDR), then the bytes
+                if cdr:
+                    pos = 4 + ((pos - 4 + 3) // 4) * 4
+                if pos + 4 > ln:
+                    ok = False
+                    break
+                pos += 4 + np.int64(_load(buf, s + pos, 4, little))
+                continue
             if cdr and size > 1:
                 pos = 4 + ((pos - 4 + size - 1) // size) * size
             end = pos + size * f_count[f]
@@ -231,6 +249,8 @@ _TOP_FIELDS: dict[str, list[tuple[str, str]]] = {
                ("float64[9]", "position_covariance"), ("uint8", "position_covariance_type")],
     TWIST_COV_TYPE: [("Header", "header"), ("TwistWithCovariance", "twist")],
     TWIST_TYPE: [("Header", "header"), ("Twist", "twist")],
+    ODOM_TYPE: [("Header", "header"), ("string", "child_frame_id"), ("PoseWithCovariance", "pose"),
+                ("TwistWithCovariance", "twist")],
 }
 #: Nested definitions the fixed layout relies on, checked when the schema text includes them.
 _NESTED_FIELDS: dict[str, dict[str, list[tuple[str, str]]]] = {
@@ -247,6 +267,9 @@ _NESTED_FIELDS: dict[str, dict[str, list[tuple[str, str]]]] = {
         "NavSatStatus": [("int8", "status"), ("uint16", "service")],
         "Twist": [("Vector3", "linear"), ("Vector3", "angular")],
         "TwistWithCovariance": [("Twist", "twist"), ("float64[36]", "covariance")],
+        "PoseWithCovariance": [("Pose", "pose"), ("float64[36]", "covariance")],
+        "Pose": [("Point", "position"), ("Quaternion", "orientation")],
+        "Point": [("float64", "x"), ("float64", "y"), ("float64", "z")],
     },
 }
 
@@ -354,22 +377,25 @@ def _row_from_object(msgtype: str, msg: Any, row: np.ndarray) -> None:
         f[1:4] = (msg.latitude, msg.longitude, msg.altitude)
         f[4:13] = list(msg.position_covariance)
         row[13] = int(msg.position_covariance_type) & 0xFF
-    elif msgtype == TWIST_COV_TYPE:
-        v = msg.twist.twist.linear
-        f[0:3] = (v.x, v.y, v.z)
-        f[3:18] = list(msg.twist.covariance)[:15]
+    elif msgtype in (TWIST_COV_TYPE, ODOM_TYPE):
+        v, w = msg.twist.twist.linear, msg.twist.twist.angular
+        f[0:6] = (v.x, v.y, v.z, w.x, w.y, w.z)
+        f[6:42] = list(msg.twist.covariance)
     else:
-        v = msg.twist.linear
-        f[0:3] = (v.x, v.y, v.z)
+        v, w = msg.twist.linear, msg.twist.angular
+        f[0:6] = (v.x, v.y, v.z, w.x, w.y, w.z)
 
 
 def decode_with_library(msgtype: str, encoding: str, payloads: Sequence[Any], *,
                         schema_name: str | None = None, schema_text: str | None = None,
+                        child_frame_ids: list[str] | None = None,
                         ) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Decode ``payloads`` one by one with the library decoder.
 
     Returns ``(table (N, n_cols) uint64, stamp_ns (N,) int64, frame_ids)`` in the kernel's
-    format.  Exceptions of the decoder (or a missing field: ``AttributeError``) propagate.
+    format; an Odometry's ``child_frame_id`` of each message is appended to ``child_frame_ids``
+    when that list is given.  Exceptions of the decoder (or a missing field:
+    ``AttributeError``) propagate.
     """
     msgtype = normalise_type(msgtype)
     layout = _LAYOUTS[msgtype]
@@ -383,6 +409,8 @@ def decode_with_library(msgtype: str, encoding: str, payloads: Sequence[Any], *,
         _row_from_object(msgtype, msg, table[i])
         stamps[i] = _stamp_ns(msg.header)
         frame_ids.append(str(msg.header.frame_id))
+        if child_frame_ids is not None and msgtype == ODOM_TYPE:
+            child_frame_ids.append(str(msg.child_frame_id))
     return table, stamps, frame_ids
 
 
@@ -396,6 +424,17 @@ def _as_readonly_u8(buffer: Any) -> np.ndarray:
         arr = arr.view()
         arr.flags.writeable = False
     return arr
+
+
+def _child_frame_id(buf: np.ndarray, start: int, pos: int, cdr: bool) -> str:
+    """The string right after the header (an Odometry's ``child_frame_id``) of the message at
+    ``buf[start:]``; ``pos`` is the byte after ``header.frame_id`` (relative to ``start``)."""
+    little = not cdr or int(buf[start + 1]) == 1
+    if cdr:
+        pos = 4 + ((pos - 4 + 3) // 4) * 4
+    n = int.from_bytes(bytes(buf[start + pos:start + pos + 4]), "little" if little else "big")
+    raw = bytes(buf[start + pos + 4:start + pos + 4 + n])
+    return raw.rstrip(b"\0").decode("utf-8", errors="replace")
 
 
 def _time_text(ns: int) -> str:
@@ -443,6 +482,7 @@ class TopicDecoder:
         self.count = 0
         self.n_fallback = 0  # messages decoded by the library decoder
         self.frame_id: str | None = None
+        self.child_frame_id: str | None = None  # nav_msgs/Odometry only
 
     def _where(self, index: int | None = None, log_ns: int | None = None) -> str:
         where = f"{self.source}: topic {self.topic!r}" if self.source else f"topic {self.topic!r}"
@@ -477,6 +517,9 @@ class TopicDecoder:
                 i = int(np.flatnonzero(flag == 0)[0])
                 raw = bytes(buf[starts[i] + 16: starts[i] + 16 + frame_len[i]])
                 self.frame_id = raw.rstrip(b"\0").decode("utf-8", errors="replace")
+                if self.msgtype == ODOM_TYPE:
+                    self.child_frame_id = _child_frame_id(buf, int(starts[i]), 16 + int(frame_len[i]),
+                                                          self.encoding == "cdr")
         else:
             bad = np.arange(n)
             flag = np.full(n, _LONG, dtype=np.uint8)
@@ -521,6 +564,8 @@ class TopicDecoder:
                              f"({detail}{type(exc).__name__}: {exc})") from None
         if self.frame_id is None:
             self.frame_id = str(msg.header.frame_id)
+        if self.child_frame_id is None and self.msgtype == ODOM_TYPE:
+            self.child_frame_id = str(msg.child_frame_id)
         self.n_fallback += 1
 
     def result(self) -> Messages:
@@ -531,13 +576,14 @@ class TopicDecoder:
         stamps = np.concatenate(self._stamps) if self._stamps else np.zeros(0, dtype=np.int64)
         logs = np.concatenate(self._logs) if self._logs else np.zeros(0, dtype=np.int64)
         self._tables, self._stamps, self._logs = [], [], []
-        return build_messages(self.msgtype, self.topic, table, stamps, logs, self.frame_id or "")
+        return build_messages(self.msgtype, self.topic, table, stamps, logs, self.frame_id or "",
+                              self.child_frame_id or "")
 
 
 def build_messages(msgtype: str, topic: str, table: np.ndarray, stamp_ns: np.ndarray,
-                   log_ns: np.ndarray, frame_id: str) -> Messages:
+                   log_ns: np.ndarray, frame_id: str, child_frame_id: str = "") -> Messages:
     """The ros.py container for ``msgtype`` from a (N, n_cols) uint64 table in the kernel's
-    format (as :func:`decode_with_library` returns it)."""
+    format (as :func:`decode_with_library` returns it); ``child_frame_id``: Odometry only."""
     f = table.view(np.float64)
     if msgtype == IMU_TYPE:
         return ImuMessages(topic=topic, stamp_ns=stamp_ns, log_ns=log_ns,
@@ -551,13 +597,15 @@ def build_messages(msgtype: str, topic: str, table: np.ndarray, stamp_ns: np.nda
                            lat_deg=f[:, 1].copy(), lon_deg=f[:, 2].copy(), alt=f[:, 3].copy(),
                            cov=np.ascontiguousarray(f[:, 4:13]),
                            cov_type=table[:, 13].astype(np.uint8), frame_id=frame_id)
-    if msgtype == TWIST_COV_TYPE:
+    if msgtype in (TWIST_COV_TYPE, ODOM_TYPE):
         return TwistMessages(topic=topic, stamp_ns=stamp_ns, log_ns=log_ns,
                              vel=np.ascontiguousarray(f[:, 0:3]),
-                             cov_diag=np.ascontiguousarray(f[:, [3, 3 + 7, 3 + 14]]),
-                             frame_id=frame_id)
+                             cov_diag=np.ascontiguousarray(f[:, [6, 6 + 7, 6 + 14]]),
+                             frame_id=frame_id, angular=np.ascontiguousarray(f[:, 3:6]),
+                             var_yaw_rate=f[:, 6 + 35].copy(), child_frame_id=child_frame_id)
     return TwistMessages(topic=topic, stamp_ns=stamp_ns, log_ns=log_ns,
-                         vel=np.ascontiguousarray(f[:, 0:3]), cov_diag=None, frame_id=frame_id)
+                         vel=np.ascontiguousarray(f[:, 0:3]), cov_diag=None, frame_id=frame_id,
+                         angular=np.ascontiguousarray(f[:, 3:6]))
 
 
 def _as_buffer(payloads: Payloads) -> tuple[Any, np.ndarray, np.ndarray]:

@@ -20,7 +20,12 @@ IMU_TYPE = "sensor_msgs/Imu"
 FIX_TYPE = "sensor_msgs/NavSatFix"
 TWIST_COV_TYPE = "geometry_msgs/TwistWithCovarianceStamped"
 TWIST_TYPE = "geometry_msgs/TwistStamped"
-SUPPORTED_TYPES = (IMU_TYPE, FIX_TYPE, TWIST_COV_TYPE, TWIST_TYPE)
+ODOM_TYPE = "nav_msgs/Odometry"
+SUPPORTED_TYPES = (IMU_TYPE, FIX_TYPE, TWIST_COV_TYPE, TWIST_TYPE, ODOM_TYPE)
+#: Types that can carry GNSS velocity (ENU) or, in a vehicle frame, wheel odometry.
+VELOCITY_TYPES = (TWIST_COV_TYPE, TWIST_TYPE)
+#: Types that can carry wheel odometry (forward speed and yaw rate in the vehicle frame).
+ODOMETRY_TYPES = (ODOM_TYPE, TWIST_COV_TYPE, TWIST_TYPE)
 
 
 def normalise_type(name: str) -> str:
@@ -86,8 +91,15 @@ class FixMessages:
 
 @dataclass(frozen=True)
 class TwistMessages:
-    """GNSS velocity from ``TwistWithCovarianceStamped`` / ``TwistStamped``: vel (N, 3) m/s
-    (linear part, ENU as GNSS drivers publish it); cov_diag (N, 3) m^2/s^2 or None."""
+    """``TwistWithCovarianceStamped`` / ``TwistStamped`` / ``nav_msgs/Odometry`` (its twist part).
+
+    vel : (N, 3) m/s, the linear part: ENU for a GNSS velocity topic, the vehicle frame
+    (``child_frame_id`` of an Odometry, ``frame_id`` of a Twist) for wheel odometry.
+    cov_diag : (N, 3) m^2/s^2, covariance elements 0, 7, 14 (None for ``TwistStamped``).
+    angular : (N, 3) rad/s, the angular part (same frame), None when not decoded.
+    var_yaw_rate : (N,) rad^2/s^2, covariance element 35 (None without a covariance).
+    frame_id, child_frame_id : of the first message (child: Odometry only).
+    """
 
     topic: str
     stamp_ns: np.ndarray
@@ -95,6 +107,9 @@ class TwistMessages:
     vel: np.ndarray
     cov_diag: np.ndarray | None = None
     frame_id: str = ""
+    angular: np.ndarray | None = None
+    var_yaw_rate: np.ndarray | None = None
+    child_frame_id: str = ""
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,7 @@ from navpp.errors import InputError, NavppError
 from navpp.io.ros import (
     FIX_TYPE,
     IMU_TYPE,
+    ODOM_TYPE,
     SUPPORTED_TYPES,
     TWIST_COV_TYPE,
     TWIST_TYPE,
@@ -62,7 +63,10 @@ _REQUIRED_FIELDS: dict[str, tuple[str, ...]] = {
     TWIST_COV_TYPE: ("header.stamp.sec", "header.stamp.nanosec", "header.frame_id", "twist.twist.linear.x",
                      "twist.twist.linear.y", "twist.twist.linear.z", "twist.covariance"),
     TWIST_TYPE: ("header.stamp.sec", "header.stamp.nanosec", "header.frame_id", "twist.linear.x",
-                 "twist.linear.y", "twist.linear.z"),
+                 "twist.linear.y", "twist.linear.z", "twist.angular.z"),
+    ODOM_TYPE: ("header.stamp.sec", "header.stamp.nanosec", "header.frame_id", "child_frame_id",
+                "twist.twist.linear.x", "twist.twist.linear.y", "twist.twist.linear.z", "twist.twist.angular.z",
+                "twist.covariance"),
 }
 
 Messages = ImuMessages | FixMessages | TwistMessages
@@ -71,7 +75,7 @@ Messages = ImuMessages | FixMessages | TwistMessages
 _FAST_ROS1 = True
 
 _RESULT_CLASS = {IMU_TYPE: ImuMessages, FIX_TYPE: FixMessages, TWIST_COV_TYPE: TwistMessages,
-                 TWIST_TYPE: TwistMessages}
+                 TWIST_TYPE: TwistMessages, ODOM_TYPE: TwistMessages}
 
 
 # --------------------------------------------------------------------------- public API
@@ -99,7 +103,7 @@ def list_topics(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]
 
 def read_rosbag(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
                 topics: Iterable[str] | None = None) -> LogContents:
-    """Decode a bag's IMU, NavSatFix and GNSS-velocity topics into numpy arrays.
+    """Decode a bag's IMU, NavSatFix, GNSS-velocity and wheel-odometry topics into numpy arrays.
 
     Parameters
     ----------
@@ -107,12 +111,14 @@ def read_rosbag(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]
         or a ROS 2 bag directory (with ``metadata.yaml``; ``sqlite3`` or ``mcap`` storage).
     topics : the topics to decode; None decodes every topic of a supported type
         (``sensor_msgs/Imu``, ``sensor_msgs/NavSatFix``,
-        ``geometry_msgs/TwistWithCovarianceStamped``, ``geometry_msgs/TwistStamped``).
+        ``geometry_msgs/TwistWithCovarianceStamped``, ``geometry_msgs/TwistStamped``,
+        ``nav_msgs/Odometry``).
 
     Returns
     -------
     LogContents : ``topics`` lists every topic of the bag (decoded ones with their exact
-        log-time span); ``imu`` / ``fix`` / ``twist`` hold the decoded topics.
+        log-time span); ``imu`` / ``fix`` / ``twist`` hold the decoded topics (``twist``: the
+        Twist and the Odometry topics).
 
     Raises
     ------
@@ -755,11 +761,14 @@ def _decode_each(label: str, reader: Any, topic: str, msgtype: str, rosname: str
             cov_type=scalar(lambda m: m.position_covariance_type, np.uint8),
             frame_id=frame_id,
         )
-    if msgtype == TWIST_COV_TYPE:
+    if msgtype in (TWIST_COV_TYPE, ODOM_TYPE):
         cov = np.array([m.twist.covariance for m in msgs], dtype=np.float64).reshape(n, -1 if n else 36)
         if cov.shape[1] != 36:
             raise InputError(f"{label}: topic {topic!r}: twist.covariance has {cov.shape[1]} elements, expected 36")
+        child = str(msgs[0].child_frame_id) if msgs and msgtype == ODOM_TYPE else ""
         return TwistMessages(topic, stamp_ns, log_ns, vel=vec(lambda m: m.twist.twist.linear),
-                             cov_diag=np.ascontiguousarray(cov[:, [0, 7, 14]]), frame_id=frame_id)
+                             cov_diag=np.ascontiguousarray(cov[:, [0, 7, 14]]), frame_id=frame_id,
+                             angular=vec(lambda m: m.twist.twist.angular), var_yaw_rate=cov[:, 35].copy(),
+                             child_frame_id=child)
     return TwistMessages(topic, stamp_ns, log_ns, vel=vec(lambda m: m.twist.linear), cov_diag=None,
-                         frame_id=frame_id)
+                         frame_id=frame_id, angular=vec(lambda m: m.twist.angular))

@@ -21,6 +21,12 @@ What is written
   0, 7, 14 = ``std_vel_enu**2`` (others 0).
 - ``sensor_msgs/NavSatFix`` on ``reference_topic`` (when given and the recording has a
   reference): the reference position, covariance type 0, frame ``"reference"``.
+- ``nav_msgs/Odometry`` on ``odometry_topic`` when the recording has odometry (wheel
+  odometry as a Husky / Jackal controller publishes it): frame ``odom``, child frame
+  ``frame_id_odometry`` (``base_link``); ``twist.twist.linear.x`` = ``rec.odometry.speed``
+  (m/s), ``twist.twist.angular.z`` = ``yaw_rate`` (rad/s, 0 when absent), twist covariance
+  elements 0 and 35 = ``std_speed**2`` / ``std_yaw_rate**2`` when given (else 0: unknown); the
+  pose is left at zero (identity orientation).
 
 The same bulk serialisation packs navpp's *output* messages for ``trajectory.mcap``
 (:mod:`navpp.io.mcap_out`): ``nav_msgs/Odometry``, ``tf2_msgs/TFMessage``,
@@ -212,6 +218,7 @@ _IMU = "sensor_msgs/msg/Imu"
 _FIX = "sensor_msgs/msg/NavSatFix"
 _TWIST_COV = "geometry_msgs/msg/TwistWithCovarianceStamped"
 _TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
+_ODOMETRY = "nav_msgs/msg/Odometry"
 
 #: ROS 2 message type -> its ``ros2msg`` schema text (every type navpp writes).
 MSGDEFS = {
@@ -651,6 +658,28 @@ class _Topics:
     accel_var: float | None
     time_range: tuple[float, float] | None
     log_offset_ns: int
+    odometry_topic: str | None = None
+    frame_id_odometry: str = "base_link"
+
+
+def _odometry_payloads(rec: Recording, k: np.ndarray, st: np.ndarray, encoding: str, child: str) -> list[bytes]:
+    """``rec.odometry`` rows ``k`` (stamps ``st`` ns) as ``nav_msgs/Odometry`` payloads."""
+    od = rec.odometry
+    assert od is not None
+    n = st.size
+    linear = np.zeros((n, 3))
+    linear[:, 0] = od.speed[k]
+    angular = np.zeros((n, 3))
+    if od.yaw_rate is not None:
+        angular[:, 2] = od.yaw_rate[k]
+    var = np.zeros((n, 6))
+    if od.std_speed is not None:
+        var[:, 0] = np.square(od.std_speed[k])
+    if od.std_yaw_rate is not None:
+        var[:, 5] = np.square(od.std_yaw_rate[k])
+    quat = np.broadcast_to(np.array([0.0, 0.0, 0.0, 1.0]), (n, 4))
+    return payload_bytes(pack_odometry(st, np.zeros((n, 3)), quat, linear, angular, encoding=encoding,
+                                       frame_id="odom", child_frame_id=child, twist_var=var))
 
 
 def _streams(rec: Recording, encoding: str, opts: _Topics) -> list[_Stream]:
@@ -688,6 +717,11 @@ def _streams(rec: Recording, encoding: str, opts: _Topics) -> list[_Stream]:
         out.append(_Stream(opts.reference_topic, _FIX, st + opts.log_offset_ns,
                            encode_navsatfix(st, ref.lat_deg[k], ref.lon_deg[k], ref.alt[k], encoding=encoding,
                                             frame_id="reference")))
+    if opts.odometry_topic and rec.odometry is not None:
+        k = keep(rec.odometry.t)
+        st = stamps_ns(rec, rec.odometry.t[k])
+        out.append(_Stream(opts.odometry_topic, _ODOMETRY, st + opts.log_offset_ns,
+                           _odometry_payloads(rec, k, st, encoding, opts.frame_id_odometry)))
     topics = [s.topic for s in out]
     if len(set(topics)) != len(topics):
         raise ValueError(f"topic names must differ, got {topics}")
@@ -705,9 +739,10 @@ def _time_order(streams: Sequence[_Stream]) -> tuple[np.ndarray, np.ndarray]:
 
 def _options(imu_topic: str, gnss_topic: str, gnss_vel_topic: str | None, reference_topic: str | None,
              frame_id_imu: str, frame_id_gnss: str, gyro_var: float | None, accel_var: float | None,
-             time_range: tuple[float, float] | None, log_offset_ns: int) -> _Topics:
+             time_range: tuple[float, float] | None, log_offset_ns: int, odometry_topic: str | None = None,
+             frame_id_odometry: str = "base_link") -> _Topics:
     return _Topics(imu_topic, gnss_topic, gnss_vel_topic, reference_topic, frame_id_imu, frame_id_gnss,
-                   gyro_var, accel_var, time_range, int(log_offset_ns))
+                   gyro_var, accel_var, time_range, int(log_offset_ns), odometry_topic, frame_id_odometry)
 
 
 # --------------------------------------------------------------------------- writers
@@ -721,7 +756,8 @@ def write_mcap_ros2(rec: Recording, path: str | os.PathLike[str], *, imu_topic: 
                     frame_id_gnss: str = "gnss", gyro_var: float | None = None,
                     accel_var: float | None = None, compression: str = "zstd",
                     chunk_size: int = 1 << 20, time_range: tuple[float, float] | None = None,
-                    log_offset_ns: int = 0) -> None:
+                    log_offset_ns: int = 0, odometry_topic: str | None = "/wheel/odom",
+                    frame_id_odometry: str = "base_link") -> None:
     """Write ``rec`` as a ROS 2 MCAP file (CDR messages, ``ros2msg`` schemas, ``ros2`` profile).
 
     The file is what ``mcap_ros2.writer.Writer`` makes (same profile, schema encoding and
@@ -745,6 +781,9 @@ def write_mcap_ros2(rec: Recording, path: str | os.PathLike[str], *, imu_topic: 
     time_range : ``(start_s, stop_s)`` relative to ``rec.t0_ns``: only messages with
         ``start_s <= t < stop_s`` (for split or partial logs).
     log_offset_ns : log time minus header stamp, ns (0: log time = stamp).
+    odometry_topic : topic of the wheel odometry (``nav_msgs/Odometry``, written only when
+        ``rec.odometry`` exists); None to leave it out.
+    frame_id_odometry : its ``child_frame_id`` (the vehicle frame).
     """
     from mcap.writer import CompressionType
     from mcap.writer import Writer as McapWriter
@@ -752,7 +791,7 @@ def write_mcap_ros2(rec: Recording, path: str | os.PathLike[str], *, imu_topic: 
     if compression not in _MCAP_COMPRESSION:
         raise ValueError(f"compression must be one of {_MCAP_COMPRESSION}, got {compression!r}")
     opts = _options(imu_topic, gnss_topic, gnss_vel_topic, reference_topic, frame_id_imu, frame_id_gnss,
-                    gyro_var, accel_var, time_range, log_offset_ns)
+                    gyro_var, accel_var, time_range, log_offset_ns, odometry_topic, frame_id_odometry)
     streams = _streams(rec, "cdr", opts)
     which, index = _time_order(streams)
     ctype = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[compression]
@@ -805,7 +844,8 @@ def write_ros1_bag(rec: Recording, path: str | os.PathLike[str], *, imu_topic: s
                    frame_id_gnss: str = "gnss", gyro_var: float | None = None,
                    accel_var: float | None = None, compression: str = "none",
                    chunk_size: int = 1 << 20, time_range: tuple[float, float] | None = None,
-                   log_offset_ns: int = 0) -> None:
+                   log_offset_ns: int = 0, odometry_topic: str | None = "/wheel/odom",
+                   frame_id_odometry: str = "base_link") -> None:
     """Write ``rec`` as a ROS 1 bag (format 2.0) with ``rosbags.rosbag1.Writer``.
 
     Message definitions and md5sums come from rosbags' ROS 1 Noetic typestore and are stored
@@ -819,7 +859,7 @@ def write_ros1_bag(rec: Recording, path: str | os.PathLike[str], *, imu_topic: s
     if compression not in _ROS1_COMPRESSION:
         raise ValueError(f"compression must be one of {_ROS1_COMPRESSION}, got {compression!r}")
     opts = _options(imu_topic, gnss_topic, gnss_vel_topic, reference_topic, frame_id_imu, frame_id_gnss,
-                    gyro_var, accel_var, time_range, log_offset_ns)
+                    gyro_var, accel_var, time_range, log_offset_ns, odometry_topic, frame_id_odometry)
     streams = _streams(rec, "ros1", opts)
     which, index = _time_order(streams)
     typestore = get_typestore(Stores.ROS1_NOETIC)
@@ -854,7 +894,8 @@ def write_ros2_bag(rec: Recording, dirpath: str | os.PathLike[str], *, storage: 
                    frame_id_imu: str = "imu_link", frame_id_gnss: str = "gnss",
                    gyro_var: float | None = None, accel_var: float | None = None,
                    compression: str = "none", time_range: tuple[float, float] | None = None,
-                   log_offset_ns: int = 0) -> None:
+                   log_offset_ns: int = 0, odometry_topic: str | None = "/wheel/odom",
+                   frame_id_odometry: str = "base_link") -> None:
     """Write ``rec`` as a ROS 2 bag directory (rosbag2 format version 9) with ``rosbags.rosbag2.Writer``.
 
     ``storage``: ``"sqlite3"`` (``<name>.db3``) or ``"mcap"`` (``<name>.mcap``).  Message
@@ -875,7 +916,7 @@ def write_ros2_bag(rec: Recording, dirpath: str | os.PathLike[str], *, storage: 
     if compression == "storage" and storage != "mcap":
         raise ValueError("compression 'storage' needs storage='mcap'")
     opts = _options(imu_topic, gnss_topic, gnss_vel_topic, reference_topic, frame_id_imu, frame_id_gnss,
-                    gyro_var, accel_var, time_range, log_offset_ns)
+                    gyro_var, accel_var, time_range, log_offset_ns, odometry_topic, frame_id_odometry)
     streams = _streams(rec, "cdr", opts)
     which, index = _time_order(streams)
     typestore = get_typestore(Stores.ROS2_HUMBLE)
