@@ -67,9 +67,9 @@ OUTAGE_SETS = {"turn-stop-hill": [(200.0, 30.0), (450.0, 30.0), (700.0, 30.0)],
 
 def outages(seeds: int, filt: str) -> dict[str, float]:
     """Median ratio of the outage-end errors, constraints on / off, per outage set."""
-    from navpp.simulate import SimulationSpec, simulate
-
     from dataclasses import replace
+
+    from navpp.simulate import SimulationSpec, simulate
 
     out = {}
     for name, windows in OUTAGE_SETS.items():
