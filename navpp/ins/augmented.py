@@ -19,9 +19,8 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
-from numba import njit
 
-from .model import InsModel, minus, plus
+from .model import InsModel, minus, plus, rts_means
 from .state import N_ERR, NOMINAL_SIZE
 
 
@@ -77,39 +76,11 @@ class StateBlock:
         return self.variance * (1.0 - a * a)
 
 
-@njit(cache=True)
-def plus_aug(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
-    """``x ⊞ dx`` on an augmented state: the INS part by :func:`navpp.ins.model.plus`, the rest
-    additively; (16 + k,) ⊞ (15 + k,)."""
-    y = plus(x, dx[:N_ERR])
-    for i in range(x.shape[0] - NOMINAL_SIZE):
-        y[NOMINAL_SIZE + i] = x[NOMINAL_SIZE + i] + dx[N_ERR + i]
-    return y
-
-
-@njit(cache=True)
-def minus_aug(x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
-    """``x1 ⊟ x0`` on an augmented state, (15 + k,)."""
-    k = x1.shape[0] - NOMINAL_SIZE
-    dx = np.empty(N_ERR + k)
-    dx[:N_ERR] = minus(x1, x0)
-    for i in range(k):
-        dx[N_ERR + i] = x1[NOMINAL_SIZE + i] - x0[NOMINAL_SIZE + i]
-    return dx
-
-
-@njit(cache=True)
-def rts_means_aug(x_post: np.ndarray, x_prior: np.ndarray, gains: np.ndarray, reset: np.ndarray) -> np.ndarray:
-    """The smoother's mean recursion on an augmented nominal (as :func:`navpp.ins.model.rts_means`)."""
-    m = x_post.shape[0]
-    xs = np.empty_like(x_post)
-    xs[m - 1] = x_post[m - 1]
-    for k in range(m - 2, -1, -1):
-        if reset[k + 1]:
-            xs[k] = x_post[k]
-        else:
-            xs[k] = plus_aug(x_post[k], gains[k + 1] @ minus_aug(xs[k + 1], x_prior[k + 1]))
-    return xs
+#: ``x ⊞ dx``, ``x1 ⊟ x0`` and the smoother's mean recursion on an augmented state: the INS's own
+#: kernels, which carry the elements beyond the INS's additively
+plus_aug = plus
+minus_aug = minus
+rts_means_aug = rts_means
 
 
 def ins_part(x: np.ndarray) -> np.ndarray:

@@ -99,8 +99,9 @@ class GnssErrorModel(AugmentedInsModel):
 
     def _block(self, interval: tuple[float, float]) -> tuple[float, np.ndarray]:
         """(decay a, Qd diagonal (3,)) of the GNSS error over ``interval``."""
-        a = self.settings.decay(interval[1] - interval[0])
-        return a, self._var * (1.0 - a * a)
+        b = self.blocks[0]
+        dt = interval[1] - interval[0]
+        return b.decay(dt), b.drive(dt)
 
     def start(self, x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The augmented start (:meth:`AugmentedInsModel.start`) with the GNSS error correlated

@@ -332,7 +332,8 @@ def _wrap_pi(a: float) -> float:
 def plus(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
     """Nominal ⊞ error: ``x`` (16,) and ``dx`` (15,) -> (16,).  The attitude error rotates
     ``q_nb`` in the navigation frame; the position error (ENU m) moves lat, lon, h with the
-    radii of curvature at ``x``."""
+    radii of curvature at ``x``.  Elements beyond the INS's (an augmented state,
+    :mod:`navpp.ins.augmented`: ``x`` (16 + k,), ``dx`` (15 + k,)) add."""
     y = x.copy()
     y[NOMINAL_Q] = quat_mul(rotvec_to_quat(dx[ATT]), x[NOMINAL_Q])
     y[NOMINAL_VEL] = x[NOMINAL_VEL] + dx[VEL]
@@ -343,13 +344,17 @@ def plus(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
     y[X_H] = h + dx[DP_U]
     y[NOMINAL_BG] = x[NOMINAL_BG] + dx[BG]
     y[NOMINAL_BA] = x[NOMINAL_BA] + dx[BA]
+    for i in range(x.shape[0] - NOMINAL_SIZE):
+        y[NOMINAL_SIZE + i] = x[NOMINAL_SIZE + i] + dx[N_ERR + i]
     return y
 
 
 @njit(cache=True)
 def minus(x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
-    """Error taking ``x0`` to ``x1``: ``x1 = x0 ⊞ minus(x1, x0)``, (15,)."""
-    dx = np.empty(N_ERR)
+    """Error taking ``x0`` to ``x1``: ``x1 = x0 ⊞ minus(x1, x0)``, (15,) (15 + k, for augmented
+    states of 16 + k elements)."""
+    k = x1.shape[0] - NOMINAL_SIZE
+    dx = np.empty(N_ERR + k)
     dx[ATT] = quat_to_rotvec(quat_mul(x1[NOMINAL_Q], quat_conj(x0[NOMINAL_Q])))
     dx[VEL] = x1[NOMINAL_VEL] - x0[NOMINAL_VEL]
     rm, rn = radii(x0[X_LAT])
@@ -359,6 +364,8 @@ def minus(x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
     dx[DP_U] = x1[X_H] - h
     dx[BG] = x1[NOMINAL_BG] - x0[NOMINAL_BG]
     dx[BA] = x1[NOMINAL_BA] - x0[NOMINAL_BA]
+    for i in range(k):
+        dx[N_ERR + i] = x1[NOMINAL_SIZE + i] - x0[NOMINAL_SIZE + i]
     return dx
 
 
@@ -448,7 +455,8 @@ def apply_node_corrections(path: np.ndarray, t: np.ndarray, node_t: np.ndarray, 
 def rts_means(x_post: np.ndarray, x_prior: np.ndarray, gains: np.ndarray, reset: np.ndarray) -> np.ndarray:
     """The smoother's mean recursion on the INS nominal (:func:`navpp.filters.smoother.smooth_arrays`):
     ``xs[k] = x_post[k] ⊞ gains[k+1] (xs[k+1] ⊟ x_prior[k+1])`` backwards from the last node,
-    ``xs[k] = x_post[k]`` where ``reset[k+1]``.  (M, 16) arrays, gains (M, 15, 15)."""
+    ``xs[k] = x_post[k]`` where ``reset[k+1]``.  (M, 16) arrays, gains (M, 15, 15); augmented
+    states too ((M, 16 + k), gains (M, 15 + k, 15 + k), :mod:`navpp.ins.augmented`)."""
     m = x_post.shape[0]
     xs = np.empty_like(x_post)
     xs[m - 1] = x_post[m - 1]

@@ -28,22 +28,37 @@ LATERAL_VERTICAL = slice(1, 3)    #: rows of the vehicle frame (FLU) the constra
 
 
 @njit(cache=True)
-def _h(x: np.ndarray, p: np.ndarray) -> np.ndarray:
-    cvb = p[P_C_VB].reshape(3, 3)
+def vehicle_velocity(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Velocity of the point ``p[P_POINT]`` in the vehicle frame, ``C_vb (C^T v + w x l)`` (3,) m/s
+    (the odometer, :mod:`navpp.ins.aids.odometer`, reads its forward row)."""
+    cvb = np.ascontiguousarray(p[P_C_VB]).reshape(3, 3)
     vb = quat_to_dcm(x[NOMINAL_Q]).T @ x[NOMINAL_VEL] + np.cross(p[P_GYRO] - x[NOMINAL_BG], p[P_POINT])
-    z: np.ndarray = (cvb @ vb)[LATERAL_VERTICAL].copy()
-    return z
+    v: np.ndarray = cvb @ vb
+    return v
 
 
 @njit(cache=True)
-def _H(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+def vehicle_velocity_jacobian(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """``d(vehicle_velocity)/d(dx)`` (3, 15): ``C_vb [C^T [v x], C^T, 0, [l x], 0]``."""
     cvb = np.ascontiguousarray(p[P_C_VB]).reshape(3, 3)
     Ct = np.ascontiguousarray(quat_to_dcm(x[NOMINAL_Q]).T)
     H = np.zeros((3, N_ERR))
     H[:, ATT] = Ct @ skew(x[NOMINAL_VEL])
     H[:, VEL] = Ct
     H[:, BG] = skew(p[P_POINT])
-    Hz: np.ndarray = (cvb @ H)[LATERAL_VERTICAL].copy()
+    J: np.ndarray = cvb @ H
+    return J
+
+
+@njit(cache=True)
+def _h(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    z: np.ndarray = vehicle_velocity(x, p)[LATERAL_VERTICAL].copy()
+    return z
+
+
+@njit(cache=True)
+def _H(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    Hz: np.ndarray = vehicle_velocity_jacobian(x, p)[LATERAL_VERTICAL].copy()
     return Hz
 
 

@@ -11,7 +11,8 @@ wheel radius a little off, tyre pressure), carried as an extra state of the augm
 With ``u(x) = e_x^T C_vb (C^T v + w x l)`` (the speed the INS predicts) and ``C_true = exp([phi x])
 C``: ``du/d(dx) = e_x^T C_vb [C^T [v x], C^T, 0, [l x], 0]`` (the NHC's rows,
 :mod:`navpp.ins.aids.nonholonomic`, the forward one), so ``H = [(1 + s) du/d(dx), u]`` with the
-``u`` in the scale state's column.  ``p = [C_vb (9, row-major), w_m (3), l (3)]``.
+``u`` in the scale state's column.  ``p``: as the NHC's, ``[C_vb (9, row-major), w_m (3), l (3)]``
+(:func:`~navpp.ins.aids.nonholonomic.vehicle_velocity`).
 """
 
 from __future__ import annotations
@@ -21,14 +22,10 @@ from typing import Any, ClassVar
 import numpy as np
 from numba import njit
 
-from ..attitude import quat_to_dcm, skew
 from ..augmented import StateBlock, ins_part
-from ..state import ATT, BG, N_ERR, NOMINAL_BG, NOMINAL_Q, NOMINAL_VEL, VEL
+from ..state import N_ERR
 from .base import Aid, points_kernel
-
-P_C_VB = slice(0, 9)      #: ``p``: C_vb, body -> vehicle, row-major
-P_GYRO = slice(9, 12)     #: ``p``: gyro output at the epoch, body FLU, rad/s
-P_POINT = slice(12, 15)   #: ``p``: the odometry point, body FLU, m
+from .nonholonomic import vehicle_velocity, vehicle_velocity_jacobian
 
 #: the augmented INS block of the odometer's scale-factor error (dimensionless)
 BLOCK_NAME = "odometer_scale"
@@ -43,22 +40,13 @@ def scale_block(sigma: float, walk_per_sqrt_h: float) -> StateBlock:
 
 @njit(cache=True)
 def _h(x: np.ndarray, p: np.ndarray) -> np.ndarray:
-    cvb = np.ascontiguousarray(p[P_C_VB]).reshape(3, 3)
-    vb = quat_to_dcm(x[NOMINAL_Q]).T @ x[NOMINAL_VEL] + np.cross(p[P_GYRO] - x[NOMINAL_BG], p[P_POINT])
-    z = np.empty(1)
-    z[0] = cvb[0] @ vb
+    z: np.ndarray = vehicle_velocity(x, p)[0:1].copy()
     return z
 
 
 @njit(cache=True)
 def _H(x: np.ndarray, p: np.ndarray) -> np.ndarray:
-    cvb = np.ascontiguousarray(p[P_C_VB]).reshape(3, 3)
-    Ct = np.ascontiguousarray(quat_to_dcm(x[NOMINAL_Q]).T)
-    H = np.zeros((3, N_ERR))
-    H[:, ATT] = Ct @ skew(x[NOMINAL_VEL])
-    H[:, VEL] = Ct
-    H[:, BG] = skew(p[P_POINT])
-    Hz: np.ndarray = (cvb @ H)[0:1].copy()
+    Hz: np.ndarray = vehicle_velocity_jacobian(x, p)[0:1].copy()
     return Hz
 
 
