@@ -71,10 +71,6 @@ class GnssErrorSettings:
         var: np.ndarray = np.square(np.asarray(self.sigma_enu))
         return var
 
-    def decay(self, dt: float) -> float:
-        """``exp(-dt / tau)`` over ``dt`` s."""
-        return math.exp(-max(dt, 0.0) / self.tau_s)
-
     def block(self) -> StateBlock:
         """The error as a block of the augmented INS (:mod:`navpp.ins.augmented`)."""
         return StateBlock("gnss_error", tuple(GM_STATE_NAMES), self.tau_s, self.sigma_enu)
