@@ -10,10 +10,14 @@ the configuration and the data, at which times they apply:
 - **Constraints** (NHC for ``[vehicle] type = "car"``; ZUPT and ZARU while still) on a grid at
   ``[vehicle] rate_hz``: a grid time within half a period of a GNSS epoch rides on that epoch;
   the others are epochs of their own, so the constraints keep working through GNSS outages.
-- **Standstill**: :func:`navpp.ins.aids.standstill.still_mask` on the IMU, and the speed gate on
-  the filter's speed (and the GNSS speed when the log has velocity) at the epoch.  ZARU measures
-  the mean gyro output since the previous constraint epoch, when every sample in between is
-  still.
+- **Odometer** (the log's odometry, ``[odometry] use``) at every constraint epoch, its speed
+  interpolated between the two samples around the epoch; with ``[odometry] use_yaw_rate`` its yaw
+  rate too, against the mean gyro over one odometry interval centred on the epoch.
+- **Standstill**: :func:`navpp.ins.aids.standstill.still_mask` on the IMU, or odometry that reads
+  zero (at most ``[odometry] still_speed_mps``) over a whole detector window on either side, and
+  the speed gate on the filter's speed (and the GNSS speed when the log has velocity, and the
+  odometer's) at the epoch.  ZARU measures the mean gyro output since the previous constraint
+  epoch, when every sample in between is still.
 """
 
 from __future__ import annotations
@@ -27,11 +31,12 @@ from .config import Config
 from .ins.aids import GnssVelocity, NonHolonomic, ZeroRate, ZeroVelocity
 from .ins.aids.odometer import OdometerSpeed
 from .ins.aids.standstill import StandstillSettings, speed_allows, still_mask
+from .ins.aids.yaw_rate import OdometerYawRate
 from .ins.attitude import rpy_deg_to_dcm
 from .ins.model import VEL
 
 #: Aid kinds in the order they are reported (the GNSS position first).
-KINDS = ("gnss_position", "gnss_velocity", "zupt", "zaru", "nhc", "odometer")
+KINDS = ("gnss_position", "gnss_velocity", "zupt", "zaru", "nhc", "odometer", "odometer_yaw")
 
 #: ZUPT's consistency check (:meth:`Aiding.observed`): the last this many innovations, and the
 #: sigmas their mean may reach on an axis (white innovations: false alarm ~1e-6 per test).
@@ -94,6 +99,7 @@ class Aiding:
         veh = config.vehicle
         self.profile = profile            # the data's noise (navpp.ins.calibrate.NoiseProfile) or None
         self.t, self.gyro = t, gyro
+        self.imu_period = max(float(np.median(np.diff(t))), 1e-9) if t.shape[0] > 1 else 1.0   # s
         self.gaps = np.zeros((0, 2)) if gaps is None else np.asarray(gaps, dtype=float).reshape(-1, 2)
         self.gyro_arw = gyro_arw
         self.nhc = veh.type == "car" and veh.nhc
@@ -101,12 +107,29 @@ class Aiding:
         self.settings = StandstillSettings(window_s=veh.still_window_s, accel_floor=veh.still_accel_std_mps2,
                                            gyro_floor=math.radians(veh.still_gyro_std_dps),
                                            max_speed=veh.still_max_speed_mps)
+        # the odometer: the log's speed (m/s, vehicle x) and its 1-sigma, when [odometry] use
+        self.odo = odometry if (odometry is not None and config.odometry.use and len(odometry) >= 2) else None
+        self.odo_yaw = False
+        if self.odo is not None:
+            o, oc = self.odo, config.odometry
+            self.odo_std = (np.asarray(o.std_speed, dtype=float) if o.std_speed is not None
+                            else np.full(len(o), oc.std_mps))
+            self.odo_point = np.asarray(oc.lever_arm_m, dtype=float)
+            self.odo_period = float(np.median(np.diff(o.t)))
+            self.odo_gap = 2.0 * self.odo_period     # longest interval read across, s
+            self.odo_yaw = oc.use_yaw_rate and o.yaw_rate is not None
+            if self.odo_yaw:
+                self.odo_yaw_std = (np.asarray(o.std_yaw_rate, dtype=float) if o.std_yaw_rate is not None
+                                    else np.full(len(o), math.radians(oc.yaw_rate_std_dps)))
+        self.odo_zero = np.zeros(t.shape[0], bool)
         if not (self.zupt or self.zaru):
             self.still = np.zeros(t.shape[0], bool)
-        elif still is not None:
-            self.still = still
         else:
-            self.still = still_mask(t, gyro, accel, gyro_arw, accel_vrw, self.settings)
+            self.still = still if still is not None else still_mask(t, gyro, accel, gyro_arw, accel_vrw, self.settings)
+            if self.odo is not None and config.odometry.still_speed_mps > 0.0:
+                self.odo_zero = odometry_zero(t, self.odo.t, self.odo.speed, config.odometry.still_speed_mps,
+                                              veh.still_window_s, self.odo_gap)
+                self.still = self.still | self.odo_zero
         self.rate_hz = veh.rate_hz
         self.nhc_std = veh.nhc_std_mps
         mounting = mounting_rpy_deg if mounting_rpy_deg is not None else veh.mounting_rpy_deg
@@ -125,14 +148,6 @@ class Aiding:
             ok = np.all(np.isfinite(v), axis=1) & np.all(np.isfinite(var) & (var > 0.0), axis=1)
             self.vel, self.vel_var, self.vel_ok = v, var, ok
             self.vel_t = np.asarray(gnss.t, dtype=float)[sel]
-        # the odometer: the log's speed (m/s, vehicle x) and its 1-sigma, when [odometry] use
-        self.odo = odometry if (odometry is not None and config.odometry.use and len(odometry) >= 2) else None
-        if self.odo is not None:
-            o = self.odo
-            self.odo_std = (np.asarray(o.std_speed, dtype=float) if o.std_speed is not None
-                            else np.full(len(o), config.odometry.std_mps))
-            self.odo_point = np.asarray(config.odometry.lever_arm_m, dtype=float)
-            self.odo_gap = 2.0 * float(np.median(np.diff(o.t)))     # longest interval read across, s
         self.counts = AidCounts.empty()
         self._last_constraint_t: float | None = None
         # the still runs, numbered (ZUPT's own consistency check stops a run that is not still)
@@ -145,6 +160,11 @@ class Aiding:
     @property
     def constraints(self) -> bool:
         return self.nhc or self.zupt or self.zaru or self.odo is not None
+
+    @property
+    def recorded_kinds(self) -> tuple[str, ...]:
+        """The one-element aids of this run whose updates the diagnostics record per GNSS epoch."""
+        return (("odometer",) if self.odo is not None else ()) + (("odometer_yaw",) if self.odo_yaw else ())
 
     @property
     def has_velocity(self) -> bool:
@@ -243,24 +263,50 @@ class Aiding:
                 self.vetoes.append(float(inn.t))
                 self._zupt_z = []
 
-    def odometer(self, t: float) -> OdometerSpeed | None:
-        """The odometer's speed at ``t`` (linear between the two samples around it, when they are
-        at most two median periods apart), None without one."""
-        if self.odo is None:
-            return None
+    def _odometry_at(self, t: float, values: np.ndarray, std: np.ndarray) -> tuple[float, float] | None:
+        """An odometry quantity at ``t`` and its 1-sigma: linear between the two samples around ``t``
+        when they are at most two median periods apart (the larger sigma), None otherwise."""
         o = self.odo
         j = int(np.searchsorted(o.t, t))
         if j <= 0 or j >= len(o) or o.t[j] - o.t[j - 1] > self.odo_gap:
             if 0 <= j < len(o) and o.t[j] == t:
-                return OdometerSpeed.at(t, float(o.speed[j]), float(self.odo_std[j]), self.c_vb, self._gyro_at(t),
-                                        self.odo_point)
+                value, sd = float(values[j]), float(std[j])
+            else:
+                return None
+        else:
+            w = (t - o.t[j - 1]) / (o.t[j] - o.t[j - 1])
+            value = float((1.0 - w) * values[j - 1] + w * values[j])
+            sd = float(max(std[j - 1], std[j]))
+        if not (math.isfinite(value) and math.isfinite(sd) and sd > 0.0):
             return None
-        w = (t - o.t[j - 1]) / (o.t[j] - o.t[j - 1])
-        speed = (1.0 - w) * o.speed[j - 1] + w * o.speed[j]
-        std = max(self.odo_std[j - 1], self.odo_std[j])
-        if not (np.isfinite(speed) and np.isfinite(std) and std > 0.0):
+        return value, sd
+
+    def odometer(self, t: float) -> OdometerSpeed | None:
+        """The odometer's speed at ``t`` (:meth:`_odometry_at`), None without one."""
+        if self.odo is None:
             return None
-        return OdometerSpeed.at(t, float(speed), float(std), self.c_vb, self._gyro_at(t), self.odo_point)
+        got = self._odometry_at(t, self.odo.speed, self.odo_std)
+        if got is None:
+            return None
+        return OdometerSpeed.at(t, got[0], got[1], self.c_vb, self._gyro_at(t), self.odo_point)
+
+    def odometer_yaw(self, t: float) -> OdometerYawRate | None:
+        """The odometry's yaw rate at ``t`` (``[odometry] use_yaw_rate``), None without one: against
+        the mean gyro over one odometry interval centred on ``t``."""
+        if not self.odo_yaw:
+            return None
+        got = self._odometry_at(t, self.odo.yaw_rate, self.odo_yaw_std)
+        if got is None:
+            return None
+        half = 0.5 * self.odo_period
+        lo, hi = np.searchsorted(self.t, t - half), np.searchsorted(self.t, t + half, side="right")
+        dt = self.imu_period
+        if hi - lo < 2:                          # the IMU is no faster than the odometry
+            gyro, n = self._gyro_at(t), 1
+        else:
+            gyro, n = self.gyro[lo:hi].mean(axis=0), int(hi - lo)
+        var = self.gyro_arw ** 2 / (n * dt)      # the mean's white noise, (rad/s)^2
+        return OdometerYawRate.at(t, got[0], got[1], self.c_vb, gyro, var)
 
     def constraint_measurements(self, t: float, x: np.ndarray, P: np.ndarray) -> list:
         """The constraints that apply at epoch ``t`` given the prior (nominal ``x``, covariance
@@ -273,6 +319,9 @@ class Aiding:
         odo = self.odometer(t)
         if odo is not None:
             out.append(odo)
+        yaw = self.odometer_yaw(t)
+        if yaw is not None:
+            out.append(yaw)
         if not (self.zupt or self.zaru):
             return out
         i = int(np.clip(np.searchsorted(self.t, t), 0, self.t.shape[0] - 1))
@@ -296,4 +345,25 @@ class Aiding:
         return out
 
 
-__all__ = ["KINDS", "AidCounts", "Aiding", "vehicle_matrix"]
+def odometry_zero(t: np.ndarray, odo_t: np.ndarray, speed: np.ndarray, max_speed: float, window_s: float,
+                  max_gap: float) -> np.ndarray:
+    """(N,) bool at the IMU times ``t`` (s): the odometry (times ``odo_t`` s, ``speed`` m/s) reads at
+    most ``max_speed`` at every sample within ``window_s`` on either side of the sample, and covers
+    that span (a sample within ``max_gap`` s of each end, none further apart than ``max_gap``):
+    wheels that count no ticks, evidence of standing still of its own."""
+    zero = np.abs(np.asarray(speed, dtype=float)) <= max_speed      # NaN reads as moving
+    odo_t = np.asarray(odo_t, dtype=float)
+    moving = np.concatenate([[0], np.cumsum(~zero)])
+    gap_after = np.concatenate([[0], np.cumsum(np.diff(odo_t) > max_gap)])   # gaps before sample j
+    lo = np.searchsorted(odo_t, t - window_s, side="left")
+    hi = np.searchsorted(odo_t, t + window_s, side="right")            # samples lo .. hi-1
+    n = odo_t.shape[0]
+    ok = hi - lo >= 2
+    lo_c, hi_c = np.clip(lo, 0, n - 1), np.clip(hi - 1, 0, n - 1)
+    ok &= moving[hi] - moving[lo] == 0
+    ok &= gap_after[hi_c] - gap_after[lo_c] == 0
+    ok &= (odo_t[lo_c] - (t - window_s) <= max_gap) & ((t + window_s) - odo_t[hi_c] <= max_gap)
+    return ok
+
+
+__all__ = ["KINDS", "AidCounts", "Aiding", "odometry_zero", "vehicle_matrix"]

@@ -504,7 +504,7 @@ def _run(plan: _Plan, progress: Callable[[str, float], None] | None) -> ProcessR
     cfg = plan.cfg
     notes = tuple(cfg.notes) + tuple(result.notes) + tuple(result.alignment.lines) + tuple(
         f"GNSS outage {o['start_s']:g}-{o['end_s']:g} s ({o['duration_s']:g} s from the log start): "
-        f"{o['gnss_removed']} fixes removed, the INS coasts" for o in outages) + odometry_note(rec)
+        f"{o['gnss_removed']} fixes removed, the INS coasts" for o in outages) + odometry_note(rec, cfg)
     warnings = (tuple(rec.warnings) + tuple(result.warnings) + tuple(forced_fix_warnings(rec, cfg, result))
                 + tuple(reference_checks(rec, cfg, metrics)))
     if plan.smooth:
@@ -514,14 +514,24 @@ def _run(plan: _Plan, progress: Callable[[str, float], None] | None) -> ProcessR
                          warnings, tuple(outages), fwd_out)
 
 
-def odometry_note(rec: Recording) -> tuple[str, ...]:
-    """The run's note on its odometry input: which stream (topic or file), samples and rate."""
+def odometry_note(rec: Recording, cfg: Config) -> tuple[str, ...]:
+    """The run's note on its odometry input: which stream (topic or file), samples and rate, and
+    what of it the run used (``[odometry] use``, ``use_yaw_rate``)."""
     od = rec.odometry
     if od is None or len(od) == 0:
         return ()
     dt = np.diff(od.t)
     rate = f", {1.0 / float(np.median(dt)):.3g} Hz" if dt.size and float(np.median(dt)) > 0 else ""
-    return (f"odometry: {od.source} ({len(od)} samples{rate})",)
+    head = f"odometry: {od.source} ({len(od)} samples{rate})"
+    if not cfg.odometry.use:
+        return (f"{head}, not used ([odometry] use = false)",)
+    if od.yaw_rate is None:
+        used = "speed used" + ("; it has no yaw rate for [odometry] use_yaw_rate" if cfg.odometry.use_yaw_rate else "")
+    elif cfg.odometry.use_yaw_rate:
+        used = "speed and yaw rate used"
+    else:
+        used = "speed used; its yaw rate is not ([odometry] use_yaw_rate = true fuses it)"
+    return (f"{head}: {used}",)
 
 
 def run_metrics(rec: Recording, cfg: Config, result: Any, solution: Solution, *, filter_name: str, log: str,

@@ -748,6 +748,14 @@ class OdometryConfig:
         (0.03 = 3 %: a wheel radius or tyre pressure a little off); the filter estimates it.
     scale_walk_per_sqrt_h : float, >= 0, default 0.002. How fast the scale factor may drift, per
         square-root hour (tyres warming, load).
+    use_yaw_rate : bool, default false. Also fuse the odometry's yaw rate (vehicle z axis, w.r.t. the
+        Earth) when the log has one: it observes the vertical gyro bias while driving.  Off by default:
+        a skid-steered robot's or a slipping car's wheel yaw rate is often worse than a MEMS gyro, and
+        many Odometry messages carry a zero there; the notes say when a log has a yaw rate left unused.
+    yaw_rate_std_dps : float, deg/s, > 0, default 0.2. The yaw rate's 1-sigma when the log has none.
+    still_speed_mps : float, m/s, >= 0, default 0.01. Odometry that reads at most this speed for a whole
+        standstill window is evidence of standing still on its own (wheels that count no ticks), even when
+        the IMU is too shaky to say so (an idling engine); 0 turns this off.  The speed gates still apply.
     """
 
     use: bool = True
@@ -755,9 +763,15 @@ class OdometryConfig:
     std_mps: float = 0.05
     scale_sigma: float = 0.03
     scale_walk_per_sqrt_h: float = 0.002
+    use_yaw_rate: bool = False
+    yaw_rate_std_dps: float = 0.2
+    still_speed_mps: float = 0.01
 
     def __post_init__(self) -> None:
         _as_bool("odometry", "use", self.use)
+        _as_bool("odometry", "use_yaw_rate", self.use_yaw_rate)
+        _fix_float(self, "odometry", "yaw_rate_std_dps", minimum=0.0, strict_min=True)
+        _fix_float(self, "odometry", "still_speed_mps", minimum=0.0)
         _set(self, "lever_arm_m", _as_vector("odometry", "lever_arm_m", self.lever_arm_m, 3))
         _fix_float(self, "odometry", "std_mps", minimum=0.0, strict_min=True)
         _fix_float(self, "odometry", "scale_sigma", minimum=0.0, strict_min=True)

@@ -112,7 +112,9 @@ never below ``-v`` (a locked wheel stops).  The drive cycle reaches 2.25 m/s^2 p
 w.r.t. the Earth about its z axis (rad/s, up; negative in a right turn) plus white noise
 ``odometry_yaw_rate_std_rps``.  The written ``std_speed`` is ``hypot(std, quantum / sqrt(12))``
 (left out when 0), ``std_yaw_rate`` the yaw-rate noise.  Stamps are on the IMU's clock (true time
-+ ``imu_time_offset_s``).  The noise is drawn from a fourth stream of the seed (speed, then yaw
++ ``imu_time_offset_s``).  A wheel that does not turn (``v + slip = 0``: standing still, or a
+locked wheel) reads exactly 0 for the speed and the yaw rate, as encoders that count no ticks do;
+the noise is drawn for every sample all the same.  The noise is drawn from a fourth stream of the seed (speed, then yaw
 rate), so turning odometry on leaves the IMU, GNSS and effects exactly as they were; the truth
 is in :attr:`Simulation.sensor_errors` (``odometry_*``), the scale error also in ``navpp.toml``'s
 comment and ``realism.json``.
@@ -1066,9 +1068,11 @@ def _simulate_odometry(spec: SimulationSpec, traj: Trajectory,
     q = spec.odometry_quantum_mps
     if q > 0.0:
         measured = q * np.round(measured / q)
+    turning = speed + slip != 0.0                                  # a wheel at rest counts no ticks
+    measured = np.where(turning, measured, 0.0)
     yaw = std_yaw = None
     if spec.odometry_yaw_rate:
-        yaw = yaw_rate + rng.standard_normal(t.size) * spec.odometry_yaw_rate_std_rps
+        yaw = np.where(turning, yaw_rate + rng.standard_normal(t.size) * spec.odometry_yaw_rate_std_rps, 0.0)
         if spec.odometry_yaw_rate_std_rps > 0.0:
             std_yaw = np.full(t.size, spec.odometry_yaw_rate_std_rps)
     sigma = math.hypot(spec.odometry_std_mps, q / math.sqrt(12.0))   # white noise and quantisation

@@ -120,9 +120,9 @@ def test_odometer_estimates_its_scale_and_bridges_an_outage(drive):
     d = with_odo.diagnostics
     names, cols, decimals = diagnostics_columns(d)      # diagnostics.csv and the MCAP diagnostics
     k = names.index("nu_odo")
-    np.testing.assert_array_equal(cols[k], d.odo_nu)
-    assert np.count_nonzero(np.isfinite(d.odo_nu)) > 500 and decimals[k] == 4
-    assert np.nanmean(d.odo_nis) < 3.0             # a consistent 1-element NIS averages 1
+    np.testing.assert_array_equal(cols[k], d.aids["odo"][0])
+    assert np.count_nonzero(np.isfinite(d.aids["odo"][0])) > 500 and decimals[k] == 4
+    assert np.nanmean(d.aids["odo"][1]) < 3.0             # a consistent 1-element NIS averages 1
     assert with_odo.updates["odometer"]["applied"] > 1000
     assert _end_error(with_odo, rec, 460.0) < 0.5 * _end_error(without, rec, 460.0)
     assert BLOCK_NAME == "odometer_scale"

@@ -24,6 +24,10 @@ from .loop import EpochOutcome
 from .results import BiasHistory, Diagnostics
 from .schedule import Epoch, GnssFixes
 
+#: one-element aids recorded at the GNSS epochs: kind -> the short name of their columns
+#: (``nu_<name>``, ``nis_<name>``, ``<name>_accepted``)
+AID_COLUMNS = {"odometer": "odo", "odometer_yaw": "yaw"}
+
 ProgressFn = Callable[[float], None]   # called with the fraction done, 0..1
 
 
@@ -51,7 +55,7 @@ class RunRecorder:
     def __init__(self, fixes: GnssFixes, path: np.ndarray, start: GaussianState, start_sample: int,
                  noise_report: Callable[[], dict[str, np.ndarray]], *, velocity: bool, smooth: bool,
                  progress: ProgressFn | None = None, n_epochs: int = 1,
-                 extra_states: list[tuple[str, int, int]] | None = None, odometer: bool = False) -> None:
+                 extra_states: list[tuple[str, int, int]] | None = None, aids: tuple[str, ...] = ()) -> None:
         m = len(fixes)
         self.path = path
         self.n_path = path.shape[1]
@@ -72,8 +76,9 @@ class RunRecorder:
         self.extra_values = np.full((m, 2 * len(self.extra)), np.nan) if self.extra else None
         # GNSS velocity: innovation (M, 3) m/s, NIS (M,), applied (M,: 1, 0, NaN without one)
         self.vel = (np.full((m, 3), np.nan), np.full(m, np.nan), np.full(m, np.nan)) if velocity else None
-        # the odometer's update at a GNSS epoch: innovation (M,) m/s, NIS, applied (1, 0, NaN without one)
-        self.odo = (np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan)) if odometer else None
+        # one-element aids' updates at a GNSS epoch, by kind (AID_COLUMNS): innovation (M,), NIS,
+        # applied (1, 0, NaN without one)
+        self.aids = {kind: (np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan)) for kind in aids}
         self.noise_report = noise_report
         self.t = start.t            # time of the last state the loop made, s
         # covariance knots for the output's 1-sigma: flat (t, prior E/N/U variance, posterior E/N/U
@@ -117,8 +122,9 @@ class RunRecorder:
                 if name not in self.adaptive:
                     self.adaptive[name] = np.full((len(self.nis), np.size(value)), np.nan)
                 self.adaptive[name][k] = value
-        elif meas.kind == "odometer" and self.odo is not None and k >= 0:
-            self.odo[0][k], self.odo[1][k], self.odo[2][k] = inn.nu[0], inn.nis, float(inn.accepted)
+        elif meas.kind in self.aids and k >= 0:
+            nu, nis, acc = self.aids[meas.kind]
+            nu[k], nis[k], acc[k] = inn.nu[0], inn.nis, float(inn.accepted)
         elif meas.kind == "gnss_velocity" and self.vel is not None:
             self.vel[0][k], self.vel[1][k], self.vel[2][k] = inn.nu, inn.nis, float(inn.accepted)
 
@@ -170,9 +176,9 @@ class RunRecorder:
                 states[label] = self.extra_values[:, [j]]
             for j, (label, _, _) in enumerate(self.extra):
                 states[label + "_std"] = std[:, [j]]
-        odo_nu, odo_nis, odo_accepted = self.odo if self.odo is not None else (None, None, None)
+        aids = {AID_COLUMNS[kind]: values for kind, values in self.aids.items()}
         return Diagnostics(t, self.nu, self.nis, self.accepted, self.forced, self.r_std, named, vel_nu, vel_nis,
-                           vel_accepted, states, odo_nu, odo_nis, odo_accepted)
+                           vel_accepted, states, aids)
 
     def bias_history(self, t: np.ndarray) -> BiasHistory:
         """The biases after each fix at the fix times ``t`` (s), with their 1-sigma."""

@@ -32,9 +32,10 @@ class Diagnostics:
     #: extra filter states after each fix, name -> (M, 1): with the Gauss-Markov GNSS error model
     #: ``gnss_error_e/n/u`` (ENU m) and their 1-sigma ``gnss_error_e_std`` ...
     states: dict[str, np.ndarray] = field(default_factory=dict)
-    odo_nu: np.ndarray | None = None          # (M,) the odometer's innovation at the GNSS epoch, m/s (NaN: none)
-    odo_nis: np.ndarray | None = None         # (M,) its NIS
-    odo_accepted: np.ndarray | None = None    # (M,) 1 applied, 0 rejected, NaN no odometer update there
+    #: one-element aids at the GNSS epoch, short name -> (innovation (M,), NIS (M,), applied (M,): 1, 0,
+    #: NaN where the aid had no update there): ``odo`` the odometer's speed (m/s), ``yaw`` the
+    #: odometry's yaw rate (rad/s)
+    aids: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -252,7 +252,7 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     recorder = RunRecorder(fixes, prep.path, start, al.index, filt.noise_report, velocity=aiding.has_velocity,
                            smooth=smooth, progress=progress, n_epochs=n_epochs,
                            extra_states=fmodel.state_labels() if isinstance(fmodel, AugmentedInsModel) else None,
-                           odometer=aiding.odo is not None)
+                           aids=aiding.recorded_kinds)
     source = RunMeasurements(fixes, recording.gnss, lever, reopen, aiding, model=fmodel,
                              r_share=1.0 if choice is None else 1.0 - choice.share)
     check = DivergenceCheck(recording, config, filt.name, al.t, log, source)

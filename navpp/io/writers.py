@@ -337,7 +337,8 @@ def adaptive_columns(diagnostics: Any) -> tuple[list[str], np.ndarray]:
     """Names and (M, K) values of every per-epoch quantity beyond the fixed GNSS-position fields:
     the GNSS velocity update of the epoch when the run had one (``nu_ve, nu_vn, nu_vu`` m/s,
     ``nis_vel``, ``vel_accepted``; nan where a fix had no velocity), the odometer's update at the
-    epoch when the run had one (``nu_odo`` m/s, ``nis_odo``, ``odo_accepted``), then the extra filter states
+    epoch when the run had one (``nu_odo`` m/s, ``nis_odo``, ``odo_accepted``) and the odometry's yaw rate
+    with ``[odometry] use_yaw_rate`` (``nu_yaw`` rad/s, ``nis_yaw``, ``yaw_accepted``), then the extra filter states
     of ``diagnostics.states`` (the GNSS error states ``gnss_error_e/n/u`` and their 1-sigma, ENU m,
     with the Gauss-Markov GNSS error model), then every adaptive quantity in
     ``diagnostics.adaptive``.
@@ -354,12 +355,9 @@ def adaptive_columns(diagnostics: Any) -> tuple[list[str], np.ndarray]:
         cols.append(np.column_stack([np.asarray(vel_nu, dtype=np.float64).reshape(m, 3),
                                      np.asarray(diagnostics.vel_nis, dtype=np.float64).reshape(m),
                                      np.asarray(diagnostics.vel_accepted, dtype=np.float64).reshape(m)]))
-    odo_nu = getattr(diagnostics, "odo_nu", None)
-    if odo_nu is not None:
-        names += ["nu_odo", "nis_odo", "odo_accepted"]
-        cols.append(np.column_stack([np.asarray(odo_nu, dtype=np.float64).reshape(m),
-                                     np.asarray(diagnostics.odo_nis, dtype=np.float64).reshape(m),
-                                     np.asarray(diagnostics.odo_accepted, dtype=np.float64).reshape(m)]))
+    for short, values in getattr(diagnostics, "aids", {}).items():
+        names += [f"nu_{short}", f"nis_{short}", f"{short}_accepted"]
+        cols.append(np.column_stack([np.asarray(v, dtype=np.float64).reshape(m) for v in values]))
     for key, values in [*getattr(diagnostics, "states", {}).items(), *getattr(diagnostics, "adaptive", {}).items()]:
         v = np.asarray(values, dtype=np.float64).reshape(m, -1)
         names += [key] if v.shape[1] == 1 else [f"{key}_{i}" for i in range(v.shape[1])]
@@ -387,8 +385,8 @@ def diagnostics_columns(diag: Any) -> tuple[list[str], list[np.ndarray], list[in
     names += extra_names
     cols += list(values.T)
     n_vel = 5 if getattr(diag, "vel_nu", None) is not None else 0
-    n_odo = 3 if getattr(diag, "odo_nu", None) is not None else 0
-    decimals += [4, 4, 4, 4, 0][:n_vel] + [4, 4, 0][:n_odo] + [6] * (len(extra_names) - n_vel - n_odo)
+    aid_decimals = [d for short in getattr(diag, "aids", {}) for d in ([6, 4, 0] if short == "yaw" else [4, 4, 0])]
+    decimals += [4, 4, 4, 4, 0][:n_vel] + aid_decimals + [6] * (len(extra_names) - n_vel - len(aid_decimals))
     return names, cols, decimals
 
 

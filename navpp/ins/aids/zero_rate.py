@@ -22,21 +22,21 @@ from .base import Aid, points_kernel
 
 
 @njit(cache=True, inline="always")
-def _earth_rate(lat: float) -> np.ndarray:
+def earth_rate_n(lat: float) -> np.ndarray:
     """Earth rotation rate in ENU at latitude ``lat`` (rad), rad/s."""
     return np.array([0.0, OMEGA_E * np.cos(lat), OMEGA_E * np.sin(lat)])
 
 
 @njit(cache=True)
 def _h(x: np.ndarray, p: np.ndarray) -> np.ndarray:
-    w: np.ndarray = x[NOMINAL_BG] + quat_to_dcm(x[NOMINAL_Q]).T @ _earth_rate(x[X_LAT])
+    w: np.ndarray = x[NOMINAL_BG] + quat_to_dcm(x[NOMINAL_Q]).T @ earth_rate_n(x[X_LAT])
     return w
 
 
 @njit(cache=True)
 def _H(x: np.ndarray, p: np.ndarray) -> np.ndarray:
     H = np.zeros((3, N_ERR))
-    H[:, ATT] = quat_to_dcm(x[NOMINAL_Q]).T @ skew(_earth_rate(x[X_LAT]))
+    H[:, ATT] = quat_to_dcm(x[NOMINAL_Q]).T @ skew(earth_rate_n(x[X_LAT]))
     H[0, DX_BG] = H[1, DX_BG + 1] = H[2, DX_BG + 2] = 1.0
     return H
 
