@@ -29,12 +29,14 @@ import numpy as np
 AUTO: dict[str, bool] = {}
 
 
-def _run(rec, filt: str, preset: str, vehicle: dict, gnss: dict | None = None, outages=()):
+def _run(rec, filt: str, preset: str, vehicle: dict, gnss: dict | None = None, outages=(),
+         odometry: dict | None = None):
     from navpp import api, engine
     from navpp.config import config_from_dict
     from navpp.metrics import compute_metrics
 
-    cfg = config_from_dict({"imu": {"preset": preset}, "vehicle": vehicle, "gnss": gnss or {}, "auto": AUTO}, "bench")
+    cfg = config_from_dict({"imu": {"preset": preset}, "vehicle": vehicle, "gnss": gnss or {}, "auto": AUTO,
+                            "odometry": odometry or {}}, "bench")
     cut, _ = api.apply_outages(rec, list(outages), "sim")
     res = engine.run(cut, cfg, api.make_filter(filt, cfg))
     m = compute_metrics(res.solution, rec.reference, filter_name=filt, log="sim", reference="truth",
@@ -73,32 +75,39 @@ def outages(seeds: int, filt: str) -> dict[str, float]:
 
     out = {}
     for name, windows in OUTAGE_SETS.items():
-        ends_off, ends_on, ends_odo, rmse_on, rmse_odo = [], [], [], [], []
+        ends_off, ends_on, ends_odo, ends_yaw, rmse_on, rmse_odo, rmse_yaw = [], [], [], [], [], [], []
         for seed in range(seeds):
-            # the odometry (1 % scale error, 0.02 m/s noise, 10 Hz) is drawn from a stream of its
-            # own: the IMU and GNSS are those of the log without it
-            with_odo = simulate(SimulationSpec(duration_s=900.0, seed=seed, odometry=True,
+            # the odometry (1 % scale error, 0.02 m/s noise, 10 Hz; yaw rate 0.002 rad/s noise) is
+            # drawn from a stream of its own: the IMU and GNSS are those of the log without it
+            with_odo = simulate(SimulationSpec(duration_s=900.0, seed=seed, odometry=True, odometry_yaw_rate=True,
                                                odometry_scale_error_pct=1.0)).recording()
             rec = replace(with_odo, odometry=None)
             _, m0 = _run(rec, filt, "automotive", {"type": "none", "zupt": False, "zaru": False}, outages=windows)
             _, m1 = _run(rec, filt, "automotive", {"type": "car"}, outages=windows)
             _, m2 = _run(with_odo, filt, "automotive", {"type": "car"}, outages=windows)
+            _, m3 = _run(with_odo, filt, "automotive", {"type": "car"}, outages=windows,
+                         odometry={"use_yaw_rate": True})
             e0 = [w["horizontal_m"]["end"] for w in m0["outages"]]
             e1 = [w["horizontal_m"]["end"] for w in m1["outages"]]
             e2 = [w["horizontal_m"]["end"] for w in m2["outages"]]
+            e3 = [w["horizontal_m"]["end"] for w in m3["outages"]]
             ends_off += e0
             ends_on += e1
             ends_odo += e2
+            ends_yaw += e3
             rmse_on.append(m1["position_m"]["horizontal"]["rmse"])
             rmse_odo.append(m2["position_m"]["horizontal"]["rmse"])
+            rmse_yaw.append(m3["position_m"]["horizontal"]["rmse"])
             print(f"  outages {name} seed {seed}: end errors without {np.round(e0, 2).tolist()} m, "
-                  f"with NHC+ZUPT {np.round(e1, 2).tolist()} m, + odometer {np.round(e2, 2).tolist()} m")
+                  f"with NHC+ZUPT {np.round(e1, 2).tolist()} m, + odometer {np.round(e2, 2).tolist()} m, "
+                  f"+ its yaw rate {np.round(e3, 2).tolist()} m")
         ratio = float(np.median(ends_on) / np.median(ends_off))
         out[name] = ratio
         print(f"outages ({name}): median end error {np.median(ends_off):.2f} m -> {np.median(ends_on):.2f} m, "
               f"ratio {ratio:.3f} (target <= 0.4; {len(ends_on)} outages); with the odometer "
               f"{np.median(ends_odo):.2f} m (target <= 1.0 m), whole-drive RMSE {np.mean(rmse_on):.3f} -> "
-              f"{np.mean(rmse_odo):.3f} m")
+              f"{np.mean(rmse_odo):.3f} m; with its yaw rate too {np.median(ends_yaw):.2f} m, RMSE "
+              f"{np.mean(rmse_yaw):.3f} m")
     return out
 
 

@@ -466,6 +466,17 @@ def simulate(
     odometry_rate: Annotated[float, typer.Option(
         help="Odometry rate, Hz (with --odometry).",
         callback=_require(_finite(0.0, 1000.0, strict=True), "a number of Hz within 0..1000, > 0"))] = 10.0,
+    odometry_std: Annotated[float, typer.Option(
+        help="Odometry speed white noise, m/s 1-sigma (with --odometry).",
+        callback=_require(_finite(0.0, 10.0), "a number of m/s within 0..10"))] = 0.02,
+    odometry_quantum: Annotated[float, typer.Option(
+        help="Odometry speed resolution, m/s: readings are rounded to its multiples (0: none; with --odometry).",
+        callback=_require(_finite(0.0, 10.0), "a number of m/s within 0..10"))] = 0.0,
+    odometry_slip: Annotated[float, typer.Option(
+        help="Wheel slip under hard acceleration: SLIP m/s per m/s^2 beyond 2 m/s^2 (0: none; with --odometry).",
+        callback=_require(_finite(0.0, 10.0), "a number within 0..10"))] = 0.0,
+    odometry_yaw_rate: Annotated[bool, typer.Option(
+        "--odometry-yaw-rate", help="Also write the vehicle's yaw rate (0.002 rad/s noise) in odometry.csv.")] = False,
 ) -> None:
     """Simulate a car-like drive and write it as a CSV log with its reference."""
     from rich.console import Console
@@ -497,7 +508,9 @@ def simulate(
         if gnss_gap_start is not None:
             kwargs["gnss_gap_start_s"] = gnss_gap_start
         if odometry:
-            kwargs.update(odometry=True, odometry_scale_error_pct=odometry_scale_error, odometry_rate_hz=odometry_rate)
+            kwargs.update(odometry=True, odometry_scale_error_pct=odometry_scale_error, odometry_rate_hz=odometry_rate,
+                          odometry_std_mps=odometry_std, odometry_quantum_mps=odometry_quantum,
+                          odometry_slip=odometry_slip, odometry_yaw_rate=odometry_yaw_rate)
         try:
             path = api.simulate_log(out, **kwargs)
         except ValueError as exc:

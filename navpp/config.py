@@ -114,7 +114,7 @@ ACCEL_UNITS: Final[tuple[str, ...]] = ("m/s^2", "g")
 TIME_BASES: Final[tuple[str, ...]] = ("unix", "gpst", "relative")
 TIME_SOURCES: Final[tuple[str, ...]] = ("header", "log")
 INIT_METHODS: Final[tuple[str, ...]] = ("auto", "gyrocompass", "gnss", "config")
-VEHICLE_TYPES: Final[tuple[str, ...]] = ("car", "none")
+VEHICLE_TYPES: Final[tuple[str, ...]] = ("auto", "car", "none")
 OUTPUT_FORMATS: Final[tuple[str, ...]] = ("csv", "mcap", "tum", "geojson", "kml")
 
 # Default of the eight noise fields: "take this value from the preset".  Identified by
@@ -577,7 +577,9 @@ class VehicleConfig:
 
     Attributes
     ----------
-    type : ``"car"`` (a wheeled vehicle: the non-holonomic constraint applies) or ``"none"``.
+    type : ``"car"`` (a wheeled vehicle: the non-holonomic constraint applies), ``"none"``, or
+        ``"auto"`` (default): ``"car"`` when the run uses wheel odometry (only a wheeled vehicle
+        has it; the notes say so), else ``"none"``.
     nhc : bool, default true. Apply the non-holonomic constraint (with ``type = "car"`` only).
     nhc_std_mps : (lateral, vertical) m/s, > 0. 1-sigma of the body's lateral and vertical
         velocity in the vehicle frame (side slip, suspension); a scalar sets both.
@@ -601,7 +603,7 @@ class VehicleConfig:
         has velocity) must be below this, with a 1-sigma below twice this, for a ZUPT or ZARU.
     """
 
-    type: str = "none"
+    type: str = "auto"
     nhc: bool = True
     nhc_std_mps: tuple[float, float] = (0.1, 0.1)
     mounting_rpy_deg: tuple[float, float, float] | str = (0.0, 0.0, 0.0)

@@ -158,6 +158,13 @@ def test_cli_simulate_writes_odometry(tmp_path: Path):
     rec = read_csv_log(tmp_path / "log")
     assert len(rec.odometry) == 60 * 20 + 1
     assert "scale error +2 %" in (tmp_path / "log" / "navpp.toml").read_text()
+    res = CliRunner().invoke(app, ["simulate", str(tmp_path / "q"), "--duration", "60", "--odometry", "--odometry-std",
+                                   "0", "--odometry-quantum", "0.05", "--odometry-slip", "0.5", "--odometry-yaw-rate"])
+    assert res.exit_code == 0, res.output
+    rec = read_csv_log(tmp_path / "q")
+    np.testing.assert_allclose(rec.odometry.speed / 0.05, np.round(rec.odometry.speed / 0.05), atol=1e-6)
+    np.testing.assert_allclose(rec.odometry.std_speed, 0.05 / np.sqrt(12.0), rtol=1e-3)
+    assert rec.odometry.yaw_rate is not None and np.abs(rec.odometry.yaw_rate).max() > 0.05
     res = CliRunner().invoke(app, ["simulate", str(tmp_path / "bad"), "--duration", "60", "--odometry-rate", "0"])
     assert res.exit_code != 0 and not (tmp_path / "bad").exists()
 

@@ -65,6 +65,7 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
     from numba.core import event as numba_event
 
     t_wall = time.perf_counter()
+    config, vehicle_note = resolved_vehicle(recording, config)
     with numba_event.install_recorder("numba:compile") as rec:
         segments = imu_segments(recording)
         if len(segments) > 1:
@@ -72,7 +73,25 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
         else:
             result = run_one(recording, config, filt, progress, cov_step_s, smooth)
     compile_s = compile_seconds(rec.buffer)
+    if vehicle_note is not None:
+        result = replace(result, notes=(vehicle_note, *result.notes))
     return replace(result, runtime_s=time.perf_counter() - t_wall - compile_s, compile_s=compile_s)
+
+
+def resolved_vehicle(recording: Recording, config: Config) -> tuple[Config, str | None]:
+    """``config`` with ``[vehicle] type = "auto"`` made ``"car"`` when the run uses wheel odometry
+    (``[odometry] use`` and a log with odometry: only a wheeled vehicle has it), else ``"none"``;
+    and the note saying so (None when nothing was decided here)."""
+    if config.vehicle.type != "auto":
+        return config, None
+    od = recording.odometry
+    wheeled = od is not None and len(od) >= 2 and config.odometry.use
+    resolved = replace(config, vehicle=replace(config.vehicle, type="car" if wheeled else "none"))
+    if not wheeled:
+        return resolved, None
+    nhc = "the non-holonomic constraint applies" if config.vehicle.nhc else "[vehicle] nhc = false keeps the NHC off"
+    return resolved, (f"vehicle: a wheeled vehicle, for the log has wheel odometry ({od.source}): {nhc} "
+                      '([vehicle] type = "none" says otherwise)')
 
 
 @dataclass
