@@ -28,12 +28,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import Config
+from .geodesy import gravity
 from .ins.aids import GnssVelocity, NonHolonomic, ZeroRate, ZeroVelocity
 from .ins.aids.odometer import OdometerSpeed
 from .ins.aids.standstill import StandstillSettings, speed_allows, still_mask
 from .ins.aids.yaw_rate import OdometerYawRate
-from .ins.attitude import rpy_deg_to_dcm
+from .ins.attitude import quat_to_dcm, rpy_deg_to_dcm
 from .ins.model import VEL
+from .ins.state import NOMINAL_Q, X_H, X_LAT
+from .units import STANDARD_GRAVITY
 
 #: Aid kinds in the order they are reported (the GNSS position first).
 KINDS = ("gnss_position", "gnss_velocity", "zupt", "zaru", "nhc", "odometer", "odometer_yaw")
@@ -98,7 +101,7 @@ class Aiding:
                  profile=None, odometry=None) -> None:
         veh = config.vehicle
         self.profile = profile            # the data's noise (navpp.ins.calibrate.NoiseProfile) or None
-        self.t, self.gyro = t, gyro
+        self.t, self.gyro, self.accel = t, gyro, accel
         self.imu_period = max(float(np.median(np.diff(t))), 1e-9) if t.shape[0] > 1 else 1.0   # s
         self.gaps = np.zeros((0, 2)) if gaps is None else np.asarray(gaps, dtype=float).reshape(-1, 2)
         self.gyro_arw = gyro_arw
@@ -118,6 +121,7 @@ class Aiding:
             self.odo_period = float(np.median(np.diff(o.t)))
             self.odo_gap = 2.0 * self.odo_period     # longest interval read across, s
             self.odo_yaw = oc.use_yaw_rate and o.yaw_rate is not None
+            self.odo_slip = oc.slip_per_g
             if self.odo_yaw:
                 self.odo_yaw_std = (np.asarray(o.std_yaw_rate, dtype=float) if o.std_yaw_rate is not None
                                     else np.full(len(o), math.radians(oc.yaw_rate_std_dps)))
@@ -281,14 +285,39 @@ class Aiding:
             return None
         return value, sd
 
-    def odometer(self, t: float) -> OdometerSpeed | None:
-        """The odometer's speed at ``t`` (:meth:`_odometry_at`), None without one."""
+    def _imu_window(self, t: float) -> tuple[int, int]:
+        """IMU samples ``lo:hi`` within one odometry interval centred on ``t`` (at least one)."""
+        half = 0.5 * self.odo_period
+        lo = int(np.searchsorted(self.t, t - half))
+        hi = int(np.searchsorted(self.t, t + half, side="right"))
+        if hi <= lo:
+            lo = int(np.clip(np.searchsorted(self.t, t), 0, self.t.shape[0] - 1))
+            hi = lo + 1
+        return lo, hi
+
+    def forward_acceleration(self, t: float, x: np.ndarray) -> float:
+        """The vehicle's forward acceleration (m/s^2, vehicle x) around ``t``: the mean specific
+        force over one odometry interval plus gravity, rotated by the nominal ``x``'s attitude."""
+        lo, hi = self._imu_window(t)
+        g_n = np.array([0.0, 0.0, -float(gravity(float(x[X_LAT]), float(x[X_H])))])
+        a_b = self.accel[lo:hi].mean(axis=0) + quat_to_dcm(np.ascontiguousarray(x[NOMINAL_Q])).T @ g_n
+        return float((self.c_vb @ a_b)[0])
+
+    def odometer(self, t: float, x: np.ndarray | None = None) -> OdometerSpeed | None:
+        """The odometer's speed at ``t`` (:meth:`_odometry_at`), None without one.  Given the
+        nominal ``x``, its 1-sigma grows with the forward acceleration, for wheels slip when they
+        drive or brake hard: ``sigma^2 = sigma_0^2 + (slip_per_g |a| / g |speed|)^2``
+        (``[odometry] slip_per_g``)."""
         if self.odo is None:
             return None
         got = self._odometry_at(t, self.odo.speed, self.odo_std)
         if got is None:
             return None
-        return OdometerSpeed.at(t, got[0], got[1], self.c_vb, self._gyro_at(t), self.odo_point)
+        speed, sd = got
+        if x is not None and self.odo_slip > 0.0 and speed != 0.0:
+            slip = self.odo_slip * abs(self.forward_acceleration(t, x)) / STANDARD_GRAVITY * abs(speed)
+            sd = math.hypot(sd, slip)
+        return OdometerSpeed.at(t, speed, sd, self.c_vb, self._gyro_at(t), self.odo_point)
 
     def odometer_yaw(self, t: float) -> OdometerYawRate | None:
         """The odometry's yaw rate at ``t`` (``[odometry] use_yaw_rate``), None without one: against
@@ -298,14 +327,12 @@ class Aiding:
         got = self._odometry_at(t, self.odo.yaw_rate, self.odo_yaw_std)
         if got is None:
             return None
-        half = 0.5 * self.odo_period
-        lo, hi = np.searchsorted(self.t, t - half), np.searchsorted(self.t, t + half, side="right")
-        dt = self.imu_period
+        lo, hi = self._imu_window(t)
         if hi - lo < 2:                          # the IMU is no faster than the odometry
             gyro, n = self._gyro_at(t), 1
         else:
-            gyro, n = self.gyro[lo:hi].mean(axis=0), int(hi - lo)
-        var = self.gyro_arw ** 2 / (n * dt)      # the mean's white noise, (rad/s)^2
+            gyro, n = self.gyro[lo:hi].mean(axis=0), hi - lo
+        var = self.gyro_arw ** 2 / (n * self.imu_period)      # the mean's white noise, (rad/s)^2
         return OdometerYawRate.at(t, got[0], got[1], self.c_vb, gyro, var)
 
     def constraint_measurements(self, t: float, x: np.ndarray, P: np.ndarray) -> list:
@@ -316,7 +343,7 @@ class Aiding:
         t_prev, self._last_constraint_t = self._last_constraint_t, t
         if self.nhc:
             out.append(NonHolonomic.at(t, self.nhc_std, self.c_vb, self._gyro_at(t), self.nhc_point))
-        odo = self.odometer(t)
+        odo = self.odometer(t, x)
         if odo is not None:
             out.append(odo)
         yaw = self.odometer_yaw(t)

@@ -755,6 +755,9 @@ class OdometryConfig:
         a skid-steered robot's or a slipping car's wheel yaw rate is often worse than a MEMS gyro, and
         many Odometry messages carry a zero there; the notes say when a log has a yaw rate left unused.
     yaw_rate_std_dps : float, deg/s, > 0, default 0.2. The yaw rate's 1-sigma when the log has none.
+    slip_per_g : float, >= 0, default 0.1. Wheels slip when they drive or brake hard: the speed's
+        1-sigma grows by this share of the speed per g of forward acceleration (0.1: 3 % of the
+        speed when braking at 0.3 g; the IMU gives the acceleration); 0 turns this off.
     still_speed_mps : float, m/s, >= 0, default 0.01. Odometry that reads at most this speed for a whole
         standstill window is evidence of standing still on its own (wheels that count no ticks), even when
         the IMU is too shaky to say so (an idling engine); 0 turns this off.  The speed gates still apply.
@@ -767,6 +770,7 @@ class OdometryConfig:
     scale_walk_per_sqrt_h: float = 0.002
     use_yaw_rate: bool = False
     yaw_rate_std_dps: float = 0.2
+    slip_per_g: float = 0.1
     still_speed_mps: float = 0.01
 
     def __post_init__(self) -> None:
@@ -774,6 +778,7 @@ class OdometryConfig:
         _as_bool("odometry", "use_yaw_rate", self.use_yaw_rate)
         _fix_float(self, "odometry", "yaw_rate_std_dps", minimum=0.0, strict_min=True)
         _fix_float(self, "odometry", "still_speed_mps", minimum=0.0)
+        _fix_float(self, "odometry", "slip_per_g", minimum=0.0)
         _set(self, "lever_arm_m", _as_vector("odometry", "lever_arm_m", self.lever_arm_m, 3))
         _fix_float(self, "odometry", "std_mps", minimum=0.0, strict_min=True)
         _fix_float(self, "odometry", "scale_sigma", minimum=0.0, strict_min=True)
