@@ -10,10 +10,15 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .config import Config, load_config
 from .errors import ConfigError, InputError
-from .recording import Recording
+from .recording import Recording, ReferenceData
+
+if TYPE_CHECKING:
+    from .io.frames import Anchor
+    from .io.ros import LogContents
 
 #: The configuration file navpp looks for beside (or inside) a log.
 CONFIG_IN_LOG_DIR = "navpp.toml"
@@ -128,17 +133,19 @@ def _pose_types() -> tuple[str, ...]:
     return POSE_REFERENCE_TYPES
 
 
-def _reference_note(ref, how: str) -> str:
+def _reference_note(ref: ReferenceData | None, how: str) -> str:
+    if ref is None:
+        return f"reference: none ({how})"
     n = len(ref)
     att = ", with attitude" if ref.rph_deg is not None else ""
     return f"reference: {ref.source}, {how} ({n:,} epoch{'s' if n != 1 else ''}{att})"
 
 
-def _anchor_text(anchor) -> str:
+def _anchor_text(anchor: Anchor) -> str:
     return f"lat {anchor.lat_deg:.9f} deg, lon {anchor.lon_deg:.9f} deg, height {anchor.alt:.4f} m"
 
 
-def _chosen_anchor(given: str | None, found, what: str, found_how: str):
+def _chosen_anchor(given: str | None, found: Anchor | None, what: str, found_how: str) -> tuple[Anchor, str]:
     """The anchor of a local-frame reference: ``--reference-anchor`` first, then the one its file
     names; InputError naming the reference when there is none."""
     from .io.refposes import parse_anchor
@@ -234,7 +241,7 @@ def _read_ros_log(kind: str, path: Path, config: Config, imu_topic: str | None, 
 _PLACEHOLDER = "(--gnss)"
 
 
-def _with_placeholder_fix(contents, replaced: set[str]):
+def _with_placeholder_fix(contents: LogContents, replaced: set[str]) -> LogContents:
     """The log's contents for a run whose GNSS comes from --gnss: the NavSatFix topics it
     replaces (``replaced``, not decoded) left out, and one IMU-timed placeholder fix so the
     assembler can build the Recording; the caller then puts the file's fixes in."""

@@ -43,10 +43,10 @@ from ..errors import InputError
 from ..ins.attitude import dcm_to_rph, quat_to_dcm_batch
 from ..recording import ReferenceData
 from .frames import Anchor
+from .ros import ODOM_TYPE as ODOMETRY_TYPE
+from .ros import POSE_TYPE
 
 #: The message types a pose reference topic may have (ROS 1 names).
-POSE_TYPE = "geometry_msgs/PoseStamped"
-ODOMETRY_TYPE = "nav_msgs/Odometry"
 POSE_REFERENCE_TYPES = (ODOMETRY_TYPE, POSE_TYPE)
 
 _TUM_ANCHOR = re.compile(r"about lat\s+(\S+)\s+deg,\s+lon\s+(\S+)\s+deg,\s+height\s+(\S+)\s+m")
@@ -89,7 +89,8 @@ def parse_anchor(text: str, what: str = "--reference-anchor") -> Anchor:
 
 
 def is_tum(path: str | Path) -> bool:
-    """True for a TUM trajectory file: ``.tum`` / ``.txt`` suffix, or a first data line of 8 numbers."""
+    """True for a TUM trajectory file: a ``.tum`` suffix, or (any suffix but ``.csv``) a first data
+    line of 8 whitespace-separated fields without a comma (evo writes ``.txt``)."""
     p = Path(path)
     if p.suffix.lower() == ".tum":
         return True
@@ -197,6 +198,16 @@ def read_pose_topic(kind: str, path: Path | list[Path], topic: str, msgtype: str
     vels: list[list[float]] = []
     frame_id = ""
     anchor = None
+
+    def add(msg: Any, log_ns: int) -> str:
+        row, vel = _pose_row(msgtype, msg)
+        stamps.append(_stamp_ns(msg))
+        logs.append(log_ns)
+        rows.append(row)
+        if vel is not None:
+            vels.append(vel)
+        return frame_id or str(msg.header.frame_id)
+
     try:
         if kind == "mcap":
             from mcap.reader import make_reader
@@ -207,13 +218,7 @@ def read_pose_topic(kind: str, path: Path | list[Path], topic: str, msgtype: str
                 reader = make_reader(f, decoder_factories=[Ros2Factory(), Ros1Factory()])
                 for _schema, _channel, message, msg in reader.iter_decoded_messages(topics=[topic],
                                                                                      log_time_order=True):
-                    row, vel = _pose_row(msgtype, msg)
-                    stamps.append(_stamp_ns(msg))
-                    logs.append(int(message.log_time))
-                    rows.append(row)
-                    if vel is not None:
-                        vels.append(vel)
-                    frame_id = frame_id or str(msg.header.frame_id)
+                    frame_id = add(msg, int(message.log_time))
                 f.seek(0)
                 meta = next((m.metadata for m in make_reader(f).iter_metadata() if m.name == "navpp"), None)
             if meta is not None and frame_id == "map" and "map_anchor_lat_deg" in meta:
@@ -223,17 +228,10 @@ def read_pose_topic(kind: str, path: Path | list[Path], topic: str, msgtype: str
             from rosbags.highlevel import AnyReader
 
             files = path if isinstance(path, list) else [path]
-            with AnyReader(list(files)) as reader:
-                conns = [c for c in reader.connections if c.topic == topic]
-                for conn, log_ns, raw in reader.messages(connections=conns):
-                    msg = reader.deserialize(raw, conn.msgtype)
-                    row, vel = _pose_row(msgtype, msg)
-                    stamps.append(_stamp_ns(msg))
-                    logs.append(int(log_ns))
-                    rows.append(row)
-                    if vel is not None:
-                        vels.append(vel)
-                    frame_id = frame_id or str(msg.header.frame_id)
+            with AnyReader(list(files)) as bag:
+                conns = [c for c in bag.connections if c.topic == topic]
+                for conn, log_ns, raw in bag.messages(connections=conns):
+                    frame_id = add(bag.deserialize(raw, conn.msgtype), int(log_ns))
     except InputError:
         raise
     except Exception as exc:  # noqa: BLE001 - decoder and container errors: all bad input
