@@ -205,7 +205,8 @@ def run_inputs(log: Path, config: str | Path | Config | None, reference: str | P
     """(device, inode) of every file a run of :func:`process` reads (:func:`navpp.outdir.input_files`):
     the log (a file, or the files in its directory), the config, the reference and the GNSS file."""
     cfg_path = config if isinstance(config, (str, Path)) else companion(log, CONFIG_IN_LOG_DIR)
-    ref_path = reference if reference is not None else companion(log, "reference.csv")
+    ref_path = reference if reference is not None else (companion(log, "reference.csv")
+                                                        or companion(log, "reference.tum"))
     return input_files(log, cfg_path, ref_path, gnss_file, not_in_dirs=OUTPUT_FILES)
 
 
@@ -311,7 +312,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
             reference_topic: str | None = None, gnss_file: str | Path | None = None,
             formats: str | Sequence[str] | None = None, embed_input: bool = False,
             gnss_outages: Sequence[tuple[float, float]] | None = None,
-            smooth: bool | None = None, odometry_topic: str | None = None) -> ProcessResult:
+            smooth: bool | None = None, odometry_topic: str | None = None,
+            reference_anchor: str | Sequence[float] | None = None) -> ProcessResult:
     """Read a log, run one filter, write trajectory (and metrics with a reference).
 
     ``navpp.process`` is this function.  Example::
@@ -324,7 +326,9 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     ----------
     log : a CSV log directory (imu.csv, gnss.csv, optional reference.csv), an MCAP file, a
         ROS 1 bag or a ROS 2 bag directory.
-    imu_topic, gnss_topic, reference_topic : topic choices for ROS logs (see :func:`read_log`).
+    imu_topic, gnss_topic, reference_topic : topic choices for ROS logs (see :func:`read_log`);
+        the reference topic may be a NavSatFix, a ``nav_msgs/Odometry`` or a
+        ``geometry_msgs/PoseStamped`` (poses in a local ENU frame: see ``reference_anchor``).
     odometry_topic : the wheel odometry topic of a ROS log (``nav_msgs/Odometry``, ``TwistStamped``
         or ``TwistWithCovarianceStamped`` in the vehicle frame); None chooses automatically
         (:func:`navpp.io.detect.choose_odometry_topic`; the run's notes say which), ``"none"``
@@ -333,7 +337,13 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     filter_name : registry name (``navpp filters``).
     config : a TOML path or a :class:`Config`; None looks for ``navpp.toml`` in the log
         directory, then uses the defaults (automotive preset).
-    reference : reference CSV overriding ``reference.csv`` in the log directory.
+    reference : reference CSV or TUM file overriding ``reference.csv`` in the log directory
+        (``reference.csv`` / ``reference.tum`` beside a ROS log); the run's notes say which
+        reference was used and how it was found.
+    reference_anchor : origin of a local-frame reference (TUM file, Odometry / PoseStamped
+        topic) as ``(lat_deg, lon_deg, alt_m)`` or ``"LAT,LON,ALT"`` (WGS-84 ellipsoidal height;
+        ENU axes); None uses the anchor its file names (navpp's own trajectory.tum and
+        trajectory.mcap record theirs; :mod:`navpp.io.refposes`).
     out_dir : output directory; default ``navpp-out/<log>-<filter>``.  With ``write=True`` it is
         created and checked writable before anything is read (:class:`InputError` if not).
         After a successful run, navpp's own output files (:data:`OUTPUT_FILES`) that this run
@@ -375,7 +385,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     plan = _plan(Path(log), filter_name=filter_name, config=config, reference=reference, out_dir=out_dir,
                  output_rate_hz=output_rate_hz, write=write, gnss_file=gnss_file, formats=formats,
                  embed_input=embed_input, gnss_outages=gnss_outages, smooth=smooth,
-                 topics=(imu_topic, gnss_topic, reference_topic, odometry_topic))
+                 topics=(imu_topic, gnss_topic, reference_topic, odometry_topic),
+                 reference_anchor=_anchor_arg(reference_anchor))
     with claimed_out_dir(plan.out, plan.out_label, OUTPUT_FILES) if write else nullcontext():
         return _run(plan, progress)
 
@@ -409,12 +420,21 @@ class _Plan:
     out: Path
     out_label: str
     inputs: set[tuple[int, int]]
+    reference_anchor: str | None = None
+
+
+def _anchor_arg(anchor: str | Sequence[float] | None) -> str | None:
+    """``reference_anchor`` as the ``"LAT,LON,ALT"`` text :func:`read_log` takes."""
+    if anchor is None or isinstance(anchor, str):
+        return anchor
+    return ",".join(repr(float(v)) for v in anchor)
 
 
 def _plan(log: Path, *, filter_name: str, config: str | Path | Config | None, reference: str | Path | None,
           out_dir: str | Path | None, output_rate_hz: float | None, write: bool, gnss_file: str | Path | None,
           formats: str | Sequence[str] | None, embed_input: bool, gnss_outages: Sequence[tuple[float, float]] | None,
-          smooth: bool | None, topics: tuple[str | None, str | None, str | None, str | None]) -> _Plan:
+          smooth: bool | None, topics: tuple[str | None, str | None, str | None, str | None],
+          reference_anchor: str | None = None) -> _Plan:
     """Check every option of :func:`process` (in this order: config, output rate, formats,
     outages, filter, output directory against the inputs); the first problem raises."""
     cfg = config if isinstance(config, Config) else resolve_config(log, config)
@@ -439,7 +459,8 @@ def _plan(log: Path, *, filter_name: str, config: str | Path | Config | None, re
         refuse_overwriting_inputs(out, [FORMAT_FILES[f] for f in chosen_formats] + list(OUTPUT_FILES[1:5]),
                                   inputs, label)
     return _Plan(log, cfg, config, filter_name, filt, reference, gnss_file, topics, rate, rate_what,
-                 tuple(chosen_formats), embed_input, tuple(windows), smooth, write, out, label, inputs)
+                 tuple(chosen_formats), embed_input, tuple(windows), smooth, write, out, label, inputs,
+                 reference_anchor)
 
 
 def _read(plan: _Plan, progress: Callable[[str, float], None] | None) -> tuple[Recording, list[dict]]:
@@ -451,7 +472,7 @@ def _read(plan: _Plan, progress: Callable[[str, float], None] | None) -> tuple[R
     rec = read_log(plan.log, plan.cfg, reference=plan.reference,
                    progress=(lambda f: progress("reading", f)) if progress else None, imu_topic=imu_topic,
                    gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=plan.gnss_file,
-                   odometry_topic=odometry_topic)
+                   odometry_topic=odometry_topic, reference_anchor=plan.reference_anchor)
     if progress:
         progress("reading", 1.0)
     rec, outages = apply_outages(rec, plan.windows, str(plan.log))
@@ -502,7 +523,7 @@ def _run(plan: _Plan, progress: Callable[[str, float], None] | None) -> ProcessR
                            filter_name=plan.filter_name, embed_input=plan.embed_input, forward_out=fwd_out)
         files = write_outputs(plan.out, outputs, plan.inputs)
     cfg = plan.cfg
-    notes = tuple(cfg.notes) + tuple(result.notes) + tuple(result.alignment.lines) + tuple(
+    notes = tuple(rec.notes) + tuple(cfg.notes) + tuple(result.notes) + tuple(result.alignment.lines) + tuple(
         f"GNSS outage {o['start_s']:g}-{o['end_s']:g} s ({o['duration_s']:g} s from the log start): "
         f"{o['gnss_removed']} fixes removed, the INS coasts" for o in outages) + odometry_note(rec, cfg)
     warnings = (tuple(rec.warnings) + tuple(result.warnings) + tuple(forced_fix_warnings(rec, cfg, result))

@@ -148,13 +148,19 @@ def process(
     config: Annotated[Path | None, typer.Option(help="TOML config; default: navpp.toml in the log directory, "
                                                    "else the automotive preset.")] = None,
     reference: Annotated[Path | None, typer.Option(help="Reference CSV (t, lat, lon, alt[, ve, vn, vu, roll, "
-                                                      "pitch, heading]); overrides reference.csv.")] = None,
+                                                      "pitch, heading]) or TUM file (t x y z qx qy qz qw, local "
+                                                      "ENU: see --reference-anchor); overrides reference.csv.")] = None,
+    reference_anchor: Annotated[str | None, typer.Option(
+        metavar="LAT,LON,ALT", help="Origin of a TUM or Odometry/PoseStamped reference's local ENU frame: deg, deg, "
+        "m above the WGS-84 ellipsoid.  [default: the anchor navpp's own trajectory.tum / trajectory.mcap "
+        "record]")] = None,
     imu_topic: Annotated[str | None, typer.Option(
         help="IMU topic (sensor_msgs/Imu) when a ROS log has several.")] = None,
     gnss_topic: Annotated[str | None, typer.Option(
         help="GNSS topic (sensor_msgs/NavSatFix) when a ROS log has several.")] = None,
     reference_topic: Annotated[str | None, typer.Option(
-        help="A NavSatFix topic of the log to use as the reference (e.g. a DGPS receiver).")] = None,
+        help="A topic of the log to use as the reference: NavSatFix (e.g. a DGPS receiver), or nav_msgs/Odometry "
+             "or geometry_msgs/PoseStamped in a local ENU frame (see --reference-anchor).")] = None,
     odometry_topic: Annotated[str | None, typer.Option(
         help="Wheel odometry topic (nav_msgs/Odometry, TwistStamped or TwistWithCovarianceStamped in the vehicle "
              "frame), or none for no odometry.  [default: chosen by frame and rate; the notes say which]")] = None,
@@ -197,7 +203,7 @@ def process(
                               output_rate_hz=output_rate, progress=prog, imu_topic=imu_topic,
                               gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss,
                               formats=formats, embed_input=embed_input, gnss_outages=gnss_outage, smooth=smooth,
-                              odometry_topic=odometry_topic)
+                              odometry_topic=odometry_topic, reference_anchor=reference_anchor)
     except NavppError as exc:
         _fail(str(exc), exc)
         return

@@ -63,7 +63,7 @@ def inspect(log: str | Path, *, config: str | Path | Config | None = None
     import pandas as pd
 
     from .io.detect import list_topics, log_kind, read_topics
-    from .io.ros import FIX_TYPE, IMU_TYPE, SUPPORTED_TYPES
+    from .io.ros import FIX_TYPE, IMU_TYPE, POSE_TYPE, SUPPORTED_TYPES
 
     path = Path(log)
     kind, where = log_kind(path)
@@ -105,6 +105,8 @@ def inspect(log: str | Path, *, config: str | Path | Config | None = None
             role = "IMU" if n_imu == 1 else "IMU? (choose with --imu-topic)"
         elif t.msgtype == FIX_TYPE:
             role = "GNSS" if n_fix == 1 else "GNSS or reference? (--gnss-topic / --reference-topic)"
+        elif t.msgtype == POSE_TYPE:
+            role = "reference? (--reference-topic, anchored: --reference-anchor)"
         else:
             role = velocity_roles.get(t.topic, "")
         rows.append(StreamSummary(t.topic, t.msgtype, t.count, rate, first, last, gaps, largest, dup, role))

@@ -323,6 +323,9 @@ class Recording:
     warnings: tuple[str, ...] = field(default_factory=tuple)
     #: wheel odometry / vehicle speed when the log has it (:class:`OdometryData`)
     odometry: OdometryData | None = None
+    #: what reading chose, one line each (which reference and how it was found, a GNSS file
+    #: replacing the log's GNSS); printed with the run's notes
+    notes: tuple[str, ...] = field(default_factory=tuple)
 
     def absolute_time(self, t_rel: np.ndarray) -> np.ndarray:
         """Relative seconds -> float seconds on the log's own time base."""

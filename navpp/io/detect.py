@@ -64,7 +64,7 @@ def log_kind(path: Path) -> tuple[str, Path]:
                      "imu.csv and gnss.csv)")
 
 
-def _bag_paths(kind: str, path: Path) -> Path | list[Path]:
+def bag_paths(kind: str, path: Path) -> Path | list[Path]:
     """The files of a split ROS 1 recording given as a directory, else the path itself."""
     if kind == "ros1" and path.is_dir():
         return sorted(path.glob("*.bag"))
@@ -79,7 +79,7 @@ def list_topics(kind: str, path: Path) -> tuple[TopicInfo, ...]:
         return mcap_topics(path)
     from .rosbag import list_topics as bag_topics
 
-    return bag_topics(_bag_paths(kind, path))
+    return bag_topics(bag_paths(kind, path))
 
 
 def read_topics(kind: str, path: Path, topics: list[str]) -> LogContents:
@@ -90,7 +90,7 @@ def read_topics(kind: str, path: Path, topics: list[str]) -> LogContents:
         return read_mcap(path, topics)
     from .rosbag import read_rosbag
 
-    return read_rosbag(_bag_paths(kind, path), topics)
+    return read_rosbag(bag_paths(kind, path), topics)
 
 
 # --------------------------------------------------------------------------- wheel odometry role

@@ -21,6 +21,8 @@ FIX_TYPE = "sensor_msgs/NavSatFix"
 TWIST_COV_TYPE = "geometry_msgs/TwistWithCovarianceStamped"
 TWIST_TYPE = "geometry_msgs/TwistStamped"
 ODOM_TYPE = "nav_msgs/Odometry"
+#: A pose in a local frame: read only as a reference (:mod:`navpp.io.refposes`), not in SUPPORTED_TYPES.
+POSE_TYPE = "geometry_msgs/PoseStamped"
 SUPPORTED_TYPES = (IMU_TYPE, FIX_TYPE, TWIST_COV_TYPE, TWIST_TYPE, ODOM_TYPE)
 #: Types that can carry GNSS velocity (ENU) or, in a vehicle frame, wheel odometry.
 VELOCITY_TYPES = (TWIST_COV_TYPE, TWIST_TYPE)
