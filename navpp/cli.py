@@ -23,12 +23,29 @@ from typing import Annotated
 
 import typer
 
-from .cli_print import note, print_comparison, print_process_summary
+from .cli_print import note, print_compare_details, print_comparison, print_process_summary, process_details
 
 app = typer.Typer(
-    add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
+    no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
     help="Post-process inertial navigation logs: strapdown INS + loosely coupled GNSS filters.",
 )
+
+
+def _version(value: bool) -> None:
+    """``--version``: the package version (:mod:`navpp.version`), then exit 0."""
+    if value:
+        from .version import __version__
+
+        typer.echo(f"navpp {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True,
+                                          help="Print navpp's version and exit.")] = False,
+) -> None:
+    """Post-process inertial navigation logs: strapdown INS + loosely coupled GNSS filters."""
 
 
 def _fail(message: str, exc: BaseException | None = None) -> None:
@@ -77,6 +94,7 @@ class _Progress:
         self.quiet = quiet
         self.bar = None
         self.tasks: dict[str, int] = {}
+        self.marks: dict[str, list[float]] = {}     # stage -> [first call, last call], perf_counter s (--verbose)
 
     def __enter__(self):
         from rich.console import Console
@@ -92,6 +110,10 @@ class _Progress:
         return self
 
     def __call__(self, stage: str, fraction: float) -> None:
+        import time
+
+        now = time.perf_counter()
+        self.marks.setdefault(stage, [now, now])[1] = now
         if self.bar is None:
             return
         if stage not in self.tasks:
@@ -181,6 +203,9 @@ def process(
         "[default: [output] smooth, else off]", show_default=False)] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars, notes or summary (warnings about "
                                         "the data are still printed).")] = False,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Also print where the config, reference and "
+                                          "odometry came from, the config keys that differ from the defaults, "
+                                          "the time of each stage and the size of each file written.")] = False,
 ) -> None:
     """Process one log with one filter; write trajectory.csv or the --format files, diagnostics.csv,
     and metrics with a reference."""
@@ -189,6 +214,9 @@ def process(
     if embed_input and formats is not None and "mcap" not in formats:
         raise typer.BadParameter(f"needs mcap among --format (got {','.join(formats)}), e.g. --format "
                                  f"{','.join((*formats, 'mcap'))}", param_hint="'--embed-input'")
+    import time
+
+    t_start = time.perf_counter()
     try:
         from . import api
 
@@ -201,7 +229,7 @@ def process(
     except NavppError as exc:
         _fail(str(exc), exc)
         return
-    print_process_summary(res, quiet)
+    print_process_summary(res, quiet, process_details(res, prog.marks, t_start, time.perf_counter()) if verbose else [])
 
 
 DEFAULT_COMPARE = "ekf,aekf,ckf,vce-ckf,rwckf"
@@ -253,6 +281,9 @@ def compare(
                                           "and the rest go on. 0: no watchdog.",
         callback=_require(lambda v: math.isfinite(v) and v >= 0, "a number of seconds >= 0"))] = 600.0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars.")] = False,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Also print each log's config and where it came "
+                                          "from, each run's reference, and the wall time of each stage (reading "
+                                          "a log, a filter on a log).")] = False,
 ) -> None:
     """Run several filters on each log; print the MAE/RMSE table; write summary.csv and the report.
 
@@ -260,10 +291,13 @@ def compare(
     exits with 1 after writing everything else.  Exit 3: a CI gate (--baseline, --max-rmse)
     failed; the regressions are listed on stderr.  Exit 2: bad arguments.
     """
+    import time
+
     from . import comparison as cmp
     from .errors import NavppError
 
     tol, base_rows, limits = _gate_options(tolerance, max_rmse, baseline, scheduler, executor)
+    t_start = time.perf_counter()
     try:
         from .outfiles import prepare_out_dir, remove_created_dirs
 
@@ -288,6 +322,8 @@ def compare(
     failed = result.failed
     code = 1 if failed else 3 if verdict is not None and not verdict.passed else 0
     print_comparison(result, json_out, verdict, code)
+    if verbose and not json_out:
+        print_compare_details(result, logs, config, prog.marks, t_start, time.perf_counter())
     if failed:
         _fail_runs(failed, len(result.rows))
     if code == 3:
@@ -577,6 +613,15 @@ def filters_cmd() -> None:
 
     for name, cls in sorted(FILTERS.items()):
         typer.echo(f"{name:<10} {cls.summary}  [{cls.paper}]")
+
+
+@app.command("config")
+def config_cmd() -> None:
+    """Print a commented TOML template of every config key with its default, unit and meaning
+    (navpp config > navpp.toml; it loads as the built-in defaults)."""
+    from .config_template import config_template
+
+    typer.echo(config_template(), nl=False)
 
 
 def main() -> None:
