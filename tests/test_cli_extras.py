@@ -107,6 +107,16 @@ def _size(path: Path) -> str:
     return f"{path.name} {n / 1e6:.2f} MB" if n >= 100_000 else f"{path.name} {n / 1e3:.1f} kB"
 
 
+def _cut(log: Path, seconds: float) -> Path:
+    """The CSV log cut to its first ``seconds`` s (every file's rows by their stamp): a cheaper run."""
+    for name in ("imu.csv", "gnss.csv", "reference.csv"):
+        lines = (log / name).read_text().splitlines()
+        t0 = float(lines[1].split(",")[0])
+        (log / name).write_text("\n".join([lines[0]] + [x for x in lines[1:] if float(x.split(",")[0]) < t0 + seconds])
+                                + "\n")
+    return log
+
+
 def test_smoothed_verbose_run_writes_and_names_the_forward_tum(log_copy, tmp_path):
     """One CLI run: --smooth --format csv,tum -v.  The note names the forward files written; the
     forward TUM read back matches trajectory_forward.csv (another writer) in the TUM's own ENU
@@ -116,6 +126,7 @@ def test_smoothed_verbose_run_writes_and_names_the_forward_tum(log_copy, tmp_pat
 
     from navpp.geodesy import geodetic_to_enu
 
+    _cut(log_copy, 60.0)                   # 30 s still, 30 s driving
     toml = log_copy / "navpp.toml"
     text = toml.read_text()
     assert "[gnss]\n" in text and "[output]" not in text and "gate_probability" not in text
@@ -168,3 +179,23 @@ def test_forward_outputs_note_names_what_is_written(formats, forward):
         assert (name in note) == (f in formats)
 
 
+
+
+@pytest.mark.slow          # a compare run with a worker's start-up: about 4.5 s
+def test_compare_verbose_names_config_reference_and_stages(log_copy, tmp_path):
+    log = _cut(log_copy, 60.0)
+    toml = log / "navpp.toml"
+    toml.write_text(toml.read_text().replace("[gnss]\n", "[gnss]\ngate_probability = 0.999\n"))
+    res = runner.invoke(app, ["compare", str(log), "--filters", "ekf", "--out", str(tmp_path / "c"), "-v"])
+    assert res.exit_code == 0, res.output
+    err = " ".join(res.stderr.split())
+    assert (f"{log}: config {toml}; 1 differs from the defaults: [gnss] gate_probability = 0.999; "
+            f"reference {log / 'reference.csv'}") in err
+    stages = re.search(r"stages done at \(s from the start\): (.*?) ·", err + " ·").group(1)
+    ends = [(name, float(t)) for name, t in re.findall(r"(\S+(?: \S+)?) \+([\d.]+)", stages)]
+    assert [n for n, _ in ends] == ["reading log", "log ekf", "all runs"]
+    assert [t for _, t in ends] == sorted(t for _, t in ends)
+    runtime = float(next(line for line in (tmp_path / "c" / "summary.csv").read_text().splitlines()[1:]).split(",")[
+        (tmp_path / "c" / "summary.csv").read_text().splitlines()[0].split(",").index("runtime_s")])
+    total = re.search(r"total ([\d.]+) s wall time for 1 runs; their filters took ([\d.]+) s in all", err)
+    assert total and abs(float(total.group(2)) - runtime) < 0.01 and float(total.group(1)) >= runtime
