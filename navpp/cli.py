@@ -162,11 +162,19 @@ def _gnss_outages(values: list[str] | None) -> tuple[tuple[float, float], ...] |
         raise typer.BadParameter(str(exc).removeprefix("--gnss-outage: ")) from None
 
 
+def _filter_names(incomplete: str) -> list[str]:
+    """Shell completion of ``--filter``: the registered filter names starting with ``incomplete``."""
+    from .filters import FILTERS
+
+    return [name for name in sorted(FILTERS) if name.startswith(incomplete)]
+
+
 @app.command()
 def process(
     log: Annotated[Path, typer.Argument(metavar="LOG", help="Log: an MCAP file, a ROS 1 bag, a ROS 2 bag directory, "
                                         "or a directory with imu.csv and gnss.csv (reference.csv optional).")],
-    filter: Annotated[str, typer.Option("--filter", "-f", help="Filter name (see `navpp filters`).")] = "ekf",
+    filter: Annotated[str, typer.Option("--filter", "-f", help="Filter name (see `navpp filters`).",
+                                        autocompletion=_filter_names)] = "ekf",
     config: Annotated[Path | None, typer.Option(help="TOML config; default: navpp.toml in the log directory, "
                                                    "else the automotive preset.")] = None,
     reference: Annotated[Path | None, typer.Option(help="Reference CSV (t, lat, lon, alt[, ve, vn, vu, roll, "

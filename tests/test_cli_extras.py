@@ -44,6 +44,11 @@ def test_shell_completion_is_offered_and_completes(monkeypatch):
     assert got.stdout.split() == ["config"]
     env = {"_NAVPP_COMPLETE": "complete_bash", "COMP_WORDS": "navpp process LOG --verb", "COMP_CWORD": "3"}
     assert runner.invoke(app, [], prog_name="navpp", env=env).stdout.split() == ["--verbose"]
+    from navpp.filters import FILTERS
+
+    env = {"_NAVPP_COMPLETE": "complete_bash", "COMP_WORDS": "navpp process LOG --filter a", "COMP_CWORD": "4"}
+    assert runner.invoke(app, [], prog_name="navpp", env=env).stdout.split() == sorted(
+        n for n in FILTERS if n.startswith("a"))
 
 
 def _template_keys(text: str) -> dict[str, list[str]]:
