@@ -206,8 +206,9 @@ def process(
         help="Simulate a GNSS outage: drop the fixes from START for DUR seconds (s from the log start, the "
              "first IMU sample); repeatable.  The metrics report each window.  [default: [gnss] outages]")] = None,
     smooth: Annotated[bool | None, typer.Option(
-        "--smooth/--no-smooth", help="Smooth the forward run backwards (Rauch-Tung-Striebel): trajectory.csv is the "
-        "smoothed trajectory, trajectory_forward.csv the forward one, the metrics show both.  "
+        "--smooth/--no-smooth", help="Smooth the forward run backwards (Rauch-Tung-Striebel): the trajectory files "
+        "hold the smoothed trajectory, trajectory_forward.csv/.tum (and the MCAP's forward topics) the forward one, "
+        "the metrics show both.  "
         "[default: [output] smooth, else off]", show_default=False)] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars, notes or summary (warnings about "
                                         "the data are still printed).")] = False,

@@ -691,7 +691,8 @@ class OutputConfig:
         process --format`` overrides it.
     smooth : bool, default false.  Smooth the forward run backwards (Rauch-Tung-Striebel):
         the written trajectory is the smoothed one, the forward one is kept beside it
-        (``trajectory_forward.csv``) and the metrics show both; ``--smooth`` turns it on.
+        (``trajectory_forward.csv``, ``trajectory_forward.tum``, the MCAP's forward topics, by
+        the formats written) and the metrics show both; ``--smooth`` turns it on.
     """
 
     rate_hz: float | None = None
