@@ -36,17 +36,18 @@ from .outfiles import claimed_out_dir, os_reason
 from .reading import CONFIG_IN_LOG_DIR, companion, read_log, resolve_config
 from .recording import Recording, Solution
 
-__all__ = ["CONFIG_IN_LOG_DIR", "FORMAT_FILES", "OUTPUT_FILES", "ProcessResult", "StreamSummary", "apply_outages",
-           "check_formats", "check_output_rate", "companion", "default_out_dir", "forced_fix_warnings", "inspect",
-           "make_filter", "mcap_writer", "process", "read_log", "reference_checks", "resample_solution",
-           "resolve_config", "run_inputs", "run_metrics", "simulate_log", "smoothing_metrics", "write_outputs"]
+__all__ = ["CONFIG_IN_LOG_DIR", "FORMAT_FILES", "FORWARD_OUTPUTS", "OUTPUT_FILES", "ProcessResult", "StreamSummary",
+           "apply_outages", "check_formats", "check_output_rate", "companion", "default_out_dir",
+           "forced_fix_warnings", "forward_outputs_note", "inspect", "make_filter", "mcap_writer", "process",
+           "read_log", "reference_checks", "resample_solution", "resolve_config", "run_inputs", "run_metrics",
+           "simulate_log", "smoothing_metrics", "write_outputs"]
 
 #: Files navpp writes into an output directory.  After a successful run, any of these that the
 #: run did not write (e.g. metrics from an earlier run with a reference, or a trajectory.kml
 #: from a run with ``--format kml``) are removed, so the directory never mixes results of
 #: different runs.  Only these exact names are touched.
 OUTPUT_FILES = ("trajectory.csv", "trajectory_forward.csv", "diagnostics.csv", "metrics.json", "metrics.md",
-                "trajectory.mcap", "trajectory.tum", "trajectory.geojson", "trajectory.kml")
+                "trajectory.mcap", "trajectory.tum", "trajectory.geojson", "trajectory.kml", "trajectory_forward.tum")
 #: The file each ``--format`` / ``[output] formats`` name writes.
 FORMAT_FILES = {"csv": "trajectory.csv", "mcap": "trajectory.mcap", "tum": "trajectory.tum",
                 "geojson": "trajectory.geojson", "kml": "trajectory.kml"}
@@ -456,8 +457,9 @@ def _plan(log: Path, *, filter_name: str, config: str | Path | Config | None, re
     inputs: set[tuple[int, int]] = set()
     if write:        # before anything is created or read: a run whose result would replace its own input
         inputs = run_inputs(log, config, reference, gnss_file)
-        refuse_overwriting_inputs(out, [FORMAT_FILES[f] for f in chosen_formats] + list(OUTPUT_FILES[1:5]),
-                                  inputs, label)
+        forward_tum = [FORWARD_OUTPUTS["tum"]] if smooth and "tum" in chosen_formats else []
+        refuse_overwriting_inputs(out, [FORMAT_FILES[f] for f in chosen_formats] + list(OUTPUT_FILES[1:5])
+                                  + forward_tum, inputs, label)
     return _Plan(log, cfg, config, filter_name, filt, reference, gnss_file, topics, rate, rate_what,
                  tuple(chosen_formats), embed_input, tuple(windows), smooth, write, out, label, inputs,
                  reference_anchor)
@@ -530,9 +532,28 @@ def _run(plan: _Plan, progress: Callable[[str, float], None] | None) -> ProcessR
                 + tuple(reference_checks(rec, cfg, metrics)))
     if plan.smooth:
         notes += (f"smoothed backwards (Rauch-Tung-Striebel) over {result.smoothed.nodes} forward nodes in "
-                  f"{result.smoothed.runtime_s:.2f} s; trajectory_forward.csv holds the forward solution",)
+                  f"{result.smoothed.runtime_s:.2f} s; {forward_outputs_note(plan.formats, plan.write)}",)
     return ProcessResult(plan.filter_name, rec, sol_out, result, metrics, plan.out, tuple(files), cfg, notes,
                          warnings, tuple(outages), fwd_out)
+
+
+#: Where a smoothed run keeps the forward filter's solution, per output format (``--format``).
+FORWARD_OUTPUTS = {"csv": "trajectory_forward.csv", "tum": "trajectory_forward.tum",
+                   "mcap": "the /navpp/forward/fix and /navpp/forward/odometry topics of trajectory.mcap"}
+
+
+def forward_outputs_note(formats: Sequence[str], write: bool = True) -> str:
+    """Where a smoothed run's forward solution went, by the formats written (:data:`FORWARD_OUTPUTS`;
+    geojson and kml hold the smoothed trajectory only)."""
+    where = [FORWARD_OUTPUTS[f] for f in formats if f in FORWARD_OUTPUTS]
+    if not write:
+        return "the forward solution is ProcessResult.forward (nothing written)"
+    if not where:
+        verb = "holds" if len(formats) == 1 else "hold"
+        return (f"the forward solution is not written ({', '.join(formats)} {verb} the smoothed one only; "
+                "--format csv, tum or mcap keeps it)")
+    return ("the forward solution is in " + ", ".join(where[:-1]) + (" and " if len(where) > 1 else "")
+            + where[-1])
 
 
 def odometry_note(rec: Recording, cfg: Config) -> tuple[str, ...]:
@@ -635,6 +656,9 @@ def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solu
     for fmt in formats:
         if fmt == "tum":
             outputs.append((FORMAT_FILES[fmt], lambda p: exports.write_tum(p, sol_out, rec, **named)))
+            if forward_out is not None:
+                outputs.append((FORWARD_OUTPUTS["tum"], lambda p: exports.write_tum(
+                    p, forward_out, rec, filter_name=f"{filter_name} (forward, not smoothed)", log=str(log))))
         elif fmt == "geojson":
             outputs.append((FORMAT_FILES[fmt], lambda p: exports.write_geojson(p, sol_out, rec, metrics=metrics,
                                                                               **named)))

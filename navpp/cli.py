@@ -23,12 +23,29 @@ from typing import Annotated
 
 import typer
 
-from .cli_print import note, print_comparison, print_process_summary
+from .cli_print import note, print_compare_details, print_comparison, print_process_summary, process_details
 
 app = typer.Typer(
-    add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
+    no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
     help="Post-process inertial navigation logs: strapdown INS + loosely coupled GNSS filters.",
 )
+
+
+def _version(value: bool) -> None:
+    """``--version``: the package version (:mod:`navpp.version`), then exit 0."""
+    if value:
+        from .version import __version__
+
+        typer.echo(f"navpp {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True,
+                                          help="Print navpp's version and exit.")] = False,
+) -> None:
+    """Post-process inertial navigation logs: strapdown INS + loosely coupled GNSS filters."""
 
 
 def _fail(message: str, exc: BaseException | None = None) -> None:
@@ -77,6 +94,7 @@ class _Progress:
         self.quiet = quiet
         self.bar = None
         self.tasks: dict[str, int] = {}
+        self.marks: dict[str, list[float]] = {}     # stage -> [first call, last call], perf_counter s (--verbose)
 
     def __enter__(self):
         from rich.console import Console
@@ -92,6 +110,10 @@ class _Progress:
         return self
 
     def __call__(self, stage: str, fraction: float) -> None:
+        import time
+
+        now = time.perf_counter()
+        self.marks.setdefault(stage, [now, now])[1] = now
         if self.bar is None:
             return
         if stage not in self.tasks:
@@ -140,11 +162,19 @@ def _gnss_outages(values: list[str] | None) -> tuple[tuple[float, float], ...] |
         raise typer.BadParameter(str(exc).removeprefix("--gnss-outage: ")) from None
 
 
+def _filter_names(incomplete: str) -> list[str]:
+    """Shell completion of ``--filter``: the registered filter names starting with ``incomplete``."""
+    from .filters import FILTERS
+
+    return [name for name in sorted(FILTERS) if name.startswith(incomplete)]
+
+
 @app.command()
 def process(
     log: Annotated[Path, typer.Argument(metavar="LOG", help="Log: an MCAP file, a ROS 1 bag, a ROS 2 bag directory, "
                                         "or a directory with imu.csv and gnss.csv (reference.csv optional).")],
-    filter: Annotated[str, typer.Option("--filter", "-f", help="Filter name (see `navpp filters`).")] = "ekf",
+    filter: Annotated[str, typer.Option("--filter", "-f", help="Filter name (see `navpp filters`).",
+                                        autocompletion=_filter_names)] = "ekf",
     config: Annotated[Path | None, typer.Option(help="TOML config; default: navpp.toml in the log directory, "
                                                    "else the automotive preset.")] = None,
     reference: Annotated[Path | None, typer.Option(help="Reference CSV (t, lat, lon, alt[, ve, vn, vu, roll, "
@@ -182,11 +212,15 @@ def process(
         help="Simulate a GNSS outage: drop the fixes from START for DUR seconds (s from the log start, the "
              "first IMU sample); repeatable.  The metrics report each window.  [default: [gnss] outages]")] = None,
     smooth: Annotated[bool | None, typer.Option(
-        "--smooth/--no-smooth", help="Smooth the forward run backwards (Rauch-Tung-Striebel): trajectory.csv is the "
-        "smoothed trajectory, trajectory_forward.csv the forward one, the metrics show both.  "
+        "--smooth/--no-smooth", help="Smooth the forward run backwards (Rauch-Tung-Striebel): the trajectory files "
+        "hold the smoothed trajectory, trajectory_forward.csv/.tum (and the MCAP's forward topics) the forward one, "
+        "the metrics show both.  "
         "[default: [output] smooth, else off]", show_default=False)] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars, notes or summary (warnings about "
                                         "the data are still printed).")] = False,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Also print where the config, reference and "
+                                          "odometry came from, the config keys that differ from the defaults, "
+                                          "the time of each stage and the size of each file written.")] = False,
 ) -> None:
     """Process one log with one filter; write trajectory.csv or the --format files, diagnostics.csv,
     and metrics with a reference."""
@@ -195,6 +229,9 @@ def process(
     if embed_input and formats is not None and "mcap" not in formats:
         raise typer.BadParameter(f"needs mcap among --format (got {','.join(formats)}), e.g. --format "
                                  f"{','.join((*formats, 'mcap'))}", param_hint="'--embed-input'")
+    import time
+
+    t_start = time.perf_counter()
     try:
         from . import api
 
@@ -207,7 +244,7 @@ def process(
     except NavppError as exc:
         _fail(str(exc), exc)
         return
-    print_process_summary(res, quiet)
+    print_process_summary(res, quiet, process_details(res, prog.marks, t_start, time.perf_counter()) if verbose else [])
 
 
 DEFAULT_COMPARE = "ekf,aekf,ckf,vce-ckf,rwckf"
@@ -259,6 +296,9 @@ def compare(
                                           "and the rest go on. 0: no watchdog.",
         callback=_require(lambda v: math.isfinite(v) and v >= 0, "a number of seconds >= 0"))] = 600.0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars.")] = False,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Also print each log's config and where it came "
+                                          "from, each run's reference, and the wall time of each stage (reading "
+                                          "a log, a filter on a log).")] = False,
 ) -> None:
     """Run several filters on each log; print the MAE/RMSE table; write summary.csv and the report.
 
@@ -266,10 +306,13 @@ def compare(
     exits with 1 after writing everything else.  Exit 3: a CI gate (--baseline, --max-rmse)
     failed; the regressions are listed on stderr.  Exit 2: bad arguments.
     """
+    import time
+
     from . import comparison as cmp
     from .errors import NavppError
 
     tol, base_rows, limits = _gate_options(tolerance, max_rmse, baseline, scheduler, executor)
+    t_start = time.perf_counter()
     try:
         from .outfiles import prepare_out_dir, remove_created_dirs
 
@@ -294,6 +337,8 @@ def compare(
     failed = result.failed
     code = 1 if failed else 3 if verdict is not None and not verdict.passed else 0
     print_comparison(result, json_out, verdict, code)
+    if verbose and not json_out:
+        print_compare_details(result, logs, config, prog.marks, t_start, time.perf_counter())
     if failed:
         _fail_runs(failed, len(result.rows))
     if code == 3:
@@ -583,6 +628,15 @@ def filters_cmd() -> None:
 
     for name, cls in sorted(FILTERS.items()):
         typer.echo(f"{name:<10} {cls.summary}  [{cls.paper}]")
+
+
+@app.command("config")
+def config_cmd() -> None:
+    """Print a commented TOML template of every config key with its default, unit and meaning
+    (navpp config > navpp.toml; it loads as the built-in defaults)."""
+    from .config_template import config_template
+
+    typer.echo(config_template(), nl=False)
 
 
 def main() -> None:

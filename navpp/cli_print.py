@@ -21,10 +21,10 @@ def note(console: Any, line: str) -> None:
     console.print(f"[dim]·[/] {escape(line)}")
 
 
-def print_process_summary(res: Any, quiet: bool) -> None:
+def print_process_summary(res: Any, quiet: bool, details: list[str] = ()) -> None:
     """``navpp process``: its warnings and notes (stderr), then the run's figures, the error
     table against the reference, the outage lines and the files written (stdout); ``quiet``:
-    the warnings only."""
+    the warnings only.  ``details``: more note lines after the notes (``--verbose``)."""
     from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
@@ -34,7 +34,7 @@ def print_process_summary(res: Any, quiet: bool) -> None:
         err.print(f"[yellow]warning:[/] {escape(line)}")
     if quiet:
         return
-    for line in res.notes:
+    for line in (*res.notes, *details):
         note(err, line)
     compile_s = getattr(res.run, "compile_s", 0.0) or 0.0
     if compile_s > 0.5:
@@ -178,3 +178,98 @@ def print_gate(verdict) -> None:
         tab.add_row(escape(Path(f.log).name), f.filter, f.metric, f.gate, f"{f.reference:.4f}", f"{f.allowed:.4f}",
                     "none" if f.value is None else f"{f.value:.4f}", worse)
     err.print(tab)
+
+
+def config_changes(cfg: Any) -> list[str]:
+    """The keys of ``cfg`` (a :class:`navpp.config.Config`) whose value differs from the built-in
+    default, as ``[section] key = value`` (TOML values), and each ``[filter.<name>]`` table given."""
+    import dataclasses
+
+    from .config_template import config_sections, toml_value
+
+    out = []
+    for name, cls in config_sections().items():
+        ours, default = getattr(cfg, name), cls()
+        for f in dataclasses.fields(cls):
+            value = getattr(ours, f.name)
+            if value != getattr(default, f.name):
+                out.append(f"[{name}] {f.name} = " + ("(not set)" if value is None else toml_value(value)))
+    for fname, options in cfg.filters.items():
+        out.append(f"[filter.{fname}] " + ", ".join(f"{k} = {v!r}" for k, v in options.items()))
+    return out
+
+
+def _stage_ends(marks: dict[str, list[float]], t_start: float) -> str:
+    """``stage +a.b`` per progress stage: when it last reported (s from the command's start), in
+    that order; stages may overlap (``compare --jobs``), so ends are shown, not durations."""
+    ends = sorted((t1, stage) for stage, (_, t1) in marks.items())
+    return ", ".join(f"{stage} +{t1 - t_start:.2f}" for t1, stage in ends)
+
+
+def _differ(changes: list[str]) -> str:
+    if not changes:
+        return "all keys at their defaults"
+    return f"{len(changes)} differ{'s' * (len(changes) == 1)} from the defaults: " + "; ".join(changes)
+
+
+def _size(path: Path) -> str:
+    try:
+        n = path.stat().st_size
+    except OSError:
+        return f"{path.name} (gone)"
+    return f"{path.name} {n / 1e6:.2f} MB" if n >= 100_000 else f"{path.name} {n / 1e3:.1f} kB"
+
+
+def process_details(res: Any, marks: dict[str, list[float]], t_start: float, t_end: float) -> list[str]:
+    """``navpp process --verbose``: note lines on where the config, reference and odometry came
+    from, the config keys that differ from the defaults, the wall time of each stage (s, one
+    after the other: each runs to the last progress report of its stage) and the size of each
+    file written."""
+    cfg, rec, run = res.config, res.recording, res.run
+    changes = config_changes(cfg)
+    lines = [f"config: {cfg.source}; {_differ(changes)}"]
+    lines.append("reference: " + (rec.reference.source if rec.reference is not None else "none (no error figures)"))
+    od = rec.odometry
+    lines.append(f"odometry: {od.source} ({len(od)} samples)" if od is not None and len(od) else "odometry: none")
+    labels = {"reading": "start-up and reading", "filtering": "alignment and filtering"}
+    parts, last = [], t_start
+    for stage, (_, t1) in sorted(marks.items(), key=lambda kv: kv[1][1]):
+        parts.append(f"{labels.get(stage, stage)} {t1 - last:.2f} s")
+        last = t1
+    compile_s = getattr(run, "compile_s", 0.0) or 0.0
+    smooth_s = run.smoothed.runtime_s if getattr(run, "smoothed", None) is not None else 0.0
+    rest = "smoothing, metrics and files" if res.smoothed else "metrics and files"
+    lines.append("wall time: " + ", ".join(parts) + f", {rest} {t_end - last:.2f} s; total "
+                 f"{t_end - t_start:.2f} s (the filter {run.runtime_s - smooth_s:.2f} s"
+                 + (f", smoothing {smooth_s:.2f} s" if res.smoothed else "")
+                 + (f", kernel compilation {compile_s:.2f} s" if compile_s > 0 else "") + ")")
+    if res.files:
+        lines.append("files: " + ", ".join(_size(p) for p in res.files))
+    return lines
+
+
+def print_compare_details(result: Any, logs: list[Path], config: Path | None, marks: dict[str, list[float]],
+                          t_start: float, t_end: float) -> None:
+    """``navpp compare --verbose``: on stderr, as notes: each log's config (its source and the
+    keys that differ from the defaults) and reference, when each stage (reading a log, a filter
+    on a log) was done, and the total wall time against the sum of the runs' filter times."""
+    from rich.console import Console
+
+    from .errors import NavppError
+    from .reading import resolve_config
+
+    err = Console(stderr=True, highlight=False, soft_wrap=True)
+    for log in logs:
+        try:
+            cfg = resolve_config(Path(log), config)
+        except NavppError as exc:
+            note(err, f"{log}: config not read ({exc})")
+            continue
+        changes = config_changes(cfg)
+        refs = sorted({r.reference for r in result.rows if r.log == str(log) and r.reference})
+        note(err, f"{log}: config {cfg.source}; {_differ(changes)}; reference {', '.join(refs) if refs else 'none'}")
+    if marks:
+        note(err, f"stages done at (s from the start): {_stage_ends(marks, t_start)}")
+    ran = [r.runtime_s for r in result.rows if r.ok]
+    note(err, f"total {t_end - t_start:.2f} s wall time for {len(result.rows)} runs; their filters took "
+              f"{sum(ran):.2f} s in all")

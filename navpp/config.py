@@ -1,6 +1,6 @@
 """Run configuration: TOML loading, validation, IMU presets and datasheet-unit conversion.
 
-One TOML file, every field optional (see INTERFACES.md, "Configuration (TOML)")::
+One TOML file, every field optional (README.md, "Configuration file"; `navpp config` prints every key)::
 
     [imu]      preset, noise in datasheet units, mounting_rpy_deg, gyro_units, accel_units
     [gnss]     lever_arm_m, default_std_m, default_vel_std_mps, gate_probability, ...
@@ -104,7 +104,7 @@ PRESETS: dict[str, dict[str, float]] = {
     "tactical": _preset((0.1, 1.0, 0.1, 600.0, 0.03, 0.3, 0.02, 600.0)),
     "navigation": _preset((0.003, 0.03, 0.01, 3600.0, 0.03, 0.025, 0.01, 3600.0)),
 }
-"""IMU noise presets in datasheet units (INTERFACES.md table), keyed by ``NOISE_KEYS``."""
+"""IMU noise presets in datasheet units (README.md, "Configuration file"), keyed by ``NOISE_KEYS``."""
 
 PRESET_NAMES: Final[tuple[str, ...]] = tuple(PRESETS)
 DEFAULT_PRESET: Final[str] = "automotive"
@@ -691,7 +691,8 @@ class OutputConfig:
         process --format`` overrides it.
     smooth : bool, default false.  Smooth the forward run backwards (Rauch-Tung-Striebel):
         the written trajectory is the smoothed one, the forward one is kept beside it
-        (``trajectory_forward.csv``) and the metrics show both; ``--smooth`` turns it on.
+        (``trajectory_forward.csv``, ``trajectory_forward.tum``, the MCAP's forward topics, by
+        the formats written) and the metrics show both; ``--smooth`` turns it on.
     """
 
     rate_hz: float | None = None

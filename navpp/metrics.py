@@ -11,7 +11,7 @@ Steps, each a tested function of its own:
    up = height error, metres.
 4. :func:`error_stats` reduces errors to MAE / RMSE / max / p95 per axis, horizontally and in 3-D.
 
-:func:`compute_metrics` chains them into the ``metrics.json`` structure of INTERFACES.md and,
+:func:`compute_metrics` chains them into the ``metrics.json`` structure of README.md ("Outputs") and,
 when given the raw GNSS fixes, adds their own accuracy against the reference antenna position;
 with simulated GNSS outages, :func:`outage_metrics` adds the errors inside each window.
 
@@ -350,7 +350,7 @@ def compute_metrics(sol: Solution, ref: ReferenceData, *, filter_name: str, log:
                     outages: Sequence[tuple[float, float]] = (),
                     outages_removed: Sequence[int] | None = None,
                     updates: dict[str, dict[str, int]] | None = None) -> dict[str, Any]:
-    """The ``metrics.json`` structure (INTERFACES.md) of a solution against a reference.
+    """The ``metrics.json`` structure (README.md, "Outputs") of a solution against a reference.
 
     Keys: ``filter``, ``log``, ``reference``, ``epochs`` (reference epochs inside the solution
     span), ``position_m`` (:func:`error_stats` of the ENU position errors, m), ``velocity_mps``

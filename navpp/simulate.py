@@ -190,7 +190,7 @@ class ImuGrade:
     scale_factor_ppm: float  #: gyro and accel alike, 1-sigma per axis
 
 
-#: The ``[imu]`` presets of INTERFACES.md plus a scale-factor error per grade, and "ideal".
+#: The ``[imu]`` presets of navpp.config.PRESETS plus a scale-factor error per grade, and "ideal".
 IMU_GRADES: dict[str, ImuGrade] = {
     "consumer": ImuGrade(0.5, 200.0, 10.0, 100.0, 0.1, 20.0, 1.0, 100.0, 3000.0),
     "automotive": ImuGrade(1.0, 10.0, 1.0, 300.0, 0.05, 2.0, 0.1, 300.0, 500.0),

@@ -5,7 +5,7 @@ Definitions used throughout navpp
 ``unix``
     UTC seconds since 1970-01-01 00:00:00 UTC, POSIX style (every day has 86400 s, leap
     seconds are not counted).  ROS stamps are on this base.
-``gpst`` (the ``[time] base = "gpst"`` of ``INTERFACES.md``)
+``gpst`` (the ``[time] base = "gpst"`` of the config (README.md, "Configuration file"))
     GPS time expressed as seconds since 1970-01-01 00:00:00 *on the GPS time scale*, i.e. the
     GPS calendar date and time of day converted the POSIX way.  Numerically
     ``gpst = unix + (GPS - UTC)``: 18 s ahead of ``unix`` since 2017-01-01, equal to it before
@@ -239,7 +239,7 @@ def unix_to_gps_week_tow(unix_seconds: npt.ArrayLike) -> tuple[np.ndarray, Float
 
 
 # --------------------------------------------------------------------------------------------
-# between the time bases of INTERFACES.md
+# between the time bases of ``[time] base``
 # --------------------------------------------------------------------------------------------
 
 

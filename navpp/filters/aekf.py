@@ -5,7 +5,7 @@ the improved one gains with the previous epoch's R and drops the ``- H P- H^T`` 
 positive definite.  Only fixes that pass the innovation gate are learnt into R (not those forced
 through it after a run of rejections).
 
-References: paper 002 section 3; ALGORITHMS.md "Sage-Husa and the improved adaptive EKF".
+References: paper 002 section 3; docs/algorithms.md "Sage-Husa and the improved adaptive EKF".
 """
 
 from __future__ import annotations

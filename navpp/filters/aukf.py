@@ -5,7 +5,7 @@ After the unscented measurement prediction (``nu``, ``Pzz`` *without* R as in
 
     ``lambda_k = min(max_fading, max(1, (nu^T nu - tr R) / tr(Pzz)))``
 
-i.e. ALGORITHMS.md's ``(d^T d - tr R) / tr(Pzz' - R)`` with ``Pzz' = Pzz + R`` the innovation
+i.e. docs/algorithms.md's ``(d^T d - tr R) / tr(Pzz' - R)`` with ``Pzz' = Pzz + R`` the innovation
 covariance including R (so the denominator is the trace of the predicted-measurement spread
 alone).  ``nu^T nu`` is the squared innovation in the measurement's units (GNSS: m^2, ENU).
 When ``lambda_k > 1`` the propagated part of the prior is inflated, leaving the process noise
@@ -17,7 +17,7 @@ the sigma points are redrawn from the new P- and ``nu, Pzz, Pxz`` recomputed bef
 the posterior covariance is then ``P- - K S K^T`` about the inflated P-.  With ``adapt = false``
 (the oracle option) ``lambda_k = 1`` always and the filter is the UKF exactly.
 
-Readings and choices (the original is not at hand; ALGORITHMS.md "Paper 001's comparison
+Readings and choices (the original is not at hand; docs/algorithms.md "Paper 001's comparison
 filters"):
 
 - ``Q`` is the process noise added since the last applied update: the adaptation's
@@ -37,7 +37,7 @@ filters"):
   of ~32 on standard deviations, far above what a gated fix needs on the INS (there, with the
   99.99 % gate and R dominating S, lambda stays below a few hundred), so the cap only guards
   against degenerate cases and ungated use.
-- ``detect_probability`` (default 0.999; 0 is ALGORITHMS.md's rule as written): with p > 0 the
+- ``detect_probability`` (default 0.999; 0 is docs/algorithms.md's rule as written): with p > 0 the
   filter fades only when the unfaded NIS exceeds the chi-square quantile p (a fault-detection test before
   adapting, as in Hajiyev and Soken's adaptive filters as we understand them; their papers
   are not at hand).  On the INS the rule as written fades on many GNSS epochs, because one
@@ -53,7 +53,7 @@ filters"):
 measurement update (1 when not fading, rejected or ``adapt = false``).
 
 References: paper 001 (comparison filter, its refs [6]/[12]); H. E. Soken, C. Hajiyev, adaptive
-fading UKF (2011); the strong-tracking fading factor of Zhou & Frank (1996); ALGORITHMS.md.
+fading UKF (2011); the strong-tracking fading factor of Zhou & Frank (1996); docs/algorithms.md.
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ class AUKFOptions(UKFOptions):
 
     adapt : apply the fading factor (false: the UKF exactly).
     max_fading : upper bound on lambda_k, >= 1 (see the module docstring).
-    detect_probability : in [0, 1), default 0.999.  0 (ALGORITHMS.md's rule): fade whenever
+    detect_probability : in [0, 1), default 0.999.  0 (docs/algorithms.md's rule): fade whenever
         lambda_k > 1.  p > 0: fade only when the unfaded NIS exceeds the chi-square(m)
         quantile p, i.e. when a test at significance 1 - p finds the innovation inconsistent
         with the UKF's prediction (see the module docstring).

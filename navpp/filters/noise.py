@@ -16,7 +16,7 @@ figures on the sample drive).
   (no subtraction, so R stays positive definite).
 
 References: paper 002 section 3 (eqs 6-13 for Sage-Husa, 14-16 for the improvements);
-ALGORITHMS.md "Sage-Husa and the improved adaptive EKF".
+docs/algorithms.md "Sage-Husa and the improved adaptive EKF".
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ weights ``beta ~ Dirichlet(1, ..., 1)`` (eq 23).  One weight vector enters the p
 and covariance (eqs 24-25) and the predicted measurement, its covariance and the
 cross-covariance (eqs 26-28); gain, update and covariance are eqs 29-32.
 
-Readings (ALGORITHMS.md, "Randomly weighted CKF"):
+Readings (docs/algorithms.md, "Randomly weighted CKF"):
 
 - The measurement update redraws points from ``P*-`` around ``x*-`` (eq 10) and every statistic
   is centred on a weighted mean (see ``covariance``), so with uniform weights RWCKF is exactly

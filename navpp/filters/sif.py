@@ -24,8 +24,8 @@ far better than that) that is after ``min_iter`` = 2 iterations; ``tol = 0`` alw
 ``max_iter`` iterations are taken from the Generator up front (one compiled call), so the random stream
 advances by the same amount per integral whatever ``tol`` stops at.
 
-Centred covariances (ALGORITHMS.md preamble).  Per iteration the rule gives first and second
-moments about a *fixed* reference: in the time update the propagated nominal ``f(x_hat)``
+Centred covariances (docs/algorithms.md, "Sigma-point filters on the INS").  Per iteration the
+rule gives first and second moments about a *fixed* reference: in the time update the propagated nominal ``f(x_hat)``
 (the image of the centre point), in the measurement update ``h(x_hat-)``; the points are error
 vectors ``f(x ⊞ dX_i) ⊟ f(x)``, already small.  Those moments are averaged over the iterations,
 and the covariance is formed once from the averages: ``P = M_bar - m_bar m_bar^T``.  This is
@@ -47,7 +47,7 @@ covariance that lost definiteness is repaired and counted like any sigma-point f
 
 References: J. Dunik, O. Straka, M. Simandl, "Stochastic integration filter", IEEE Trans.
 Automatic Control 58(6):1561-1566, 2013 (paper 001's ref [13], a comparison filter);
-ALGORITHMS.md "Paper 001's comparison filters (AUKF, SIF)".
+docs/algorithms.md "Paper 001's comparison filters (AUKF, SIF)".
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ Points are drawn in the model's error space around the mean (``x ⊞ dX_i``), pu
 the model itself (on the INS: every point through the real strapdown over the IMU samples of
 the interval, in one compiled call), brought back to error space about the propagated
 nominal, and recombined.  Covariances come from centred deviations, never from raw second
-moments (ALGORITHMS.md).  A rule (:mod:`navpp.filters.rules`) decides the points and weights.
+moments (docs/algorithms.md).  A rule (:mod:`navpp.filters.rules`) decides the points and weights.
 
 References: paper 001 eqs 3-18, paper 003 eqs 19-34 (CKF); Wan & van der Merwe (2000) (UKF).
 """

@@ -17,7 +17,7 @@ update, with or without a measurement there).  At node ``k`` the store keeps
 - ``reset[k]``: the update re-anchored the covariance (a fix forced through the gate): no
   information is carried back across it (the forward filter itself declared its prior wrong).
 
-Backward, for ``k = M-2 .. 0`` (ALGORITHMS.md; error-state form of Rauch, Tung & Striebel 1965):
+Backward, for ``k = M-2 .. 0`` (docs/algorithms.md; error-state form of Rauch, Tung & Striebel 1965):
 
 ``C_k = D_{k+1} (P_{k+1}^-)^{-1}`` (Cholesky solve),
 ``x_k^s = x_k^+ ⊞ C_k (x_{k+1}^s ⊟ x_{k+1}^-)``,

@@ -15,7 +15,7 @@ standard error of the mean estimates the integration error (the stopping rule's 
 
 References: J. Dunik, O. Straka, M. Simandl, "Stochastic integration filter", IEEE Trans.
 Automatic Control 58(6):1561-1566, 2013 (its ref [13] in paper 001); the spherical-radial
-randomisation goes back to Genz & Monahan (1998).  ALGORITHMS.md "Paper 001's comparison
+randomisation goes back to Genz & Monahan (1998).  docs/algorithms.md "Paper 001's comparison
 filters (AUKF, SIF)".
 """
 

@@ -7,7 +7,7 @@ the model's noise groups (:class:`~navpp.filters.protocols.GroupedNoiseModel`; a
 them is one group, its ``process_noise``) and the :class:`~navpp.filters.states.Innovation`
 record, so the same code runs on the INS and on the papers' small benchmark models.
 
-Per accepted epoch (paper 003 eqs 37-39; ALGORITHMS.md "Helmert variance component
+Per accepted epoch (paper 003 eqs 37-39; docs/algorithms.md "Helmert variance component
 estimation"), with the prior covariance ``P⁻`` (n, n), ``A = (P⁻)⁻¹`` (Cholesky solves),
 ``S = Pzz + R`` (the innovation covariance: the papers' ``Pzz``), ``K = Pxz S⁻¹``, innovation
 ``d`` and ``Q = Σ_g f_g U_g`` (``U_g`` the configured, *unit* group covariance; ``f_g`` its
@@ -68,7 +68,7 @@ INS at the GNSS rate the process-noise groups have a tiny redundancy per epoch (
 noise barely reaches the position innovation directly), so ``min_redundancy`` keeps Q at its
 prior and only R is learnt (docs/papers.md gives the measured figures).
 
-References: paper 003 eqs 6-18 and 35-39; ALGORITHMS.md; Wang (2009) as cited by paper 003.
+References: paper 003 eqs 6-18 and 35-39; docs/algorithms.md; Wang (2009) as cited by paper 003.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ is the model's noise groups scaled by the adaptation's factors, the measurement 
 given R scaled per axis, and every update that passed the gate feeds the adaptation
 (:mod:`navpp.filters.vce`).  With ``adapt = "none"`` it is the CKF exactly.
 
-References: paper 003 eqs 6-18, 35-39 (VCE), 19-34 (CKF); ALGORITHMS.md.
+References: paper 003 eqs 6-18, 35-39 (VCE), 19-34 (CKF); docs/algorithms.md.
 """
 
 from __future__ import annotations

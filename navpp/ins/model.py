@@ -1,7 +1,7 @@
 """The INS as a state-space model for the filters: 15-element error space around a nominal.
 
 The error state ``dx`` (``true = nominal ⊞ dx``: attitude, velocity, position, gyro bias,
-accelerometer bias; ALGORITHMS.md) and the 16-element nominal state of
+accelerometer bias; docs/algorithms.md) and the 16-element nominal state of
 :mod:`navpp.ins.strapdown` are laid out in :mod:`navpp.ins.state`.  Filters see only
 ``plus``/``minus`` (⊞/⊟), ``transition`` (EKF: nominal propagation + Phi, Qd) and
 ``propagate_points`` (sigma-point filters: every point through the real strapdown).
@@ -12,7 +12,7 @@ Continuous error dynamics (psi-angle form, ENU; Groves 2013 eqs 14.64-14.72, pap
 ``dp' = dv``; ``dbg' = -dbg / tau_g + w``; ``dba' = -dba / tau_a + w`` (see
 :meth:`NoiseModel.bias_process` for how tau and the drive follow from the datasheet).
 Per covariance step of length T (<= ``cov_step_s``): ``Phi = I + F T + (F T)^2 / 2``,
-``Qd = (Phi G Qc G^T Phi^T + G Qc G^T) T / 2`` (ALGORITHMS.md), accumulated over the interval.
+``Qd = (Phi G Qc G^T Phi^T + G Qc G^T) T / 2`` (docs/algorithms.md), accumulated over the interval.
 """
 
 from __future__ import annotations

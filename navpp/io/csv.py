@@ -1,7 +1,7 @@
 """CSV logs: a directory holding ``imu.csv`` and ``gnss.csv`` (optionally ``reference.csv``, ``odometry.csv``).
 
 Schemas (header row required, comma separated, extra columns ignored and named once in a
-warning; see ``INTERFACES.md``):
+warning; see README.md, "Input: a CSV log"):
 
 - ``imu.csv``: ``t, gx, gy, gz, ax, ay, az``: angular rate (rad/s) and specific force (m/s^2)
   sampled at ``t``, body FLU; or increments ``t, dthx, dthy, dthz, dvx, dvy, dvz`` (rad, m/s)

@@ -1,4 +1,4 @@
-"""Output files: ``trajectory.csv``, ``metrics.json``, ``metrics.md`` (see INTERFACES.md).
+"""Output files: ``trajectory.csv``, ``metrics.json``, ``metrics.md`` (README.md, "Outputs").
 
 Every file is written through :func:`atomic_write`: the bytes go to a temporary name in the
 target directory, are flushed to disk, and the temporary file is renamed over the target only
@@ -40,7 +40,7 @@ __all__ = [
     "write_trajectory_csv",
 ]
 
-#: Column names of ``trajectory.csv``, in order (INTERFACES.md).
+#: Column names of ``trajectory.csv``, in order (README.md, "Outputs").
 TRAJECTORY_COLUMNS: tuple[str, ...] = (
     "t", "lat", "lon", "alt", "ve", "vn", "vu", "roll", "pitch", "heading",
     "std_e", "std_n", "std_u",
@@ -293,7 +293,7 @@ def _time_field(t_rel: np.ndarray, t0_s: float) -> _Field:
 
 
 def write_trajectory_csv(path: str | os.PathLike[str], sol: Solution, *, t0_s: float) -> None:
-    """Write ``trajectory.csv`` (INTERFACES.md): one row per solution epoch.
+    """Write ``trajectory.csv`` (README.md, "Outputs"): one row per solution epoch.
 
     Columns ``t, lat, lon, alt, ve, vn, vu, roll, pitch, heading, std_e, std_n, std_u``:
     ``t`` in seconds on the log's own time base (``t0_s + sol.t``, 6 decimals), latitude and

@@ -1,7 +1,7 @@
 """Paper 003's bearing-only tracking (eqs 40-41): a decaying 2-state target seen by a sensor
 circling the origin, CKF against VCE-CKF with the filters' Q at 3x and R at 4x the truth.
 
-Readings of the paper (ALGORITHMS.md, "The papers' benchmarks: readings") are stated in the
+Readings of the paper (docs/algorithms.md, "The papers' benchmarks: readings") are stated in the
 result's notes; the bearing is read as the four-quadrant ``atan2``.
 """
 
@@ -106,9 +106,9 @@ def run_bearing(runs: int, seed: int, filters: Sequence[str]) -> BenchResult:
          "atan2: the printed tan^-1 of a ratio loses the quadrant once s_k decays to ~0 (0.9 per step) and "
          "the sensor circles the origin; angle differences are wrapped into (-pi, pi] in the innovation and "
          "the points. 1 s steps, 500 s; truth x_0 ~ N(x0, P0), x0 = [20, 5], P0 = 0.1 I; filters start at "
-         "(x0, P0) with Q = 3 Q_true and R = 4 R_true (ALGORITHMS.md: 'bearing-only (eqs 40-41): Q at 3x "
+         "(x0, P0) with Q = 3 Q_true and R = 4 R_true (docs/algorithms.md: 'bearing-only (eqs 40-41): Q at 3x "
          "and R at 4x'). Runs: 20, the paper's. Gate off."),
-        ("VCE groups (ALGORITHMS.md): one per diagonal element of Q (q_s, q_t) and R. The 'paper' column of "
+        ("VCE groups (docs/algorithms.md): one per diagonal element of Q (q_s, q_t) and R. The 'paper' column of "
          "a factor row is the true value the paper's setup implies (Q at 3x -> 1/3, R at 4x -> 1/4): the "
          "paper claims VCE estimates the noise, without numbers. Factor = mean over runs of the factor "
          "reported at the last epoch; the factor(k) means over runs are in series."),

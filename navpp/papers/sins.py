@@ -15,7 +15,7 @@ Earth model (:mod:`navpp.geodesy`), the inverse of the strapdown's ENU mechanisa
 to navpp's strapdown this IMU reproduces the truth to micrometres over 400 s (the tests'
 oracle).
 
-Readings of the paper (it gives no more than the figures above; ALGORITHMS.md, "The papers'
+Readings of the paper (it gives no more than the figures above; docs/algorithms.md, "The papers'
 benchmarks: readings") are the fields of :class:`Paper002Scenario`, each documented there,
 and are repeated in the benchmark's notes.
 

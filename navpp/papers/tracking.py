@@ -3,7 +3,7 @@ Table 1).
 
 The truth moves by eq 38 with the systematic error ``g(x) = -0.5 |v| v`` (eq 41); the filters
 run the linear model without ``g`` and with the process noise scaled by lambda = 2 (eq 39) on
-position measurements with R = I.  Readings of the paper (ALGORITHMS.md, "The papers'
+position measurements with R = I.  Readings of the paper (docs/algorithms.md, "The papers'
 benchmarks: readings") are stated in the result's notes: ``g`` is taken at the previous state
 (eq 38 prints ``g(x_k)``, implicit; :func:`tracking_step` solves that reading too).
 """
@@ -150,7 +150,7 @@ def run_tracking(runs: int, seed: int, filters: Sequence[str]) -> BenchResult:
     if "ekf" in filters:
         rows.extend(_tracking_reading_rows(runs, seed))
     notes = [
-        ("Readings (ALGORITHMS.md): 'eq 38 writes g(x_k) on the right-hand side, which is implicit; navpp "
+        ("Readings (docs/algorithms.md): 'eq 38 writes g(x_k) on the right-hand side, which is implicit; navpp "
          "uses g(x_{k-1}). The truth is simulated with g (the systematic error); the filters' model is "
          "x_k = Phi x_{k-1} + W_k without g, with the filter's Q multiplied by lambda = 2.' So the truth's "
          "W_k ~ N(0, Q0), Q0 = eq 39 with lambda = 1; z = H x + V, R = I (eqs 42-44); M = 1 s, 100 steps; "
@@ -169,7 +169,7 @@ def run_tracking(runs: int, seed: int, filters: Sequence[str]) -> BenchResult:
          f"(1/(M^3/3) + 1/R)^-1 = 0.25 m^2 after z_k, so RMSE >= {bound:.3f} m (norm; 0.5 m per axis) for "
          f"any filter under eqs 38-44. The paper's RWCKF 0.15-0.21 m (and its other figures, if they are "
          f"norms) lie below it: its truth cannot have had eq 39's noise with R = I, whatever the filter."),
-        ("Ours vs paper: " + "; ".join(compare) + ". ALGORITHMS.md anticipated about 1.2 m for the Kalman "
+        ("Ours vs paper: " + "; ".join(compare) + ". docs/algorithms.md anticipated about 1.2 m for the Kalman "
          "filter on this reading. With linear filter models, CKF/UKF/SIF are the Kalman filter, and RWCKF / "
          "AUKF can only differ through their weights / fading factor; we have not tuned any of them toward "
          "the paper's numbers (default options, the paper's lambda = 2)."),

@@ -2,7 +2,7 @@
 range and bearing from the origin, CKF against VCE-CKF with the filters' Q and R at 3x the
 truth.
 
-Readings of the paper (ALGORITHMS.md, "The papers' benchmarks: readings") are stated in the
+Readings of the paper (docs/algorithms.md, "The papers' benchmarks: readings") are stated in the
 result's notes; the paper gives no duration, :data:`TURN_STEPS` is ours.
 """
 
@@ -194,17 +194,17 @@ def run_turn(runs: int, seed: int, filters: Sequence[str]) -> BenchResult:
          "wrapped into (-pi, pi]), sigma_r = 10 m, sigma_theta = sqrt(10) mrad (Table 1); x0 = [1000 m, "
          "300 m/s, 1000 m, 300 m/s, -3 deg/s] as paper 003 prints it, P0 = diag(100 m^2, 100 m^2/s^2, "
          "100 m^2, 100 m^2/s^2, 100 mrad^2/s^2); truth x_0 ~ N(x0, P0), filters start at (x0, P0) with Q "
-         "and R at 3x truth (Table 1; ALGORITHMS.md). Gate off."),
+         "and R at 3x truth (Table 1; docs/algorithms.md). Gate off."),
         (f"Duration: paper 003 gives none; we run {TURN_STEPS} steps of 1 s (our choice, stated). Runs: 20, "
          "the paper's."),
-        ("VCE groups (ALGORITHMS.md): q1 (both position-velocity blocks with their M blocks) and q2 (the turn "
+        ("VCE groups (docs/algorithms.md): q1 (both position-velocity blocks with their M blocks) and q2 (the turn "
          "rate), and R per axis (range, bearing). The 'paper' column of a factor row is the true value the "
          "setup implies (3x -> 1/3). Factor = mean over runs of the factor reported at the last epoch; the "
          "factor(k) means over runs are in series."),
         ("RMSE as paper 003 eq 44 (position and velocity: error norms; turn rate in deg/s), pooled over runs "
          "and k = 1..N; ANEES = mean of e' P^-1 e / 5. The paper shows curves only (Fig 4) and finds CKF "
          "and VCE-CKF nearly equal."),
-        ("Process-noise redundancy (paper 003 eq 39, ALGORITHMS.md): r_g = tr(Q_g A Pxz S^-1 Pxz' A), about "
+        ("Process-noise redundancy (paper 003 eq 39, docs/algorithms.md): r_g = tr(Q_g A Pxz S^-1 Pxz' A), about "
          "tr(Q_g H' S^-1 H). Range and bearing do not depend on the turn rate, so q2's redundancy is 0 at "
          "every epoch and VCE cannot estimate it from single-epoch residuals; q1's is small because "
          "the filter's q1 M block (0.1 m^2 in position per step) is tiny against S (range 300 m^2). "

@@ -10,7 +10,7 @@ update template with no aid-specific code:
 - :mod:`.nonholonomic`: NHC, a wheeled vehicle has no lateral or vertical velocity;
 - :mod:`.standstill`: the detector that says when the vehicle is still.
 
-Frames and units: navigation ENU, body FLU, velocities m/s, rates rad/s (ALGORITHMS.md).
+Frames and units: navigation ENU, body FLU, velocities m/s, rates rad/s (docs/algorithms.md).
 """
 
 from .base import Aid
