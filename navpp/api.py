@@ -46,7 +46,12 @@ __all__ = ["CONFIG_IN_LOG_DIR", "FORMAT_FILES", "OUTPUT_FILES", "ProcessResult",
 #: from a run with ``--format kml``) are removed, so the directory never mixes results of
 #: different runs.  Only these exact names are touched.
 OUTPUT_FILES = ("trajectory.csv", "trajectory_forward.csv", "diagnostics.csv", "metrics.json", "metrics.md",
-                "trajectory.mcap", "trajectory.tum", "trajectory.geojson", "trajectory.kml")
+                "trajectory.mcap", "trajectory.tum", "trajectory.geojson", "trajectory.kml", "reference.tum",
+                "navpp.layout.json")
+#: Besides :data:`OUTPUT_FILES`, the labelled TUM copy (``<log>-<filter>.tum``,
+#: :func:`navpp.io.exports.labelled_tum_name`) an earlier run listed in the manifest is stale too
+#: when this run did not write it: names with this suffix.
+LABELLED_OUTPUT_SUFFIX = ".tum"
 #: The file each ``--format`` / ``[output] formats`` name writes.
 FORMAT_FILES = {"csv": "trajectory.csv", "mcap": "trajectory.mcap", "tum": "trajectory.tum",
                 "geojson": "trajectory.geojson", "kml": "trajectory.kml"}
@@ -265,7 +270,9 @@ def write_outputs(out: Path, outputs: Sequence[tuple[str, Callable[[Path], None]
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     ours = outdir.read_manifest(out)
-    for name in OUTPUT_FILES:          # stale results of an earlier navpp run: not ours any more
+    labelled = sorted(n for n in ours if n.endswith(LABELLED_OUTPUT_SUFFIX) and n not in OUTPUT_FILES
+                      and os.sep not in n and "/" not in n)
+    for name in (*OUTPUT_FILES, *labelled):   # stale results of an earlier navpp run: not ours any more
         stale = out / name
         if (stale not in written and name in ours and stale.is_file() and not stale.is_symlink()
                 and not outdir.is_input(stale, inputs)):
@@ -499,7 +506,8 @@ def _run(plan: _Plan, progress: Callable[[str, float], None] | None) -> ProcessR
     files: list[Path] = []
     if plan.write:
         outputs = _outputs(plan.formats, log=plan.log, rec=rec, sol_out=sol_out, result=result, metrics=metrics,
-                           filter_name=plan.filter_name, embed_input=plan.embed_input, forward_out=fwd_out)
+                           filter_name=plan.filter_name, embed_input=plan.embed_input, forward_out=fwd_out,
+                           compared=sol)
         files = write_outputs(plan.out, outputs, plan.inputs)
     cfg = plan.cfg
     notes = tuple(cfg.notes) + tuple(result.notes) + tuple(result.alignment.lines) + tuple(
@@ -593,9 +601,12 @@ def forced_fix_warnings(rec: Recording, cfg: Config, result: Any) -> list[str]:
 
 def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solution, result: Any,
              metrics: dict | None, filter_name: str, embed_input: bool,
-             forward_out: Solution | None = None) -> list[tuple[str, Callable[[Path], None]]]:
+             forward_out: Solution | None = None, compared: Solution | None = None
+             ) -> list[tuple[str, Callable[[Path], None]]]:
     """``(file name, writer(path))`` for every file of a run, in the order they are listed.
-    ``forward_out``: the forward solution of a smoothed run (``sol_out`` is then the smoothed one)."""
+    ``forward_out``: the forward solution of a smoothed run (``sol_out`` is then the smoothed one).
+    ``compared``: the (full-rate) solution the metrics were computed on; its span picks the rows
+    of ``reference.tum``."""
     from .io import exports, writers
 
     t0_s = rec.t0_ns * 1e-9
@@ -614,6 +625,11 @@ def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solu
     for fmt in formats:
         if fmt == "tum":
             outputs.append((FORMAT_FILES[fmt], lambda p: exports.write_tum(p, sol_out, rec, **named)))
+            outputs.append((exports.labelled_tum_name(log, filter_name),
+                            lambda p: exports.write_tum(p, sol_out, rec, **named)))
+            if rec.reference is not None and metrics is not None:
+                outputs.append((exports.REFERENCE_TUM_FILE, lambda p: exports.write_reference_tum(
+                    p, rec.reference, sol_out, rec, compared=compared, **named)))
         elif fmt == "geojson":
             outputs.append((FORMAT_FILES[fmt], lambda p: exports.write_geojson(p, sol_out, rec, metrics=metrics,
                                                                               **named)))
