@@ -149,7 +149,9 @@ def _subset(solution: Solution, rows: np.ndarray) -> Solution:
     return Solution(t=solution.t[rows], lat_deg=solution.lat_deg[rows], lon_deg=solution.lon_deg[rows],
                     alt=solution.alt[rows], vel_enu=np.asarray(solution.vel_enu)[rows],
                     rph_deg=np.asarray(solution.rph_deg)[rows], std_enu=np.asarray(solution.std_enu)[rows],
-                    t0_ns=solution.t0_ns)
+                    t0_ns=solution.t0_ns, **{name: None if getattr(solution, name) is None
+                                             else np.asarray(getattr(solution, name))[rows]
+                                             for name in ("std_att", "std_vel_enu", "rate_body")})
 
 
 def map_rows(solution: Solution, *, min_interval_s: float = MAP_MIN_INTERVAL_S,
