@@ -72,8 +72,10 @@ Embedded input (``embed_input=True``): the IMU and GNSS that navpp processed, in
 so one file replays everything.  From an MCAP input whose IMU / GNSS topics are CDR encoded,
 the Message records of those topics are copied (read with ``mcap``'s stream reader: payload,
 log and publish time, sequence; bytes identical) with their schemas, topics and channel metadata
-(e.g. rosbag2's QoS profiles); a GNSS velocity topic goes with the GNSS when the recording used one.  Anything
-else (CSV, ROS 1 bag, ROS 2 bag, a ROS 1 encoded MCAP, or an MCAP whose topic does not hold the
+(e.g. rosbag2's QoS profiles); a GNSS velocity topic goes with the GNSS when the recording used one.
+From a ROS 1 bag, every topic is embedded as it was, converted to ROS 2 CDR
+(:func:`_ros1_input_streams`).  Anything
+else (CSV, ROS 2 bag, a ROS 1 encoded MCAP, or an MCAP whose topic does not hold the
 recording's data, e.g. GNSS replaced by ``--gnss FILE.pos``) is encoded from the Recording:
 ``sensor_msgs/msg/Imu`` on ``/imu/data`` (frame ``imu_link``), ``sensor_msgs/msg/NavSatFix``
 on ``/gnss/fix`` (frame ``gnss``) and, with GNSS velocity,
@@ -99,6 +101,7 @@ message.  The file is written atomically (:func:`navpp.io.writers.atomic_write`)
 
 from __future__ import annotations
 
+import functools
 import os
 import struct
 from collections.abc import Callable, Iterator, Sequence
@@ -347,9 +350,7 @@ def _tf_static_stream(stamp_ns: int, mounting: np.ndarray, lever_arm_m: np.ndarr
     """One ``/tf_static`` message: map -> odom (identity), base_link -> imu_link (the IMU's
     mounting: the rotation taking sensor vectors into base_link), base_link -> gnss (the antenna
     lever arm, m, base_link FLU)."""
-    from rosbags.typesys import Stores, get_typestore
-
-    ts = get_typestore(Stores.ROS2_HUMBLE)
+    ts = _humble_typestore()
     t = ts.types
     q = frames.quat_xyzw(np.asarray(mounting, dtype=float).reshape(1, 3, 3))[0]
     sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
@@ -490,7 +491,7 @@ def _ros1_input_streams(path: Path, recording: Recording) -> tuple[list[_Stream]
 
     from .ros import FIX_TYPE
 
-    ts2 = get_typestore(Stores.ROS2_HUMBLE)
+    ts2 = _humble_typestore()
     paths = sorted(path.glob("*.bag")) if path.is_dir() else [path]
     streams: list[_Stream] = []
     skipped: list[str] = []
@@ -508,6 +509,8 @@ def _ros1_input_streams(path: Path, recording: Recording) -> tuple[list[_Stream]
                 continue
             if msgtype not in ts2.fielddefs:
                 try:
+                    if ts2 is _humble_typestore():          # the shared one stays standard
+                        ts2 = get_typestore(Stores.ROS2_HUMBLE)
                     found = get_types_from_msg(conns[0].msgdef.data, msgtype)
                     ts2.register({k: v for k, v in found.items() if k not in ts2.fielddefs})
                 except Exception as exc:  # noqa: BLE001 -- any failure: the type cannot be converted
@@ -536,6 +539,14 @@ def _ros1_input_streams(path: Path, recording: Recording) -> tuple[list[_Stream]
             enc = [replace(e, topic="/navpp/input" + e.topic) for e in enc]
         streams += enc
     return streams, skipped
+
+
+@functools.cache
+def _humble_typestore() -> Any:
+    """rosbags' ROS 2 Humble typestore, built once (about half a second); never registered into."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_HUMBLE)
 
 
 def _reference_topic(recording: Recording) -> str | None:
