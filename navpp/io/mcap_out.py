@@ -287,15 +287,15 @@ def _pose_streams(solution: Solution, recording: Recording, anchor: frames.Ancho
     lon = np.asarray(solution.lon_deg, dtype=np.float64)
     alt = np.asarray(solution.alt, dtype=np.float64)
     var = np.square(np.asarray(solution.std_enu, dtype=np.float64))
-    pose_cov, twist_cov = odometry_covariances(solution, biases, rate_noise_std)
     angular = (np.zeros((n, 3)) if solution.rate_body is None
                else np.asarray(solution.rate_body, dtype=np.float64).reshape(n, 3))
 
     def pack_odometry(st: np.ndarray, r: slice) -> np.ndarray:
         arr = roswrite.pack_odometry(st, pos_map[r], quat[r], vel_b[r], angular[r], encoding="cdr",
                                      frame_id=MAP_FRAME, child_frame_id=BODY_FRAME)
-        arr["pose_covariance"] = pose_cov[r].reshape(-1, 36)
-        arr["twist_covariance"] = twist_cov[r].reshape(-1, 36)
+        pose_cov, twist_cov = odometry_covariances(solution, biases, rate_noise_std, rows=r)
+        arr["pose_covariance"] = pose_cov.reshape(-1, 36)
+        arr["twist_covariance"] = twist_cov.reshape(-1, 36)
         return arr
 
     streams = [
@@ -309,37 +309,45 @@ def _pose_streams(solution: Solution, recording: Recording, anchor: frames.Ancho
     return streams
 
 
-def odometry_covariances(solution: Solution, biases: Any = None,
-                         rate_noise_std: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def odometry_covariances(solution: Solution, biases: Any = None, rate_noise_std: float = 0.0,
+                         rows: slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
     """``pose.covariance`` and ``twist.covariance`` (N, 6, 6) of ``/navpp/odometry`` (module
     docstring): position diag(std_e², std_n², std_u²) m²; orientation diag of ``std_att²`` rad²
     (rotations about the map's x y z = E N U axes); linear twist ``C_bn diag(std_vel_enu²) C_nb``
     (m²/s², base_link axes); angular twist diag(gyro bias variance after the last fix at or before
     the row + ``rate_noise_std²``) rad²/s².  What the solution does not carry:
-    :data:`NOT_ESTIMATED_VARIANCE` on the diagonal."""
-    n = len(solution)
+    :data:`NOT_ESTIMATED_VARIANCE` on the diagonal.  ``rows``: of these rows only (the writer
+    makes them a block at a time)."""
+
+    def cut(a: Any) -> Any:
+        return None if a is None else np.asarray(a)[rows]
+
+    t = np.asarray(solution.t, dtype=float)[rows]
+    n = t.shape[0]
+    std_enu, std_att, std_vel, rate = (cut(solution.std_enu), cut(solution.std_att), cut(solution.std_vel_enu),
+                                       cut(solution.rate_body))
     pose = np.zeros((n, 6, 6))
     twist = np.zeros((n, 6, 6))
     i3 = np.arange(3)
-    pose[:, i3, i3] = np.square(np.asarray(solution.std_enu, dtype=np.float64).reshape(n, 3))
-    if solution.std_att is not None:
-        pose[:, i3 + 3, i3 + 3] = np.square(np.asarray(solution.std_att, dtype=np.float64).reshape(n, 3))
+    pose[:, i3, i3] = np.square(np.asarray(std_enu, dtype=np.float64).reshape(n, 3))
+    if std_att is not None:
+        pose[:, i3 + 3, i3 + 3] = np.square(np.asarray(std_att, dtype=np.float64).reshape(n, 3))
     else:
         pose[:, i3 + 3, i3 + 3] = NOT_ESTIMATED_VARIANCE
-    if solution.std_vel_enu is not None:
-        rph = np.radians(np.asarray(solution.rph_deg, dtype=float))
+    if std_vel is not None:
+        rph = np.radians(np.asarray(solution.rph_deg, dtype=float)[rows])
         from ..ins.attitude import rph_to_dcm
 
         c_nb = rph_to_dcm(rph[:, 0], rph[:, 1], rph[:, 2])
-        v = np.square(np.asarray(solution.std_vel_enu, dtype=np.float64).reshape(n, 3))
+        v = np.square(np.asarray(std_vel, dtype=np.float64).reshape(n, 3))
         twist[:, :3, :3] = np.einsum("nji,nj,njk->nik", c_nb, v, c_nb)
     else:
         twist[:, i3, i3] = NOT_ESTIMATED_VARIANCE
-    if solution.rate_body is not None and biases is not None and len(biases.t):
-        k = np.searchsorted(np.asarray(biases.t, dtype=float), np.asarray(solution.t, dtype=float), side="right") - 1
+    if rate is not None and biases is not None and len(biases.t):
+        k = np.searchsorted(np.asarray(biases.t, dtype=float), t, side="right") - 1
         bstd = np.asarray(biases.gyro_std, dtype=np.float64).reshape(-1, 3)[np.maximum(k, 0)]
         twist[:, i3 + 3, i3 + 3] = np.square(bstd) + float(rate_noise_std) ** 2
-    elif solution.rate_body is not None and rate_noise_std > 0.0:
+    elif rate is not None and rate_noise_std > 0.0:
         twist[:, i3 + 3, i3 + 3] = float(rate_noise_std) ** 2
     else:
         twist[:, i3 + 3, i3 + 3] = NOT_ESTIMATED_VARIANCE
