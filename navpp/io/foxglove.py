@@ -50,7 +50,8 @@ def layout(diagnostics: Any = None) -> dict[str, Any]:
     adapt = [("/navpp/diagnostics.nis", "NIS")] + [(f"/navpp/diagnostics.values[{k}]", name)
                                                    for k, name in enumerate(names)]
     config = {
-        "map!navpp": {"layer": "map", "disabledTopics": [], "followTopic": "/navpp/fix", "zoomLevel": 17},
+        "map!navpp": {"layer": "map", "customTileUrl": "", "disabledTopics": [], "topicColors": {},
+                      "followTopic": "/navpp/fix", "zoomLevel": 17},
         "3D!navpp": {"followMode": "follow-pose", "followTf": "base_link",
                      "topics": {"/navpp/odometry": {"visible": True}, "/navpp/fix": {"visible": False}},
                      "transforms": {"frame:map": {"visible": True}, "frame:odom": {"visible": True},
