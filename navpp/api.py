@@ -47,7 +47,12 @@ __all__ = ["CONFIG_IN_LOG_DIR", "FORMAT_FILES", "FORWARD_OUTPUTS", "OUTPUT_FILES
 #: from a run with ``--format kml``) are removed, so the directory never mixes results of
 #: different runs.  Only these exact names are touched.
 OUTPUT_FILES = ("trajectory.csv", "trajectory_forward.csv", "diagnostics.csv", "metrics.json", "metrics.md",
-                "trajectory.mcap", "trajectory.tum", "trajectory.geojson", "trajectory.kml", "trajectory_forward.tum")
+                "trajectory.mcap", "trajectory.tum", "trajectory.geojson", "trajectory.kml", "trajectory_forward.tum",
+                "reference.tum", "navpp.layout.json")
+#: Besides :data:`OUTPUT_FILES`, the labelled TUM copy (``<log>-<filter>.tum``,
+#: :func:`navpp.io.exports.labelled_tum_name`) an earlier run listed in the manifest is stale too
+#: when this run did not write it: names with this suffix.
+LABELLED_OUTPUT_SUFFIX = ".tum"
 #: The file each ``--format`` / ``[output] formats`` name writes.
 FORMAT_FILES = {"csv": "trajectory.csv", "mcap": "trajectory.mcap", "tum": "trajectory.tum",
                 "geojson": "trajectory.geojson", "kml": "trajectory.kml"}
@@ -179,8 +184,13 @@ def resample_solution(sol: Solution, rate_hz: float) -> Solution:
                           f"{sol.t[-1] - sol.t[0]:.3f} s span; use a higher rate")
     it = interpolate_solution(sol, t)
     std = np.column_stack([np.interp(t, sol.t, sol.std_enu[:, i]) for i in range(3)])
+
+    def interp3(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else np.column_stack([np.interp(t, sol.t, a[:, i]) for i in range(3)])
+
     return Solution(t=t, lat_deg=it["lat_deg"], lon_deg=it["lon_deg"], alt=it["alt"], vel_enu=it["vel_enu"],
-                    rph_deg=it["rph_deg"], std_enu=std, t0_ns=sol.t0_ns)
+                    rph_deg=it["rph_deg"], std_enu=std, t0_ns=sol.t0_ns, std_att=interp3(sol.std_att),
+                    std_vel_enu=interp3(sol.std_vel_enu), rate_body=interp3(sol.rate_body))
 
 
 def reference_checks(rec: Recording, cfg: Config, metrics: dict | None) -> list[str]:
@@ -267,7 +277,9 @@ def write_outputs(out: Path, outputs: Sequence[tuple[str, Callable[[Path], None]
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     ours = outdir.read_manifest(out)
-    for name in OUTPUT_FILES:          # stale results of an earlier navpp run: not ours any more
+    labelled = sorted(n for n in ours if n.endswith(LABELLED_OUTPUT_SUFFIX) and n not in OUTPUT_FILES
+                      and os.sep not in n and "/" not in n)
+    for name in (*OUTPUT_FILES, *labelled):   # stale results of an earlier navpp run: not ours any more
         stale = out / name
         if (stale not in written and name in ours and stale.is_file() and not stale.is_symlink()
                 and not outdir.is_input(stale, inputs)):
@@ -522,7 +534,8 @@ def _run(plan: _Plan, progress: Callable[[str, float], None] | None) -> ProcessR
     files: list[Path] = []
     if plan.write:
         outputs = _outputs(plan.formats, log=plan.log, rec=rec, sol_out=sol_out, result=result, metrics=metrics,
-                           filter_name=plan.filter_name, embed_input=plan.embed_input, forward_out=fwd_out)
+                           filter_name=plan.filter_name, embed_input=plan.embed_input, forward_out=fwd_out,
+                           compared=sol, cfg=plan.cfg)
         files = write_outputs(plan.out, outputs, plan.inputs)
     cfg = plan.cfg
     notes = tuple(rec.notes) + tuple(cfg.notes) + tuple(result.notes) + tuple(result.alignment.lines) + tuple(
@@ -635,11 +648,16 @@ def forced_fix_warnings(rec: Recording, cfg: Config, result: Any) -> list[str]:
 
 def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solution, result: Any,
              metrics: dict | None, filter_name: str, embed_input: bool,
-             forward_out: Solution | None = None) -> list[tuple[str, Callable[[Path], None]]]:
+             forward_out: Solution | None = None, compared: Solution | None = None,
+             cfg: Config | None = None) -> list[tuple[str, Callable[[Path], None]]]:
     """``(file name, writer(path))`` for every file of a run, in the order they are listed.
-    ``forward_out``: the forward solution of a smoothed run (``sol_out`` is then the smoothed one)."""
+    ``forward_out``: the forward solution of a smoothed run (``sol_out`` is then the smoothed one).
+    ``compared``: the (full-rate) solution the metrics were computed on; its span picks the rows
+    of ``reference.tum``."""
     from .io import exports, writers
+    from .io.foxglove import LAYOUT_FILE, write_layout
 
+    cfg = Config() if cfg is None else cfg
     t0_s = rec.t0_ns * 1e-9
     biases = result.smoothed.biases if forward_out is not None else result.biases
     outputs: list[tuple[str, Callable[[Path], None]]] = []
@@ -659,6 +677,11 @@ def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solu
             if forward_out is not None:
                 outputs.append((FORWARD_OUTPUTS["tum"], lambda p: exports.write_tum(
                     p, forward_out, rec, filter_name=f"{filter_name} (forward, not smoothed)", log=str(log))))
+            outputs.append((exports.labelled_tum_name(log, filter_name),
+                            lambda p: exports.write_tum(p, sol_out, rec, **named)))
+            if rec.reference is not None and metrics is not None:
+                outputs.append((exports.REFERENCE_TUM_FILE, lambda p: exports.write_reference_tum(
+                    p, rec.reference, sol_out, rec, compared=compared, **named)))
         elif fmt == "geojson":
             outputs.append((FORMAT_FILES[fmt], lambda p: exports.write_geojson(p, sol_out, rec, metrics=metrics,
                                                                               **named)))
@@ -666,10 +689,15 @@ def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solu
             outputs.append((FORMAT_FILES[fmt], lambda p: exports.write_kml(p, sol_out, rec, metrics=metrics,
                                                                           **named)))
         elif fmt == "mcap":
-            outputs.append((FORMAT_FILES[fmt], lambda p: mcap_writer()(
+            mounting = (result.calibration or {}).get("gross_mounting_rpy_deg", cfg.imu.mounting_rpy_deg)
+            rate_hz = rec.imu.rate_hz
+            rate_noise = cfg.imu.noise().gyro_arw * math.sqrt(rate_hz) if math.isfinite(rate_hz) else 0.0
+            outputs.append((FORMAT_FILES[fmt], lambda p, mounting=mounting, rate_noise=rate_noise: mcap_writer()(
                 p, solution=sol_out, recording=rec, diagnostics=result.diagnostics, biases=biases,
                 embed_input=embed_input, input_log=log, filter_name=filter_name,
+                imu_mounting_rpy_deg=mounting, gnss_lever_arm_m=cfg.gnss.lever_arm_m, rate_noise_std=rate_noise,
                 **({"forward": forward_out} if forward_out is not None else {}))))
+            outputs.append((LAYOUT_FILE, lambda p: write_layout(p, result.diagnostics)))
     return outputs
 
 

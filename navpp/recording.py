@@ -343,6 +343,13 @@ class Solution:
     vel_enu : (N, 3) float, m/s.
     rph_deg : (N, 3) float, roll / pitch / heading in degrees (navigation convention).
     std_enu : (N, 3) float, m, 1-sigma position uncertainty per ENU axis.
+    std_att : (N, 3) float or None, rad, 1-sigma of the attitude error: the small rotation
+        about the local ENU axes (east, north, up) between the true and the estimated attitude
+        (the filter's error state; the up element is the heading's 1-sigma).  None: not carried.
+    std_vel_enu : (N, 3) float or None, m/s, 1-sigma of ``vel_enu`` per ENU axis.
+    rate_body : (N, 3) float or None, rad/s, angular velocity of the body relative to the local
+        ENU frame, body FLU: the gyro (mounting applied) minus the estimated gyro bias, the
+        Earth rate and the transport rate.
     """
 
     t: np.ndarray
@@ -353,6 +360,9 @@ class Solution:
     rph_deg: np.ndarray
     std_enu: np.ndarray
     t0_ns: int = 0
+    std_att: np.ndarray | None = None
+    std_vel_enu: np.ndarray | None = None
+    rate_body: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t.shape[0])

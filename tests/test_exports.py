@@ -323,8 +323,10 @@ def every_format(sim_log_dir: Path, tmp_path_factory: pytest.TempPathFactory):
 
 def test_process_writes_every_asked_format(every_format) -> None:
     res, out = every_format
-    names = ["trajectory.csv", "diagnostics.csv", "metrics.json", "metrics.md", *ALL]
+    names = ["trajectory.csv", "diagnostics.csv", "metrics.json", "metrics.md", "trajectory.tum", "drive-ekf.tum",
+             "reference.tum", "trajectory.geojson", "trajectory.kml"]
     assert [p.name for p in res.files] == names
+    assert (out / "drive-ekf.tum").read_bytes() == (out / "trajectory.tum").read_bytes()
     assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == sorted(names)  # no staging directory left
     assert csv_t_strings(out / "trajectory.csv") == [
         line.split(" ", 1)[0] for line in (out / "trajectory.tum").read_text().splitlines() if line[0] != "#"]
@@ -381,7 +383,8 @@ def test_top_level_compare_resolves_at_call_time(monkeypatch: pytest.MonkeyPatch
 def test_config_formats_apply_and_the_argument_overrides(sim_log_dir: Path, tmp_path: Path) -> None:
     cfg = Config(output=OutputConfig(formats=("tum",)))
     res = api.process(sim_log_dir, config=cfg, out_dir=tmp_path / "a", output_rate_hz=5.0)
-    assert [p.name for p in res.files] == ["diagnostics.csv", "metrics.json", "metrics.md", "trajectory.tum"]
+    assert [p.name for p in res.files] == ["diagnostics.csv", "metrics.json", "metrics.md", "trajectory.tum",
+                                           "drive-ekf.tum", "reference.tum"]
     res = api.process(sim_log_dir, config=cfg, out_dir=tmp_path / "b", output_rate_hz=5.0, formats=["kml"])
     assert [p.name for p in res.files][-1] == "trajectory.kml" and not (tmp_path / "b" / "trajectory.tum").exists()
 
@@ -441,7 +444,8 @@ def test_mcap_writer_is_called_with_its_contract(sim_log_dir: Path, tmp_path: Pa
     fake = types.ModuleType("navpp.io.mcap_out")
 
     def write_trajectory_mcap(path, *, solution, recording, diagnostics=None, biases=None, embed_input=False,
-                              input_log=None, filter_name=""):
+                              input_log=None, filter_name="", imu_mounting_rpy_deg=(0.0, 0.0, 0.0),
+                              gnss_lever_arm_m=(0.0, 0.0, 0.0), rate_noise_std=0.0):
         calls.append({"solution": solution, "recording": recording, "diagnostics": diagnostics, "biases": biases,
                       "embed_input": embed_input, "input_log": input_log, "filter_name": filter_name})
         Path(path).write_bytes(b"\x89MCAP0\r\n")
@@ -451,7 +455,8 @@ def test_mcap_writer_is_called_with_its_contract(sim_log_dir: Path, tmp_path: Pa
     out = tmp_path / "out"
     res = api.process(sim_log_dir, out_dir=out, output_rate_hz=5.0, formats="mcap", embed_input=True,
                       filter_name="aekf")
-    assert [p.name for p in res.files] == ["diagnostics.csv", "metrics.json", "metrics.md", "trajectory.mcap"]
+    assert [p.name for p in res.files] == ["diagnostics.csv", "metrics.json", "metrics.md", "trajectory.mcap",
+                                           "navpp.layout.json"]
     assert (out / "trajectory.mcap").read_bytes() == b"\x89MCAP0\r\n"
     (call,) = calls
     assert call["solution"] is res.solution and call["recording"] is res.recording
@@ -473,7 +478,8 @@ def test_cli_format_combination(sim_log_dir: Path, tmp_path: Path) -> None:
     res = invoke("process", sim_log_dir, "--out", out, "--output-rate", "5", "--format", "tum, kml,tum", "-q")
     assert res.exit_code == 0, res.output
     assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == [
-        "diagnostics.csv", "metrics.json", "metrics.md", "trajectory.kml", "trajectory.tum"]
+        "diagnostics.csv", "drive-ekf.tum", "metrics.json", "metrics.md", "reference.tum", "trajectory.kml",
+        "trajectory.tum"]
 
 
 def test_cli_format_overrides_the_config(log_copy: Path, tmp_path: Path) -> None:
@@ -515,9 +521,9 @@ def test_mcap_format_writes_a_readable_mcap(sim_log_dir: Path, tmp_path: Path) -
 
     out = tmp_path / "out"
     res = api.process(sim_log_dir, out_dir=out, output_rate_hz=5.0, formats="csv,mcap")
-    assert [p.name for p in res.files][-1] == "trajectory.mcap"
+    assert [p.name for p in res.files][-2:] == ["trajectory.mcap", "navpp.layout.json"]
     assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == [
-        "diagnostics.csv", "metrics.json", "metrics.md", "trajectory.csv", "trajectory.mcap"]
+        "diagnostics.csv", "metrics.json", "metrics.md", "navpp.layout.json", "trajectory.csv", "trajectory.mcap"]
     with open(out / "trajectory.mcap", "rb") as f:
         summary = make_reader(f).get_summary()
     topics = {c.topic for c in summary.channels.values()}

@@ -93,11 +93,14 @@ def test_read_back_with_mcap_ros2(processed, trajectory):
     n, m = len(sol), res.run.gnss_epochs
     assert [len(msgs[t]) for t in ("/navpp/fix", "/navpp/odometry", "/tf")] == [n, n, n]
     assert [len(msgs[t]) for t in ("/navpp/bias/gyro", "/navpp/bias/accel", "/navpp/diagnostics")] == [m, m, m]
+    assert len(msgs["/tf_static"]) == 1
     for topic, items in msgs.items():
-        stamps = np.array([_stamp(x.ros_msg.transforms[0].header if topic == "/tf" else x.ros_msg.header)
+        stamps = np.array([_stamp(x.ros_msg.transforms[0].header if topic.startswith("/tf") else x.ros_msg.header)
                            for x in items])
         assert np.array_equal(stamps, [x.log_time_ns for x in items]), topic
         assert np.array_equal(stamps, [x.publish_time_ns for x in items]), topic
+        if topic == "/tf_static":
+            continue
         want = exp["stamps"] if len(items) == n else res.recording.t0_ns + np.rint(diag.t * 1e9).astype(np.int64)
         assert np.array_equal(stamps, want), topic
 
@@ -119,18 +122,17 @@ def test_read_back_with_mcap_ros2(processed, trajectory):
     lin = np.array([[o.twist.twist.linear.x, o.twist.twist.linear.y, o.twist.twist.linear.z] for o in odo])
     ang = np.array([[o.twist.twist.angular.x, o.twist.twist.angular.y, o.twist.twist.angular.z] for o in odo])
     assert np.array_equal(pos, exp["pos"]) and np.array_equal(q, exp["quat"]) and np.array_equal(lin, exp["vel_b"])
-    assert not ang.any()
+    assert np.array_equal(ang, sol.rate_body)       # the body rate (tests/test_outputs_frames.py)
     pcov = np.array([o.pose.covariance for o in odo]).reshape(n, 6, 6)
     tcov = np.array([o.twist.covariance for o in odo]).reshape(n, 6, 6)
-    big = mcap_out.NOT_ESTIMATED_VARIANCE
     assert np.array_equal(np.diagonal(pcov, axis1=1, axis2=2),
-                          np.column_stack([sol.std_enu ** 2, np.full((n, 3), big)]))
-    assert np.array_equal(tcov, np.broadcast_to(np.eye(6) * big, tcov.shape))
+                          np.column_stack([sol.std_enu ** 2, np.square(sol.std_att)]))
+    assert np.array_equal(tcov, mcap_out.odometry_covariances(sol, bias, 0.0)[1])
     assert np.count_nonzero(pcov) == 6 * n
 
     tf = [x.ros_msg.transforms for x in msgs["/tf"]]
     assert {len(t) for t in tf} == {1}
-    assert {(t[0].header.frame_id, t[0].child_frame_id) for t in tf} == {("map", "base_link")}
+    assert {(t[0].header.frame_id, t[0].child_frame_id) for t in tf} == {("odom", "base_link")}
     tr = np.array([[t[0].transform.translation.x, t[0].transform.translation.y, t[0].transform.translation.z]
                    for t in tf])
     rot = np.array([[t[0].transform.rotation.x, t[0].transform.rotation.y, t[0].transform.rotation.z,
@@ -243,7 +245,7 @@ def test_log_time_order_summary_and_metadata(processed, trajectory):
 
     with open(trajectory, "rb") as f:     # front to back, as a streaming reader sees the file
         logs = [r.log_time for r in StreamReader(f, validate_crcs=True).records if isinstance(r, Message)]
-    assert len(logs) == 3 * len(processed.solution) + 3 * processed.run.gnss_epochs
+    assert len(logs) == 3 * len(processed.solution) + 3 * processed.run.gnss_epochs + 1      # + /tf_static
     assert np.all(np.diff(logs) >= 0)
     with open(trajectory, "rb") as f:
         reader = make_reader(f)
@@ -254,9 +256,9 @@ def test_log_time_order_summary_and_metadata(processed, trajectory):
     n, m = len(processed.solution), processed.run.gnss_epochs
     counts = {summary.channels[c].topic: k for c, k in summary.statistics.channel_message_counts.items()}
     assert counts == {"/navpp/fix": n, "/navpp/odometry": n, "/tf": n, "/navpp/bias/gyro": m,
-                      "/navpp/bias/accel": m, "/navpp/diagnostics": m}
-    assert summary.statistics.channel_count == len(summary.channels) == 6
-    assert summary.statistics.schema_count == len(summary.schemas) == 5      # the two biases share one
+                      "/navpp/bias/accel": m, "/navpp/diagnostics": m, "/tf_static": 1}
+    assert summary.statistics.channel_count == len(summary.channels) == 7
+    assert summary.statistics.schema_count == len(summary.schemas) == 5      # biases share one, so do the tfs
     assert {(s.name, s.encoding) for s in summary.schemas.values()} == {
         (mcap_out.TOPICS[t], "ros2msg") for t in mcap_out.TOPICS}
     assert {c.message_encoding for c in summary.channels.values()} == {"cdr"}
@@ -300,6 +302,8 @@ def test_a_fixed_solution_decodes_to_the_expected_messages(tmp_path):
         got = [(c.topic, s.name, s.encoding, c.message_encoding, m.log_time, m.publish_time, m.sequence, m.data)
                for s, c, m in reader.iter_messages(log_time_order=False)]
     s1, s2 = t0 + 500_000_000, t0 + 1_000_000_000
+    assert got[3][0] == "/tf_static" and (got[3][4], got[3][6]) == (s1, 0)
+    got = got[:3] + got[4:]
     assert [g[0] for g in got] == ["/navpp/fix", "/navpp/odometry", "/tf", "/navpp/fix", "/navpp/odometry", "/tf",
                                    "/navpp/bias/gyro", "/navpp/bias/accel", "/navpp/diagnostics"]
     assert [(g[4], g[5], g[6]) for g in got] == [(s1, s1, 0)] * 3 + [(s2, s2, 1)] * 3 + [(s2, s2, 0)] * 3
@@ -331,7 +335,7 @@ def test_a_fixed_solution_decodes_to_the_expected_messages(tmp_path):
         assert (w.x, w.y, w.z) == (0.0, 0.0, 0.0)
         assert len(tf.transforms) == 1
         tr = tf.transforms[0]
-        assert (tr.header.frame_id, tr.child_frame_id) == ("map", "base_link")
+        assert (tr.header.frame_id, tr.child_frame_id) == ("odom", "base_link")
         assert np.allclose([tr.transform.translation.x, tr.transform.translation.y, tr.transform.translation.z],
                            0.0, atol=1e-9)
         r = tr.transform.rotation
@@ -383,7 +387,7 @@ def test_odometry_at_the_anchor_is_zero_and_quaternion_matches_heading(processed
     v = odo[1].twist.twist.linear
     assert np.allclose([v.x, v.y, v.z], [2.0, 0.0, 0.0], atol=1e-12)
     # no diagnostics / biases given: no such topics
-    assert sorted(_by_topic(path)) == ["/navpp/fix", "/navpp/odometry", "/tf"]
+    assert sorted(_by_topic(path)) == ["/navpp/fix", "/navpp/odometry", "/tf", "/tf_static"]
 
 
 def _expected_quat(sol, rec):
@@ -409,7 +413,8 @@ def test_embed_csv_input_reads_back_as_the_same_recording(processed, sim_log_dir
         assert np.array_equal(getattr(back.gnss, name), getattr(rec.gnss, name)), name
     assert not back.warnings
     logs = [m.log_time for items in _raw_messages(path).values() for _, _, m in items]
-    assert len(logs) == len(rec.imu) + len(rec.gnss) + 3 * len(processed.solution) + 3 * processed.run.gnss_epochs
+    assert len(logs) == (len(rec.imu) + len(rec.gnss) + 3 * len(processed.solution) + 3 * processed.run.gnss_epochs
+                         + 1)
 
 
 @pytest.fixture(scope="module")
@@ -494,7 +499,7 @@ def test_container_variants_read_back(processed, tmp_path, compression, chunk_si
         f.seek(0)
         indexed = [(c.topic, m.log_time, m.data) for _, c, m in
                    make_reader(f, validate_crcs=True).iter_messages(log_time_order=True)]
-    assert len(streamed) == len(indexed) == 3 * len(processed.solution) + 3 * processed.run.gnss_epochs
+    assert len(streamed) == len(indexed) == 3 * len(processed.solution) + 3 * processed.run.gnss_epochs + 1
     assert [m[1] for m in streamed] == sorted(m[1] for m in streamed)
     for topic in {m[0] for m in streamed}:
         assert [m for m in streamed if m[0] == topic] == [m for m in indexed if m[0] == topic]

@@ -132,7 +132,7 @@ def test_written_files(sim_log_dir, tmp_path):
     res = api.process(sim_log_dir, out_dir=out, smooth=True, formats="csv,mcap", gnss_outages=[OUTAGE])
     names = sorted(p.name for p in res.files)
     assert names == sorted(["trajectory.csv", "trajectory_forward.csv", "diagnostics.csv", "metrics.json",
-                            "metrics.md", "trajectory.mcap"])
+                            "metrics.md", "trajectory.mcap", "navpp.layout.json"])
     written = pd.read_csv(out / "trajectory.csv")
     np.testing.assert_allclose(written["lat"], res.trajectory["lat"], rtol=0, atol=2e-9)
     np.testing.assert_allclose(written["alt"], res.trajectory["alt"], rtol=0, atol=1e-4)

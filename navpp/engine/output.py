@@ -1,5 +1,5 @@
-"""From a finished forward run to the outputs: the IMU-rate solution, its position 1-sigma, the
-smoothed run.
+"""From a finished forward run to the outputs: the IMU-rate solution, its 1-sigma (position,
+velocity, attitude), its body rate, the smoothed run.
 
 The recorded path rows are ``(q_nb, vel_enu, lat, lon, h)`` (quaternion body FLU -> nav ENU,
 m/s, rad, rad, m); :func:`solution_from_path` converts them in place to degrees.
@@ -14,7 +14,8 @@ from numba import njit
 
 from ..filters.protocols import SmoothableModel
 from ..filters.smoother import ForwardStore, smooth_arrays
-from ..ins.model import BA, BG, POS, apply_node_corrections
+from ..geodesy import OMEGA_E, radii
+from ..ins.model import ATT, BA, BG, POS, VEL, apply_node_corrections
 from ..ins.strapdown import NOMINAL_BA, NOMINAL_BG
 from ..recording import Solution
 from .results import BiasHistory, SmoothedRun
@@ -37,7 +38,7 @@ def compile_seconds(events) -> float:
 
 
 def smoothed_run(store: ForwardStore, model: SmoothableModel, t_out: np.ndarray, path: np.ndarray,
-                 epoch_node: np.ndarray, tg: np.ndarray, t0_ns: int) -> SmoothedRun:
+                 epoch_node: np.ndarray, tg: np.ndarray, t0_ns: int, gyro: np.ndarray | None = None) -> SmoothedRun:
     """Smooth the stored forward run and bring it to the IMU rate.
 
     Between two nodes the forward path is the strapdown from the earlier node's posterior; the
@@ -45,8 +46,10 @@ def smoothed_run(store: ForwardStore, model: SmoothableModel, t_out: np.ndarray,
     ``x_k+1^s ⊟ x_ref,k+1`` at the end (nodes are at most 1.5 :data:`~navpp.engine.schedule.KNOT_S`
     apart, over which the error dynamics are linear to well below the errors themselves); a
     sample exactly at a node
-    takes the node's smoothed state.  The smoothed position 1-sigma interpolates the smoothed
-    variance between nodes.
+    takes the node's smoothed state.  The smoothed position, velocity and attitude 1-sigma
+    interpolate the smoothed variances between nodes.  ``gyro`` (N, 3) rad/s, body FLU, at
+    ``t_out``: the gyro the model used, for the body rate (:func:`body_rate`, with the smoothed
+    gyro bias); None: no body rate.
     """
     t_start = time.perf_counter()
     nodes = store.arrays()
@@ -56,10 +59,16 @@ def smoothed_run(store: ForwardStore, model: SmoothableModel, t_out: np.ndarray,
     spath = path.copy()
     apply_node_corrections(spath, t_out, sm.t, sm.x, x_post, x_ref)
     var = np.ascontiguousarray(np.diagonal(sm.P, axis1=1, axis2=2))
-    vpos = np.ascontiguousarray(var[:, POS])
-    std = interpolated_std(t_out, sm.t[0], vpos[0], sm.t[1:], vpos[1:], vpos[1:])
-    solution = solution_from_path(t_out, spath, std, t0_ns)
+    std = {}
+    for name, block in (("pos", POS), ("vel", VEL), ("att", ATT)):
+        v = np.ascontiguousarray(var[:, block])
+        std[name] = interpolated_std(t_out, sm.t[0], v[0], sm.t[1:], v[1:], v[1:])
     xs = sm.x[epoch_node]
+    rate = None
+    if gyro is not None:
+        rate = body_rate(t_out, spath, gyro, tg, xs[:, NOMINAL_BG], sm.x[0, NOMINAL_BG])
+    solution = solution_from_path(t_out, spath, std["pos"], t0_ns, std_att=std["att"], std_vel_enu=std["vel"],
+                                  rate_body=rate)
     bstd = np.sqrt(np.maximum(var[epoch_node], 0.0))
     biases = BiasHistory(tg, xs[:, NOMINAL_BG].copy(), xs[:, NOMINAL_BA].copy(), bstd[:, BG].copy(),
                          bstd[:, BA].copy())
@@ -115,10 +124,46 @@ def path_to_output_columns(path):
         path[i, 8] *= r2d
 
 
-def solution_from_path(t: np.ndarray, path: np.ndarray, std_enu: np.ndarray, t0_ns: int) -> Solution:
+def body_rate(t: np.ndarray, path: np.ndarray, gyro: np.ndarray, bias_t: np.ndarray, bias_gyro: np.ndarray,
+              bias0: np.ndarray) -> np.ndarray:
+    """Angular velocity of the body relative to the local ENU frame, body FLU, rad/s, (N, 3).
+
+    ``w_nb^b = w_ib^b - b_g - C_bn (w_ie^n + w_en^n)``: ``gyro`` (N, 3) the measured rate the
+    model integrated (mounting applied), ``b_g`` the gyro bias estimate after the last fix at or
+    before each time (``bias_t`` (M,) s, ``bias_gyro`` (M, 3)), ``bias0`` before the first fix;
+    the attitude ``C_nb``, velocity and position from the recorded ``path`` rows (N, 10: q_nb,
+    vel_enu, lat rad, lon rad, h m; read before :func:`solution_from_path` converts them)."""
+    t = np.asarray(t, dtype=float)
+    k = np.searchsorted(np.asarray(bias_t, dtype=float), t, side="right") - 1
+    bg = np.where((k >= 0)[:, None], np.asarray(bias_gyro, dtype=float)[np.maximum(k, 0)],
+                  np.asarray(bias0, dtype=float)[None, :])
+    w, x, y, z = (path[:, i] for i in range(4))
+    lat, h = path[:, 7], path[:, 9]
+    ve, vn = path[:, 4], path[:, 5]
+    rm, rn = radii(lat)
+    w_in = np.column_stack([-vn / (rm + h), OMEGA_E * np.cos(lat) + ve / (rn + h),
+                            OMEGA_E * np.sin(lat) + ve * np.tan(lat) / (rn + h)])
+    c_nb = np.empty((t.shape[0], 3, 3))
+    c_nb[:, 0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    c_nb[:, 0, 1] = 2.0 * (x * y - w * z)
+    c_nb[:, 0, 2] = 2.0 * (x * z + w * y)
+    c_nb[:, 1, 0] = 2.0 * (x * y + w * z)
+    c_nb[:, 1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    c_nb[:, 1, 2] = 2.0 * (y * z - w * x)
+    c_nb[:, 2, 0] = 2.0 * (x * z - w * y)
+    c_nb[:, 2, 1] = 2.0 * (y * z + w * x)
+    c_nb[:, 2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    return np.asarray(gyro, dtype=float) - bg - np.einsum("nji,nj->ni", c_nb, w_in)
+
+
+def solution_from_path(t: np.ndarray, path: np.ndarray, std_enu: np.ndarray, t0_ns: int, *,
+                       std_att: np.ndarray | None = None, std_vel_enu: np.ndarray | None = None,
+                       rate_body: np.ndarray | None = None) -> Solution:
     """Recorded rows (N, 10: q_nb, vel_enu, lat, lon, h) -> :class:`Solution`, converting ``path``
-    IN PLACE: the solution's arrays are views of it, so an hour at 125 Hz costs no second copy."""
+    IN PLACE: the solution's arrays are views of it, so an hour at 125 Hz costs no second copy.
+    ``std_att`` (rad), ``std_vel_enu`` (m/s), ``rate_body`` (rad/s): see :class:`Solution`."""
     path_to_output_columns(path)
     return Solution(t=np.asarray(t, dtype=float), lat_deg=path[:, 7], lon_deg=path[:, 8], alt=path[:, 9],
-                    vel_enu=path[:, 4:7], rph_deg=path[:, 0:3], std_enu=std_enu, t0_ns=t0_ns)
+                    vel_enu=path[:, 4:7], rph_deg=path[:, 0:3], std_enu=std_enu, t0_ns=t0_ns, std_att=std_att,
+                    std_vel_enu=std_vel_enu, rate_body=rate_body)
 

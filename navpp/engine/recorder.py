@@ -18,7 +18,7 @@ import numpy as np
 
 from ..filters.base import GaussianState, Prediction, Update
 from ..filters.smoother import ForwardStore
-from ..ins.model import BA, BG, POS
+from ..ins.model import ATT, BA, BG, POS, VEL
 from ..ins.strapdown import NOMINAL_BA, NOMINAL_BG, PATH_SIZE
 from .loop import EpochOutcome
 from .results import BiasHistory, Diagnostics
@@ -27,6 +27,10 @@ from .schedule import Epoch, GnssFixes
 #: one-element aids recorded at the GNSS epochs: kind -> the short name of their columns
 #: (``nu_<name>``, ``nis_<name>``, ``<name>_accepted``)
 AID_COLUMNS = {"odometer": "odo", "odometer_yaw": "yaw"}
+#: the error-state elements whose variance each knot records: attitude, velocity, position (ENU)
+KNOT = slice(ATT.start, POS.stop)
+_KNOT_N = KNOT.stop - KNOT.start
+assert (ATT.stop, VEL.start, VEL.stop, POS.start) == (3, 3, 6, 6) and _KNOT_N == 9
 
 ProgressFn = Callable[[float], None]   # called with the fraction done, 0..1
 
@@ -94,8 +98,9 @@ class RunRecorder:
         self.knot(start)
 
     def knot(self, state: GaussianState, prior: np.ndarray | None = None) -> None:
-        """A knot at ``state.t``: position variance before (``prior``, default the state's) and after."""
-        v = state.P.diagonal()[POS]
+        """A knot at ``state.t``: attitude, velocity and position variance (:data:`KNOT`) before
+        (``prior``, default the state's) and after."""
+        v = state.P.diagonal()[KNOT]
         self.knots.append(state.t)
         self.knots.extend(v if prior is None else prior)
         self.knots.extend(v)
@@ -134,7 +139,7 @@ class RunRecorder:
             self.store.updated(outcome.prior_used, state, outcome.reset)
         if outcome.applied and epoch.sample >= 0:
             self.path[epoch.sample] = state.x[:self.n_path]     # the epoch's own sample shows the posterior
-        self.knot(state, outcome.prior.P.diagonal()[POS].copy())
+        self.knot(state, outcome.prior.P.diagonal()[KNOT].copy())
         k = epoch.fix
         if k >= 0:
             if self.store is not None:
@@ -154,8 +159,15 @@ class RunRecorder:
     # results -------------------------------------------------------------------------------
     def knot_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The knots: times (K,) s, prior and posterior position variance (K, 3) ENU m^2."""
-        kn = np.frombuffer(self.knots, dtype=float).reshape(-1, 7)
-        return kn[:, 0].copy(), kn[:, 1:4].copy(), kn[:, 4:7].copy()
+        t, prior, post = self.knot_arrays_all()
+        pos = slice(POS.start - KNOT.start, POS.stop - KNOT.start)
+        return t, np.ascontiguousarray(prior[:, pos]), np.ascontiguousarray(post[:, pos])
+
+    def knot_arrays_all(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The knots: times (K,) s, prior and posterior variance (K, 9) of the attitude error
+        (rad^2, about the ENU axes), velocity (ENU m^2/s^2) and position (ENU m^2)."""
+        kn = np.frombuffer(self.knots, dtype=float).reshape(-1, 1 + 2 * _KNOT_N)
+        return kn[:, 0].copy(), kn[:, 1:1 + _KNOT_N].copy(), kn[:, 1 + _KNOT_N:].copy()
 
     def diagnostics(self, t: np.ndarray, labels: dict[str, list[str]]) -> Diagnostics:
         """The per-fix record at the fix times ``t`` (s); an adaptive report with ``labels`` (the

@@ -29,6 +29,7 @@ from ..ins.alignment import Alignment, align
 from ..ins.augmented import AugmentedInsModel, StateBlock
 from ..ins.gnss_error import Correlation, GnssErrorModel, GnssErrorSettings, innovation_correlation
 from ..ins.model import InsModel
+from ..ins.strapdown import NOMINAL_BG
 from ..recording import Recording
 from .checks import alignment_findings, check_data, check_imu_plausible
 from .gnss_error import (
@@ -44,7 +45,7 @@ from .gnss_error import (
 from .loop import run_epochs
 from .measurements import RunMeasurements, recovery_reopening
 from .mounting import first_pass_filter, vehicle_mounting
-from .output import compile_seconds, interpolated_std, smoothed_run, solution_from_path
+from .output import body_rate, compile_seconds, interpolated_std, smoothed_run, solution_from_path
 from .prepare import alignment_settings, calibrated, mounting_matrix, noise_model, timing_fixes
 from .recorder import RunRecorder, new_path
 from .results import RunResult, SmoothedRun
@@ -353,13 +354,19 @@ def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared,
     al, fixes = prep.alignment, prep.fixes
     path = recorder.path[al.index:]
     t_out = recording.imu.t[al.index:]
+    gyro = np.asarray(prep.model.gyro)[al.index:]
     smoothed = None
     if smooth:
         smoothed = smoothed_output(recorder, prep.model if fmodel is None else fmodel, t_out, path, fixes.t,
-                                   recording.t0_ns)
-    kt, k_prior, k_post = recorder.knot_arrays()
-    std_out = interpolated_std(t_out, kt[0], k_post[0], kt[1:], k_prior[1:], k_post[1:])
-    solution = solution_from_path(t_out, path, std_out, recording.t0_ns)
+                                   recording.t0_ns, gyro)
+    kt, k_prior, k_post = recorder.knot_arrays_all()
+    std_out = {name: interpolated_std(t_out, kt[0], np.ascontiguousarray(k_post[0, j:j + 3]), kt[1:],
+                                      np.ascontiguousarray(k_prior[1:, j:j + 3]),
+                                      np.ascontiguousarray(k_post[1:, j:j + 3]))
+               for name, j in (("att", 0), ("vel", 3), ("pos", 6))}      # the KNOT layout of the recorder
+    rate = body_rate(t_out, path, gyro, fixes.t, recorder.bias[:, :3], al.x[NOMINAL_BG])
+    solution = solution_from_path(t_out, path, std_out["pos"], recording.t0_ns, std_att=std_out["att"],
+                                  std_vel_enu=std_out["vel"], rate_body=rate)
     diag = recorder.diagnostics(fixes.t, filt.noise_report_labels())
     log.warnings += alignment_findings(al.warnings)
     aiding = source.aiding
@@ -392,14 +399,14 @@ def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared,
 
 
 def smoothed_output(recorder: RunRecorder, model: Any, t_out: np.ndarray, path: np.ndarray,
-                    tg: np.ndarray, t0_ns: int) -> SmoothedRun:
+                    tg: np.ndarray, t0_ns: int, gyro: np.ndarray | None = None) -> SmoothedRun:
     """The recorder's forward run smoothed (:func:`~navpp.engine.output.smoothed_run`), its
     runtime without the compilation of kernels on a cold cache; the recorder's store is emptied."""
     from numba.core import event as numba_event
 
     assert recorder.store is not None
     with numba_event.install_recorder("numba:compile") as compiling:
-        smoothed = smoothed_run(recorder.store, model, t_out, path, recorder.epoch_node, tg, t0_ns)
+        smoothed = smoothed_run(recorder.store, model, t_out, path, recorder.epoch_node, tg, t0_ns, gyro)
     recorder.store = None
     return replace(smoothed, runtime_s=smoothed.runtime_s - compile_seconds(compiling.buffer))
 

@@ -19,6 +19,27 @@ tool reads them); a finished run has none.
     (:func:`navpp.io.frames.body_to_map`).  The comment lines name the anchor (lat, lon in
     degrees, WGS-84 ellipsoidal height in metres), the filter and the log.
 
+``<log>-<filter>.tum`` (:func:`labelled_tum_name`)
+    The same bytes as ``trajectory.tum`` under a name that carries the log and the filter,
+    because ``evo`` labels a trajectory by its file name: ``evo_traj tum a/drive-ekf.tum
+    b/drive-aekf.tum`` tells the runs apart, two ``trajectory.tum`` would both be
+    "trajectory".  ``trajectory.tum`` stays for scripts that read it.
+
+``reference.tum`` (:func:`write_reference_tum`)
+    The run's reference trajectory in the same format, frame and anchor as
+    ``trajectory.tum`` (the anchor convention above is the one every navpp TUM file shares,
+    and the one a TUM reference read back is expected to use), so ``evo_ape tum
+    reference.tum trajectory.tum`` needs no script of one's own.  Its rows are the reference
+    epochs navpp's metrics compare (:func:`navpp.metrics.associate`: the reference rows with
+    a position inside the solution's span, not inside a hole of it).  evo associates each
+    with the nearest ``trajectory.tum`` row within 0.01 s where navpp interpolates the
+    solution, so ``evo_ape``'s translation RMSE is ``metrics.json``'s ``position_m.3d.rmse``
+    exactly (to the 0.1 mm of the files) when the output rows fall on the reference epochs
+    (e.g. ``--output-rate`` = the reference's rate on its grid), and within the distance
+    travelled in half an output interval otherwise.  Orientation: the reference's
+    roll / pitch / heading when it has them, else ``0 0 0 1`` (identity), which evo's default
+    ``evo_ape`` (translation part) does not use; the comment lines say which.
+
 ``trajectory.geojson`` (:func:`write_geojson`)
     RFC 7946: a ``FeatureCollection`` holding one ``Feature`` whose geometry is a
     ``LineString`` of ``[lon, lat, alt]`` positions (degrees with 9 decimals, metres above
@@ -68,17 +89,22 @@ __all__ = [
     "KML_FILE",
     "MAP_MIN_INTERVAL_S",
     "MAP_MIN_STEP_M",
+    "REFERENCE_TUM_FILE",
     "TUM_FILE",
     "absolute_time",
     "diagnostics_frame",
+    "labelled_tum_name",
     "map_rows",
+    "reference_solution",
     "trajectory_frame",
     "write_geojson",
     "write_kml",
+    "write_reference_tum",
     "write_tum",
 ]
 
 TUM_FILE = "trajectory.tum"
+REFERENCE_TUM_FILE = "reference.tum"
 GEOJSON_FILE = "trajectory.geojson"
 KML_FILE = "trajectory.kml"
 
@@ -123,7 +149,9 @@ def _subset(solution: Solution, rows: np.ndarray) -> Solution:
     return Solution(t=solution.t[rows], lat_deg=solution.lat_deg[rows], lon_deg=solution.lon_deg[rows],
                     alt=solution.alt[rows], vel_enu=np.asarray(solution.vel_enu)[rows],
                     rph_deg=np.asarray(solution.rph_deg)[rows], std_enu=np.asarray(solution.std_enu)[rows],
-                    t0_ns=solution.t0_ns)
+                    t0_ns=solution.t0_ns, **{name: None if getattr(solution, name) is None
+                                             else np.asarray(getattr(solution, name))[rows]
+                                             for name in ("std_att", "std_vel_enu", "rate_body")})
 
 
 def map_rows(solution: Solution, *, min_interval_s: float = MAP_MIN_INTERVAL_S,
@@ -196,15 +224,82 @@ def write_tum(path: str | os.PathLike[str], solution: Solution, recording: Recor
     rows = _finite_rows(solution, with_attitude=True)
     sol = _subset(solution, rows)
     anchor = frames.anchor_for(sol, recording) if len(sol) else frames.Anchor(0.0, 0.0, 0.0)
-    t0_s = solution.t0_ns * 1e-9
-    time_base = f" ({recording.time_base})" if recording is not None else ""
-    header = [
+    _write_tum_rows(path, sol, anchor, recording, [
         "# navpp trajectory, TUM format: t x y z qx qy qz qw",
         f"# filter: {_one_line(filter_name) or '-'}; log: {_one_line(log) or '-'}",
-        f"# t: s on the log's time base{time_base}, as trajectory.csv",
+    ], True, None)
+
+
+def labelled_tum_name(log: str | os.PathLike[str], filter_name: str) -> str:
+    """``<log>-<filter>.tum``: the TUM file name evo shows as the run's label.  ``<log>`` is the
+    log's file name without its extension (a directory log: its name), ``<filter>`` the
+    filter's name; characters other than letters, digits, ``.``, ``_`` and ``-`` become ``_``."""
+    import re
+
+    p = os.fspath(log).rstrip("/\\")
+    base = os.path.basename(p) or "log"
+    stem = base if os.path.isdir(p) else (os.path.splitext(base)[0] or base)
+    label = f"{stem}-{filter_name}" if filter_name else stem
+    return re.sub(r"[^A-Za-z0-9._-]", "_", label) + ".tum"
+
+
+def reference_solution(reference: Any, solution: Solution) -> Solution:
+    """The reference rows navpp's metrics compare (see ``reference.tum`` in the module docstring)
+    as a :class:`Solution` on ``solution.t0_ns`` (zero velocity where the reference has none;
+    NaN attitude where it has none; zero sigmas)."""
+    from ..metrics import associate
+
+    ref = reference
+    ok = np.isfinite(ref.lat_deg) & np.isfinite(ref.lon_deg) & np.isfinite(ref.alt)
+    i = associate(np.asarray(solution.t, dtype=float), np.where(ok, np.asarray(ref.t, dtype=float), np.nan),
+                  skip_holes=True).idx_ref
+    n = int(i.size)
+    vel = (np.asarray(ref.vel_enu, dtype=float)[i] if ref.vel_enu is not None else np.zeros((n, 3)))
+    rph = (np.asarray(ref.rph_deg, dtype=float)[i] if ref.rph_deg is not None else np.full((n, 3), np.nan))
+    return Solution(t=np.asarray(ref.t, dtype=float)[i], lat_deg=np.asarray(ref.lat_deg, dtype=float)[i],
+                    lon_deg=np.asarray(ref.lon_deg, dtype=float)[i], alt=np.asarray(ref.alt, dtype=float)[i],
+                    vel_enu=vel, rph_deg=rph, std_enu=np.zeros((n, 3)), t0_ns=solution.t0_ns)
+
+
+def write_reference_tum(path: str | os.PathLike[str], reference: Any, solution: Solution,
+                        recording: Recording | None = None, *, filter_name: str = "", log: str = "",
+                        compared: Solution | None = None) -> None:
+    """Write ``reference.tum``: the reference (a :class:`~navpp.recording.ReferenceData`, ``t``
+    relative to ``solution.t0_ns``) at the epochs the metrics compare, in ``trajectory.tum``'s
+    frame and anchor (that of ``solution`` and ``recording``; module docstring).
+    ``compared``: the solution the metrics were computed on, when not ``solution`` itself (the
+    full-rate one of a run written at ``--output-rate``): its span picks the rows.
+
+    Raises ValueError when no reference epoch falls inside the solution's span.
+    """
+    rows = _finite_rows(solution, with_attitude=True)
+    sol = _subset(solution, rows)
+    if len(sol) == 0:
+        raise ValueError("the solution has no finite row: no anchor for reference.tum")
+    anchor = frames.anchor_for(sol, recording)
+    ref = reference_solution(reference, solution if compared is None else compared)
+    if len(ref) == 0:
+        raise ValueError("no reference epoch inside the solution's span: nothing to write to reference.tum")
+    rph = np.asarray(ref.rph_deg, dtype=float)
+    has_att = bool(np.isfinite(rph).all())
+    src = getattr(reference, "source", "") or "-"
+    _write_tum_rows(path, ref, anchor, recording, [
+        "# navpp reference, TUM format: t x y z qx qy qz qw",
+        f"# reference: {_one_line(src)}; compared with filter: {_one_line(filter_name) or '-'}; "
+        f"log: {_one_line(log) or '-'}",
+    ], has_att, "the reference epochs navpp's metrics compare (inside the solution's span)")
+
+
+def _write_tum_rows(path: str | os.PathLike[str], sol: Solution, anchor: frames.Anchor,
+                    recording: Recording | None, head: list[str], attitude: bool, rows_text: str | None) -> None:
+    t0_s = sol.t0_ns * 1e-9
+    time_base = f" ({recording.time_base})" if recording is not None else ""
+    header = head + [
+        f"# t: s on the log's time base{time_base}, as trajectory.csv" + (f"; rows: {rows_text}" if rows_text else ""),
         (f"# x y z: m, local ENU (east, north, up) about lat {anchor.lat_deg:.9f} deg, "
          f"lon {anchor.lon_deg:.9f} deg, height {anchor.alt:.4f} m (WGS-84 ellipsoid)"),
-        "# qx qy qz qw: rotation body FLU (x forward, y left, z up) -> that ENU frame",
+        ("# qx qy qz qw: rotation body FLU (x forward, y left, z up) -> that ENU frame" if attitude else
+         "# qx qy qz qw: 0 0 0 1 (the reference has no attitude; evo_ape's default translation part ignores it)"),
     ]
     text_header = ("\n".join(header) + "\n").encode("utf-8")
     n = len(sol)
@@ -215,7 +310,11 @@ def write_tum(path: str | os.PathLike[str], solution: Solution, recording: Recor
             stop = min(n, start + writers._CHUNK_ROWS)
             part = _subset(sol, np.arange(start, stop))
             xyz = anchor.enu(part.lat_deg, part.lon_deg, part.alt)
-            q = frames.quat_xyzw(frames.body_to_map(part, anchor))
+            if attitude:
+                q = frames.quat_xyzw(frames.body_to_map(part, anchor))
+            else:
+                q = np.zeros((stop - start, 4))
+                q[:, 3] = 1.0
             fields = [writers._time_field(part.t, t0_s)]
             fields += [writers._field_from_values(xyz[:, i], _POSITION_DECIMALS) for i in range(3)]
             fields += [writers._field_from_values(q[:, i], _QUATERNION_DECIMALS) for i in range(4)]

@@ -21,20 +21,28 @@ FLU (x forward, y left, z up).
   ``base_link``: ``pose.position`` the body origin in ``map`` (m); ``pose.orientation`` the
   rotation taking ``base_link`` vectors into ``map`` (:func:`~navpp.io.frames.body_to_map`);
   ``twist.linear`` the velocity in ``base_link`` (m/s, :func:`~navpp.io.frames.velocity_body`);
-  ``twist.angular`` zero.  Covariances (row-major 6x6, x y z then rotations about x y z, all
-  off-diagonal elements 0): the pose's position block is diag(std_e², std_n², std_u²) (ENU m²;
-  the map's axes differ from the local ENU axes by the tiny rotation described in
-  :mod:`navpp.io.frames`).  Everything navpp's :class:`~navpp.recording.Solution` does not
-  carry is marked "not estimated" with the variance :data:`NOT_ESTIMATED_VARIANCE` (1e6, in
-  rad² or m²/s² or rad²/s²): the orientation variances, and the whole twist diagonal (the
-  solution has no velocity sigma, and the angular velocity is not estimated at all).  ROS
-  defines no "unknown" marker for Odometry; zero would claim a perfect estimate to any
-  consumer that weights by the covariance (robot_localization, planners), whereas a huge
-  variance makes such a consumer ignore the value, which is the truth.
-- ``/tf`` ``tf2_msgs/msg/TFMessage``, one per solution row: the transform ``map`` ->
-  ``base_link`` with the odometry's pose, so 3-D views show the vehicle moving.  No
-  ``/tf_static``: navpp has no fixed frame to publish (the body frame is the IMU's; the GNSS
-  lever arm is configuration, not part of the solution).
+  ``twist.angular`` the body rate (:attr:`~navpp.recording.Solution.rate_body`: gyro minus
+  the estimated bias, Earth and transport rate; base_link, rad/s).  Covariances (row-major
+  6x6, x y z then rotations about x y z; :func:`odometry_covariances`): the pose's position
+  block diag(std_e², std_n², std_u²) (ENU m²; the map's axes differ from the local ENU axes by
+  the tiny rotation described in :mod:`navpp.io.frames`), its orientation block diag of the
+  filter's attitude-error variances about E, N, U (rad²); the twist's linear block the ENU
+  velocity variances rotated into base_link (``C_bn diag(σ²) C_nb``, m²/s², not diagonal), its
+  angular block the gyro-bias variance after the last fix plus the gyro's white noise per
+  sample (rad²/s²).  A Solution that carries no such sigma (one made by hand) gets
+  :data:`NOT_ESTIMATED_VARIANCE` (1e6) there: ROS defines no "unknown" marker for Odometry;
+  zero would claim a perfect estimate, a huge variance makes a consumer ignore the value.
+- ``/tf`` ``tf2_msgs/msg/TFMessage``, one per solution row: ``odom`` -> ``base_link`` with the
+  odometry's pose.  ``/tf_static`` (one message at the first row's stamp, QoS transient local):
+  ``map`` -> ``odom`` identity, ``base_link`` -> ``imu_link`` (the IMU's mounting rotation,
+  ``[imu] mounting_rpy_deg`` or the gross mounting the run found) and ``base_link`` -> ``gnss``
+  (the antenna lever arm ``[gnss] lever_arm_m``), so the tree is map -> odom -> base_link ->
+  {imu_link, gnss} as REP-105 names it.  REP-105 wants ``odom`` continuous and ``map``
+  globally correct; navpp's GNSS-aided solution is both at once (one estimate, corrected at
+  each fix by a few cm, with no separate dead-reckoning track), so ``map`` -> ``odom`` is the
+  identity and all of the pose is in ``odom`` -> ``base_link``; the Odometry's header keeps
+  ``map`` (the same frame).  A robot that has its own ``odom`` should take ``/navpp/odometry``
+  into its own localisation rather than this tree.
 - ``/navpp/bias/gyro`` and ``/navpp/bias/accel`` ``geometry_msgs/msg/Vector3Stamped``, frame
   ``base_link``, one per GNSS epoch the filter processed
   (:class:`~navpp.engine.BiasHistory`): the estimated gyro (rad/s) and accelerometer (m/s²)
@@ -64,8 +72,10 @@ Embedded input (``embed_input=True``): the IMU and GNSS that navpp processed, in
 so one file replays everything.  From an MCAP input whose IMU / GNSS topics are CDR encoded,
 the Message records of those topics are copied (read with ``mcap``'s stream reader: payload,
 log and publish time, sequence; bytes identical) with their schemas, topics and channel metadata
-(e.g. rosbag2's QoS profiles); a GNSS velocity topic goes with the GNSS when the recording used one.  Anything
-else (CSV, ROS 1 bag, ROS 2 bag, a ROS 1 encoded MCAP, or an MCAP whose topic does not hold the
+(e.g. rosbag2's QoS profiles); a GNSS velocity topic goes with the GNSS when the recording used one.
+From a ROS 1 bag, every topic is embedded as it was, converted to ROS 2 CDR
+(:func:`_ros1_input_streams`).  Anything
+else (CSV, ROS 2 bag, a ROS 1 encoded MCAP, or an MCAP whose topic does not hold the
 recording's data, e.g. GNSS replaced by ``--gnss FILE.pos``) is encoded from the Recording:
 ``sensor_msgs/msg/Imu`` on ``/imu/data`` (frame ``imu_link``), ``sensor_msgs/msg/NavSatFix``
 on ``/gnss/fix`` (frame ``gnss``) and, with GNSS velocity,
@@ -91,10 +101,11 @@ message.  The file is written atomically (:func:`navpp.io.writers.atomic_write`)
 
 from __future__ import annotations
 
+import functools
 import os
 import struct
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from operator import itemgetter
 from pathlib import Path
 from typing import IO, Any
@@ -109,15 +120,21 @@ __all__ = [
     "BODY_FRAME",
     "CHUNK_SIZE",
     "COMPRESSIONS",
+    "GNSS_FRAME",
+    "IMU_FRAME",
     "MAP_FRAME",
     "NOT_ESTIMATED_VARIANCE",
+    "ODOM_FRAME",
     "TOPICS",
     "adaptive_columns",
     "write_trajectory_mcap",
 ]
 
 MAP_FRAME = "map"
+ODOM_FRAME = "odom"
 BODY_FRAME = "base_link"
+IMU_FRAME = "imu_link"
+GNSS_FRAME = "gnss"
 #: Variance written for what navpp does not estimate (see the module docstring).
 NOT_ESTIMATED_VARIANCE = 1.0e6
 #: Target uncompressed size of a chunk, bytes.
@@ -126,6 +143,7 @@ CHUNK_SIZE = 4 * 2**20
 TOPIC_FIX = "/navpp/fix"
 TOPIC_ODOMETRY = "/navpp/odometry"
 TOPIC_TF = "/tf"
+TOPIC_TF_STATIC = "/tf_static"
 TOPIC_BIAS_GYRO = "/navpp/bias/gyro"
 TOPIC_BIAS_ACCEL = "/navpp/bias/accel"
 TOPIC_DIAGNOSTICS = "/navpp/diagnostics"
@@ -136,6 +154,7 @@ TOPICS = {
     TOPIC_FIX: "sensor_msgs/msg/NavSatFix",
     TOPIC_ODOMETRY: "nav_msgs/msg/Odometry",
     TOPIC_TF: "tf2_msgs/msg/TFMessage",
+    TOPIC_TF_STATIC: "tf2_msgs/msg/TFMessage",
     TOPIC_BIAS_GYRO: "geometry_msgs/msg/Vector3Stamped",
     TOPIC_BIAS_ACCEL: "geometry_msgs/msg/Vector3Stamped",
     TOPIC_DIAGNOSTICS: roswrite.FILTER_DIAGNOSTICS_TYPE,
@@ -224,13 +243,19 @@ def _ros2_stream(topic: str, msgtype: str, stamps: np.ndarray,
 
 
 def _solution_streams(solution: Solution, recording: Recording, diagnostics: Any,
-                      biases: Any, forward: Solution | None = None) -> tuple[list[_Stream], frames.Anchor]:
+                      biases: Any, forward: Solution | None = None, *,
+                      static: tuple[np.ndarray, np.ndarray] | None = None,
+                      rate_noise_std: float = 0.0) -> tuple[list[_Stream], frames.Anchor]:
     if len(solution) == 0:
         raise ValueError("the solution is empty: nothing to write")
     anchor = frames.anchor_for(solution, recording)
-    streams = _pose_streams(solution, recording, anchor, TOPIC_FIX, TOPIC_ODOMETRY, tf=True)
+    streams = _pose_streams(solution, recording, anchor, TOPIC_FIX, TOPIC_ODOMETRY, tf=True, biases=biases,
+                            rate_noise_std=rate_noise_std)
+    mounting, lever = static if static is not None else (np.eye(3), np.zeros(3))
+    streams.append(_tf_static_stream(int(roswrite.stamps_ns(recording, solution.t[:1])[0]), mounting, lever))
     if forward is not None:
-        streams += _pose_streams(forward, recording, anchor, TOPIC_FORWARD_FIX, TOPIC_FORWARD_ODOMETRY, tf=False)
+        streams += _pose_streams(forward, recording, anchor, TOPIC_FORWARD_FIX, TOPIC_FORWARD_ODOMETRY, tf=False,
+                                 biases=None, rate_noise_std=rate_noise_std)
     if biases is not None:
         b_stamps = roswrite.stamps_ns(recording, biases.t)
         gyro = np.asarray(biases.gyro, dtype=np.float64)
@@ -247,8 +272,8 @@ def _solution_streams(solution: Solution, recording: Recording, diagnostics: Any
 
 
 def _pose_streams(solution: Solution, recording: Recording, anchor: frames.Anchor, fix_topic: str,
-                  odom_topic: str, tf: bool) -> list[_Stream]:
-    """NavSatFix, Odometry (and with ``tf`` the map -> base_link transform) of every row."""
+                  odom_topic: str, tf: bool, biases: Any = None, rate_noise_std: float = 0.0) -> list[_Stream]:
+    """NavSatFix, Odometry (and with ``tf`` the odom -> base_link transform) of every row."""
     n = len(solution)
     if n == 0:
         raise ValueError("the solution is empty: nothing to write")
@@ -262,23 +287,111 @@ def _pose_streams(solution: Solution, recording: Recording, anchor: frames.Ancho
     lon = np.asarray(solution.lon_deg, dtype=np.float64)
     alt = np.asarray(solution.alt, dtype=np.float64)
     var = np.square(np.asarray(solution.std_enu, dtype=np.float64))
-    pose_var = np.empty((n, 6))
-    pose_var[:, :3] = var
-    pose_var[:, 3:] = NOT_ESTIMATED_VARIANCE
-    twist_var = np.full(6, NOT_ESTIMATED_VARIANCE)
-    zeros3 = np.zeros((1, 3))
+    angular = (np.zeros((n, 3)) if solution.rate_body is None
+               else np.asarray(solution.rate_body, dtype=np.float64).reshape(n, 3))
+
+    def pack_odometry(st: np.ndarray, r: slice) -> np.ndarray:
+        arr = roswrite.pack_odometry(st, pos_map[r], quat[r], vel_b[r], angular[r], encoding="cdr",
+                                     frame_id=MAP_FRAME, child_frame_id=BODY_FRAME)
+        pose_cov, twist_cov = odometry_covariances(solution, biases, rate_noise_std, rows=r)
+        arr["pose_covariance"] = pose_cov.reshape(-1, 36)
+        arr["twist_covariance"] = twist_cov.reshape(-1, 36)
+        return arr
 
     streams = [
         _ros2_stream(fix_topic, _ALL_TOPICS[fix_topic], stamps, lambda st, r: roswrite.pack_navsatfix(
             st, lat[r], lon[r], alt[r], encoding="cdr", frame_id=BODY_FRAME, cov_diag=var[r])),
-        _ros2_stream(odom_topic, _ALL_TOPICS[odom_topic], stamps, lambda st, r: roswrite.pack_odometry(
-            st, pos_map[r], quat[r], vel_b[r], np.broadcast_to(zeros3, (st.size, 3)), encoding="cdr",
-            frame_id=MAP_FRAME, child_frame_id=BODY_FRAME, pose_var=pose_var[r], twist_var=twist_var)),
+        _ros2_stream(odom_topic, _ALL_TOPICS[odom_topic], stamps, pack_odometry),
     ]
     if tf:
         streams.append(_ros2_stream(TOPIC_TF, TOPICS[TOPIC_TF], stamps, lambda st, r: roswrite.pack_tf_message(
-            st, pos_map[r], quat[r], encoding="cdr", frame_id=MAP_FRAME, child_frame_id=BODY_FRAME)))
+            st, pos_map[r], quat[r], encoding="cdr", frame_id=ODOM_FRAME, child_frame_id=BODY_FRAME)))
     return streams
+
+
+def odometry_covariances(solution: Solution, biases: Any = None, rate_noise_std: float = 0.0,
+                         rows: slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
+    """``pose.covariance`` and ``twist.covariance`` (N, 6, 6) of ``/navpp/odometry`` (module
+    docstring): position diag(std_e², std_n², std_u²) m²; orientation diag of ``std_att²`` rad²
+    (rotations about the map's x y z = E N U axes); linear twist ``C_bn diag(std_vel_enu²) C_nb``
+    (m²/s², base_link axes); angular twist diag(gyro bias variance after the last fix at or before
+    the row + ``rate_noise_std²``) rad²/s².  What the solution does not carry:
+    :data:`NOT_ESTIMATED_VARIANCE` on the diagonal.  ``rows``: of these rows only (the writer
+    makes them a block at a time)."""
+
+    def cut(a: Any) -> Any:
+        return None if a is None else np.asarray(a)[rows]
+
+    t = np.asarray(solution.t, dtype=float)[rows]
+    n = t.shape[0]
+    std_enu, std_att, std_vel, rate = (cut(solution.std_enu), cut(solution.std_att), cut(solution.std_vel_enu),
+                                       cut(solution.rate_body))
+    pose = np.zeros((n, 6, 6))
+    twist = np.zeros((n, 6, 6))
+    i3 = np.arange(3)
+    pose[:, i3, i3] = np.square(np.asarray(std_enu, dtype=np.float64).reshape(n, 3))
+    if std_att is not None:
+        pose[:, i3 + 3, i3 + 3] = np.square(np.asarray(std_att, dtype=np.float64).reshape(n, 3))
+    else:
+        pose[:, i3 + 3, i3 + 3] = NOT_ESTIMATED_VARIANCE
+    if std_vel is not None:
+        rph = np.radians(np.asarray(solution.rph_deg, dtype=float)[rows])
+        from ..ins.attitude import rph_to_dcm
+
+        c_nb = rph_to_dcm(rph[:, 0], rph[:, 1], rph[:, 2])
+        v = np.square(np.asarray(std_vel, dtype=np.float64).reshape(n, 3))
+        twist[:, :3, :3] = np.einsum("nji,nj,njk->nik", c_nb, v, c_nb)
+    else:
+        twist[:, i3, i3] = NOT_ESTIMATED_VARIANCE
+    if rate is not None and biases is not None and len(biases.t):
+        k = np.searchsorted(np.asarray(biases.t, dtype=float), t, side="right") - 1
+        bstd = np.asarray(biases.gyro_std, dtype=np.float64).reshape(-1, 3)[np.maximum(k, 0)]
+        twist[:, i3 + 3, i3 + 3] = np.square(bstd) + float(rate_noise_std) ** 2
+    elif rate is not None and rate_noise_std > 0.0:
+        twist[:, i3 + 3, i3 + 3] = float(rate_noise_std) ** 2
+    else:
+        twist[:, i3 + 3, i3 + 3] = NOT_ESTIMATED_VARIANCE
+    return pose, twist
+
+
+def _tf_static_stream(stamp_ns: int, mounting: np.ndarray, lever_arm_m: np.ndarray) -> _Stream:
+    """One ``/tf_static`` message: map -> odom (identity), base_link -> imu_link (the IMU's
+    mounting: the rotation taking sensor vectors into base_link), base_link -> gnss (the antenna
+    lever arm, m, base_link FLU)."""
+    ts = _humble_typestore()
+    t = ts.types
+    q = frames.quat_xyzw(np.asarray(mounting, dtype=float).reshape(1, 3, 3))[0]
+    sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
+
+    def transform(parent: str, child: str, xyz: Any, xyzw: Any) -> Any:
+        header = t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
+                                          frame_id=parent)
+        return t["geometry_msgs/msg/TransformStamped"](
+            header=header, child_frame_id=child, transform=t["geometry_msgs/msg/Transform"](
+                translation=t["geometry_msgs/msg/Vector3"](x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2])),
+                rotation=t["geometry_msgs/msg/Quaternion"](x=float(xyzw[0]), y=float(xyzw[1]), z=float(xyzw[2]),
+                                                           w=float(xyzw[3]))))
+
+    msg = t["tf2_msgs/msg/TFMessage"](transforms=[
+        transform(MAP_FRAME, ODOM_FRAME, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)),
+        transform(BODY_FRAME, IMU_FRAME, (0.0, 0.0, 0.0), q),
+        transform(BODY_FRAME, GNSS_FRAME, np.asarray(lever_arm_m, dtype=float).reshape(3), (0.0, 0.0, 0.0, 1.0)),
+    ])
+    data = bytes(ts.serialize_cdr(msg, "tf2_msgs/msg/TFMessage"))
+    st = np.array([stamp_ns], dtype=np.int64)
+    msgtype = TOPICS[TOPIC_TF_STATIC]
+    return _Stream(TOPIC_TF_STATIC, msgtype, "ros2msg", roswrite.MSGDEFS[msgtype].encode(), "cdr", st, st,
+                   np.zeros(1, dtype=np.int64), _Raw([data]),
+                   {"offered_qos_profiles": _TRANSIENT_LOCAL_QOS})
+
+
+#: rosbag2's QoS metadata of a latched topic (``/tf_static``): keep last 1, reliable, transient
+#: local (rmw enum values: history 1 keep last, reliability 1 reliable, durability 1 transient
+#: local, liveliness 1 automatic), so ``ros2 bag play`` offers it to late subscribers.
+_TRANSIENT_LOCAL_QOS = ("- history: 1\n  depth: 1\n  reliability: 1\n  durability: 1\n"
+                        "  deadline:\n    sec: 0\n    nsec: 0\n  lifespan:\n    sec: 0\n    nsec: 0\n"
+                        "  liveliness: 1\n  liveliness_lease_duration:\n    sec: 0\n    nsec: 0\n"
+                        "  avoid_ros_namespace_conventions: false\n")
 
 
 def _diagnostics_stream(recording: Recording, diagnostics: Any) -> _Stream:
@@ -354,15 +467,94 @@ def _odometry_rows(recording: Recording, rows: slice, stamps: np.ndarray) -> np.
                                   frame_id="odom", child_frame_id="base_link", twist_var=var)
 
 
-def _input_streams(recording: Recording, input_log: str | os.PathLike[str] | None) -> list[_Stream]:
-    """The input's IMU, GNSS and odometry: copied from an MCAP input where possible, else encoded."""
+def _input_streams(recording: Recording, input_log: str | os.PathLike[str] | None
+                   ) -> tuple[list[_Stream], list[str]]:
+    """The input's IMU, GNSS and odometry: copied from an MCAP input where possible; every topic of
+    a ROS 1 bag, converted (:func:`_ros1_input_streams`); else encoded.  Also the input topics
+    left out, one line each."""
     if input_log is not None:
         from navpp.io.detect import log_kind
 
         kind, where = log_kind(Path(input_log))
         if kind == "mcap":
-            return _mcap_input_streams(where, recording)
-    return [_encoded_imu(recording), *_encoded_gnss(recording, with_velocity=True), *_encoded_odometry(recording)]
+            return _mcap_input_streams(where, recording), []
+        if kind == "ros1":
+            return _ros1_input_streams(where, recording)
+    return [_encoded_imu(recording), *_encoded_gnss(recording, with_velocity=True), *_encoded_odometry(recording)], []
+
+
+def _ros1_input_streams(path: Path, recording: Recording) -> tuple[list[_Stream], list[str]]:
+    """Every topic of a ROS 1 bag (a ``.bag`` file, or every ``.bag`` in a directory) as it was:
+    same topic names, message types and field values, each message converted to ROS 2 CDR
+    (rosbags: ROS 1 deserialise, ROS 2 Humble serialise; the ROS 1 ``header.seq``, which ROS 2
+    messages do not have, is the only field that does not carry over), log time = the bag's
+    receive time, schemas the ROS 2 definitions.  A topic named like one of navpp's output
+    topics (:data:`TOPICS`, e.g. an input ``/tf``) is left out, and so is a type neither ROS 2
+    Humble nor the bag's own definitions describe; both are listed in the file's metadata
+    (``embedded_input_skipped``, :func:`write_trajectory_mcap`).  When the recording's GNSS is
+    not one of the bag's NavSatFix topics (``--gnss FILE.pos``), it is encoded as for a CSV
+    input on ``/gnss/fix``, or on ``/navpp/input/gnss/fix`` if the bag has that name."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    from .ros import FIX_TYPE
+
+    ts2 = _humble_typestore()
+    paths = sorted(path.glob("*.bag")) if path.is_dir() else [path]
+    streams: list[_Stream] = []
+    skipped: list[str] = []
+    fix_found = False
+    g = recording.gnss
+    with AnyReader(paths, default_typestore=ts2) as reader:
+        topics: dict[str, list[Any]] = {}
+        for conn in reader.connections:
+            topics.setdefault(conn.topic, []).append(conn)
+        for topic, conns in topics.items():
+            msgtype = conns[0].msgtype
+            if topic in TOPICS or any(c.msgtype != msgtype for c in conns):
+                skipped.append(f"{topic} ({msgtype}): " + ("a navpp output topic" if topic in TOPICS
+                                                          else "more than one message type"))
+                continue
+            if msgtype not in ts2.fielddefs:
+                try:
+                    if ts2 is _humble_typestore():          # the shared one stays standard
+                        ts2 = get_typestore(Stores.ROS2_HUMBLE)
+                    found = get_types_from_msg(conns[0].msgdef.data, msgtype)
+                    ts2.register({k: v for k, v in found.items() if k not in ts2.fielddefs})
+                except Exception as exc:  # noqa: BLE001 -- any failure: the type cannot be converted
+                    skipped.append(f"{topic} ({msgtype}): cannot convert the type ({exc})")
+                    continue
+            log, data, lats, lons = [], [], [], []
+            for conn, stamp, raw in reader.messages(connections=conns):
+                msg = reader.deserialize(raw, conn.msgtype)
+                log.append(int(stamp))
+                data.append(bytes(ts2.serialize_cdr(msg, msgtype)))
+                if msgtype == FIX_TYPE:
+                    lats.append(msg.latitude)
+                    lons.append(msg.longitude)
+            if msgtype == FIX_TYPE and len(g) and _contains_all(np.array(lats), g.lat_deg) \
+                    and _contains_all(np.array(lons), g.lon_deg):
+                fix_found = True
+            schema = roswrite.MSGDEFS.get(msgtype) or ts2.generate_msgdef(msgtype, ros_version=2)[0]
+            log_ns = np.asarray(log, dtype=np.int64)
+            order = np.argsort(log_ns, kind="stable")
+            streams.append(_Stream(topic, msgtype, "ros2msg", schema.encode(), "cdr", log_ns[order], log_ns[order],
+                                   np.arange(log_ns.size, dtype=np.int64), _Raw([data[i] for i in order.tolist()])))
+    if not fix_found:
+        enc = _encoded_gnss(recording, with_velocity=True)
+        taken = {s.topic for s in streams}
+        if EMBED_GNSS_TOPIC in taken:
+            enc = [replace(e, topic="/navpp/input" + e.topic) for e in enc]
+        streams += enc
+    return streams, skipped
+
+
+@functools.cache
+def _humble_typestore() -> Any:
+    """rosbags' ROS 2 Humble typestore, built once (about half a second); never registered into."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_HUMBLE)
 
 
 def _reference_topic(recording: Recording) -> str | None:
@@ -601,7 +793,8 @@ def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, r
                           diagnostics: Any = None, biases: Any = None, embed_input: bool = False,
                           input_log: str | os.PathLike[str] | None = None, filter_name: str = "",
                           forward: Solution | None = None, chunk_size: int = CHUNK_SIZE,
-                          compression: str = "zstd") -> None:
+                          compression: str = "zstd", imu_mounting_rpy_deg: Sequence[float] = (0.0, 0.0, 0.0),
+                          gnss_lever_arm_m: Sequence[float] = (0.0, 0.0, 0.0), rate_noise_std: float = 0.0) -> None:
     """Write ``trajectory.mcap``: the solution, biases and filter diagnostics as ROS 2 messages.
 
     See the module docstring for the topics, frames, units and covariances.
@@ -625,6 +818,13 @@ def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, r
         ``solution`` says ``smoothed`` (else ``forward``).
     chunk_size : target uncompressed size of a chunk, bytes.
     compression : chunk compression, one of :data:`COMPRESSIONS`.
+    imu_mounting_rpy_deg : (3,) deg, the IMU's mounting (sensor -> base_link, roll pitch yaw
+        about x y z, as ``[imu] mounting_rpy_deg``): the ``base_link -> imu_link`` rotation of
+        ``/tf_static``.
+    gnss_lever_arm_m : (3,) m, the antenna in base_link FLU (``[gnss] lever_arm_m``): the
+        ``base_link -> gnss`` translation of ``/tf_static``.
+    rate_noise_std : rad/s, the gyro's white noise per sample (``[imu]`` ARW x sqrt(IMU rate)),
+        added to the angular-velocity variance of ``/navpp/odometry``.
 
     Raises
     ------
@@ -635,9 +835,16 @@ def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, r
     navpp.errors.InputError
         ``input_log`` cannot be read.
     """
-    streams, anchor = _solution_streams(solution, recording, diagnostics, biases, forward)
+    from ..ins.attitude import rpy_deg_to_dcm
+
+    static = (rpy_deg_to_dcm(np.asarray(imu_mounting_rpy_deg, dtype=float).reshape(3)),
+              np.asarray(gnss_lever_arm_m, dtype=float).reshape(3))
+    streams, anchor = _solution_streams(solution, recording, diagnostics, biases, forward, static=static,
+                                        rate_noise_std=rate_noise_std)
+    skipped: list[str] = []
     if embed_input:
-        streams = _input_streams(recording, input_log) + streams
+        embedded, skipped = _input_streams(recording, input_log)
+        streams = embedded + streams
     metadata = {
         "filter": filter_name,
         "solution": "smoothed (Rauch-Tung-Striebel)" if forward is not None else "forward",
@@ -649,6 +856,10 @@ def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, r
         "map_anchor_lon_deg": repr(anchor.lon_deg),
         "map_anchor_alt_m": repr(anchor.alt),
         "body_frame": "FLU (x forward, y left, z up)",
+        "tf_tree": "map -> odom (static identity) -> base_link (/tf); base_link -> imu_link, base_link -> gnss "
+                   "(/tf_static)",
         "not_estimated_variance": repr(NOT_ESTIMATED_VARIANCE),
     }
+    if skipped:
+        metadata["embedded_input_skipped"] = "; ".join(skipped)
     _write(path, streams, metadata, chunk_size=chunk_size, compression=compression)
