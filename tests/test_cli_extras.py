@@ -143,7 +143,7 @@ def test_smoothed_verbose_run_writes_and_names_the_forward_tum(log_copy, tmp_pat
     assert "the forward solution is in trajectory_forward.csv and trajectory_forward.tum" in err
     assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == sorted(
         ["trajectory.csv", "trajectory_forward.csv", "diagnostics.csv", "metrics.json", "metrics.md",
-         "trajectory.tum", "trajectory_forward.tum"])
+         "trajectory.tum", "trajectory_forward.tum", "log-ekf.tum", "reference.tum"])
     # the forward TUM against the forward CSV, in the anchor the TUM's header states
     lines = (out / "trajectory_forward.tum").read_text().splitlines()
     assert "filter: ekf (forward, not smoothed)" in lines[1]
