@@ -242,3 +242,21 @@ def test_errors_figure_band_is_the_solution_sigma(plotted):
         np.testing.assert_allclose(band.band_enu_m[:, j], 3.0 * np.interp(band.t_s, t, traj[col].to_numpy()),
                                    rtol=0, atol=1e-4)     # 0.1 mm: the steps at the fixes, t rounded to 1 us
     assert math.isfinite(float(band.err_h_m.max()))
+
+
+def test_position_groups_name_runs_whose_lines_coincide():
+    from navpp.comparison.figures import position_groups
+    from navpp.comparison.series import RunSeries
+
+    k = np.arange(500.0)
+    east, north = 10.0 * np.cos(k / 50), 10.0 * np.sin(k / 50)
+    cdf = np.linspace(0.0, 1.5, 201)                       # an error axis of 1.5 m: 7.5 mm coincide
+    runs = {"ckf": RunSeries(east, north, cdf_m=cdf),
+            "ukf": RunSeries(east + 0.0044, north, cdf_m=cdf + 0.001),
+            "ekf": RunSeries(east + 0.02, north, cdf_m=cdf),
+            "aekf": RunSeries(east + 0.02, north + 0.0005, cdf_m=cdf)}
+    assert position_groups(runs) == [("ckf", "ckf ≈ ukf (lines coincide, differ ≤ 4.4 mm)"),
+                                     ("ekf", "ekf = aekf (identical)")]
+    # without a reference (no error axis): identical within 1 mm only
+    bare = {n: RunSeries(s.east_m, s.north_m) for n, s in runs.items()}
+    assert [label for _, label in position_groups(bare)] == ["ckf", "ukf", "ekf = aekf (identical)"]

@@ -14,8 +14,9 @@
 - ``<log>_map.html``: an overview map of the log (:mod:`navpp.mapview`): the tracks, the GNSS
   fixes, the reference and the GNSS outages.
 
-Runs whose plotted values coincide (:func:`coincident_groups`) are drawn once, labelled
-``"ckf = ukf (identical)"``, so no line hides another unsaid.
+Runs whose positions coincide (:func:`position_groups`: within 1 mm, or closer than about two
+pixels of the error axis) are drawn once, labelled ``"ckf = ukf (identical)"`` or ``"ckf ≈ ukf
+(lines coincide, differ ≤ 4.4 mm)"``, so no line hides another unsaid.
 
 A :class:`FigureJob` is plain data (it pickles), so a worker process or a Dask worker can draw
 a log's figures as soon as that log's runs are done.  Figures are drawn with ``Figure`` +
@@ -140,15 +141,34 @@ def identical_label(group: Sequence[str], difference: float = 0.0, unit: str = "
     return " ≈ ".join(group) + f" (lines coincide, differ ≤ {size})"
 
 
-def _drawn(runs: Mapping[str, RunSeries], arrays, rel: float = 2e-3) -> list[tuple[str, str]]:
-    """(name drawn, legend label) per group of runs whose ``arrays(series)`` coincide on the
-    figure (:func:`coincident_groups` with ``rel``)."""
+def _drawn(runs: Mapping[str, RunSeries], arrays, rel: float = 0.0, tol: float = COINCIDE_TOL
+           ) -> list[tuple[str, str]]:
+    """(name drawn, legend label) per group of runs whose ``arrays(series)`` coincide
+    (:func:`coincident_groups` with ``tol`` and ``rel``)."""
     series = {n: arrays(s) for n, s in runs.items()}
     out = []
-    for g in coincident_groups(series, rel=rel):
+    for g in coincident_groups(series, tol=tol, rel=rel):
         diff = max((max_difference(series[g[0]], series[n]) for n in g[1:]), default=0.0)
         out.append((g[0], identical_label(g, diff)))
     return out
+
+
+#: Runs whose positions differ by less than this fraction of the error axis (the range of their
+#: error CDFs) coincide on the error figures: about 2 pixels of an 800-pixel axis.
+POSITION_COINCIDE_REL = 5e-3
+
+
+def position_groups(runs: Mapping[str, RunSeries]) -> list[tuple[str, str]]:
+    """(name drawn, legend label) per group of runs whose positions coincide on the figures: the
+    same trajectory points (E, N, m; strided alike, so point for point) and error quantiles
+    within ``max(COINCIDE_TOL, POSITION_COINCIDE_REL x the error range)`` m (identical within
+    :data:`COINCIDE_TOL` without a reference).  Every position figure of a log uses these."""
+    import numpy as np
+
+    spans = [float(np.nanmax(s.cdf_m) - np.nanmin(s.cdf_m)) for s in runs.values()
+             if s.cdf_m is not None and np.isfinite(s.cdf_m).any()]
+    tol = max([COINCIDE_TOL] + [POSITION_COINCIDE_REL * sp for sp in spans])
+    return _drawn(runs, lambda s: (s.east_m, s.north_m, s.cdf_m), tol=tol)
 
 
 def log_label(log: str) -> str:
@@ -207,7 +227,7 @@ def _trajectory_figure(label: str, slug: str, log_series: LogSeries | None, runs
         lat, lon, alt = log_series.anchor
         ax.set_title(f"{label}: trajectories, local ENU about the first GNSS fix\n"
                      f"({lat:.6f}°, {lon:.6f}°, {alt:.1f} m)", fontsize=10)
-    for name, legend in _drawn(runs, lambda s: (s.east_m, s.north_m)):
+    for name, legend in position_groups(runs):
         s = runs[name]
         ax.plot(s.east_m, s.north_m, _line(name, runs), lw=1.0, color=colors[name], label=legend)
     ax.set_aspect("equal", adjustable="datalim")
@@ -227,7 +247,7 @@ def _error_time_figure(label: str, slug: str, runs: Mapping[str, RunSeries], col
         return None
     fig = Figure(figsize=(8.5, 4.2), layout="constrained")
     ax = fig.add_subplot()
-    for name, legend in _drawn(with_err, lambda s: (s.err_t_s, s.err_h_m)):
+    for name, legend in position_groups(with_err):
         s = with_err[name]
         ax.plot(s.err_t_s, s.err_h_m, _line(name, runs), lw=0.8, color=colors[name], label=legend)
     ax.set_xlabel("time since log start, s")
@@ -249,7 +269,7 @@ def _error_cdf_figure(label: str, slug: str, runs: Mapping[str, RunSeries], colo
         return None
     fig = Figure(figsize=(6.5, 4.5), layout="constrained")
     ax = fig.add_subplot()
-    for name, legend in _drawn(with_err, lambda s: (s.cdf_m,)):
+    for name, legend in position_groups(with_err):
         s = with_err[name]
         ax.plot(s.cdf_m, np.linspace(0.0, 1.0, len(s.cdf_m)), _line(name, runs), lw=1.2, color=colors[name],
                 label=legend)
@@ -274,7 +294,7 @@ def _adaptive_figure(label: str, slug: str, runs: Mapping[str, RunSeries], color
     with_factors = any(s.factors for s in adapt.values())
     fig = Figure(figsize=(8.5, 6.5 if with_factors else 4.2), layout="constrained")
     axes = fig.subplots(2 if with_factors else 1, 1, sharex=True, squeeze=False)[:, 0]
-    for name, legend in _drawn(adapt, lambda s: (s.diag_t_s, s.r_std_m), rel=0.0):
+    for name, legend in _drawn(adapt, lambda s: (s.diag_t_s, s.r_std_m)):
         s = adapt[name]
         for j, (axis, ls) in enumerate((("E", "-"), ("N", "--"), ("U", ":"))):
             axes[0].plot(s.diag_t_s, s.r_std_m[:, j], ls, lw=1.0, color=colors[name], label=f"{legend} R {axis}")
@@ -288,7 +308,7 @@ def _adaptive_figure(label: str, slug: str, runs: Mapping[str, RunSeries], color
         keys = list(dict.fromkeys(k for s in adapt.values() for k in s.factors))
         fcolors = factor_colors(keys)
         with_f = {n: s for n, s in adapt.items() if s.factors}
-        drawn = _drawn(with_f, lambda s: (s.diag_t_s, *(s.factors.get(k) for k in keys)), rel=0.0)
+        drawn = _drawn(with_f, lambda s: (s.diag_t_s, *(s.factors.get(k) for k in keys)))
         for j, (name, legend) in enumerate(drawn):
             s = with_f[name]
             # factors of one run that coincide (e.g. several left at 1) are drawn once, named together
@@ -383,9 +403,8 @@ def _run_errors(label: str, slug: str, log_series: LogSeries | None, runs: Mappi
                 colors: Mapping[str, str]) -> list[Plot]:
     gaps = log_series.gaps_s if log_series is not None else ()
     plots = []
-    # a figure per run; runs identical within COINCIDE_TOL share one (nothing else is hidden here)
-    for name, legend in _drawn(runs, lambda s: (None if s.band is None else s.band.err_enu_m,
-                                                None if s.innovations is None else s.innovations.nu_enu_m), rel=0.0):
+    # a figure per run; runs whose positions coincide (position_groups) share one
+    for name, legend in position_groups(runs):
         p = run_error_figure(label, slug, name, runs[name], gaps, colors.get(name, "tab:blue"), legend)
         if p is not None:
             plots.append(p)
@@ -411,7 +430,7 @@ def log_map(label: str, slug: str, log_series: LogSeries | None, runs: Mapping[s
                                (decimate_track(log_series.ref_lat_deg, log_series.ref_lon_deg),), width=3.0))
     with_track = {n: s for n, s in runs.items() if s.lat_deg is not None}
 
-    for name, legend in _drawn(with_track, lambda s: (s.east_m, s.north_m), rel=0.0):   # m, not deg
+    for name, legend in position_groups(with_track):
         s = with_track[name]
         layers.append(MapLayer(legend, "line", to_hex(colors.get(name, "tab:blue")),
                                (decimate_track(s.lat_deg, s.lon_deg),), width=2.0))
