@@ -19,7 +19,7 @@ import shutil
 import tempfile
 from collections.abc import Callable, Sequence
 from contextlib import nullcontext
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -326,7 +326,7 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
             formats: str | Sequence[str] | None = None, embed_input: bool = False,
             gnss_outages: Sequence[tuple[float, float]] | None = None,
             smooth: bool | None = None, odometry_topic: str | None = None,
-            reference_anchor: str | Sequence[float] | None = None) -> ProcessResult:
+            reference_anchor: str | Sequence[float] | None = None, plot: bool = False) -> ProcessResult:
     """Read a log, run one filter, write trajectory (and metrics with a reference).
 
     ``navpp.process`` is this function.  Example::
@@ -383,6 +383,9 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         smoothed 1-sigma), ``trajectory_forward.csv`` (with ``csv``) and the MCAP's
         ``/navpp/forward/*`` topics the forward one, and the metrics show both.  Overrides
         ``[output] smooth``; None uses it (default off).
+    plot : also write the run's figures beside the outputs (:mod:`navpp.plots`: the error per
+        axis with its +-3-sigma band, the trajectory, the adaptive noise, an HTML overview map);
+        ignored with ``write=False``.
 
     Returns
     -------
@@ -400,6 +403,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
                  embed_input=embed_input, gnss_outages=gnss_outages, smooth=smooth,
                  topics=(imu_topic, gnss_topic, reference_topic, odometry_topic),
                  reference_anchor=_anchor_arg(reference_anchor))
+    if plot:
+        plan = replace(plan, plot=True)
     with claimed_out_dir(plan.out, plan.out_label, OUTPUT_FILES) if write else nullcontext():
         return _run(plan, progress)
 
@@ -434,6 +439,7 @@ class _Plan:
     out_label: str
     inputs: set[tuple[int, int]]
     reference_anchor: str | None = None
+    plot: bool = False            # also write the figures (navpp.plots)
 
 
 def _anchor_arg(anchor: str | Sequence[float] | None) -> str | None:
@@ -536,6 +542,10 @@ def _run(plan: _Plan, progress: Callable[[str, float], None] | None) -> ProcessR
         outputs = _outputs(plan.formats, log=plan.log, rec=rec, sol_out=sol_out, result=result, metrics=metrics,
                            filter_name=plan.filter_name, embed_input=plan.embed_input, forward_out=fwd_out,
                            compared=sol, cfg=plan.cfg)
+        if plan.plot:
+            from .plots import plot_outputs
+
+            outputs += plot_outputs(plan.log, rec, result, plan.filt, plan.filter_name, plan.windows)
         files = write_outputs(plan.out, outputs, plan.inputs)
     cfg = plan.cfg
     notes = tuple(rec.notes) + tuple(cfg.notes) + tuple(result.notes) + tuple(result.alignment.lines) + tuple(

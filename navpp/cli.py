@@ -216,6 +216,11 @@ def process(
         "hold the smoothed trajectory, trajectory_forward.csv/.tum (and the MCAP's forward topics) the forward one, "
         "the metrics show both.  "
         "[default: [output] smooth, else off]", show_default=False)] = None,
+    plot: Annotated[bool, typer.Option(
+        "--plot", help="Also write figures beside the outputs: <log>_<filter>_errors.png (error per axis with the "
+                       "±3σ band, outages, rejected fixes; without a reference <log>_<filter>_innovations.png), "
+                       "<log>_trajectory.png, <log>_adaptive.png and the zoomable overview map <log>_map.html.")
+    ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars, notes or summary (warnings about "
                                         "the data are still printed).")] = False,
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Also print where the config, reference and "
@@ -240,7 +245,8 @@ def process(
                               output_rate_hz=output_rate, progress=prog, imu_topic=imu_topic,
                               gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss,
                               formats=formats, embed_input=embed_input, gnss_outages=gnss_outage, smooth=smooth,
-                              odometry_topic=odometry_topic, reference_anchor=reference_anchor)
+                              odometry_topic=odometry_topic, reference_anchor=reference_anchor,
+                              plot=plot)
     except NavppError as exc:
         _fail(str(exc), exc)
         return

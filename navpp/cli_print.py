@@ -108,6 +108,7 @@ def print_comparison(result, json_out: bool, verdict=None, exit_code: int = 0) -
     from rich.table import Table
 
     from .comparison.report import best_cells
+    from .comparison.rows import with_raw_gnss
 
     rows = result.rows
     err = Console(stderr=True, highlight=False, soft_wrap=True)
@@ -137,6 +138,7 @@ def print_comparison(result, json_out: bool, verdict=None, exit_code: int = 0) -
     cols = ["log", "filter"] + ([h for _, h in metric_cols] if with_ref else []) + ["rej.", "s"]
     for c in cols:
         tab.add_column(c, justify="left" if c in ("log", "filter") else "right", no_wrap=True)
+    rows = with_raw_gnss(rows)           # + each log's raw GNSS fixes against the reference (no rej., no s)
     best = best_cells(rows, [c for c, _ in metric_cols])
     for i, r in enumerate(rows):
         cells = [escape(Path(r.log).name), r.filter]
@@ -150,14 +152,19 @@ def print_comparison(result, json_out: bool, verdict=None, exit_code: int = 0) -
                 v = s.get(c)
                 text = f"{v:.3f}" if isinstance(v, float) else ""
                 cells.append(f"[bold]{text}[/]" if text and (i, c) in best else text)
+        if r.is_raw_gnss:
+            tab.add_row(*cells, "", "", style="dim")
+            continue
         cells += [str(r.gnss_rejected), f"{r.runtime_s:.2f}"]
         tab.add_row(*cells)
     con.print(tab)
     if result.files:
-        names = [p.name for p in result.files if p.suffix != ".png"]
+        names = [p.name for p in result.files if p.suffix != ".png" and not p.name.endswith("_map.html")]
         n_png = sum(p.suffix == ".png" for p in result.files)
+        n_map = sum(p.name.endswith("_map.html") for p in result.files)
         con.print(escape(f"wrote {', '.join(str(result.out_dir / n) for n in names)}"
-                         + (f" and {n_png} figure{'s' * (n_png != 1)}" if n_png else "")))
+                         + (f" and {n_png} figure{'s' * (n_png != 1)}" if n_png else "")
+                         + (f" and {n_map} map{'s' * (n_map != 1)}" if n_map else "")))
 
 
 def print_gate(verdict) -> None:

@@ -76,7 +76,10 @@ def untimed(r: CompareRow) -> CompareRow:
 def _same_series(a, b) -> None:
     for name in a.__dataclass_fields__:
         x, y = getattr(a, name), getattr(b, name)
-        if isinstance(x, dict):
+        if hasattr(x, "__dataclass_fields__"):      # a band of the series (ErrorBand, InnovationBand)
+            assert type(x) is type(y), name
+            _same_series(x, y)
+        elif isinstance(x, dict):
             assert x.keys() == y.keys()
             for k in x:
                 np.testing.assert_array_equal(x[k], y[k])
@@ -138,10 +141,16 @@ def test_cli_table_summary_and_json(sim_log_dir: Path, tmp_path: Path):
     assert "H RMSE" in res.stdout and "aekf" in res.stdout
     table = read_summary(out / "summary.csv")
     assert tuple(table[0]) == SUMMARY_COLUMNS
-    assert [t["filter"] for t in table] == ["ekf", "aekf"]
-    ekf = api.process(sim_log_dir, filter_name="ekf", write=False).metrics["position_m"]
+    assert [t["filter"] for t in table] == ["ekf", "aekf", "raw GNSS"]
+    metrics = api.process(sim_log_dir, filter_name="ekf", write=False).metrics
+    ekf = metrics["position_m"]
     assert float(table[0]["horizontal_rmse"]) == pytest.approx(ekf["horizontal"]["rmse"], abs=6e-5)
     assert float(table[0]["up_mae"]) == pytest.approx(ekf["up"]["mae"], abs=6e-5)
+    raw = metrics["gnss_position_m"]           # the raw-GNSS row: the fixes against the reference, as process has it
+    assert int(table[2]["epochs"]) == raw["epochs"] and table[2]["runtime_s"] == ""
+    for axis in ("east", "north", "up", "horizontal"):
+        for stat in ("mae", "rmse"):
+            assert float(table[2][f"{axis}_{stat}"]) == pytest.approx(raw[axis][stat], abs=6e-5)
     assert (out / "report.md").is_file() and (out / "report.html").is_file()
 
     res = invoke("compare", sim_log_dir, "--filters", "ekf", "--out", out, "--json")
@@ -180,7 +189,7 @@ def test_an_unreadable_log_is_rows_and_the_others_run(sim_log_dir: Path, tmp_pat
     assert "2 of 4 runs failed" in last and "ekf, aekf on nowhere.mcap" in last and len(last) < 300, res.stderr
     assert "warning: ekf, aekf on" in err and "Traceback" not in res.output
     table = read_summary(tmp_path / "c" / "summary.csv")
-    assert [t["status"] == "ok" for t in table] == [False, False, True, True]
+    assert [t["status"] == "ok" for t in table] == [False, False, True, True, True]     # + the raw GNSS row
     assert (tmp_path / "c" / "report.html").is_file()
 
 
@@ -401,7 +410,7 @@ def test_python_api_creates_the_output_directory(sim_log_dir, tmp_path):
 
     out = tmp_path / "new" / "cmp"
     res = navpp.compare([sim_log_dir], ["ekf"], out_dir=out, report=False)
-    assert (out / "summary.csv").is_file() and res.summary["filter"].tolist() == ["ekf"]
+    assert (out / "summary.csv").is_file() and res.summary["filter"].tolist() == ["ekf", "raw GNSS"]
 
 
 def test_config_outages_apply_to_compare_as_to_process(log_copy):

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import base64
 import csv
+import html
 import io
 import re
 from pathlib import Path
@@ -45,9 +46,11 @@ def md_table(text: str) -> tuple[list[str], list[list[str]]]:
 
 def test_files_and_stale_figures(report_dir: Path):
     names = sorted(p.name for p in report_dir.iterdir())
-    assert names == ["drive_adaptive.png", "drive_error_cdf.png", "drive_error_time.png", "drive_trajectory.png",
-                     "noref_adaptive.png", "noref_trajectory.png", "notes.txt", "report.html", "report.md",
-                     "summary.csv"]
+    assert names == ["drive_adaptive.png", "drive_ekf_errors.png", "drive_error_cdf.png", "drive_error_time.png",
+                     "drive_map.html", "drive_trajectory.png", "drive_vce-ckf_errors.png", "noref_adaptive.png",
+                     "noref_ekf_innovations.png", "noref_map.html", "noref_trajectory.png",
+                     "noref_vce-ckf_innovations.png",
+                     "notes.txt", "report.html", "report.md", "summary.csv"]
     assert not list(report_dir.glob(".*.tmp"))
 
 
@@ -55,7 +58,8 @@ def test_markdown_numbers_are_the_summary_and_best_is_the_minimum(report_dir: Pa
     head, body = md_table((report_dir / "report.md").read_text())
     with open(report_dir / "summary.csv", newline="") as f:
         summary = list(csv.DictReader(f))
-    assert len(body) == len(summary) == 4
+    assert len(body) == len(summary) == 5                    # 2 x 2 runs and the raw GNSS row of drive
+    assert [s["filter"] for s in summary] == ["ekf", "vce-ckf", "raw GNSS", "ekf", "vce-ckf"]
     checked = 0
     for cells, srow in zip(body, summary):
         assert cells[head.index("filter")] == srow["filter"]
@@ -66,11 +70,16 @@ def test_markdown_numbers_are_the_summary_and_best_is_the_minimum(report_dir: Pa
                 continue
             assert float(cell.strip("*")) == float(srow[c])
             checked += 1
-            same_log = [float(s[c]) for s in summary if s["log"] == srow["log"] and s[c] != ""]
-            assert cell.startswith("**") == (float(srow[c]) == min(same_log)), (h, srow["filter"])
+            same_log = [float(s[c]) for s in summary if s["log"] == srow["log"] and s[c] != ""
+                        and s["filter"] != "raw GNSS"]     # the raw fixes are shown, never "best"
+            best = srow["filter"] != "raw GNSS" and float(srow[c]) == min(same_log)
+            assert cell.startswith("**") == best, (h, srow["filter"])
         assert cells[head.index("rejected")] == srow["gnss_rejected"]
-        assert float(cells[head.index("time s")]) == pytest.approx(float(srow["runtime_s"]), abs=0.006)
-    assert checked == 2 * len(HEADER_TO_COLUMN)              # the log without reference has no numbers
+        if srow["filter"] == "raw GNSS":
+            assert cells[head.index("time s")] == srow["runtime_s"] == ""
+        else:
+            assert float(cells[head.index("time s")]) == pytest.approx(float(srow["runtime_s"]), abs=0.006)
+    assert checked == 3 * len(HEADER_TO_COLUMN)              # the log without reference has no numbers
     text = (report_dir / "report.md").read_text()
     for png in report_dir.glob("*.png"):
         assert f"]({png.name})" in text
@@ -82,13 +91,23 @@ def test_html_is_self_contained_with_valid_pngs(report_dir: Path):
     text = (report_dir / "report.html").read_text()
     uris = re.findall(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"', text)
     pngs = sorted(report_dir.glob("*.png"))
-    assert len(uris) == len(pngs) == 6
+    assert len(uris) == len(pngs) == 10
     assert sorted(base64.b64decode(u) for u in uris) == sorted(p.read_bytes() for p in pngs)
     for u in uris:
         data = base64.b64decode(u, validate=True)
         assert data.startswith(PNG_SIGNATURE)
         assert imread(io.BytesIO(data), format="png").ndim == 3
     rest = re.sub(r'<img src="data:image/png;base64,[A-Za-z0-9+/=]+"', "<img", text)
+    # the overview maps: the map pages themselves, inline; their only URLs are the tile server the
+    # page tries (falling back to a plain background) and the tiles' copyright note
+    frames = re.findall(r'<iframe srcdoc="([^"]*)"', rest)
+    assert len(frames) == 2
+    for frame in frames:
+        page = html.unescape(frame)
+        assert 'id="navpp-map-data"' in page
+        assert set(re.findall(r"https?://[a-z.]+", page)) == {"https://tile.openstreetmap.org",
+                                                             "https://www.openstreetmap.org"}
+    rest = re.sub(r'<iframe srcdoc="[^"]*"', "<frame", rest)
     assert not re.search(r"https?:|ftp:|//[a-z]|<link|<script|<iframe|@import|url\(|src=|href=", rest, re.IGNORECASE)
     assert text.count('<td class="num best">') == sum(1 for _ in re.finditer(r"\*\*", (report_dir / "report.md")
                                                                                  .read_text())) // 2

@@ -190,7 +190,7 @@ def test_compare_smooth_rows(sim_log_dir, tmp_path):
         assert (by[name + "+rts"].metrics["position_m"]["horizontal"]["rmse"]
                 < by[name].metrics["position_m"]["horizontal"]["rmse"])
     summary = pd.read_csv(tmp_path / "summary.csv")
-    assert list(summary["filter"]) == ["ekf", "ekf+rts", "ckf", "ckf+rts"]
+    assert list(summary["filter"]) == ["ekf", "ekf+rts", "ckf", "ckf+rts", "raw GNSS"]
     assert "ekf+rts" in (tmp_path / "report.md").read_text()
     assert set(res.run_series) == {(str(sim_log_dir), f) for f in ("ekf", "ekf+rts", "ckf", "ckf+rts")}
     parallel = compare([sim_log_dir], ["ekf", "ckf"], smooth=True, jobs=2, report=False)

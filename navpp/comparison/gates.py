@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import ConfigError
-from .rows import SUMMARY_COLUMNS, CompareRow
+from .rows import RAW_GNSS, SUMMARY_COLUMNS, CompareRow
 
 #: Columns ``--baseline`` compares (m): horizontal and vertical RMSE.
 BASELINE_METRICS = ("horizontal_rmse", "up_rmse")
@@ -154,6 +154,8 @@ def read_baseline(path: str | Path) -> list[dict[str, object]]:
     rows: list[dict[str, object]] = []
     seen: set[tuple[str, str]] = set()
     for line, rec in enumerate(records, start=2):
+        if (rec.get("filter") or "") == RAW_GNSS:       # the log's GNSS fixes, not a run: never gated
+            continue
         row: dict[str, object] = {"log": rec.get("log") or "", "filter": rec.get("filter") or "",
                                   "status": rec.get("status") or "ok"}
         for c in metric_cols:

@@ -2,12 +2,16 @@
 
 Content, for every log x filter: the position error against the reference (E/N/U/horizontal
 MAE and RMSE, m; the best, i.e. smallest, value of each column per log in bold), the GNSS fixes
-the gate rejected and the filter's run time (s).  Then, per log, its figures
-(:mod:`navpp.comparison.figures`) and the warnings of its runs.
+the gate rejected and the filter's run time (s); per log with a reference, a "raw GNSS" row: its
+GNSS fixes themselves against the reference (:func:`~navpp.comparison.rows.with_raw_gnss`).
+Then, per log, its figures (:mod:`navpp.comparison.figures`: per run the error per axis with
+its +-3-sigma band, and an overview map) and the warnings of its runs.
 
 A log without a reference has status, rejected fixes and run time only, and no error plots
 (the trajectories, and the adaptive noise, need no reference); the report says so.
-The HTML embeds every PNG as a base64 data URI and its CSS inline: no external resource.
+The HTML embeds every PNG as a base64 data URI and its CSS inline, and each overview map as an
+inline ``<iframe srcdoc>`` (the map page itself, :mod:`navpp.mapview`): the only thing it may
+fetch is the map's background tiles, when online.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ from ..errors import InputError
 from ..outfiles import os_reason, write_text_file
 from ..version import __version__
 from .figures import FIGURE_SUFFIXES, Plot, log_label
-from .rows import CompareRow
+from .rows import CompareRow, with_raw_gnss
 
 #: Table columns: (summary.csv column, header); the error columns are metres.
 TABLE_ERROR_COLUMNS = (("east_mae", "E MAE"), ("east_rmse", "E RMSE"), ("north_mae", "N MAE"),
@@ -57,7 +61,7 @@ def best_cells(rows: Sequence[CompareRow], columns: Sequence[str] | None = None)
     best: set[tuple[int, str]] = set()
     logs = list(dict.fromkeys(r.log for r in rows))
     for log in logs:
-        idx = [i for i, r in enumerate(rows) if r.log == log]
+        idx = [i for i, r in enumerate(rows) if r.log == log and not r.is_raw_gnss]
         for c in columns:
             vals = {i: _number(rows[i], c) for i in idx}
             vals = {i: v for i, v in vals.items() if v is not None}
@@ -72,7 +76,8 @@ def _fmt(v: float | None) -> str:
 
 
 def _table(rows: Sequence[CompareRow]) -> tuple[list[str], list[list[tuple[str, bool]]]]:
-    """Header and cells (text, is best) of the comparison table."""
+    """Header and cells (text, is best) of the comparison table; ``rows`` with the raw-GNSS rows
+    (:func:`~navpp.comparison.rows.with_raw_gnss`), which take no part in the best values."""
     with_ref = any(r.metrics is not None for r in rows)
     head = ["log", "filter", "status"]
     if with_ref:
@@ -84,7 +89,9 @@ def _table(rows: Sequence[CompareRow]) -> tuple[list[str], list[list[tuple[str, 
         cells = [(log_label(r.log), False), (r.filter, False), ("ok" if r.ok else "failed", False)]
         if with_ref:
             cells += [(_fmt(_number(r, c)), (i, c) in best) for c, _ in TABLE_ERROR_COLUMNS]
-        if r.ok:
+        if r.is_raw_gnss:
+            cells += [(str(r.gnss_epochs), False), ("", False), ("", False)]
+        elif r.ok:
             cells += [(str(r.gnss_epochs), False), (str(r.gnss_rejected), False), (f"{r.runtime_s:.2f}", False)]
         else:
             cells += [("", False)] * 3
@@ -103,7 +110,9 @@ def _header_lines(rows: Sequence[CompareRow]) -> list[str]:
               f"{len(rows)} runs; {len(rows) - failed} ok, {failed} failed.")
     legend = ("Position error against the reference in metres (E = east/longitude, N = north/latitude, U = up, "
               "H = horizontal); the best (smallest) value of each column per log is highlighted. GNSS used / "
-              "rejected: fixes applied / rejected by the gate; time: filter run time, s.")
+              "rejected: fixes applied / rejected by the gate; time: filter run time, s. The raw GNSS row of a "
+              "log: its GNSS fixes themselves against the reference antenna position (GNSS used: fixes "
+              "compared).")
     return [counts, legend]
 
 
@@ -113,8 +122,8 @@ def _section_notes(sec: LogSection) -> list[str]:
     notes = []
     if not sec.has_reference:
         notes.append("No reference for this log: no accuracy figures and no error plots; the table shows status, "
-                     "GNSS fixes and run time only, the plots the trajectories against the GNSS fixes (and the "
-                     "noise the adaptive filters chose).")
+                     "GNSS fixes and run time only, the plots the trajectories against the GNSS fixes, each run's "
+                     "GNSS innovations with their ±3√S band (and the noise the adaptive filters chose).")
     else:
         ref = next((r.reference for r in sec.rows if r.reference), "")
         if ref:
@@ -128,7 +137,8 @@ def _md_escape(text: str) -> str:
 
 def markdown(rows: Sequence[CompareRow], sections: Sequence[LogSection], version: str = "") -> str:
     """``report.md``: the table (best in bold), failures, and per log its notes and figures."""
-    head, body = _table(rows)
+    table_rows = with_raw_gnss(rows)
+    head, body = _table(table_rows)
     out = [f"# navpp comparison{f' (navpp {version})' if version else ''}", ""]
     for line in _header_lines(rows):
         out += [line, ""]
@@ -145,7 +155,8 @@ def markdown(rows: Sequence[CompareRow], sections: Sequence[LogSection], version
         out += [f"## {_md_escape(log_label(sec.log))}", "", f"Log: `{sec.log}`", ""]
         out += [_md_escape(n) + "\n" for n in _section_notes(sec)]
         for p in sec.plots:
-            out += [f"![{_md_escape(p.caption)}]({p.name})", ""]
+            out += [f"[{_md_escape(p.caption)}]({p.name})" if p.is_page else f"![{_md_escape(p.caption)}]({p.name})",
+                    ""]
         warnings = list(dict.fromkeys(w for r in sec.rows for w in r.warnings))
         if warnings:
             out += ["Warnings:", ""] + [f"- {_md_escape(w)}" for w in warnings] + [""]
@@ -161,6 +172,7 @@ th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; }
 th { background: #f0f0f0; } td.num { text-align: right; font-variant-numeric: tabular-nums; }
 td.best { font-weight: bold; background: #dff3df; }
 tr.failed td { color: #a00; }
+tr.raw td { color: #555; font-style: italic; }
 figure { margin: 1em 0; } figure img { max-width: 100%; height: auto; border: 1px solid #eee; }
 figcaption { font-size: 0.85em; color: #555; }
 code { background: #f5f5f5; padding: 0 0.2em; } .note { color: #555; }
@@ -170,19 +182,21 @@ code { background: #f5f5f5; padding: 0 0.2em; } .note { color: #555; }
 def html_document(rows: Sequence[CompareRow], sections: Sequence[LogSection], version: str = "") -> str:
     """``report.html``: the same content as :func:`markdown`, one file, PNGs as data URIs, CSS inline."""
     e = html.escape
-    head, body = _table(rows)
+    table_rows = with_raw_gnss(rows)
+    head, body = _table(table_rows)
     title = f"navpp comparison{f' (navpp {version})' if version else ''}"
     out = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
            f"<title>{e(title)}</title>", f"<style>{_CSS}</style>", "</head>", "<body>", f"<h1>{e(title)}</h1>"]
     out += [f"<p>{e(line)}</p>" for line in _header_lines(rows)]
     out.append("<table>")
     out.append("<tr>" + "".join(f"<th>{e(h)}</th>" for h in head) + "</tr>")
-    for r, cells in zip(rows, body):
+    for r, cells in zip(table_rows, body):
         tds = []
         for k, (text, best) in enumerate(cells):
             cls = " ".join(c for c in ("num" if k >= 3 else "", "best" if best and text else "") if c)
             tds.append(f'<td class="{cls}">{e(text)}</td>' if cls else f"<td>{e(text)}</td>")
-        out.append(("<tr>" if r.ok else '<tr class="failed">') + "".join(tds) + "</tr>")
+        out.append(('<tr class="raw">' if r.is_raw_gnss else "<tr>" if r.ok else '<tr class="failed">')
+                   + "".join(tds) + "</tr>")
     out.append("</table>")
     failed = [r for r in rows if not r.ok]
     if failed:
@@ -194,6 +208,11 @@ def html_document(rows: Sequence[CompareRow], sections: Sequence[LogSection], ve
         out.append(f'<p class="note">Log: <code>{e(sec.log)}</code></p>')
         out += [f'<p class="note">{e(n)}</p>' for n in _section_notes(sec)]
         for p in sec.plots:
+            if p.is_page:          # the map: the page itself, inline (the report stays one file)
+                out.append(f'<figure><iframe srcdoc="{e(p.png.decode("utf-8"))}" title="{e(p.caption)}" '
+                           f'style="width:100%;height:620px;border:1px solid #ddd"></iframe>'
+                           f"<figcaption>{e(p.caption)} (also <code>{e(p.name)}</code>)</figcaption></figure>")
+                continue
             data = base64.b64encode(p.png).decode("ascii")
             out.append(f'<figure><img src="data:image/png;base64,{data}" alt="{e(p.caption)}">'
                        f"<figcaption>{e(p.caption)}</figcaption></figure>")

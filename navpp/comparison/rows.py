@@ -32,6 +32,10 @@ ERROR_COLUMNS = ("east_mae", "east_rmse", "north_mae", "north_rmse", "up_mae", "
                  "horizontal_mae", "horizontal_rmse")
 
 
+#: ``filter`` of the row of a log's raw GNSS fixes against the reference (one per log with a
+#: reference, after the log's filter rows): not a run, no run time, never in a CI gate.
+RAW_GNSS = "raw GNSS"
+
 #: Suffix of the filter name in the row of a smoothed run (``ekf+rts``).
 SMOOTHED_SUFFIX = "+rts"
 
@@ -68,6 +72,11 @@ class CompareRow:
     def ok(self) -> bool:
         return self.status == "ok"
 
+    @property
+    def is_raw_gnss(self) -> bool:
+        """True for a log's raw-GNSS row (:func:`raw_gnss_rows`), not a filter's run."""
+        return self.filter == RAW_GNSS
+
     def summary(self) -> dict[str, object]:
         """The row as ``summary.csv`` values (position errors in metres, ENU, rounded to 0.1 mm);
         keys without a value (no reference, failed run) are left out."""
@@ -75,6 +84,9 @@ class CompareRow:
                                   "gnss_epochs": self.gnss_epochs, "gnss_rejected": self.gnss_rejected,
                                   "runtime_s": round(self.runtime_s, 4), "imu_samples": self.imu_samples,
                                   "reference": self.reference}
+        if self.is_raw_gnss:          # the fixes themselves: no run, so no run figures
+            for key in ("gnss_rejected", "runtime_s", "imu_samples"):
+                del out[key]
         m = self.metrics
         if m is not None:
             pos = m["position_m"]
@@ -97,12 +109,41 @@ class CompareRow:
         return out
 
 
+def raw_gnss_row(rows: Sequence[CompareRow], log: str) -> CompareRow | None:
+    """The raw-GNSS row of ``log``: its GNSS fixes against the reference antenna position
+    (``metrics["gnss_position_m"]`` of :func:`navpp.metrics.compute_metrics`, the same for every
+    filter of the log: taken from its first ok row), filter :data:`RAW_GNSS`, ``epochs`` and
+    ``gnss_epochs`` the fixes compared; None without a reference or a fix inside it."""
+    for r in rows:
+        if r.log != log or not r.ok or r.is_raw_gnss or r.metrics is None:
+            continue
+        g = r.metrics.get("gnss_position_m")
+        if not g or not g.get("epochs"):
+            return None
+        return CompareRow(log, RAW_GNSS, "ok", {"epochs": int(g["epochs"]), "position_m": g},
+                          gnss_epochs=int(g["epochs"]), reference=r.reference)
+    return None
+
+
+def with_raw_gnss(rows: Sequence[CompareRow]) -> list[CompareRow]:
+    """``rows`` with each log's raw-GNSS row (:func:`raw_gnss_row`) after the log's last row."""
+    out: list[CompareRow] = []
+    logs = list(dict.fromkeys(r.log for r in rows if not r.is_raw_gnss))
+    for log in logs:
+        out += [r for r in rows if r.log == log and not r.is_raw_gnss]
+        raw = raw_gnss_row(rows, log)
+        if raw is not None:
+            out.append(raw)
+    return out
+
+
 def summary_csv(rows: Sequence[CompareRow]) -> str:
-    """The rows as CSV text with :data:`SUMMARY_COLUMNS` (empty cells where not applicable)."""
+    """The rows as CSV text with :data:`SUMMARY_COLUMNS` (empty cells where not applicable),
+    each log's raw-GNSS row (:func:`with_raw_gnss`) after its filters' rows."""
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=SUMMARY_COLUMNS, lineterminator="\n")
     w.writeheader()
-    for r in rows:
+    for r in with_raw_gnss(rows):
         w.writerow(r.summary())
     return buf.getvalue()
 

@@ -36,7 +36,8 @@ if TYPE_CHECKING:
 #: Files a comparison writes into its output directory (``*``: figure names ending so), whose
 #: temporary files a killed run may leave behind (:func:`navpp.outdir.remove_leftovers`).
 COMPARE_FILES = ("summary.csv", "report.md", "report.html", "*_trajectory.png", "*_error_time.png",
-                 "*_error_cdf.png", "*_adaptive.png")
+                 "*_error_cdf.png", "*_adaptive.png", "*_errors.png", "*_innovations.png",
+                 "*_map.html")
 
 #: Where ``compare`` runs the tasks (:func:`compare`'s ``executor``).
 EXECUTORS = ("local", "dask")

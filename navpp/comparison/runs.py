@@ -149,7 +149,7 @@ def run_task(task: RunTask, cache: RecordingCache, progress: ProgressFn | None) 
         return failed_outcome(task, str(exc))
     log_series = None
     try:
-        log_series = log_series_of(rec) if task.log_series else None
+        log_series = log_series_of(rec, tuple(cfg.gnss.outages)) if task.log_series else None
         label = f"{Path(task.log).name} {task.filter}"
         filt = api.make_filter(task.filter, cfg)
         limit = watchdog_limit_s(task.time_limit_s, len(rec.imu))
