@@ -124,6 +124,16 @@ class _Progress:
         if self.bar is not None:
             self.bar.__exit__(*exc)
 
+    def say(self, line: str) -> None:
+        """One line on stderr, above the bars when they are shown (also with --quiet)."""
+        if self.bar is not None:
+            from rich.markup import escape
+
+            self.bar.console.print(f"[dim]·[/] {escape(line)}", highlight=False)
+        else:
+            sys.stderr.write(f"· {line}\n")
+            sys.stderr.flush()
+
 
 def _process_formats(value: str | None) -> tuple[str, ...] | None:
     """``--format`` callback: the names as a tuple; a usage error (exit 2) listing the valid ones."""
@@ -239,8 +249,9 @@ def process(
     t_start = time.perf_counter()
     try:
         from . import api
+        from .jitcache import CompileAnnouncer
 
-        with _Progress(quiet) as prog:
+        with _Progress(quiet) as prog, CompileAnnouncer(prog.say) as jit:
             res = api.process(log, filter_name=filter, config=config, reference=reference, out_dir=out,
                               output_rate_hz=output_rate, progress=prog, imu_topic=imu_topic,
                               gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss,
@@ -250,7 +261,8 @@ def process(
     except NavppError as exc:
         _fail(str(exc), exc)
         return
-    print_process_summary(res, quiet, process_details(res, prog.marks, t_start, time.perf_counter()) if verbose else [])
+    print_process_summary(res, quiet, process_details(res, prog.marks, t_start, time.perf_counter()) if verbose else [],
+                          compile_s=jit.seconds)
 
 
 DEFAULT_COMPARE = "ekf,aekf,ckf,vce-ckf,rwckf"
@@ -324,8 +336,10 @@ def compare(
 
         names = cmp.parse_filters(filters)
         created = prepare_out_dir(out, "--out")
+        from .jitcache import CompileAnnouncer
+
         try:
-            with _Progress(quiet or json_out) as prog:
+            with _Progress(quiet or json_out) as prog, CompileAnnouncer(prog.say):
                 result = cmp.compare(logs, names, config=config, reference=reference, imu_topic=imu_topic,
                                      gnss_topic=gnss_topic, reference_topic=reference_topic,
                                      odometry_topic=odometry_topic, jobs=jobs,

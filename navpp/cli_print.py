@@ -21,10 +21,12 @@ def note(console: Any, line: str) -> None:
     console.print(f"[dim]·[/] {escape(line)}")
 
 
-def print_process_summary(res: Any, quiet: bool, details: list[str] = ()) -> None:
+def print_process_summary(res: Any, quiet: bool, details: list[str] = (), compile_s: float | None = None) -> None:
     """``navpp process``: its warnings and notes (stderr), then the run's figures, the error
     table against the reference, the outage lines and the files written (stdout); ``quiet``:
-    the warnings only.  ``details``: more note lines after the notes (``--verbose``)."""
+    the warnings only.  ``details``: more note lines after the notes (``--verbose``).
+    ``compile_s``: the command's seconds compiling navpp's kernels (reading and writing
+    included, :class:`navpp.jitcache.CompileAnnouncer`); default the filter run's."""
     from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
@@ -36,7 +38,8 @@ def print_process_summary(res: Any, quiet: bool, details: list[str] = ()) -> Non
         return
     for line in (*res.notes, *details):
         note(err, line)
-    compile_s = getattr(res.run, "compile_s", 0.0) or 0.0
+    if compile_s is None:
+        compile_s = getattr(res.run, "compile_s", 0.0) or 0.0
     if compile_s > 0.5:
         note(err, f"compiled navpp's kernels in {compile_s:.1f} s (first run only; cached for next time)")
     con = Console(highlight=False, soft_wrap=True)

@@ -105,3 +105,73 @@ def configure() -> None:
     if numba_config is not None:          # numba already imported: its config read the variable already
         numba_config.CACHE_DIR = where
     NOTE.append(f"{why}: compiled kernels are cached in {where} ({kept}); set NUMBA_CACHE_DIR to choose")
+
+
+class CompileAnnouncer:
+    """Says when navpp's kernels are about to compile, and how long compiling took.
+
+    numba compiles a kernel when it is first called with argument types that neither this
+    process nor the on-disk cache (``NUMBA_CACHE_DIR``, see :func:`configure`) holds; it
+    emits a ``numba:compile`` START event just before, which is the one sure sign of a cold
+    cache (no guess from cache files, whose names and keys are numba's own).  Used as a context
+    manager around a command: at the first START of a navpp kernel called from Python (not one
+    compiled as part of another), ``write`` gets :attr:`LINE`, once.  ``seconds`` is the wall
+    time spent in those outermost compilations of navpp's kernels (s); ``kernels`` counts them.
+    Compilations in other processes (``navpp compare --jobs N`` workers) are not seen.
+    """
+
+    LINE = ("compiling navpp's numba kernels for this path (first run only; later runs load them from the "
+            "cache) ...")
+
+    def __init__(self, write: Any) -> None:
+        self.write = write
+        self.announced = False
+        self.seconds = 0.0
+        self.kernels = 0
+        self._depth = 0
+        self._started = 0.0
+        self._ours = False
+        self._listener: Any = None
+
+    def _start(self, event: Any) -> None:
+        import time
+
+        self._depth += 1
+        if self._depth > 1:
+            return
+        dispatcher = (event.data or {}).get("dispatcher")
+        module = getattr(getattr(dispatcher, "py_func", None), "__module__", "") or ""
+        self._ours = module.split(".")[0] == "navpp"
+        if self._ours and not self.announced:
+            self.announced = True
+            self.write(self.LINE)
+        self._started = time.perf_counter()
+
+    def _end(self, event: Any) -> None:
+        import time
+
+        self._depth -= 1
+        if self._depth == 0 and self._ours:
+            self.seconds += time.perf_counter() - self._started
+            self.kernels += 1
+
+    def __enter__(self) -> CompileAnnouncer:
+        from numba.core import event as numba_event
+
+        outer = self
+
+        class _Listener(numba_event.Listener):
+            def on_start(self, event: Any) -> None:
+                outer._start(event)
+
+            def on_end(self, event: Any) -> None:
+                outer._end(event)
+
+        self._listener = _Listener()
+        numba_event.register("numba:compile", self._listener)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        from numba.core import event as numba_event
+
+        numba_event.unregister("numba:compile", self._listener)

@@ -47,14 +47,14 @@ from .state import (
     DX_POS,
     DX_VEL,
     N_ERR,
-    NOMINAL_BA,
-    NOMINAL_BG,
     NOMINAL_Q,
     NOMINAL_SIZE,
     NOMINAL_VEL,
     PATH_SIZE,
     POS,
     VEL,
+    X_BA,
+    X_BG,
     X_H,
     X_LAT,
     X_LON,
@@ -168,7 +168,7 @@ def _set_neg_skew(M: np.ndarray, r0: int, c0: int, w: np.ndarray) -> None:
     M[r0 + 2, c0], M[r0 + 2, c0 + 1] = w[1], -w[0]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def error_dynamics(x: np.ndarray, fn: np.ndarray, inv_tau_g: float, inv_tau_a: float) -> np.ndarray:
     """Continuous error-state matrix F (15, 15) at nominal ``x`` with ENU specific force ``fn``
     (m/s^2) and bias correlation rates ``inv_tau_g``, ``inv_tau_a`` (1/s); equations in the
@@ -209,7 +209,7 @@ def error_dynamics(x: np.ndarray, fn: np.ndarray, inv_tau_g: float, inv_tau_a: f
     return F
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def transition_from_segments(x_start: np.ndarray, seg_x: np.ndarray, seg_fn: np.ndarray, seg_T: np.ndarray,
                              n_seg: int, psd: np.ndarray, inv_tau_g: float, inv_tau_a: float
                              ) -> tuple[np.ndarray, np.ndarray]:
@@ -230,7 +230,7 @@ def transition_from_segments(x_start: np.ndarray, seg_x: np.ndarray, seg_fn: np.
     return Phi, Qd
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _segment_phi(x_start: np.ndarray, x_end: np.ndarray, fn: np.ndarray, T: float, inv_tau_g: float,
                 inv_tau_a: float) -> np.ndarray:
     """Phi (15, 15) of one segment of ``T`` s: F the mean of F at its start and end states (with
@@ -243,7 +243,7 @@ def _segment_phi(x_start: np.ndarray, x_end: np.ndarray, fn: np.ndarray, T: floa
     return Phi
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _segment_qd(Phi_j: np.ndarray, psd: np.ndarray, T: float) -> np.ndarray:
     """Qd (15, 15) of one segment of ``T`` s by the trapezoid: (Phi_j GQG Phi_j^T + GQG) T / 2
     with GQG = diag(psd)."""
@@ -335,15 +335,19 @@ def plus(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
     radii of curvature at ``x``.  Elements beyond the INS's (an augmented state,
     :mod:`navpp.ins.augmented`: ``x`` (16 + k,), ``dx`` (15 + k,)) add."""
     y = x.copy()
-    y[NOMINAL_Q] = quat_mul(rotvec_to_quat(dx[ATT]), x[NOMINAL_Q])
-    y[NOMINAL_VEL] = x[NOMINAL_VEL] + dx[VEL]
+    q = quat_mul(rotvec_to_quat(dx[ATT]), x[NOMINAL_Q])
+    for k in range(4):                  # element loops, not slice assignment (see jitcache.py)
+        y[X_QW + k] = q[k]
+    for k in range(3):
+        y[X_VE + k] = x[X_VE + k] + dx[DX_VEL + k]
     rm, rn = radii(x[X_LAT])
     h = x[X_H]
     y[X_LAT] = x[X_LAT] + dx[DP_N] / (rm + h)
     y[X_LON] = _wrap_pi(x[X_LON] + dx[DP_E] / ((rn + h) * np.cos(x[X_LAT])))
     y[X_H] = h + dx[DP_U]
-    y[NOMINAL_BG] = x[NOMINAL_BG] + dx[BG]
-    y[NOMINAL_BA] = x[NOMINAL_BA] + dx[BA]
+    for k in range(3):
+        y[X_BG + k] = x[X_BG + k] + dx[DX_BG + k]
+        y[X_BA + k] = x[X_BA + k] + dx[DX_BA + k]
     for i in range(x.shape[0] - NOMINAL_SIZE):
         y[NOMINAL_SIZE + i] = x[NOMINAL_SIZE + i] + dx[N_ERR + i]
     return y
@@ -355,15 +359,18 @@ def minus(x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
     states of 16 + k elements)."""
     k = x1.shape[0] - NOMINAL_SIZE
     dx = np.empty(N_ERR + k)
-    dx[ATT] = quat_to_rotvec(quat_mul(x1[NOMINAL_Q], quat_conj(x0[NOMINAL_Q])))
-    dx[VEL] = x1[NOMINAL_VEL] - x0[NOMINAL_VEL]
+    rv = quat_to_rotvec(quat_mul(x1[NOMINAL_Q], quat_conj(x0[NOMINAL_Q])))
+    for j in range(3):                  # element loops, not slice assignment (see jitcache.py)
+        dx[DX_ATT + j] = rv[j]
+        dx[DX_VEL + j] = x1[X_VE + j] - x0[X_VE + j]
     rm, rn = radii(x0[X_LAT])
     h = x0[X_H]
     dx[DP_E] = _wrap_pi(x1[X_LON] - x0[X_LON]) * (rn + h) * np.cos(x0[X_LAT])
     dx[DP_N] = (x1[X_LAT] - x0[X_LAT]) * (rm + h)
     dx[DP_U] = x1[X_H] - h
-    dx[BG] = x1[NOMINAL_BG] - x0[NOMINAL_BG]
-    dx[BA] = x1[NOMINAL_BA] - x0[NOMINAL_BA]
+    for j in range(3):
+        dx[DX_BG + j] = x1[X_BG + j] - x0[X_BG + j]
+        dx[DX_BA + j] = x1[X_BA + j] - x0[X_BA + j]
     for i in range(k):
         dx[N_ERR + i] = x1[NOMINAL_SIZE + i] - x0[NOMINAL_SIZE + i]
     return dx

@@ -245,21 +245,26 @@ def integrate(x: np.ndarray, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
             rec = i if (i < n and t[i] == t_end) else -1
         dt = tn - tc
         step(x, w0, w1, f0, f1, dt, dv_n)
+        # (element loops, not slice assignment from arrays: see navpp/jitcache.py)
         if seg_dt > 0.0:
             acc += dv_n
             t_acc += dt
             if t_acc >= seg_dt or tn >= t_end:
-                seg_x[n_seg, :] = x
-                seg_fn[n_seg, :] = acc / t_acc
+                for k in range(seg_x.shape[1]):
+                    seg_x[n_seg, k] = x[k]
+                for k in range(3):
+                    seg_fn[n_seg, k] = acc[k] / t_acc
                 seg_T[n_seg] = t_acc
                 n_seg += 1
                 acc[:] = 0.0
                 t_acc = 0.0
         if record and rec >= 0:
-            out[rec, :] = x[:out.shape[1]]
+            for k in range(out.shape[1]):
+                out[rec, k] = x[k]
         tc = tn
-        w0[:] = w1
-        f0[:] = f1
+        for k in range(3):
+            w0[k] = w1[k]
+            f0[k] = f1[k]
         i += 1
     return n_seg
 

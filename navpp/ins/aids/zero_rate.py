@@ -17,7 +17,7 @@ from numba import njit
 
 from ...geodesy import OMEGA_E
 from ..attitude import quat_to_dcm, skew
-from ..state import ATT, DX_BG, N_ERR, NOMINAL_BG, NOMINAL_Q, X_LAT
+from ..state import DX_ATT, DX_BG, N_ERR, NOMINAL_BG, NOMINAL_Q, X_LAT
 from .base import Aid, points_kernel
 
 
@@ -36,7 +36,10 @@ def _h(x: np.ndarray, p: np.ndarray) -> np.ndarray:
 @njit(cache=True)
 def _H(x: np.ndarray, p: np.ndarray) -> np.ndarray:
     H = np.zeros((3, N_ERR))
-    H[:, ATT] = quat_to_dcm(x[NOMINAL_Q]).T @ skew(earth_rate_n(x[X_LAT]))
+    M = quat_to_dcm(x[NOMINAL_Q]).T @ skew(earth_rate_n(x[X_LAT]))
+    for r in range(3):              # element loops, not slice assignment (see navpp/jitcache.py)
+        for c in range(3):
+            H[r, DX_ATT + c] = M[r, c]
     H[0, DX_BG] = H[1, DX_BG + 1] = H[2, DX_BG + 2] = 1.0
     return H
 
