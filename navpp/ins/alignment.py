@@ -269,7 +269,7 @@ def _still_period(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: Gnss
     gravity and the GNSS track confirm (:func:`_not_still`).  What was skipped goes to ``lines``."""
     first_fix = float(gnss.t[0])
     if settings.still_mask is not None:
-        runs = spans(t, settings.still_mask, settings.still_min_s)
+        runs = spans(t, bridged(t, settings.still_mask, STILL_GAP_S), settings.still_min_s)
         first_motion = _first_gnss_motion(gnss)
     else:
         runs = still_runs(t, gyro, accel, min_duration=settings.still_min_s, gyro_arw=settings.gyro_arw,
@@ -304,6 +304,27 @@ def _still_period(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: Gnss
             lines.append(f"GNSS starts at t = {first_fix:.2f} s, inside the still period")
         return i0, i_end
     return None
+
+
+#: Breaks in calibration's still mask up to this long (s) are bridged for the alignment: a block
+#: whose +-1 s GNSS speed fit passes 3 sigma by chance (a 2-D speed does so in about 1 % of still
+#: blocks with metre-level fixes; two of them a few blocks apart leave a gap of 3 s) breaks a long rest
+#: into pieces; :func:`_not_still` (gravity, 5-s GNSS windows) then confirms the bridged run.
+STILL_GAP_S = 5.0
+
+
+def bridged(t: np.ndarray, mask: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """``mask`` (N,) bool with its runs of False between two True runs filled when they last at
+    most ``max_gap_s`` s (from the last True sample before to the first after)."""
+    out = mask.copy()
+    d = np.diff(mask.astype(np.int8))
+    ends = np.nonzero(d == -1)[0]          # last True sample before a break
+    starts = np.nonzero(d == 1)[0] + 1     # first True sample after one
+    for e in ends:
+        k = int(np.searchsorted(starts, e))
+        if k < starts.size and t[starts[k]] - t[e] <= max_gap_s:
+            out[e:starts[k]] = True
+    return out
 
 
 def _levelling(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, first_fix: float, settings: AlignmentSettings,
