@@ -226,9 +226,7 @@ def prepared(recording: Recording, config: Config, cov_step_s: float, log: Journ
             raise InputError(both if len(both) < 285 else f"{recording.source}: {suspect}") from None
         raise InputError(f"{recording.source}: {exc}") from None
     log.notes[:0] = list(al.lines)          # for an error's context; the result carries them apart
-    # the still period's fixes are in the start position (al.P): the filter takes only the later ones
-    t_fixes = al.t if al.fixes_until is None else max(al.t, al.fixes_until)
-    return Prepared(recording, model, path, cal, calibration, al, gnss_fixes(recording, config, t_fixes))
+    return Prepared(recording, model, path, cal, calibration, al, gnss_fixes(recording, config, al.t))
 
 
 def processed(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,

@@ -87,10 +87,6 @@ class Alignment:
     still: tuple[float, float] | None
     lines: tuple[str, ...] = field(default_factory=tuple)
     warnings: tuple[str, ...] = field(default_factory=tuple)
-    #: time (s) of the last GNSS fix in the start position (the mean of the still fixes): the
-    #: filter uses only the fixes after it (their information is in ``P`` already); None: the
-    #: start in motion, from one fix
-    fixes_until: float | None = None
 
 
 #: A still IMU tilted by more than this (deg) is warned about (axes not forward-left-up?); one
@@ -388,7 +384,7 @@ def _levelling(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, first_fix: fl
 @dataclass(frozen=True)
 class _StartFix:
     """The antenna position at the start (a step of :func:`align`): ``lat``, ``lon`` rad, ``h`` m,
-    the mean of ``count`` fixes (the last at ``t_last`` s), with the ENU 1-sigma of that mean
+    the mean of ``count`` fixes, with the ENU 1-sigma of that mean
     ``std_enu`` (3,) m, one fix's 1-sigma ``fix_std`` (3,) m and the effective number of
     independent fixes per axis ``n_eff`` (3,)."""
 
@@ -399,7 +395,6 @@ class _StartFix:
     count: int
     fix_std: np.ndarray
     n_eff: np.ndarray
-    t_last: float
 
 
 def effective_count(x: np.ndarray) -> float:
@@ -458,7 +453,7 @@ def _start_fix(gnss: GnssData, lv: _Levelling, t_start: float) -> _StartFix:
                                       lat, lon, h)
         n_eff = np.array([effective_count(enu[:, a]) for a in range(3)])
         std = np.maximum(std, enu.std(axis=0, ddof=1)) / np.sqrt(n_eff)
-    return _StartFix(lat, lon, h, std, len(idx), np.asarray(fix_std, dtype=float), n_eff, float(gnss.t[idx[-1]]))
+    return _StartFix(lat, lon, h, std, len(idx), np.asarray(fix_std, dtype=float), n_eff)
 
 
 def _heading(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, settings: AlignmentSettings, lv: _Levelling,
@@ -587,10 +582,9 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: GnssData, se
         neff = "/".join(f"{v:.0f}" for v in fix.n_eff)
         sd = "/".join(f"{v:.2f}" for v in fix.std_enu)
         lines.append(f"position: the mean of the {fix.count} GNSS fix(es) of the still period (as {neff} independent "
-                     f"ones E/N/U, from their autocorrelation), 1-sigma {sd} m; start at t = {t_start:.2f} s; "
-                     f"the filter uses the fixes after t = {fix.t_last:.2f} s")
+                     f"ones E/N/U, from their autocorrelation), 1-sigma {sd} m; start at t = {t_start:.2f} s")
     return Alignment(t_start, lv.start, x, P, None if lv.moving else (lv.t_s0, lv.t_s1), tuple(lines),
-                     tuple(warnings), None if lv.moving else fix.t_last)
+                     tuple(warnings))
 
 
 def _gnss_velocity_at(gnss: GnssData, t0: float, lat: float, lon: float, h: float, span: float = 2.0) -> np.ndarray:
