@@ -29,7 +29,6 @@ from ..ins.alignment import Alignment, align
 from ..ins.augmented import AugmentedInsModel, StateBlock
 from ..ins.gnss_error import Correlation, GnssErrorModel, GnssErrorSettings, innovation_correlation
 from ..ins.model import InsModel
-from ..ins.state import POS
 from ..recording import Recording
 from .checks import alignment_findings, check_data, check_imu_plausible
 from .gnss_error import (
@@ -230,19 +229,6 @@ def prepared(recording: Recording, config: Config, cov_step_s: float, log: Journ
     return Prepared(recording, model, path, cal, calibration, al, gnss_fixes(recording, config, al.t))
 
 
-def start_covariance(al: Alignment, choice: Any) -> np.ndarray:
-    """The start covariance (15, 15) for the filter model: the alignment's, except with the
-    Gauss-Markov GNSS error states (``choice``, a :class:`~navpp.engine.gnss_error.GnssErrorChoice`)
-    after a still start: the position's variance is then the white part of the averaged fixes,
-    ``(1 - share) var / N`` per ENU axis, for :meth:`~navpp.ins.gnss_error.GnssErrorModel.start`
-    adds the correlated part (with its tie to the error states) itself."""
-    if choice is None or al.start_fixes < 2 or al.start_fix_var is None:
-        return al.P
-    P = al.P.copy()
-    P[POS, POS] = np.diag(np.asarray(al.start_fix_var, dtype=float) * (1.0 - choice.share) / al.start_fixes)
-    return P
-
-
 def processed(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
               cov_step_s: float, smooth: bool, log: Journal) -> RunResult:
     """The steps of :func:`run_one`; ``log`` collects the notes and warnings as they come."""
@@ -281,7 +267,7 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     elif more:
         fmodel = AugmentedInsModel(model, more)
     if isinstance(fmodel, AugmentedInsModel):
-        start = GaussianState(al.t, *fmodel.start(al.x, start_covariance(al, choice)))
+        start = GaussianState(al.t, *fmodel.start(al.x, al.P))
     recorder = RunRecorder(fixes, prep.path, start, al.index, filt.noise_report, velocity=aiding.has_velocity,
                            smooth=smooth, progress=progress, n_epochs=n_epochs,
                            extra_states=fmodel.state_labels() if isinstance(fmodel, AugmentedInsModel) else None,

@@ -87,11 +87,6 @@ class Alignment:
     still: tuple[float, float] | None
     lines: tuple[str, ...] = field(default_factory=tuple)
     warnings: tuple[str, ...] = field(default_factory=tuple)
-    #: the start position's fixes: how many were averaged (1 in motion) and one fix's ENU
-    #: variance (3,) m^2, for a model that splits the fixes' error into parts (the white part
-    #: of ``start_fixes`` fixes averages down, a correlated one does not)
-    start_fixes: int = 1
-    start_fix_var: np.ndarray | None = None
 
 
 #: A still IMU tilted by more than this (deg) is warned about (axes not forward-left-up?); one
@@ -589,7 +584,7 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: GnssData, se
         lines.append(f"position: the mean of the {fix.count} GNSS fix(es) of the still period (as {neff} independent "
                      f"ones E/N/U, from their autocorrelation), 1-sigma {sd} m; start at t = {t_start:.2f} s")
     return Alignment(t_start, lv.start, x, P, None if lv.moving else (lv.t_s0, lv.t_s1), tuple(lines),
-                     tuple(warnings), fix.count, fix.fix_std ** 2)
+                     tuple(warnings))
 
 
 def _gnss_velocity_at(gnss: GnssData, t0: float, lat: float, lon: float, h: float, span: float = 2.0) -> np.ndarray:
