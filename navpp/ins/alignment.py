@@ -269,7 +269,7 @@ def _still_period(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: Gnss
     gravity and the GNSS track confirm (:func:`_not_still`).  What was skipped goes to ``lines``."""
     first_fix = float(gnss.t[0])
     if settings.still_mask is not None:
-        runs = spans(t, settings.still_mask, settings.still_min_s)
+        runs = spans(t, bridged(t, settings.still_mask, STILL_GAP_S), settings.still_min_s)
         first_motion = _first_gnss_motion(gnss)
     else:
         runs = still_runs(t, gyro, accel, min_duration=settings.still_min_s, gyro_arw=settings.gyro_arw,
@@ -304,6 +304,27 @@ def _still_period(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: Gnss
             lines.append(f"GNSS starts at t = {first_fix:.2f} s, inside the still period")
         return i0, i_end
     return None
+
+
+#: Breaks in calibration's still mask up to this long (s) are bridged for the alignment: a block
+#: whose +-1 s GNSS speed fit passes 3 sigma by chance (a 2-D speed does so in about 1 % of still
+#: blocks with metre-level fixes; two of them a few blocks apart leave a gap of 3 s) breaks a long rest
+#: into pieces; :func:`_not_still` (gravity, 5-s GNSS windows) then confirms the bridged run.
+STILL_GAP_S = 5.0
+
+
+def bridged(t: np.ndarray, mask: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """``mask`` (N,) bool with its runs of False between two True runs filled when they last at
+    most ``max_gap_s`` s (from the last True sample before to the first after)."""
+    out = mask.copy()
+    d = np.diff(mask.astype(np.int8))
+    ends = np.nonzero(d == -1)[0]          # last True sample before a break
+    starts = np.nonzero(d == 1)[0] + 1     # first True sample after one
+    for e in ends:
+        k = int(np.searchsorted(starts, e))
+        if k < starts.size and t[starts[k]] - t[e] <= max_gap_s:
+            out[e:starts[k]] = True
+    return out
 
 
 def _levelling(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, first_fix: float, settings: AlignmentSettings,
@@ -363,25 +384,76 @@ def _levelling(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, first_fix: fl
 @dataclass(frozen=True)
 class _StartFix:
     """The antenna position at the start (a step of :func:`align`): ``lat``, ``lon`` rad, ``h`` m,
-    the mean of ``count`` fixes, with the per-axis ENU 1-sigma ``std_enu`` (3,) m."""
+    the mean of ``count`` fixes, with the ENU 1-sigma of that mean
+    ``std_enu`` (3,) m, one fix's 1-sigma ``fix_std`` (3,) m and the effective number of
+    independent fixes per axis ``n_eff`` (3,)."""
 
     lat: float
     lon: float
     h: float
     std_enu: np.ndarray
     count: int
+    fix_std: np.ndarray
+    n_eff: np.ndarray
+
+
+def effective_count(x: np.ndarray) -> float:
+    """The effective number of independent samples in the evenly spaced series ``x`` (N,): N over
+    the integrated autocorrelation time ``1 + 2 sum(rho_k)`` of its deviations from their mean,
+    the sum cut by Geyer's (1992) initial positive sequence (pairs ``rho_2m + rho_2m+1`` summed
+    while positive and decreasing); in [1, N].  White errors give about N; errors correlated over
+    ``tau`` samples about ``N / (2 tau)``; errors correlated over more than the series (an offset
+    the series cannot show) are caught only as far as their wander within it shows."""
+    n = x.shape[0]
+    if n < 4:
+        return float(max(n, 1))
+    d = x - x.mean()
+    var = float(d @ d)
+    if var <= 0.0:
+        return float(n)
+    m = 1 << int(2 * n - 1).bit_length()
+    f = np.fft.rfft(d, m)
+    rho = np.fft.irfft(f * np.conj(f), m)[:n] / var
+    pairs = rho[0:n - 1:2] + rho[1:n:2]
+    tau = -1.0
+    prev = math.inf
+    for g in pairs:
+        if not g > 0.0:
+            break
+        g = min(float(g), prev)
+        tau += 2.0 * g
+        prev = g
+    return float(min(max(n / max(tau, 1.0), 1.0), n))
 
 
 def _start_fix(gnss: GnssData, lv: _Levelling, t_start: float) -> _StartFix:
-    """The GNSS fixes during the still period averaged, else the first fix at or after the start."""
-    in_still = (gnss.t >= lv.t_s0 - 0.5) & (gnss.t <= lv.t_s1 + 0.5) if not lv.moving else np.zeros(len(gnss), bool)
+    """The GNSS fixes of the still period averaged, else the first fix at or after the start.
+
+    At rest every fix measures the same antenna position: the mean's 1-sigma per axis is one
+    fix's (the larger of the log's sigma and the fixes' own scatter) over the square root of
+    the effective number of independent fixes (:func:`effective_count`), not of their number:
+    a receiver's errors are correlated over seconds to minutes."""
+    if lv.moving:
+        in_still = np.zeros(len(gnss), bool)
+    else:
+        in_still = (gnss.t >= lv.t_s0 - 1e-6) & (gnss.t <= lv.t_s1 + 1e-6)
+        if not in_still.any():     # a slow receiver: the fixes just around the still period
+            in_still = (gnss.t >= lv.t_s0 - 0.5) & (gnss.t <= lv.t_s1 + 0.5)
     after = np.nonzero(gnss.t >= t_start)[0]
     if not in_still.any() and after.size == 0:
         raise InputError("no GNSS fix at or after the alignment start: cannot initialise the position")
     idx = np.nonzero(in_still)[0] if in_still.any() else after[:1]
     fix_std = (np.mean(gnss.std_enu[idx], axis=0) if gnss.std_enu is not None else np.array([2.0, 2.0, 4.0]))
-    return _StartFix(math.radians(float(np.mean(gnss.lat_deg[idx]))), math.radians(float(np.mean(gnss.lon_deg[idx]))),
-                     float(np.mean(gnss.alt[idx])), fix_std, len(idx))
+    lat, lon, h = (math.radians(float(np.mean(gnss.lat_deg[idx]))), math.radians(float(np.mean(gnss.lon_deg[idx]))),
+                   float(np.mean(gnss.alt[idx])))
+    n_eff = np.ones(3)
+    std = np.asarray(fix_std, dtype=float)
+    if idx.size > 1:
+        enu = geodesy.geodetic_to_enu(np.radians(gnss.lat_deg[idx]), np.radians(gnss.lon_deg[idx]), gnss.alt[idx],
+                                      lat, lon, h)
+        n_eff = np.array([effective_count(enu[:, a]) for a in range(3)])
+        std = np.maximum(std, enu.std(axis=0, ddof=1)) / np.sqrt(n_eff)
+    return _StartFix(lat, lon, h, std, len(idx), np.asarray(fix_std, dtype=float), n_eff)
 
 
 def _heading(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, settings: AlignmentSettings, lv: _Levelling,
@@ -400,10 +472,10 @@ def _heading(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, settings: Alignmen
     def track_heading(use_velocity: bool) -> tuple[float, float, float]:
         if settings.first_motion:
             return _heading_first_motion(t, gyro - bias_g, gnss, t_start, lv.t_s1, lv.roll, lv.pitch, fix.lat,
-                                         fix.lon, fix.h, fix.std_enu, settings.min_speed_mps, bias_g_std,
+                                         fix.lon, fix.h, fix.fix_std, settings.min_speed_mps, bias_g_std,
                                          settings.heading_floor, use_velocity=use_velocity)
         return _heading_from_gnss(t, gyro, gnss, t_start, lv.t_s1, lv.roll, lv.pitch, fix.lat, fix.lon, fix.h,
-                                  fix.std_enu, settings.min_speed_mps, use_velocity=use_velocity)
+                                  fix.fix_std, settings.min_speed_mps, use_velocity=use_velocity)
 
     if settings.heading is not None and method in ("auto", "config"):
         heading = settings.heading
@@ -504,7 +576,13 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: GnssData, se
     lines.append(f"attitude: roll {math.degrees(lv.roll):+.2f} deg, pitch {math.degrees(lv.pitch):+.2f} deg "
                  f"({lv.how}), heading {math.degrees(heading) % 360:.1f} deg +- "
                  f"{math.degrees(head_std):.1f} ({head_how})")
-    lines.append(f"position: {fix.count} GNSS fix(es) averaged; start at t = {t_start:.2f} s")
+    if lv.moving:
+        lines.append(f"position: 1 GNSS fix; start at t = {t_start:.2f} s")
+    else:
+        neff = "/".join(f"{v:.0f}" for v in fix.n_eff)
+        sd = "/".join(f"{v:.2f}" for v in fix.std_enu)
+        lines.append(f"position: the mean of the {fix.count} GNSS fix(es) of the still period (as {neff} independent "
+                     f"ones E/N/U, from their autocorrelation), 1-sigma {sd} m; start at t = {t_start:.2f} s")
     return Alignment(t_start, lv.start, x, P, None if lv.moving else (lv.t_s0, lv.t_s1), tuple(lines),
                      tuple(warnings))
 
