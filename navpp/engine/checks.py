@@ -173,12 +173,17 @@ def check_data(recording: Recording, config: Config | None = None) -> list[Findi
 GYRO_SCALE_CORRELATION = 0.7
 GYRO_SCALE_TURN_DEG = 90.0
 GYRO_SCALE_BOUNDS = (0.6, 1.6)
+#: beyond this factor either way a gyro scale is refused: every turn's heading would be off by at
+#: least three times the turn itself, which no filter corrects into a right trajectory (between
+#: the warning bounds and this, the filter's gate and divergence checks decide)
+GYRO_SCALE_REFUSE = 4.0
 
 
 def check_gyro_scale(recording: Recording, config: Config, up_s: np.ndarray, enu: np.ndarray) -> list[Finding]:
     """The gyro's turns against the GNSS track's (:func:`navpp.ins.timing_estimates.yaw_scale_from_track`):
     raise InputError when the ratio says the gyro's values are in the wrong unit (1/57.3: deg/s
-    read as rad/s); warn when it is otherwise far from 1 (a wrong axis, a bad scale)."""
+    read as rad/s) or are off by more than :data:`GYRO_SCALE_REFUSE` either way; warn when it is
+    otherwise far from 1 (a wrong axis, a bad scale)."""
     from ..ins.timing_estimates import yaw_scale_from_track
 
     imu, gnss, source = recording.imu, recording.gnss, recording.source
@@ -211,9 +216,13 @@ def check_gyro_scale(recording: Recording, config: Config, up_s: np.ndarray, enu
     elif abs(math.log(scale / deg)) < math.log(1.2):
         hint = ('the gyro is in rad/s: set [imu] gyro_units = "rad/s"' if unit == "deg/s"
                 else "check [imu] gyro_units")
-    else:
+    elif 1.0 / GYRO_SCALE_REFUSE <= scale <= GYRO_SCALE_REFUSE:
         return [Finding("gyro-scale",
                         f"{source}: {what}: check the gyro columns and their axes ([imu] mounting_rpy_deg)")]
+    else:
+        raise InputError(f"{source}: the GNSS track turns {scale:.3g} x as much as the gyro measures "
+                         f"(correlation {est.correlation:.2f}): the gyro reads {1.0 / scale:.3g} x the turns: "
+                         "check the gyro columns' unit and scale ([imu] gyro_units)")
     raise InputError(f"{source}: {what}: {hint}")
 
 
