@@ -70,6 +70,10 @@ def _csv(name, fn):
     return edit
 
 
+#: what the refusal of a 10x gyro says (the track's turns against the gyro's)
+GYRO_X10_SAYS = ("turns 0.0", "the gyro reads 10.", "gyro columns' unit and scale", "gyro_units")
+
+
 def gyro_x10(filt):
     return _drive(filt, _csv("imu.csv", _cols(_scale(("gx", "gy", "gz"), 10.0))))
 
@@ -123,9 +127,9 @@ def identical_fixes(filt):
 
 
 CASES = [
-    Case("sage-husa-gyro-x10", gyro_x10("sage-husa"), ("turns 0.0", "the gyro reads 10.", "gyro columns' unit and scale", "gyro_units")),
+    Case("sage-husa-gyro-x10", gyro_x10("sage-husa"), GYRO_X10_SAYS),
     Case("aekf-imu-xy-swapped", imu_xy_swapped("aekf"), ("aekf diverged", "configured GNSS sigma", "mounting_rpy_deg")),
-    Case("aukf-gyro-x10", gyro_x10("aukf"), ("turns 0.0", "the gyro reads 10.", "gyro columns' unit and scale", "gyro_units")),
+    Case("aukf-gyro-x10", gyro_x10("aukf"), GYRO_X10_SAYS),
     Case("latlon-swapped", latlon_swapped("sage-husa"), ("gnss.csv", "lat and lon swapped")),
     Case("first-fix-elsewhere", first_fix_elsewhere("sage-husa"), ("sage-husa diverged", "configured GNSS sigma")),
     Case("first-fix-elsewhere-ekf", first_fix_elsewhere("ekf"), "ekf diverged", slow=True),
