@@ -219,10 +219,10 @@ def check_gyro_scale(recording: Recording, config: Config, up_s: np.ndarray, enu
     elif 1.0 / GYRO_SCALE_REFUSE <= scale <= GYRO_SCALE_REFUSE:
         return [Finding("gyro-scale",
                         f"{source}: {what}: check the gyro columns and their axes ([imu] mounting_rpy_deg)")]
-    else:
-        raise InputError(f"{source}: the GNSS track turns {scale:.3g} x as much as the gyro measures "
-                         f"(correlation {est.correlation:.2f}): the gyro reads {1.0 / scale:.3g} x the turns: "
-                         "check the gyro columns' unit and scale ([imu] gyro_units)")
+    else:       # the short form: the message stays one line
+        what = f"the GNSS track turns {scale:.3g} x as much as the gyro measures (correlation {est.correlation:.2f})"
+        hint = (f"the gyro reads {1.0 / scale:.3g} x the turns: check the gyro columns' unit and scale "
+                "([imu] gyro_units)")
     raise InputError(f"{source}: {what}: {hint}")
 
 

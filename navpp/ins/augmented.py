@@ -140,13 +140,9 @@ class AugmentedInsModel:
         return out
 
     # ⊞ / ⊟ -----------------------------------------------------------------------------------
-    @staticmethod
-    def plus(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
-        return plus_aug(x, np.ascontiguousarray(dx, dtype=float))
-
-    @staticmethod
-    def minus(x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
-        return minus_aug(x1, x0)
+    # the INS's own: they carry the extra elements additively
+    plus = staticmethod(InsModel.plus)
+    minus = staticmethod(InsModel.minus)
 
     rts_means = staticmethod(rts_means_aug)
 
