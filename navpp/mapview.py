@@ -71,7 +71,7 @@ def _coords(lat: np.ndarray, lon: np.ndarray) -> list[list[float]]:
     return [[round(float(a), COORD_DECIMALS), round(float(b), COORD_DECIMALS)] for a, b in zip(lat[ok], lon[ok])]
 
 
-def map_data(layers: Sequence[MapLayer]) -> dict:
+def map_data(layers: Sequence[MapLayer]) -> dict[str, list[dict[str, object]]]:
     """The JSON document the page embeds: ``{"layers": [{name, kind, color, width, marker,
     visible, segments: [[[lat, lon], ...], ...]}, ...]}`` (deg, :data:`COORD_DECIMALS`)."""
     return {"layers": [{"name": ly.name, "kind": ly.kind, "color": ly.color, "width": ly.width,
@@ -80,11 +80,13 @@ def map_data(layers: Sequence[MapLayer]) -> dict:
 
 
 _CSS = """
-body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 0; color: #222; }
-#head { padding: 0.4em 0.8em; font-size: 0.95em; }
-#wrap { position: relative; }
-#map { width: 100%; height: 78vh; min-height: 360px; display: block; background: #f4f3ef; cursor: grab;
-       touch-action: none; }
+html, body { height: 100%; }
+body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 0; color: #222;
+       display: flex; flex-direction: column; }
+#head { padding: 0.4em 0.8em; font-size: 0.95em; flex: none; }
+#wrap { position: relative; flex: 1 1 auto; min-height: 360px; }
+#map { position: absolute; left: 0; top: 0; width: 100%; height: 100%; display: block; background: #f4f3ef;
+       cursor: grab; touch-action: none; }
 #legend { position: absolute; top: 8px; right: 8px; background: rgba(255,255,255,0.92); padding: 6px 10px;
           border: 1px solid #bbb; border-radius: 4px; font-size: 0.85em; }
 #legend label { display: block; white-space: nowrap; }

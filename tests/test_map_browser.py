@@ -19,11 +19,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from headless import Browser, chromium_path
 
 from navpp.geodesy import enu_to_geodetic
 from navpp.mapview import MapLayer, map_html
-
-from headless import Browser, chromium_path
 
 CHROMIUM = chromium_path()
 pytestmark = [pytest.mark.skipif(CHROMIUM is None, reason="no Chromium installed (apt-get install chromium, "
@@ -38,8 +37,8 @@ BACKGROUND = (0xF4, 0xF3, 0xEF)
 TILE_RGB = (0x9A, 0xCD, 0x32)
 TRACK_WIDTH_PX = 2.0
 CANVAS_JS = r"""
-(function (cols, tol) {
-  var cv = document.getElementById('map'), W = cv.width, H = cv.height;
+(function (doc, cols, tol) {
+  var cv = doc.getElementById('map'), W = cv.width, H = cv.height;
   var d = cv.getContext('2d').getImageData(0, 0, W, H).data;
   var out = cols.map(function () { return {n: 0, x0: 1e9, x1: -1, y0: 1e9, y1: -1}; });
   for (var i = 0; i < d.length; i += 4) {
@@ -54,7 +53,7 @@ CANVAS_JS = r"""
   }
   var r = cv.getBoundingClientRect();
   return {w: W, h: H, left: r.left, top: r.top, cols: out};
-})(COLS, TOL)
+})(DOC, COLS, TOL)
 """
 
 
@@ -71,7 +70,7 @@ def _layers() -> list[MapLayer]:
     outage = _enu_track(north[20:40])
     rejected = _enu_track(np.array([[300.0, 0.0, 0.0], [EAST_M, 450.0, 0.0]]))
     hx = "#%02x%02x%02x"
-    return [MapLayer("GNSS fixes", "points", hx % COLORS["fixes"], (fixes,), width=4.0),
+    return [MapLayer("GNSS fixes", "points", hx % COLORS["fixes"], (fixes,), width=8.0),
             MapLayer("ekf", "line", hx % COLORS["track"], (track,), width=TRACK_WIDTH_PX),
             MapLayer("GNSS outages (1)", "line", hx % COLORS["outage"], (outage,), width=6.0),
             MapLayer("rejected fixes (2)", "points", hx % COLORS["rejected"], (rejected,), width=5.0,
@@ -108,9 +107,11 @@ def browser():
         yield b
 
 
-def _pixels(page, colors: dict[str, tuple[int, int, int]] = COLORS, tol: int = 12) -> dict:
-    """The canvas's size and position, and per colour its pixel count and bounding box (px)."""
-    res = page.js(CANVAS_JS.replace("COLS", json.dumps([list(c) for c in colors.values()])).replace("TOL", str(tol)))
+def _pixels(page, colors: dict[str, tuple[int, int, int]] = COLORS, tol: int = 12, doc: str = "document") -> dict:
+    """The map canvas's size and position, and per colour its pixel count and bounding box (px);
+    ``doc``: the JavaScript expression of the map's document."""
+    res = page.js(CANVAS_JS.replace("COLS", json.dumps([list(c) for c in colors.values()]))
+                  .replace("TOL", str(tol)).replace("DOC", doc))
     res["by"] = dict(zip(colors, res.pop("cols")))
     return res
 
@@ -168,11 +169,11 @@ def test_map_offline_draws_fits_scales_zooms_pans_and_toggles(browser, map_page:
     assert bar_px * m_per_px == pytest.approx(label_m, rel=0.01)
     assert 120 / 2.5 < bar_px <= 120                    # the longest 1-2-5 length within 120 px
 
-    # the legend's box hides a layer: no orange left, the track under it shows
+    # the legend's box hides a layer: no orange left, the track and fixes under it show
     page.click(*_legend_box(page, "GNSS outages"))
     after = _pixels(page)["by"]
     assert after["outage"]["n"] == 0 and after["track"]["n"] > track["n"]
-    assert after["fixes"]["n"] == by["fixes"]["n"] and after["rejected"]["n"] == by["rejected"]["n"]
+    assert after["fixes"]["n"] >= by["fixes"]["n"] and after["rejected"]["n"] == by["rejected"]["n"]
     page.click(*_legend_box(page, "GNSS outages"))
     assert _pixels(page)["by"]["outage"]["n"] == by["outage"]["n"]
 
@@ -230,3 +231,30 @@ def test_map_online_draws_served_tiles_under_the_track(browser, map_page: Path, 
     mx, my = _mercator(lat, lon)
     for x, y in zip(mx[[0, -1]], my[[0, -1]]):          # the track's ends
         assert (z, int(x * 2 ** z), int(y * 2 ** z)) in zxy
+
+
+def test_compare_report_shows_its_figures_and_the_map(browser, map_page: Path, tmp_path: Path):
+    """The report (:func:`navpp.comparison.report.write_report`) with a PNG figure and the map:
+    the image decodes at its size, the map inside the report's frame draws every layer."""
+    from navpp.comparison.figures import Plot
+    from navpp.comparison.report import write_report
+    from navpp.comparison.rows import CompareRow
+
+    png = _png((0x20, 0x40, 0x60), size=64)
+    plots = [Plot("synthetic_trajectory.png", "synthetic: trajectories", png),
+             Plot("synthetic_map.html", "synthetic: overview map", map_page.read_bytes())]
+    write_report(tmp_path, [CompareRow("synthetic", "ekf", "ok", None, 10, 0, 0.1, 100)], {"synthetic": plots})
+    page = browser.page(1240, 1000)
+    page.goto(tmp_path / "report.html", settle_s=0.8)
+    assert page.errors == []
+    images = page.js("Array.from(document.images).map(function (i) { return [i.alt, i.naturalWidth]; })")
+    assert images == [["synthetic: trajectories", 64]]
+    frame = "document.querySelector('iframe').contentDocument"
+    px = _pixels(page, doc=frame)
+    assert px["w"] > 1000 and px["h"] >= 360
+    assert all(box["n"] > 10 for box in px["by"].values()), px["by"]
+    assert page.js(f"{frame}.getElementById('status').textContent").startswith("offline")
+    # the map fills its frame: the frame's height is the page's (header and map), no gap below
+    heights = page.js(f"[document.querySelector('iframe').clientHeight, {frame}.documentElement.scrollHeight, "
+                      f"{frame}.getElementById('wrap').getBoundingClientRect().bottom]")
+    assert heights[1] == heights[0] and heights[2] == pytest.approx(heights[0], abs=1)
