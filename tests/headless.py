@@ -246,29 +246,39 @@ class Page:
         Path(path).write_bytes(base64.b64decode(self.send("Page.captureScreenshot", params)["data"]))
 
 
+#: The figures of the report the screenshot keeps (by caption); the others are hidden to keep it short.
+REPORT_SHOT_KEEPS = ("vce-ckf: position error", "overview map")
+
+
 def docs_screenshots(dest: Path) -> list[Path]:
-    """``drive_map.png`` (the sample drive's overview map, a 30 s GNSS outage) and
-    ``compare_report.png`` (the top of the compare report of the sample drive) into ``dest``."""
+    """``drive_map.png`` (the sample drive's overview map with vce-ckf and a 30 s GNSS outage)
+    and ``compare_report.png`` (the compare report of the sample drive, ekf and vce-ckf: the
+    table, one run's error figure and the map; the other figures hidden) into ``dest``."""
     exe = chromium_path()
     if exe is None:
         raise SystemExit("no Chromium found (install chromium or set NAVPP_CHROMIUM)")
     root = Path(__file__).resolve().parents[1]
     work = Path(tempfile.mkdtemp(prefix="navpp-shots-"))
-    drive = root / "sample_data" / "drive.mcap"
     navpp = [sys.executable, "-m", "navpp"]
-    subprocess.run([*navpp, "process", str(drive), "--filter", "ekf", "--gnss-outage", "120:30", "--plot",
-                    "--out", str(work / "process")], check=True, stdout=subprocess.DEVNULL)
-    subprocess.run([*navpp, "compare", str(drive), "--filters", "ekf,vce-ckf", "--out", str(work / "compare")],
-                   check=True, stdout=subprocess.DEVNULL)
+    for args in (["process", "sample_data/drive.mcap", "--filter", "vce-ckf", "--gnss-outage", "120:30", "--plot",
+                  "--out", str(work / "process")],
+                 ["compare", "sample_data/drive.mcap", "--filters", "ekf,vce-ckf", "--out", str(work / "compare")]):
+        run = subprocess.run([*navpp, *args], cwd=root, capture_output=True, text=True)
+        if run.returncode != 0:
+            raise SystemExit(f"navpp {' '.join(args)} failed:\n{run.stderr}")
     dest.mkdir(parents=True, exist_ok=True)
     shots = [dest / "drive_map.png", dest / "compare_report.png"]
     with Browser(exe) as b:
         page = b.page(1100, 700)
         page.goto(work / "process" / "drive.mcap_map.html", settle_s=1.0)
         page.screenshot(shots[0])
-        page = b.page(1240, 1900)
+        page = b.page(1100, 900)
         page.goto(work / "compare" / "report.html", settle_s=1.5)
-        page.screenshot(shots[1])
+        page.js("Array.from(document.querySelectorAll('figure')).forEach(function (f) { "
+                f"if (!{list(REPORT_SHOT_KEEPS)!r}.some(function (k) {{ "
+                "return f.querySelector('figcaption').textContent.indexOf(k) >= 0; })) { f.style.display = 'none'; } "
+                "}); true")
+        page.screenshot(shots[1], full_page=True)
     shutil.rmtree(work, ignore_errors=True)
     return shots
 
