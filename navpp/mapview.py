@@ -3,9 +3,12 @@
 The page draws the layers (tracks, GNSS fixes accepted and rejected, outages) on a canvas in
 Web-Mercator pixels with a few lines of plain JavaScript: the mouse wheel zooms about the
 pointer, dragging pans, a double click fits the whole track again, and the legend's boxes show
-or hide a layer.  When the browser is online the page itself loads OpenStreetMap tiles
-(``https://tile.openstreetmap.org/{z}/{x}/{y}.png``) as the background; when tiles fail to load
-and none has loaded (offline, blocked) it falls back to a plain background and says so.  A scale
+or hide a layer.  When the page is served over http(s) and the browser is online, it loads
+OpenStreetMap tiles (``https://tile.openstreetmap.org/{z}/{x}/{y}.png``) as the background; when
+tiles fail to load and none has loaded (offline, blocked) it falls back to a plain background and
+says so.  Opened from a file (``file://``, also inside a report opened from a file) it loads no
+tiles: OpenStreetMap's tile usage policy requires a Referer header, which a page opened from a
+file cannot send (such requests get "access blocked" tiles); the page says how to serve it.  A scale
 bar (1, 2 or 5 x 10^k m, at the view's centre latitude) is shown either way.  The wheel zooms one
 level per 500 px of wheel delta (lines and pages converted to px).
 
@@ -105,6 +108,15 @@ _JS = r"""
   var cv = document.getElementById('map'), ctx = cv.getContext('2d');
   var statusEl = document.getElementById('status'), legend = document.getElementById('legend');
   var scaleBarEl = document.getElementById('scale-bar'), scaleLabelEl = document.getElementById('scale-label');
+  // tiles only for a page served over http(s): OpenStreetMap's tile policy requires a Referer,
+  // which a page opened from a file cannot send (a report's srcdoc frame: its parent's address)
+  function served() {
+    var loc = window.location;
+    try { if (loc.protocol === 'about:' && window.parent !== window) { loc = window.parent.location; } }
+    catch (e) { return false; }
+    return loc.protocol === 'http:' || loc.protocol === 'https:';
+  }
+  var useTiles = served();
   // offline: a tile failed and none has loaded (one failed tile of many does not hide the others)
   var TILE = 256, tiles = {}, tilesBad = 0, tilesOk = 0;
   function offline() { return tilesBad > 0 && tilesOk === 0; }
@@ -138,6 +150,7 @@ _JS = r"""
       var img = new Image();
       img.onload = function () { tilesOk += 1; draw(); };
       img.onerror = function () { tilesBad += 1; draw(); };
+      img.referrerPolicy = 'strict-origin-when-cross-origin';   // the page's origin: what the policy asks
       img.src = 'https://tile.openstreetmap.org/' + k + '.png';
       tiles[k] = img;
     }
@@ -168,7 +181,7 @@ _JS = r"""
   function draw() {
     var r = size();
     ctx.fillStyle = '#f4f3ef'; ctx.fillRect(0, 0, r.width, r.height);
-    if (!offline()) { drawTiles(r); }
+    if (useTiles && !offline()) { drawTiles(r); }
     L.forEach(function (l) {
       if (!l.src.visible) { return; }
       ctx.strokeStyle = l.src.color; ctx.fillStyle = l.src.color; ctx.lineWidth = l.src.width;
@@ -191,7 +204,9 @@ _JS = r"""
       });
     });
     scaleBar();
-    statusEl.innerHTML = offline() ? 'offline: plain background (map tiles could not be loaded)'
+    statusEl.innerHTML = !useTiles ? 'plain background: map tiles need this page served over http '
+      + '(<code>python3 -m http.server</code> in its folder), as OpenStreetMap\'s tile policy asks'
+      : offline() ? 'offline: plain background (map tiles could not be loaded)'
       : (tilesOk ? 'background &copy; <a href="https://www.openstreetmap.org/copyright">OpenStreetMap</a> contributors'
                  : 'loading map tiles ...');
   }

@@ -158,9 +158,9 @@ class Page:
         self.browser, self.session = browser, session
         self.errors: list[str] = []
         self.failed_loads: list[str] = []
-        self.requests: list[str] = []
+        self.requests: list[tuple[str, dict[str, str]]] = []
         self.loaded = False
-        self._serve: Callable[[str], tuple[int, str, bytes]] | None = None
+        self._serve: Callable[[str], tuple[int, str, bytes] | None] | None = None
         browser.pages.append(self)
 
     def send(self, method: str, params: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -182,26 +182,39 @@ class Page:
         elif method == "Page.loadEventFired":
             self.loaded = True
         elif method == "Fetch.requestPaused" and self._serve is not None:
-            self.requests.append(p["request"]["url"])
-            status, ctype, body = self._serve(p["request"]["url"])
+            url = p["request"]["url"]
+            self.requests.append((url, dict(p["request"].get("headers", {}))))
+            answer = None if url.startswith("file:") else self._serve(url)
+            if url.startswith("file:"):          # local files load as they are
+                cmd = {"method": "Fetch.continueRequest", "params": {"requestId": p["requestId"]}}
+            elif answer is None:
+                cmd = {"method": "Fetch.failRequest",
+                       "params": {"requestId": p["requestId"], "errorReason": "NameNotResolved"}}
+            else:
+                status, ctype, body = answer
+                cmd = {"method": "Fetch.fulfillRequest",
+                       "params": {"requestId": p["requestId"], "responseCode": status,
+                                  "responseHeaders": [{"name": "Content-Type", "value": ctype}],
+                                  "body": base64.b64encode(body).decode("ascii")}}
             # answered from inside the event handler: only queue the command, the reply comes later
             self.browser._id += 1
-            msg = {"id": self.browser._id, "method": "Fetch.fulfillRequest", "sessionId": self.session,
-                   "params": {"requestId": p["requestId"], "responseCode": status,
-                              "responseHeaders": [{"name": "Content-Type", "value": ctype}],
-                              "body": base64.b64encode(body).decode("ascii")}}
-            os.write(self.browser._w, json.dumps(msg).encode() + b"\0")
+            os.write(self.browser._w, json.dumps({"id": self.browser._id, "sessionId": self.session, **cmd}).encode()
+                     + b"\0")
 
-    def serve(self, pattern: str, handler: Callable[[str], tuple[int, str, bytes]]) -> None:
+    def serve(self, pattern: str, handler: Callable[[str], tuple[int, str, bytes] | None]) -> None:
         """Answer the requests whose URL matches ``pattern`` (``*`` wildcards) with
-        ``handler(url) -> (status, content type, body)``; their URLs go to ``requests``."""
+        ``handler(url) -> (status, content type, body)``, or fail them as unresolved when it
+        returns None (offline); ``file:`` URLs load as usual.  The URLs and headers of the
+        requests go to ``requests``."""
         self._serve = handler
         self.send("Fetch.enable", {"patterns": [{"urlPattern": pattern}]})
 
-    def goto(self, path: str | Path, settle_s: float = 0.5) -> None:
-        """Open a local file and wait for its load event, then ``settle_s`` more."""
+    def goto(self, where: str | Path, settle_s: float = 0.5) -> None:
+        """Open a local file (a path) or a URL (``http...``: see :meth:`serve`) and wait for its
+        load event, then ``settle_s`` more."""
         self.loaded = False
-        self.send("Page.navigate", {"url": Path(path).resolve().as_uri()})
+        url = where if isinstance(where, str) and where.startswith(("http:", "https:")) else Path(where).resolve().as_uri()
+        self.send("Page.navigate", {"url": url})
         deadline = time.monotonic() + self.browser.timeout_s
         while not self.loaded:
             if time.monotonic() > deadline:

@@ -4,9 +4,11 @@ A synthetic L-shaped track (1000 m east, then 600 m north, built with navpp's ex
 geodetic conversion) is the oracle: the fitted view has the track's Web-Mercator aspect ratio
 and fills 90 % of the map; the scale bar's length over its label is the metres per pixel of the
 drawn 1000 m leg; the mouse wheel scales the drawing about the pointer by 2^(-deltaY/500); a
-drag moves it by the drag; the legend's box hides a layer; a double click fits again.  Offline
-(the browser resolves no host names) the page says so; with tiles served by the test it draws
-them and names OpenStreetMap.  Skipped when no Chromium is installed.
+drag moves it by the drag; the legend's box hides a layer; a double click fits again.  The page
+is served over http by the test itself (Chromium resolves no host names): with the tile requests
+failing it says it is offline; with tiles served it draws them, names OpenStreetMap, and its tile
+requests carry the Referer OpenStreetMap's tile policy requires.  Opened from a file it requests
+no tile (it could send no Referer) and says how to serve it.  Skipped when no Chromium is installed.
 """
 
 from __future__ import annotations
@@ -36,6 +38,8 @@ COLORS = {"fixes": (0x77, 0x77, 0x77), "track": (0x1F, 0x77, 0xB4), "outage": (0
 BACKGROUND = (0xF4, 0xF3, 0xEF)
 TILE_RGB = (0x9A, 0xCD, 0x32)
 TRACK_WIDTH_PX = 2.0
+SITE = "http://navpp.test/"
+TILES = "https://tile.openstreetmap.org/"
 CANVAS_JS = r"""
 (function (doc, cols, tol) {
   var cv = doc.getElementById('map'), W = cv.width, H = cv.height;
@@ -107,6 +111,23 @@ def browser():
         yield b
 
 
+def _serve(page, files: dict[str, bytes], tile: bytes | None) -> None:
+    """Answer the page's requests: ``SITE + name`` with ``files[name]``, tiles with ``tile``
+    (a PNG; None: as if offline), anything else as unresolved."""
+    def answer(url: str) -> tuple[int, str, bytes] | None:
+        if url.startswith(SITE) and url[len(SITE):] in files:
+            return 200, "text/html; charset=utf-8", files[url[len(SITE):]]
+        if url.startswith(TILES) and tile is not None:
+            return 200, "image/png", tile
+        return None
+
+    page.serve("*", answer)
+
+
+def _tile_requests(page) -> list[tuple[str, dict[str, str]]]:
+    return [(u, h) for u, h in page.requests if u.startswith(TILES)]
+
+
 def _pixels(page, colors: dict[str, tuple[int, int, int]] = COLORS, tol: int = 12, doc: str = "document") -> dict:
     """The map canvas's size and position, and per colour its pixel count and bounding box (px);
     ``doc``: the JavaScript expression of the map's document."""
@@ -144,9 +165,10 @@ def _legend_box(page, name: str) -> tuple[float, float]:
 
 def test_map_offline_draws_fits_scales_zooms_pans_and_toggles(browser, map_page: Path):
     page = browser.page(1100, 760)
-    page.goto(map_page, settle_s=0.6)
+    _serve(page, {"map.html": map_page.read_bytes()}, tile=None)
+    page.goto(SITE + "map.html", settle_s=0.6)
     assert page.errors == []
-    assert page.failed_loads and all(u.startswith("https://tile.openstreetmap.org/") for u in page.failed_loads)
+    assert _tile_requests(page)                          # it tried, they failed
     assert page.js("document.getElementById('status').textContent").startswith("offline: plain background")
     px = _pixels(page)
     by, w, h = px["by"], px["w"], px["h"]
@@ -201,11 +223,12 @@ def test_map_offline_draws_fits_scales_zooms_pans_and_toggles(browser, map_page:
 
 def test_map_online_draws_served_tiles_under_the_track(browser, map_page: Path, tmp_path: Path):
     page = browser.page(1100, 760)
-    tile = _png(TILE_RGB)
-    page.serve("https://tile.openstreetmap.org/*", lambda url: (200, "image/png", tile))
-    page.goto(map_page, settle_s=0.8)
-    assert page.errors == [] and page.failed_loads == []
+    _serve(page, {"map.html": map_page.read_bytes()}, tile=_png(TILE_RGB))
+    page.goto(SITE + "map.html", settle_s=0.8)
+    assert page.errors == [] and [u for u in page.failed_loads if not u.endswith("/favicon.ico")] == []
     assert "OpenStreetMap" in page.js("document.getElementById('status').textContent")
+    tiles = _tile_requests(page)
+    assert tiles and all(h.get("Referer") == SITE for _, h in tiles), tiles[:2]
     # the canvas now holds cross-origin tiles (unreadable from the page): read a screenshot of it
     from matplotlib.image import imread
 
@@ -223,7 +246,7 @@ def test_map_online_draws_served_tiles_under_the_track(browser, map_page: Path, 
     # the tiles are the background (all but the layers, the legend and the notes), the plain one is gone
     assert count(TILE_RGB) > 0.8 * w * h and count(BACKGROUND) == 0
     # the requested tiles are those under the track at the view's zoom
-    zxy = {tuple(int(v) for v in re.search(r"/(\d+)/(\d+)/(\d+)\.png$", u).groups()) for u in page.requests}
+    zxy = {tuple(int(v) for v in re.search(r"/(\d+)/(\d+)/(\d+)\.png$", u).groups()) for u, _ in tiles}
     zooms = {z for z, _, _ in zxy}
     assert len(zooms) == 1
     z = zooms.pop()
@@ -231,6 +254,16 @@ def test_map_online_draws_served_tiles_under_the_track(browser, map_page: Path, 
     mx, my = _mercator(lat, lon)
     for x, y in zip(mx[[0, -1]], my[[0, -1]]):          # the track's ends
         assert (z, int(x * 2 ** z), int(y * 2 ** z)) in zxy
+
+
+def test_map_from_a_file_requests_no_tiles_and_says_why(browser, map_page: Path):
+    page = browser.page(1100, 760)
+    _serve(page, {}, tile=_png(TILE_RGB))                # tiles would be there: none is asked for
+    page.goto(map_page, settle_s=0.5)
+    assert page.errors == [] and _tile_requests(page) == []
+    status = page.js("document.getElementById('status').textContent")
+    assert status.startswith("plain background: map tiles need this page served over http"), status
+    assert all(box["n"] > 10 for box in _pixels(page)["by"].values())
 
 
 def test_compare_report_shows_its_figures_and_the_map(browser, map_page: Path, tmp_path: Path):
@@ -245,6 +278,7 @@ def test_compare_report_shows_its_figures_and_the_map(browser, map_page: Path, t
              Plot("synthetic_map.html", "synthetic: overview map", map_page.read_bytes())]
     write_report(tmp_path, [CompareRow("synthetic", "ekf", "ok", None, 10, 0, 0.1, 100)], {"synthetic": plots})
     page = browser.page(1240, 1000)
+    _serve(page, {"report.html": (tmp_path / "report.html").read_bytes()}, tile=_png(TILE_RGB))
     page.goto(tmp_path / "report.html", settle_s=0.8)
     assert page.errors == []
     images = page.js("Array.from(document.images).map(function (i) { return [i.alt, i.naturalWidth]; })")
@@ -253,8 +287,14 @@ def test_compare_report_shows_its_figures_and_the_map(browser, map_page: Path, t
     px = _pixels(page, doc=frame)
     assert px["w"] > 1000 and px["h"] >= 360
     assert all(box["n"] > 10 for box in px["by"].values()), px["by"]
-    assert page.js(f"{frame}.getElementById('status').textContent").startswith("offline")
+    assert page.js(f"{frame}.getElementById('status').textContent").startswith("plain background")
+    assert _tile_requests(page) == []
     # the map fills its frame: the frame's height is the page's (header and map), no gap below
     heights = page.js(f"[document.querySelector('iframe').clientHeight, {frame}.documentElement.scrollHeight, "
                       f"{frame}.getElementById('wrap').getBoundingClientRect().bottom]")
     assert heights[1] == heights[0] and heights[2] == pytest.approx(heights[0], abs=1)
+    # served over http, the map in the report's frame loads tiles with the report's origin as Referer
+    page.goto(SITE + "report.html", settle_s=0.8)
+    assert page.errors == [] and "OpenStreetMap" in page.js(f"{frame}.getElementById('status').textContent")
+    tiles = _tile_requests(page)
+    assert tiles and all(h.get("Referer") == SITE for _, h in tiles)
