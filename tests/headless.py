@@ -213,12 +213,13 @@ class Page:
         """Open a local file (a path) or a URL (``http...``: see :meth:`serve`) and wait for its
         load event, then ``settle_s`` more."""
         self.loaded = False
-        url = where if isinstance(where, str) and where.startswith(("http:", "https:")) else Path(where).resolve().as_uri()
+        is_url = isinstance(where, str) and where.startswith(("http:", "https:"))
+        url = str(where) if is_url else Path(where).resolve().as_uri()
         self.send("Page.navigate", {"url": url})
         deadline = time.monotonic() + self.browser.timeout_s
         while not self.loaded:
             if time.monotonic() > deadline:
-                raise BrowserError(f"{path}: no load event")
+                raise BrowserError(f"{url}: no load event")
             self.browser.pump(0.05)
         self.browser.pump(settle_s)
 
