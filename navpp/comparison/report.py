@@ -11,7 +11,7 @@ A log without a reference has status, rejected fixes and run time only, and no e
 (the trajectories, and the adaptive noise, need no reference); the report says so.
 The HTML embeds every PNG as a base64 data URI and its CSS inline, and each overview map as an
 inline ``<iframe srcdoc>`` (the map page itself, :mod:`navpp.mapview`): the only thing it may
-fetch is the map's background tiles, when online.
+fetch is the map's background tiles, when the report is served over http and online.
 """
 
 from __future__ import annotations
