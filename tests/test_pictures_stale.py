@@ -90,3 +90,10 @@ def test_process_without_plot_removes_the_figures_of_a_run_with_plot(sim_log_dir
     second = api.process(sim_log_dir, filter_name="ekf", out_dir=out, formats="csv")
     assert _files(out) == {p.name for p in second.files} | {"my_map.html"}
     assert not _files(out) & figures and (out / "my_map.html").read_text() == "mine"
+
+
+def test_the_figure_endings_are_those_of_compare_s_leftovers():
+    """One list of figure endings: the temporary files of a killed compare are cleaned for the same."""
+    from navpp.comparison import COMPARE_FILES
+
+    assert {n[1:] for n in COMPARE_FILES if n.startswith("*")} == set(outdir.FIGURE_SUFFIXES)
