@@ -51,7 +51,8 @@ OUTPUT_FILES = ("trajectory.csv", "trajectory_forward.csv", "diagnostics.csv", "
                 "reference.tum", "navpp.layout.json")
 #: Besides :data:`OUTPUT_FILES`, the labelled TUM copy (``<log>-<filter>.tum``,
 #: :func:`navpp.io.exports.labelled_tum_name`) an earlier run listed in the manifest is stale too
-#: when this run did not write it: names with this suffix.
+#: when this run did not write it: names with this suffix.  So are the figures of ``--plot``
+#: (:data:`navpp.outdir.FIGURE_SUFFIXES`).
 LABELLED_OUTPUT_SUFFIX = ".tum"
 #: The file each ``--format`` / ``[output] formats`` name writes.
 FORMAT_FILES = {"csv": "trajectory.csv", "mcap": "trajectory.mcap", "tum": "trajectory.tum",
@@ -243,7 +244,8 @@ def write_outputs(out: Path, outputs: Sequence[tuple[str, Callable[[Path], None]
     the run is interrupted, nothing in ``out`` changes: the previous run's outputs stay whole
     and consistent with each other.  The staging directory is always removed.
 
-    Stale outputs are the :data:`OUTPUT_FILES` of an earlier run that this one did not write;
+    Stale outputs are the :data:`OUTPUT_FILES`, labelled TUM copies and figures
+    (:data:`navpp.outdir.FIGURE_SUFFIXES`) of an earlier run that this one did not write;
     only those the directory's manifest (:mod:`navpp.outdir`) lists as written by navpp are
     removed, and never one of the run's ``inputs`` (``(device, inode)`` pairs,
     :func:`navpp.outdir.input_files`), which are never replaced either.  The manifest is then
@@ -277,8 +279,8 @@ def write_outputs(out: Path, outputs: Sequence[tuple[str, Callable[[Path], None]
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     ours = outdir.read_manifest(out)
-    labelled = sorted(n for n in ours if n.endswith(LABELLED_OUTPUT_SUFFIX) and n not in OUTPUT_FILES
-                      and os.sep not in n and "/" not in n)
+    labelled = sorted(n for n in ours if n.endswith((LABELLED_OUTPUT_SUFFIX, *outdir.FIGURE_SUFFIXES))
+                      and n not in OUTPUT_FILES and os.sep not in n and "/" not in n)
     for name in (*OUTPUT_FILES, *labelled):   # stale results of an earlier navpp run: not ours any more
         stale = out / name
         if (stale not in written and name in ours and stale.is_file() and not stale.is_symlink()
