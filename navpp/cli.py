@@ -346,8 +346,13 @@ def compare(
         from .outfiles import prepare_out_dir, remove_created_dirs
 
         # before the filters are looked up: that imports the kernels, fixing the mode
-        jitmode.choose(jit, list(logs), [f.strip().lower() for f in filters.split(",") if f.strip()], smooth,
-                       default="auto")
+        choice = jitmode.choose(jit, list(logs), [f.strip().lower() for f in filters.split(",") if f.strip()],
+                                smooth, default="auto")
+        ahead = jitmode.workers_note(choice, min(jobs, len(logs) * len(filters.split(","))))
+        if ahead and not (quiet or json_out):
+            from rich.console import Console
+
+            note(Console(stderr=True, highlight=False, soft_wrap=True), ahead)
         names = cmp.parse_filters(filters)
         created = prepare_out_dir(out, "--out")
         from .jitcache import CompileAnnouncer

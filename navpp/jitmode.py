@@ -84,6 +84,8 @@ class Choice:
 
     compiled: bool
     why: str
+    #: kernel groups not in the cache (known only for ``auto``): what a compiled run compiles
+    missing: tuple[str, ...] = ()
 
     @property
     def word(self) -> str:
@@ -255,6 +257,16 @@ def samples(log: Path) -> tuple[int, int, str] | None:
 CHOSEN: list[Choice] = []
 
 
+def workers_note(choice: Choice, workers: int) -> str:
+    """A line said before ``workers`` processes start that will each compile kernels first
+    (their own compilation is not seen by this process's announcer), else empty."""
+    if workers < 2 or not choice.compiled or not choice.missing:
+        return ""
+    cpu = sum(COMPILE_S[g] for g in choice.missing)
+    return (f"each of the {workers} worker processes first compiles navpp's kernels for this path "
+            f"({', '.join(choice.missing)}: about {cpu:.0f} s of CPU each, once; `navpp compile` does it ahead)")
+
+
 def note(choice: Choice) -> str:
     """A line for the notes when the kernels ran interpreted, else empty."""
     if choice.compiled:
@@ -315,7 +327,7 @@ def decide(mode: str, sizes: list[tuple[int, int, str] | None], filters: list[st
     if not missing:
         return Choice(True, "kernels cached")
     if any(s is None for s in sizes):
-        return Choice(True, "log size unknown")
+        return Choice(True, "log size unknown", missing)
     compile_s = sum(COMPILE_S[g] for g in missing)
     per_sample = sum(INTERPRETED_US.get(f, max(INTERPRETED_US.values())) for f in filters)
     if smooth:
@@ -323,7 +335,7 @@ def decide(mode: str, sizes: list[tuple[int, int, str] | None], filters: list[st
     interp_s = 1e-6 * sum(s[0] * per_sample + s[1] * DECODE_US.get(s[2], 0.0) for s in sizes if s is not None)
     return Choice(interp_s >= COMPILE_SHARE * compile_s,
                   f"about {interp_s:.0f} s of CPU interpreted against {compile_s:.0f} s to compile "
-                  f"({', '.join(missing)})")
+                  f"({', '.join(missing)})", missing)
 
 
 # --------------------------------------------------------------------------- navpp compile

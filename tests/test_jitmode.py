@@ -47,6 +47,16 @@ def test_decide_takes_the_cheaper_side() -> None:
     assert jitmode.note(jitmode.decide("on", small, ["ekf"], False, missing)) == ""
 
 
+def test_workers_are_announced() -> None:
+    """compare --jobs N: workers compile on their own, so the parent says so before they start."""
+    cold = jitmode.decide("auto", [(450_000, 0, "csv")], ["ekf"], False, ("ins",))
+    assert cold.compiled and cold.missing == ("ins",)
+    line = jitmode.workers_note(cold, 2)
+    assert "each of the 2 worker processes first compiles" in line and "about 19 s" in line
+    assert jitmode.workers_note(cold, 1) == ""
+    assert jitmode.workers_note(jitmode.decide("auto", [(10, 0, "csv")], ["ekf"], False, ()), 4) == ""
+
+
 def test_needed_groups() -> None:
     assert jitmode.needed_groups([(10, 0, "csv")], ["ekf"], False) == ("ins",)
     assert jitmode.needed_groups([(10, 12, "mcap")], ["vce-ckf", "ckf"], True) == (
