@@ -328,7 +328,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
             formats: str | Sequence[str] | None = None, embed_input: bool = False,
             gnss_outages: Sequence[tuple[float, float]] | None = None,
             smooth: bool | None = None, odometry_topic: str | None = None,
-            reference_anchor: str | Sequence[float] | None = None, plot: bool = False) -> ProcessResult:
+            reference_anchor: str | Sequence[float] | None = None, plot: bool = False,
+            jit: str | None = None) -> ProcessResult:
     """Read a log, run one filter, write trajectory (and metrics with a reference).
 
     ``navpp.process`` is this function.  Example::
@@ -394,12 +395,19 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     ProcessResult : with ``trajectory`` and ``diagnostics`` as pandas DataFrames and
         ``metrics`` as a dict (None without a reference).
 
+    jit : ``"on"`` (compiled; the default unless ``$NAVPP_JIT`` says otherwise), ``"off"``
+        (interpreted) or ``"auto"`` (by the job's size and what is cached): navpp's kernels in
+        this process (:mod:`navpp.jitmode`; decided at the first run, fixed after it).
+
     Raises
     ------
     NavppError : ConfigError for bad options or config (unknown formats, ``embed_input``
         without ``mcap``), InputError for unreadable input or unwritable output,
         FilterDivergedError when the filter diverges; each with a one-line message.
     """
+    from . import jitmode
+
+    choice = jitmode.choose(jit, [Path(log)], [filter_name], _smooth_hint(Path(log), smooth, config))
     plan = _plan(Path(log), filter_name=filter_name, config=config, reference=reference, out_dir=out_dir,
                  output_rate_hz=output_rate_hz, write=write, gnss_file=gnss_file, formats=formats,
                  embed_input=embed_input, gnss_outages=gnss_outages, smooth=smooth,
@@ -408,7 +416,21 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     if plot:
         plan = replace(plan, plot=True)
     with claimed_out_dir(plan.out, plan.out_label, OUTPUT_FILES) if write else nullcontext():
-        return _run(plan, progress)
+        res = _run(plan, progress)
+    line = jitmode.note(choice)
+    return replace(res, notes=(*res.notes, line)) if line else res
+
+
+def _smooth_hint(log: Path, smooth: bool | None, config: str | Path | Config | None) -> bool:
+    """Whether the run will smooth, for :func:`navpp.jitmode.choose` (a config that cannot be
+    read says no here; :func:`_plan` reports it)."""
+    if smooth is not None:
+        return bool(smooth)
+    try:
+        cfg = config if isinstance(config, Config) else resolve_config(log, config)
+    except NavppError:
+        return False
+    return bool(cfg.output.smooth)
 
 
 @dataclass(frozen=True)
