@@ -27,7 +27,7 @@ from ..errors import InputError
 from ..findings import Finding
 from .aids.standstill import quiet_blocks
 from .attitude import dcm_to_quat, rph_to_dcm
-from .calibrate import gnss_speed_at, spans
+from .calibrate import MOVING_K, gnss_speed_at, spans
 from .state import (
     ATT,
     BA,
@@ -133,10 +133,11 @@ def still_runs(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_durati
 
 def _first_gnss_motion(gnss: GnssData, speed: float = 0.5) -> float:
     """Time (s) of the first GNSS epoch whose speed (velocity, or a fit of the fixes within
-    +-1 s) exceeds ``speed`` m/s and by more than 3 sigma; inf when the GNSS never moves."""
+    +-1 s) exceeds ``speed`` m/s and :data:`~navpp.ins.calibrate.MOVING_K` sigma; inf when the
+    GNSS never moves."""
     tg = np.asarray(gnss.t, dtype=float)
     v, sv = gnss_speed_at(gnss, tg)
-    moving = np.nonzero(np.isfinite(v) & (v > speed) & (v > 3.0 * np.nan_to_num(sv, nan=np.inf)))[0]
+    moving = np.nonzero(np.isfinite(v) & (v > speed) & (v > MOVING_K * np.nan_to_num(sv, nan=np.inf)))[0]
     return float(tg[moving[0]]) if moving.size else math.inf
 
 
@@ -180,7 +181,8 @@ def _not_still(t: np.ndarray, accel: np.ndarray, gnss: GnssData, i0: int, i1: in
 
     The mean specific force must be gravity, its 1-s means must not drift from the run's
     median by more than ``max_change`` m/s^2 (vibration averages out, a pull-away does not),
-    and the GNSS fixes of every 5-s stretch must not move.
+    and the GNSS fixes of every 5-s stretch must not move (speed above 0.5 m/s and
+    :data:`~navpp.ins.calibrate.MOVING_K` sigma).
     """
     t0, t1 = float(t[i0]), float(t[i1 - 1])
     near = (gnss.t >= t0 - 0.5) & (gnss.t <= t1 + 0.5)
@@ -212,7 +214,7 @@ def _not_still(t: np.ndarray, accel: np.ndarray, gnss: GnssData, i0: int, i1: in
     for a in t0 + 5.0 * wins.astype(float):
         sel = near & (gnss.t >= a - 0.5) & (gnss.t <= min(a + 5.0, t1) + 0.5)
         speed, speed_std = gnss_speed_bound(gnss, sel, lat, lon, h)
-        if speed > max(0.5, 3.0 * speed_std):
+        if speed > max(0.5, MOVING_K * speed_std):      # a 2-D speed: calibrate.MOVING_K
             return f"the GNSS track moves at {speed:.1f} m/s"
     return ""
 
@@ -307,9 +309,9 @@ def _still_period(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: Gnss
 
 
 #: Breaks in calibration's still mask up to this long (s) are bridged for the alignment: a block
-#: whose +-1 s GNSS speed fit passes 3 sigma by chance (a 2-D speed does so in about 1 % of still
-#: blocks with metre-level fixes; two of them a few blocks apart leave a gap of 3 s) breaks a long rest
-#: into pieces; :func:`_not_still` (gravity, 5-s GNSS windows) then confirms the bridged run.
+#: whose +-1 s GNSS speed fit passes :data:`~navpp.ins.calibrate.MOVING_K` sigma by chance (about
+#: one still block in 3000 with metre-level fixes) would break a long rest into pieces;
+#: :func:`_not_still` (gravity, 5-s GNSS windows) then confirms the bridged run.
 STILL_GAP_S = 5.0
 
 
