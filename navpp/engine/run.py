@@ -46,7 +46,15 @@ from .loop import run_epochs
 from .measurements import RunMeasurements, recovery_reopening
 from .mounting import first_pass_filter, vehicle_mounting
 from .output import body_rate, compile_seconds, interpolated_std, smoothed_run, solution_from_path
-from .prepare import alignment_settings, calibrated, mounting_matrix, noise_model, timing_fixes
+from .prepare import (
+    alignment_settings,
+    calibrated,
+    mounting_matrix,
+    noise_model,
+    start_covariance,
+    start_fixes,
+    timing_fixes,
+)
 from .recorder import RunRecorder, new_path
 from .results import RunResult, SmoothedRun
 from .schedule import GnssFixes, epochs, gnss_fixes, with_prior_std
@@ -260,7 +268,9 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     score = estimation_scorer(config, model, recording, al, fixes, new_aiding, reopen, lever, more)
     choice = gnss_error_choice(config, fixes, score)
     fmodel: InsModel | AugmentedInsModel = model
-    start = GaussianState(al.t, al.x, al.P)
+    if choice is None:          # a still start shares its fixes with the filter (white fix errors)
+        fixes = start_fixes(fixes, al)
+    start = GaussianState(al.t, al.x, start_covariance(al) if choice is None else al.P)
     if choice is not None:
         fmodel = GnssErrorModel(model, choice.settings, more)
         log.notes.append(choice.note())
@@ -268,7 +278,7 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     elif more:
         fmodel = AugmentedInsModel(model, more)
     if isinstance(fmodel, AugmentedInsModel):
-        start = GaussianState(al.t, *fmodel.start(al.x, al.P))
+        start = GaussianState(al.t, *fmodel.start(al.x, start.P))
     recorder = RunRecorder(fixes, prep.path, start, al.index, filt.noise_report, velocity=aiding.has_velocity,
                            smooth=smooth, progress=progress, n_epochs=n_epochs,
                            extra_states=fmodel.state_labels() if isinstance(fmodel, AugmentedInsModel) else None,

@@ -87,6 +87,23 @@ class Alignment:
     still: tuple[float, float] | None
     lines: tuple[str, ...] = field(default_factory=tuple)
     warnings: tuple[str, ...] = field(default_factory=tuple)
+    #: a still start's averaged fixes: the times of the first and last (s; None in motion or from
+    #: one fix), how many and as how many independent ones per ENU axis (3,)
+    start_fixes: tuple[float, float] | None = None
+    start_count: int = 1
+    start_n_eff: np.ndarray = field(default_factory=lambda: np.ones(3))
+
+
+#: A still start's position is the mean of the still period's fixes (``P`` holds that mean's
+#: variance), and the filter takes those fixes again (they tie the INS across the rest and give
+#: the adaptive filters innovations).  So that their information counts once when the filter takes
+#: the fixes' errors as white, its start holds this share of it (the mean with its variance over
+#: the share) and the fixes the rest (each fix's variance times ``N / (N_eff (1 - share))``, N_eff
+#: per axis from :func:`effective_count`; :func:`navpp.engine.prepare.start_fixes`): both parts are
+#: means of the same fixes, so the output does not jump when the filter starts, and at the end of
+#: the rest the filter's variance is the mean's (not half of it).  The Gauss-Markov GNSS error
+#: model ties the start to its error states instead (:meth:`navpp.ins.gnss_error.GnssErrorModel.start`).
+START_SHARE = 0.5
 
 
 #: A still IMU tilted by more than this (deg) is warned about (axes not forward-left-up?); one
@@ -386,7 +403,7 @@ def _levelling(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, first_fix: fl
 @dataclass(frozen=True)
 class _StartFix:
     """The antenna position at the start (a step of :func:`align`): ``lat``, ``lon`` rad, ``h`` m,
-    the mean of ``count`` fixes, with the ENU 1-sigma of that mean
+    the mean of ``count`` fixes (times ``t_first .. t_last``, s), with the ENU 1-sigma of that mean
     ``std_enu`` (3,) m, one fix's 1-sigma ``fix_std`` (3,) m and the effective number of
     independent fixes per axis ``n_eff`` (3,)."""
 
@@ -397,6 +414,8 @@ class _StartFix:
     count: int
     fix_std: np.ndarray
     n_eff: np.ndarray
+    t_first: float = math.nan
+    t_last: float = math.nan
 
 
 def effective_count(x: np.ndarray) -> float:
@@ -455,7 +474,8 @@ def _start_fix(gnss: GnssData, lv: _Levelling, t_start: float) -> _StartFix:
                                       lat, lon, h)
         n_eff = np.array([effective_count(enu[:, a]) for a in range(3)])
         std = np.maximum(std, enu.std(axis=0, ddof=1)) / np.sqrt(n_eff)
-    return _StartFix(lat, lon, h, std, len(idx), np.asarray(fix_std, dtype=float), n_eff)
+    return _StartFix(lat, lon, h, std, len(idx), np.asarray(fix_std, dtype=float), n_eff, float(gnss.t[idx[0]]),
+                     float(gnss.t[idx[-1]]))
 
 
 def _heading(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, settings: AlignmentSettings, lv: _Levelling,
@@ -585,8 +605,16 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: GnssData, se
         sd = "/".join(f"{v:.2f}" for v in fix.std_enu)
         lines.append(f"position: the mean of the {fix.count} GNSS fix(es) of the still period (as {neff} independent "
                      f"ones E/N/U, from their autocorrelation), 1-sigma {sd} m; start at t = {t_start:.2f} s")
+    span = (fix.t_first, fix.t_last) if (not lv.moving and fix.count > 1) else None
+    if span is not None:
+        scale = fix.count / (fix.n_eff * (1.0 - START_SHARE))
+        lines.append(f"the filter takes those fixes again, each with its variance times "
+                     f"{'/'.join(f'{v:.1f}' for v in scale)} E/N/U, and starts from the mean at 1-sigma "
+                     f"{'/'.join(f'{v:.2f}' for v in fix.std_enu / math.sqrt(START_SHARE))} m: each holds "
+                     f"{1.0 - START_SHARE:.0%} of their information (with the Gauss-Markov GNSS error model: "
+                     "the mean at its 1-sigma, tied to the error states)")
     return Alignment(t_start, lv.start, x, P, None if lv.moving else (lv.t_s0, lv.t_s1), tuple(lines),
-                     tuple(warnings))
+                     tuple(warnings), span, fix.count, fix.n_eff)
 
 
 def _gnss_velocity_at(gnss: GnssData, t0: float, lat: float, lon: float, h: float, span: float = 2.0) -> np.ndarray:
