@@ -58,7 +58,9 @@ def start_fixes(fixes: GnssFixes, al: Alignment) -> GnssFixes:
     ``al.start_fixes``) scaled by ``N / (N_eff (1 - START_SHARE))`` per ENU axis: the start
     (:func:`start_covariance`) holds :data:`~navpp.ins.alignment.START_SHARE` of their
     information, the filter takes the rest; ``fixes`` itself when the start is not such a mean.
-    For a filter that takes the fixes' errors as white (not with the Gauss-Markov model)."""
+    With the Gauss-Markov GNSS error model as well: N_eff then counts the fixes' correlated
+    error, which the start's tie to the error states carries
+    (:meth:`navpp.ins.gnss_error.GnssErrorModel.start`)."""
     if al.start_fixes is None:
         return fixes
     t0, t1 = al.start_fixes
@@ -71,14 +73,22 @@ def start_fixes(fixes: GnssFixes, al: Alignment) -> GnssFixes:
 
 
 def start_covariance(al: Alignment) -> np.ndarray:
-    """The start covariance (15, 15) of a filter that takes the fixes as white: the alignment's,
-    with a still start's position variance (that of the mean of the still fixes) over
-    :data:`~navpp.ins.alignment.START_SHARE` (:func:`start_fixes` gives the fixes the rest)."""
+    """The start covariance (15, 15): the alignment's, with a still start's position variance
+    (that of the mean of the still fixes) over :data:`~navpp.ins.alignment.START_SHARE`
+    (:func:`start_fixes` gives the fixes the rest)."""
     if al.start_fixes is None:
         return al.P
     P = al.P.copy()
     P[POS, POS] /= START_SHARE
     return P
+
+
+def averaged_start(al: Alignment) -> tuple[float, int] | None:
+    """(span s, count) of the fixes a still start's position is the mean of (None: one fix), for
+    :meth:`navpp.ins.gnss_error.GnssErrorModel.start`."""
+    if al.start_fixes is None:
+        return None
+    return al.start_fixes[1] - al.start_fixes[0], al.start_count
 
 
 #: Floor of the initial heading's 1-sigma from the GNSS track, deg: the body's x axis may not point

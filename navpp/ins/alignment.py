@@ -96,13 +96,13 @@ class Alignment:
 
 #: A still start's position is the mean of the still period's fixes (``P`` holds that mean's
 #: variance), and the filter takes those fixes again (they tie the INS across the rest and give
-#: the adaptive filters innovations).  So that their information counts once when the filter takes
-#: the fixes' errors as white, its start holds this share of it (the mean with its variance over
-#: the share) and the fixes the rest (each fix's variance times ``N / (N_eff (1 - share))``, N_eff
-#: per axis from :func:`effective_count`; :func:`navpp.engine.prepare.start_fixes`): both parts are
-#: means of the same fixes, so the output does not jump when the filter starts, and at the end of
-#: the rest the filter's variance is the mean's (not half of it).  The Gauss-Markov GNSS error
-#: model ties the start to its error states instead (:meth:`navpp.ins.gnss_error.GnssErrorModel.start`).
+#: the adaptive filters innovations).  So that their information counts once, the filter's start
+#: holds this share of it (the mean with its variance over the share) and the fixes the rest (each
+#: fix's variance times ``N / (N_eff (1 - share))``, N_eff per axis from :func:`effective_count`;
+#: :func:`navpp.engine.prepare.start_fixes`): both parts are means of the same fixes, so the output
+#: does not jump when the filter starts, and at the end of the rest the filter's variance is the
+#: mean's (not half of it).  With the Gauss-Markov GNSS error model the start is also tied to the
+#: error states (:meth:`navpp.ins.gnss_error.GnssErrorModel.start`).
 START_SHARE = 0.5
 
 
@@ -611,8 +611,7 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: GnssData, se
         lines.append(f"the filter takes those fixes again, each with its variance times "
                      f"{'/'.join(f'{v:.1f}' for v in scale)} E/N/U, and starts from the mean at 1-sigma "
                      f"{'/'.join(f'{v:.2f}' for v in fix.std_enu / math.sqrt(START_SHARE))} m: each holds "
-                     f"{1.0 - START_SHARE:.0%} of their information (with the Gauss-Markov GNSS error model: "
-                     "the mean at its 1-sigma, tied to the error states)")
+                     f"{1.0 - START_SHARE:.0%} of their information")
     return Alignment(t_start, lv.start, x, P, None if lv.moving else (lv.t_s0, lv.t_s1), tuple(lines),
                      tuple(warnings), span, fix.count, fix.n_eff)
 
