@@ -409,8 +409,9 @@ def test_auto_does_not_add_the_states_to_a_filter_with_a_random_mean(correlated_
 @pytest.mark.slow
 def test_smoothed_sigma_is_honest_over_correlated_drives():
     """Six correlated 420-s drives (tau 60 s, share 0.8, given), the Gauss-Markov model with a
-    60-s still start: forward and smoothed error/sigma within 0.55-1.35 on average (measured:
-    forward 0.99, smoothed 0.72 over seeds 0-7)."""
+    60-s still start: error/sigma on average within 0.6-1.35 forward and 0.45-1.35 smoothed
+    (measured on seeds 0-5: forward 0.83, smoothed 0.59; 0.84 and 0.63 before the averaged
+    start's tie: the smoothed sigma is on the safe side either way)."""
     z = []
     for seed in range(6):
         rec = simulate(SimulationSpec(duration_s=420.0, seed=seed, gnss_error="correlated", gnss_corr_time_s=60.0,
@@ -421,7 +422,7 @@ def test_smoothed_sigma_is_honest_over_correlated_drives():
                   _err_over_sigma(gm.smoothed.solution, rec.reference)[1]))
     zf, zs = np.mean(z, axis=0)
     print(f"mean error/sigma forward {zf:.2f}, smoothed {zs:.2f}")
-    assert 0.55 < zf < 1.35 and 0.55 < zs < 1.35
+    assert 0.6 < zf < 1.35 and 0.45 < zs < 1.35
 
 
 @pytest.mark.slow
