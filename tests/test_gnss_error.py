@@ -158,6 +158,36 @@ def test_start_correlates_position_and_gnss_error(ins):
     np.testing.assert_allclose(schur, P15, atol=1e-12)
 
 
+def test_averaged_start_ties_position_to_the_mean_error(ins):
+    # a still start from the mean of 1001 fixes over 200 s: the position's error is the mean of
+    # the Gauss-Markov error over the span, against a second implementation (the AR(1) covariance
+    # of the discrete fixes summed)
+    model = GnssErrorModel(ins, SETTINGS)
+    P15 = np.diag(np.full(15, 1e-4))
+    span, count = 200.0, 1001
+    _, Pa = model.start(_nominal()[:NOMINAL_SIZE], P15, (span, count))
+    tk = np.linspace(0.0, span, count)
+    rho = np.exp(-np.abs(tk[:, None] - tk[None, :]) / SETTINGS.tau_s)
+    v = np.square(SETTINGS.sigma_enu)
+    var_mean = v * rho.mean()                     # Var(mean b)
+    cov_b0 = v * np.exp(-tk / SETTINGS.tau_s).mean()     # Cov(mean b, b at the start)
+    np.testing.assert_allclose(np.diag(Pa[POS, POS]), var_mean, rtol=2e-3)
+    np.testing.assert_allclose(np.diag(Pa[POS, GM]), -cov_b0, rtol=2e-3)
+    np.testing.assert_allclose(np.diag(Pa[GM, GM]), v)
+    np.linalg.cholesky(Pa)
+    # the mean's own variance wins when larger (fixes scattered beyond the model)
+    _, Pb = model.start(_nominal()[:NOMINAL_SIZE], np.diag(np.full(15, 9.0)), (span, count))
+    np.testing.assert_allclose(np.diag(Pb[POS, POS]), 9.0)
+    np.linalg.cholesky(Pb)
+    # the start holding half of the fixes' information: the position's variance doubles
+    _, Ph = model.start(_nominal()[:NOMINAL_SIZE], P15, (span, count), 0.5)
+    np.testing.assert_allclose(np.diag(Ph[POS, POS]), 2.0 * var_mean, rtol=2e-3)
+    np.testing.assert_allclose(np.diag(Ph[POS, GM]), -cov_b0, rtol=2e-3)
+    # one fix: the old tie (the position's error is the GNSS error at the start)
+    _, Pc = model.start(_nominal()[:NOMINAL_SIZE], P15, (0.0, 1))
+    np.testing.assert_allclose(np.diag(Pc[POS, GM]), -v)
+
+
 def test_settings_validate():
     with pytest.raises(ValueError, match="tau_s"):
         GnssErrorSettings(0.0, (1.0, 1.0, 1.0))
@@ -291,7 +321,13 @@ def correlated_log():
 def test_the_model_removes_the_correlation_and_makes_sigma_honest(correlated_log):
     """One short correlated drive, the simulator's tau and share given: the Gauss-Markov run's
     error/sigma within 0.6-1.5 (white: far above), its innovations no longer correlated, its
-    diagnostics carry the GNSS error states; the sigma-point filter agrees with the EKF."""
+    diagnostics carry the GNSS error states; the sigma-point filter agrees with the EKF.
+
+    The smoothed error of one 420-s drive is mostly one offset per axis (the error's mean over a
+    few correlation times), so its error/sigma is a draw of few degrees of freedom: over seeds
+    0-7 it spans 0.27-1.15 (0.44-1.00 before the averaged still start's tie), mean 0.72 both.
+    Here only a gross miss either way; :func:`test_smoothed_sigma_is_honest_over_correlated_drives`
+    (slow) checks the mean over seeds."""
     rec = correlated_log
     white = _run(rec, "ekf", {"error_model": "white"})
     gm_cfg = {"error_model": "gauss-markov", "corr_time_s": 60.0, "correlated_share": 0.8}
@@ -300,7 +336,7 @@ def test_the_model_removes_the_correlation_and_makes_sigma_honest(correlated_log
     h_g, z_g = _err_over_sigma(gm.solution, rec.reference)
     h_s, z_s = _err_over_sigma(gm.smoothed.solution, rec.reference)
     print(f"white {h_w:.2f} m err/sigma {z_w:.1f}; gauss-markov {h_g:.2f} m {z_g:.2f}; smoothed {h_s:.2f} m {z_s:.2f}")
-    assert z_w > 3.0 and 0.6 < z_g < 1.5 and 0.5 < z_s < 1.5
+    assert z_w > 3.0 and 0.6 < z_g < 1.5 and 0.25 < z_s < 1.5
     assert any(getattr(w, "code", "") == "gnss-errors-correlated" for w in white.warnings)
     d = gm.diagnostics
     assert not innovation_correlation(d.t, d.nu, d.accepted).correlated
@@ -368,6 +404,25 @@ def test_auto_does_not_add_the_states_to_a_filter_with_a_random_mean(correlated_
     white = _run(correlated_log, "ekf", {"error_model": "white"})
     np.testing.assert_array_equal(res.solution.lat_deg, white.solution.lat_deg)
     assert any("random amounts" in w for w in res.warnings)
+
+
+@pytest.mark.slow
+def test_smoothed_sigma_is_honest_over_correlated_drives():
+    """Six correlated 420-s drives (tau 60 s, share 0.8, given), the Gauss-Markov model with a
+    60-s still start: error/sigma on average within 0.6-1.35 forward and 0.45-1.35 smoothed
+    (measured on seeds 0-5: forward 0.83, smoothed 0.59; 0.84 and 0.63 before the averaged
+    start's tie: the smoothed sigma is on the safe side either way)."""
+    z = []
+    for seed in range(6):
+        rec = simulate(SimulationSpec(duration_s=420.0, seed=seed, gnss_error="correlated", gnss_corr_time_s=60.0,
+                                      gnss_velocity=True)).recording()
+        gm = _run(rec, "ekf", {"error_model": "gauss-markov", "corr_time_s": 60.0, "correlated_share": 0.8},
+                  smooth=True)
+        z.append((_err_over_sigma(gm.solution, rec.reference)[1],
+                  _err_over_sigma(gm.smoothed.solution, rec.reference)[1]))
+    zf, zs = np.mean(z, axis=0)
+    print(f"mean error/sigma forward {zf:.2f}, smoothed {zs:.2f}")
+    assert 0.6 < zf < 1.35 and 0.45 < zs < 1.35
 
 
 @pytest.mark.slow

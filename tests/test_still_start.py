@@ -9,6 +9,7 @@ import pytest
 from navpp import api, engine, geodesy
 from navpp.config import config_from_dict
 from navpp.ins.alignment import AlignmentSettings, align, bridged, effective_count
+from navpp.ins.calibrate import spans
 from navpp.ins.state import POS
 from navpp.metrics import interpolate_solution, position_errors_enu
 from navpp.simulate import SimulationSpec, simulate
@@ -40,6 +41,57 @@ def test_a_long_rest_is_one_still_period_for_the_alignment():
     al = align(imu.t, imu.gyro, imu.accel, sim.gnss, AlignmentSettings(**{**st.__dict__, "still_mask": cal.still}))
     t0 = float(imu.t[0])
     assert al.still is not None and al.still[0] == t0 and al.still[1] - t0 > 190.0
+    # the detector itself keeps the rest whole (a 2-D speed tested at 3 sigma broke it into 4
+    # pieces here) and marks no moving sample still (against the truth's velocity)
+    ref = sim.reference
+    speed = np.hypot(np.interp(imu.t, ref.t, ref.vel_enu[:, 0]), np.interp(imu.t, ref.t, ref.vel_enu[:, 1]))
+    moving = (speed > 1e-3) | (np.abs(np.interp(imu.t, ref.t, ref.vel_enu[:, 2])) > 1e-3)
+    rest_end = float(imu.t[np.argmax(moving)])
+    pieces = [(a, b) for a, b in spans(imu.t, cal.still, 0.0) if imu.t[a] < rest_end]
+    assert len(pieces) == 1 and imu.t[pieces[0][1] - 1] > rest_end - 2.0
+    assert not np.any(cal.still & moving)
+
+
+def test_the_start_and_the_filter_share_the_still_fixes_information():
+    # white fixes: the start holds START_SHARE of the mean's information and each still fix is
+    # taken with its variance times N / (N_eff (1 - share)); a scalar Kalman filter run over them
+    # (no process noise) ends at the mean with the mean's variance sigma^2 / N_eff (closed form),
+    # not half of it, and never leaves the mean by more than the fixes' share moves it
+    from navpp.engine.prepare import start_covariance, start_fixes
+    from navpp.engine.schedule import GnssFixes
+    from navpp.ins.alignment import START_SHARE
+
+    sim = simulate(SimulationSpec(duration_s=60.0, still_s=30.0, seed=5, gnss_std_h_m=1.8, gnss_std_u_m=2.5))
+    al = align(sim.imu.t, sim.imu.gyro, sim.imu.accel, sim.gnss, _settings())
+    g = sim.gnss
+    m = len(g)
+    fixes = GnssFixes(np.arange(m), g.t, np.radians(g.lat_deg), np.radians(g.lon_deg), g.alt,
+                      np.tile(np.square(g.std_enu[0]), (m, 1)))
+    shared = start_fixes(fixes, al)
+    inside = (g.t >= al.start_fixes[0]) & (g.t <= al.start_fixes[1])
+    assert np.count_nonzero(inside) == al.start_count > 100
+    np.testing.assert_allclose(shared.r_scale[~inside], 1.0)
+    scale = al.start_count / (al.start_n_eff * (1 - START_SHARE))
+    np.testing.assert_allclose(shared.r_scale[inside], np.broadcast_to(scale, (int(inside.sum()), 3)))
+    P0 = start_covariance(al)[POS, POS]
+    np.testing.assert_allclose(np.diag(P0), np.diag(al.P[POS, POS]) / START_SHARE)
+    # the east axis as a scalar: start at the mean, the still fixes one by one
+    lat0, lon0 = math.radians(g.lat_deg[inside].mean()), math.radians(g.lon_deg[inside].mean())
+    east = geodesy.geodetic_to_enu(np.radians(g.lat_deg[inside]), np.radians(g.lon_deg[inside]), g.alt[inside],
+                                   lat0, lon0, float(g.alt[inside].mean()))[:, 0]
+    x, p = 0.0, float(P0[0, 0])
+    r = shared.var[inside, 0] * shared.r_scale[inside, 0]
+    path = []
+    for z, rk in zip(east, r):
+        k = p / (p + rk)
+        x, p = x + k * (z - x), (1 - k) * p
+        path.append(x)
+    var_mean = float(al.P[POS, POS][0, 0])
+    assert p == pytest.approx(1.0 / (START_SHARE / var_mean + float(np.sum(1.0 / r))), rel=1e-9)   # information adds
+    # ... to the mean's (within the fixes' scatter against their logged sigma), not twice it
+    assert p == pytest.approx(var_mean, rel=0.25)
+    assert abs(x) < 1e-9 + 3.0 * math.sqrt(var_mean)                 # back near the mean
+    assert np.max(np.abs(path)) < 3.0 * math.sqrt(var_mean)          # no jump towards the first fixes
 
 
 def test_effective_count_against_closed_form():

@@ -127,8 +127,9 @@ class RunMeasurements:
         """The position fix of ``epoch`` and its velocity (when there is one)."""
         k, f = epoch.fix, self.fixes
         self._drift = self.reopen is not None and drifting(np.asarray(self._rejected_nis, dtype=float))
+        var = f.var[k] * self.r_share if f.r_scale is None else f.var[k] * self.r_share * f.r_scale[k]
         out: list[Any] = [GnssPosition(epoch.t, float(f.lat[k]), float(f.lon[k]), float(f.alt[k]),
-                                       np.diag(f.var[k] * self.r_share), self.lever,
+                                       np.diag(var), self.lever,
                                        self.reopen if self._drift else None)]
         vmeas = self.aiding.velocity(k, epoch.t)
         if vmeas is not None:

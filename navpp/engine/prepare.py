@@ -14,12 +14,13 @@ import numpy as np
 
 from ..config import DEG_PER_H_TO_RAD_PER_S, MG_TO_MPS2, PRESETS, Config
 from ..findings import Finding
-from ..ins.alignment import AlignmentSettings
+from ..ins.alignment import START_SHARE, Alignment, AlignmentSettings
 from ..ins.attitude import rpy_deg_to_dcm
 from ..ins.model import NoiseModel
+from ..ins.state import POS
 from ..recording import Recording
 from .checks import check_gyro_scale
-from .schedule import with_prior_std
+from .schedule import GnssFixes, with_prior_std
 
 
 def mounting_matrix(rpy_deg: tuple[float, float, float]) -> np.ndarray:
@@ -50,6 +51,44 @@ def alignment_settings(config: Config, noise=None, cal=None) -> AlignmentSetting
         first_motion=config.auto.heading,
         heading_floor=math.radians(HEADING_FLOOR_DEG["car" if config.vehicle.type == "car" else "none"]),
         **extra)
+
+
+def start_fixes(fixes: GnssFixes, al: Alignment) -> GnssFixes:
+    """``fixes`` with the filter's R of a still start's averaged fixes (those at the times
+    ``al.start_fixes``) scaled by ``N / (N_eff (1 - START_SHARE))`` per ENU axis: the start
+    (:func:`start_covariance`) holds :data:`~navpp.ins.alignment.START_SHARE` of their
+    information, the filter takes the rest; ``fixes`` itself when the start is not such a mean.
+    With the Gauss-Markov GNSS error model as well: N_eff then counts the fixes' correlated
+    error, which the start's tie to the error states carries
+    (:meth:`navpp.ins.gnss_error.GnssErrorModel.start`)."""
+    if al.start_fixes is None:
+        return fixes
+    t0, t1 = al.start_fixes
+    inside = (fixes.t >= t0 - 1e-6) & (fixes.t <= t1 + 1e-6)
+    if not inside.any():
+        return fixes
+    scale = np.ones((len(fixes), 3))
+    scale[inside] = al.start_count / (np.asarray(al.start_n_eff, dtype=float) * (1.0 - START_SHARE))
+    return replace(fixes, r_scale=scale)
+
+
+def start_covariance(al: Alignment) -> np.ndarray:
+    """The start covariance (15, 15): the alignment's, with a still start's position variance
+    (that of the mean of the still fixes) over :data:`~navpp.ins.alignment.START_SHARE`
+    (:func:`start_fixes` gives the fixes the rest)."""
+    if al.start_fixes is None:
+        return al.P
+    P = al.P.copy()
+    P[POS, POS] /= START_SHARE
+    return P
+
+
+def averaged_start(al: Alignment) -> tuple[float, int] | None:
+    """(span s, count) of the fixes a still start's position is the mean of (None: one fix), for
+    :meth:`navpp.ins.gnss_error.GnssErrorModel.start`."""
+    if al.start_fixes is None:
+        return None
+    return al.start_fixes[1] - al.start_fixes[0], al.start_count
 
 
 #: Floor of the initial heading's 1-sigma from the GNSS track, deg: the body's x axis may not point

@@ -25,7 +25,7 @@ from ..filters.base import Filter, GaussianState
 from ..findings import Finding
 from ..gnss_jumps import check_gnss_jumps
 from ..ins.aids.odometer import scale_block
-from ..ins.alignment import Alignment, align
+from ..ins.alignment import START_SHARE, Alignment, align
 from ..ins.augmented import AugmentedInsModel, StateBlock
 from ..ins.gnss_error import Correlation, GnssErrorModel, GnssErrorSettings, innovation_correlation
 from ..ins.model import InsModel
@@ -46,7 +46,16 @@ from .loop import run_epochs
 from .measurements import RunMeasurements, recovery_reopening
 from .mounting import first_pass_filter, vehicle_mounting
 from .output import body_rate, compile_seconds, interpolated_std, smoothed_run, solution_from_path
-from .prepare import alignment_settings, calibrated, mounting_matrix, noise_model, timing_fixes
+from .prepare import (
+    alignment_settings,
+    averaged_start,
+    calibrated,
+    mounting_matrix,
+    noise_model,
+    start_covariance,
+    start_fixes,
+    timing_fixes,
+)
 from .recorder import RunRecorder, new_path
 from .results import RunResult, SmoothedRun
 from .schedule import GnssFixes, epochs, gnss_fixes, with_prior_std
@@ -260,15 +269,18 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     score = estimation_scorer(config, model, recording, al, fixes, new_aiding, reopen, lever, more)
     choice = gnss_error_choice(config, fixes, score)
     fmodel: InsModel | AugmentedInsModel = model
-    start = GaussianState(al.t, al.x, al.P)
+    fixes = start_fixes(fixes, al)      # a still start shares its averaged fixes with the filter
+    start = GaussianState(al.t, al.x, start_covariance(al))
     if choice is not None:
         fmodel = GnssErrorModel(model, choice.settings, more)
         log.notes.append(choice.note())
         prep.calibration["gnss_error"] = choice.report()
     elif more:
         fmodel = AugmentedInsModel(model, more)
-    if isinstance(fmodel, AugmentedInsModel):
-        start = GaussianState(al.t, *fmodel.start(al.x, al.P))
+    if isinstance(fmodel, GnssErrorModel):
+        start = GaussianState(al.t, *fmodel.start(al.x, al.P, averaged_start(al), START_SHARE))
+    elif isinstance(fmodel, AugmentedInsModel):
+        start = GaussianState(al.t, *fmodel.start(al.x, start.P))
     recorder = RunRecorder(fixes, prep.path, start, al.index, filt.noise_report, velocity=aiding.has_velocity,
                            smooth=smooth, progress=progress, n_epochs=n_epochs,
                            extra_states=fmodel.state_labels() if isinstance(fmodel, AugmentedInsModel) else None,
@@ -314,7 +326,8 @@ def estimation_scorer(config: Config, model: InsModel, recording: Recording, al:
         src = RunMeasurements(sub, recording.gnss, lever, reopen, new_aiding(sub.index), model=fm,
                               r_share=1.0 - share)
         try:
-            run_epochs(first_pass_filter(config), fm, GaussianState(al.t, *fm.start(al.x, al.P)), schedule, src,
+            run_epochs(first_pass_filter(config), fm, GaussianState(al.t, *fm.start(al.x, al.P, averaged_start(al))),
+                       schedule, src,
                        scorer)
         except FilterDivergedError:
             return math.inf

@@ -28,7 +28,8 @@ class GnssFixes:
     alt : (M,) m (ellipsoidal); var : (M, 3) prior variance ENU, m^2: the log's per-fix 1-sigma
     times ``[gnss] std_scale``, else ``[gnss] default_std_m`` (never scaled), squared.  Every
     check against "the prior R" uses ``var``.  notes : what the run notes about how ``var`` was
-    formed (:func:`std_scale_notes`).
+    formed (:func:`std_scale_notes`).  r_scale : (M, 3) factor on ``var`` for the filter's R
+    (a still start's averaged fixes, :data:`navpp.ins.alignment.START_SHARE`), None: ones.
     """
 
     index: np.ndarray
@@ -38,6 +39,7 @@ class GnssFixes:
     alt: np.ndarray
     var: np.ndarray
     notes: tuple[str, ...] = ()
+    r_scale: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t.shape[0])

@@ -27,7 +27,7 @@ from ..errors import InputError
 from ..findings import Finding
 from .aids.standstill import quiet_blocks
 from .attitude import dcm_to_quat, rph_to_dcm
-from .calibrate import gnss_speed_at, spans
+from .calibrate import MOVING_K, gnss_speed_at, spans
 from .state import (
     ATT,
     BA,
@@ -87,6 +87,23 @@ class Alignment:
     still: tuple[float, float] | None
     lines: tuple[str, ...] = field(default_factory=tuple)
     warnings: tuple[str, ...] = field(default_factory=tuple)
+    #: a still start's averaged fixes: the times of the first and last (s; None in motion or from
+    #: one fix), how many and as how many independent ones per ENU axis (3,)
+    start_fixes: tuple[float, float] | None = None
+    start_count: int = 1
+    start_n_eff: np.ndarray = field(default_factory=lambda: np.ones(3))
+
+
+#: A still start's position is the mean of the still period's fixes (``P`` holds that mean's
+#: variance), and the filter takes those fixes again (they tie the INS across the rest and give
+#: the adaptive filters innovations).  So that their information counts once, the filter's start
+#: holds this share of it (the mean with its variance over the share) and the fixes the rest (each
+#: fix's variance times ``N / (N_eff (1 - share))``, N_eff per axis from :func:`effective_count`;
+#: :func:`navpp.engine.prepare.start_fixes`): both parts are means of the same fixes, so the output
+#: does not jump when the filter starts, and at the end of the rest the filter's variance is the
+#: mean's (not half of it).  With the Gauss-Markov GNSS error model the start is also tied to the
+#: error states (:meth:`navpp.ins.gnss_error.GnssErrorModel.start`).
+START_SHARE = 0.5
 
 
 #: A still IMU tilted by more than this (deg) is warned about (axes not forward-left-up?); one
@@ -133,10 +150,11 @@ def still_runs(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_durati
 
 def _first_gnss_motion(gnss: GnssData, speed: float = 0.5) -> float:
     """Time (s) of the first GNSS epoch whose speed (velocity, or a fit of the fixes within
-    +-1 s) exceeds ``speed`` m/s and by more than 3 sigma; inf when the GNSS never moves."""
+    +-1 s) exceeds ``speed`` m/s and :data:`~navpp.ins.calibrate.MOVING_K` sigma; inf when the
+    GNSS never moves."""
     tg = np.asarray(gnss.t, dtype=float)
     v, sv = gnss_speed_at(gnss, tg)
-    moving = np.nonzero(np.isfinite(v) & (v > speed) & (v > 3.0 * np.nan_to_num(sv, nan=np.inf)))[0]
+    moving = np.nonzero(np.isfinite(v) & (v > speed) & (v > MOVING_K * np.nan_to_num(sv, nan=np.inf)))[0]
     return float(tg[moving[0]]) if moving.size else math.inf
 
 
@@ -180,7 +198,8 @@ def _not_still(t: np.ndarray, accel: np.ndarray, gnss: GnssData, i0: int, i1: in
 
     The mean specific force must be gravity, its 1-s means must not drift from the run's
     median by more than ``max_change`` m/s^2 (vibration averages out, a pull-away does not),
-    and the GNSS fixes of every 5-s stretch must not move.
+    and the GNSS fixes of every 5-s stretch must not move (speed above 0.5 m/s and
+    :data:`~navpp.ins.calibrate.MOVING_K` sigma).
     """
     t0, t1 = float(t[i0]), float(t[i1 - 1])
     near = (gnss.t >= t0 - 0.5) & (gnss.t <= t1 + 0.5)
@@ -212,7 +231,7 @@ def _not_still(t: np.ndarray, accel: np.ndarray, gnss: GnssData, i0: int, i1: in
     for a in t0 + 5.0 * wins.astype(float):
         sel = near & (gnss.t >= a - 0.5) & (gnss.t <= min(a + 5.0, t1) + 0.5)
         speed, speed_std = gnss_speed_bound(gnss, sel, lat, lon, h)
-        if speed > max(0.5, 3.0 * speed_std):
+        if speed > max(0.5, MOVING_K * speed_std):      # a 2-D speed: calibrate.MOVING_K
             return f"the GNSS track moves at {speed:.1f} m/s"
     return ""
 
@@ -307,9 +326,9 @@ def _still_period(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: Gnss
 
 
 #: Breaks in calibration's still mask up to this long (s) are bridged for the alignment: a block
-#: whose +-1 s GNSS speed fit passes 3 sigma by chance (a 2-D speed does so in about 1 % of still
-#: blocks with metre-level fixes; two of them a few blocks apart leave a gap of 3 s) breaks a long rest
-#: into pieces; :func:`_not_still` (gravity, 5-s GNSS windows) then confirms the bridged run.
+#: whose +-1 s GNSS speed fit passes :data:`~navpp.ins.calibrate.MOVING_K` sigma by chance (about
+#: one still block in 3000 with metre-level fixes) would break a long rest into pieces;
+#: :func:`_not_still` (gravity, 5-s GNSS windows) then confirms the bridged run.
 STILL_GAP_S = 5.0
 
 
@@ -384,7 +403,7 @@ def _levelling(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, first_fix: fl
 @dataclass(frozen=True)
 class _StartFix:
     """The antenna position at the start (a step of :func:`align`): ``lat``, ``lon`` rad, ``h`` m,
-    the mean of ``count`` fixes, with the ENU 1-sigma of that mean
+    the mean of ``count`` fixes (times ``t_first .. t_last``, s), with the ENU 1-sigma of that mean
     ``std_enu`` (3,) m, one fix's 1-sigma ``fix_std`` (3,) m and the effective number of
     independent fixes per axis ``n_eff`` (3,)."""
 
@@ -395,6 +414,8 @@ class _StartFix:
     count: int
     fix_std: np.ndarray
     n_eff: np.ndarray
+    t_first: float = math.nan
+    t_last: float = math.nan
 
 
 def effective_count(x: np.ndarray) -> float:
@@ -453,7 +474,8 @@ def _start_fix(gnss: GnssData, lv: _Levelling, t_start: float) -> _StartFix:
                                       lat, lon, h)
         n_eff = np.array([effective_count(enu[:, a]) for a in range(3)])
         std = np.maximum(std, enu.std(axis=0, ddof=1)) / np.sqrt(n_eff)
-    return _StartFix(lat, lon, h, std, len(idx), np.asarray(fix_std, dtype=float), n_eff)
+    return _StartFix(lat, lon, h, std, len(idx), np.asarray(fix_std, dtype=float), n_eff, float(gnss.t[idx[0]]),
+                     float(gnss.t[idx[-1]]))
 
 
 def _heading(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, settings: AlignmentSettings, lv: _Levelling,
@@ -583,8 +605,15 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: GnssData, se
         sd = "/".join(f"{v:.2f}" for v in fix.std_enu)
         lines.append(f"position: the mean of the {fix.count} GNSS fix(es) of the still period (as {neff} independent "
                      f"ones E/N/U, from their autocorrelation), 1-sigma {sd} m; start at t = {t_start:.2f} s")
+    span = (fix.t_first, fix.t_last) if (not lv.moving and fix.count > 1) else None
+    if span is not None:
+        scale = fix.count / (fix.n_eff * (1.0 - START_SHARE))
+        lines.append(f"the filter takes those fixes again, each with its variance times "
+                     f"{'/'.join(f'{v:.1f}' for v in scale)} E/N/U, and starts from the mean at 1-sigma "
+                     f"{'/'.join(f'{v:.2f}' for v in fix.std_enu / math.sqrt(START_SHARE))} m: each holds "
+                     f"{1.0 - START_SHARE:.0%} of their information")
     return Alignment(t_start, lv.start, x, P, None if lv.moving else (lv.t_s0, lv.t_s1), tuple(lines),
-                     tuple(warnings))
+                     tuple(warnings), span, fix.count, fix.n_eff)
 
 
 def _gnss_velocity_at(gnss: GnssData, t0: float, lat: float, lon: float, h: float, span: float = 2.0) -> np.ndarray:

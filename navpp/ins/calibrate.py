@@ -66,6 +66,12 @@ K_QUIET = 3.0            #: quiet = within this factor of the quietest level (no
 K_WHITE = 4.0            #: or within this many white-noise sigmas of the configured IMU
 GNSS_STILL_SPEED = 0.2   #: m/s: below this (or 3 sigma of it) the GNSS says still ...
 GNSS_STILL_SPEED_MAX = 0.5  #: ... but never above this, m/s
+#: GNSS says moving when its horizontal speed exceeds this many times its 1-sigma per axis.  A
+#: still track's 2-D speed is Rayleigh distributed: beyond k sigma with probability exp(-k^2 / 2),
+#: 1.1 % at k = 3 (not the 0.27 % of a 1-D 3-sigma test), which broke every 200 s simulated rest
+#: with 1.8 m fixes into 3 to 6 pieces; at 4.0 one block in 3000 (0.5 s each) passes by chance,
+#: and no simulated rest broke (a moving block still needs the IMU quiet to be taken as still)
+MOVING_K = 4.0
 GROSS_TILT_DEG = 45.0    #: gravity further than this from body +z: a mounting, not a slope
 PRIOR_CONFLICT = 3.0     #: an estimate beyond this many sigmas of the prior rejects the prior
 
@@ -365,7 +371,7 @@ def standstill(t: np.ndarray, stats: BlockStatistics, gnss: GnssData, gyro_arw: 
     limit = np.maximum(GNSS_STILL_SPEED, np.minimum(3.0 * np.nan_to_num(speed_std, nan=0.0), GNSS_STILL_SPEED_MAX))
     gnss_still = has & (speed <= limit)
     # moving only when the speed is beyond its own noise: a noisy fix says nothing either way
-    gnss_moving = has & ~gnss_still & (speed > 3.0 * np.nan_to_num(speed_std, nan=0.0))
+    gnss_moving = has & ~gnss_still & (speed > MOVING_K * np.nan_to_num(speed_std, nan=0.0))
     thr_g = np.where(gnss_still, max(K_QUIET * q_g, mid_g), K_QUIET * q_g)
     thr_a = np.where(gnss_still, max(K_QUIET * q_a, mid_a), K_QUIET * q_a)
     quiet = (lp_g <= np.maximum(thr_g, floor_g)) & (lp_a <= np.maximum(thr_a, floor_a)) & ~gnss_moving

@@ -99,17 +99,43 @@ class GnssErrorModel(AugmentedInsModel):
         dt = interval[1] - interval[0]
         return b.decay(dt), b.drive(dt)
 
-    def start(self, x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def start(self, x: np.ndarray, P: np.ndarray, averaged: tuple[float, int] | None = None, share: float = 1.0
+              ) -> tuple[np.ndarray, np.ndarray]:
         """The augmented start (:meth:`AugmentedInsModel.start`) with the GNSS error correlated
-        to the position: the start position came from the fixes, so its error holds the (unknown)
-        GNSS error with the opposite sign: the position variance grows by ``sigma_c^2`` and the
-        two blocks correlate by ``-sigma_c^2`` (the Schur complement is the INS's own position
-        variance, so the result stays positive definite)."""
+        to the position: the start position came from the fixes, so its error holds their (unknown)
+        GNSS error.
+
+        From one fix (``averaged`` None): the position's error is that fix's ``b`` at the start,
+        so the position variance grows by ``sigma_c^2`` and the two blocks correlate by
+        ``-sigma_c^2`` (the Schur complement is the INS's own position variance).  From the mean
+        of ``count`` fixes over ``span`` s (``averaged = (span, count)``, a still start): the
+        position's error is the mean of ``b`` over the span, whose variance is ``sigma_c^2 g(x)``,
+        ``g(x) = 2 (x - 1 + exp(-x)) / x^2`` with ``x = span / tau``, and whose covariance with ``b``
+        at the start is ``-sigma_c^2 (1 - exp(-x)) / x``; the position keeps ``P``'s variance (the
+        mean's, from the fixes' own scatter) when that is larger, and is divided by ``share``, the
+        share of the averaged fixes' information the start holds (the filter takes the fixes again
+        with the rest, :func:`navpp.engine.prepare.start_fixes`).  The correlation is held below
+        0.99 so that the start stays positive definite.  Adding ``sigma_c^2`` there would count the
+        averaged error twice (the filter then pulled a 200 s still start by metres towards its
+        first fixes)."""
         xa, Pa = super().start(x, P)
         v = np.diag(self._var)
-        Pa[POS, POS] += v
-        Pa[POS, GM] = -v
-        Pa[GM, POS] = -v
+        if averaged is None or averaged[1] < 2 or not averaged[0] > 0.0:
+            Pa[POS, POS] += v
+            Pa[POS, GM] = -v
+            Pa[GM, POS] = -v
+            return xa, Pa
+        xr = averaged[0] / self.settings.tau_s
+        if xr < 1e-4:        # series: the closed forms cancel
+            g, h = 1.0 - xr / 3.0, 1.0 - xr / 2.0
+        else:
+            g = 2.0 * (xr - 1.0 + math.exp(-xr)) / (xr * xr)
+            h = -math.expm1(-xr) / xr
+        var_p = np.maximum(np.diag(Pa[POS, POS]), self._var * g) / share
+        cov = -np.minimum(self._var * h, 0.99 * np.sqrt(var_p * self._var))
+        Pa[POS, POS] = np.diag(var_p)
+        Pa[POS, GM] = np.diag(cov)
+        Pa[GM, POS] = np.diag(cov)
         return xa, Pa
 
     def measurement(self, meas: Any) -> Any:
