@@ -247,6 +247,82 @@ def test_sample_logs_embed_every_topic_once(name, tmp_path):
             assert [m["data"] for m in got[topic]] == [m["data"] for m in items], topic
 
 
+@pytest.fixture(scope="module")
+def ros1_mcap(sim_rec: Recording, tmp_path_factory) -> Path:
+    """The first 20 s of the session log as a ROS 1 encoded MCAP (ros1msg schemas from
+    rosbags), with /chatter."""
+    from mcap.writer import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts1 = get_typestore(Stores.ROS1_NOETIC)
+    i, g = sim_rec.imu.t < 20.0, sim_rec.gnss
+    k = g.t < 20.0
+    stamps = rw.stamps_ns(sim_rec, sim_rec.imu.t[i])
+    fix_stamps = rw.stamps_ns(sim_rec, g.t[k])
+    topics = {
+        "/imu/data": ("sensor_msgs/Imu", stamps, rw.encode_imu(stamps, sim_rec.imu.gyro[i], sim_rec.imu.accel[i],
+                                                                encoding="ros1", frame_id=IMU_FRAME)),
+        "/gnss/fix": ("sensor_msgs/NavSatFix", fix_stamps, rw.encode_navsatfix(
+            fix_stamps, g.lat_deg[k], g.lon_deg[k], g.alt[k], encoding="ros1", frame_id=GNSS_FRAME,
+            cov_diag=np.square(g.std_enu[k]))),
+        "/chatter": ("std_msgs/String", fix_stamps[::10], [
+            bytes(ts1.serialize_ros1(ts1.types["std_msgs/msg/String"](data=f"hi {j}"), "std_msgs/msg/String"))
+            for j in range(fix_stamps[::10].size)]),
+    }
+    path = tmp_path_factory.mktemp("ros1mcap") / "drive_ros1.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros1", library="test")
+        msgs = []
+        for topic, (name, st, data) in topics.items():
+            full = name.replace("/", "/msg/")
+            sid = w.register_schema(name, "ros1msg", ts1.generate_msgdef(full, ros_version=1)[0].encode())
+            cid = w.register_channel(topic, "ros1", sid, {"md5sum": ts1.generate_msgdef(full, ros_version=1)[1]})
+            msgs += [(int(t) + 3000, cid, k, d) for k, (t, d) in enumerate(zip(st, data))]
+        for log, cid, k, d in sorted(msgs):
+            w.add_message(cid, log, d, log - 7, k)
+        w.finish()
+    return path
+
+
+def test_ros1_encoded_mcap_channels_are_converted(ros1_mcap, tmp_path):
+    """Oracle: the input's ROS 1 messages decoded by rosbags from the file's own schemas; the
+    output's decoded by mcap_ros2 from its schemas: every field but ``header.seq``, the log and
+    publish times and sequence numbers."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from rosbags.typesys import Stores, get_typestore
+
+    out = tmp_path / "trajectory.mcap"
+    skipped, _ = _embed(ros1_mcap, out)
+    assert skipped == []
+    ts1 = get_typestore(Stores.ROS1_NOETIC)
+    want: dict[str, list] = {}
+    with open(ros1_mcap, "rb") as f:
+        for schema, ch, m in make_reader(f).iter_messages():
+            msg = ts1.deserialize_ros1(bytes(m.data), schema.name.replace("/", "/msg/"))
+            want.setdefault(ch.topic, []).append((m.log_time, m.publish_time, m.sequence, msg))
+    got: dict[str, list] = {}
+    with open(out, "rb") as f:
+        for schema, ch, m, msg in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            got.setdefault(ch.topic, []).append((m.log_time, m.publish_time, m.sequence, msg, schema.name,
+                                                 ch.message_encoding))
+    assert set(got) == set(want) | NAVPP_TOPICS
+    for topic, items in want.items():
+        assert len(got[topic]) == len(items), topic
+        assert {(x[4], x[5]) for x in got[topic]} == {(items[0][3].__msgtype__, "cdr")}, topic
+        for a, b in zip(items, got[topic]):
+            assert a[:3] == b[:3], topic
+            for name in ("data", "latitude", "longitude", "altitude", "position_covariance", "angular_velocity.x",
+                         "linear_acceleration.z", "header.frame_id", "header.stamp.sec", "header.stamp.nanosec"):
+                head, _, rest = name.partition(".")
+                if hasattr(a[3], head):
+                    va, vb = getattr(a[3], head), getattr(b[3], head)
+                    for part in rest.split(".") if rest else []:
+                        va, vb = getattr(va, part), getattr(vb, part)
+                    assert np.array_equal(np.asarray(va), np.asarray(vb)), (topic, name)
+
+
 # --------------------------------------------------------------------------- the tf tree
 
 
@@ -271,11 +347,13 @@ def _reaches_map(frame: str, tree: dict) -> bool:
     return True
 
 
-@pytest.mark.parametrize("kind", ["mcap", "ros2-sqlite3", "ros1", "sample"])
-def test_every_embedded_frame_resolves_to_map(inputs, sim_rec, kind, tmp_path):
+@pytest.mark.parametrize("kind", ["mcap", "ros2-sqlite3", "ros1", "ros1-mcap", "sample"])
+def test_every_embedded_frame_resolves_to_map(inputs, sim_rec, ros1_mcap, kind, tmp_path):
     if kind == "ros1":
         log = tmp_path / "drive.bag"
         rw.write_ros1_bag(sim_rec, log, frame_id_imu=IMU_FRAME, frame_id_gnss=GNSS_FRAME)
+    elif kind == "ros1-mcap":
+        log = ros1_mcap
     else:
         log = SAMPLES / "drive_odometry.mcap" if kind == "sample" else inputs[kind]
     out = tmp_path / "trajectory.mcap"

@@ -68,24 +68,42 @@ FLU (x forward, y left, z up).
 Every message's log time = publish time = header stamp: integer ns on the log's own time base,
 ``recording.t0_ns + round(t * 1e9)`` (:func:`navpp.io.roswrite.stamps_ns`).
 
-Embedded input (``embed_input=True``): the IMU and GNSS that navpp processed, in the same file,
-so one file replays everything.  From an MCAP input whose IMU / GNSS topics are CDR encoded,
-the Message records of those topics are copied (read with ``mcap``'s stream reader: payload,
-log and publish time, sequence; bytes identical) with their schemas, topics and channel metadata
-(e.g. rosbag2's QoS profiles); a GNSS velocity topic goes with the GNSS when the recording used one.
-From a ROS 1 bag, every topic is embedded as it was, converted to ROS 2 CDR
-(:func:`_ros1_input_streams`).  Anything
-else (CSV, ROS 2 bag, a ROS 1 encoded MCAP, or an MCAP whose topic does not hold the
-recording's data, e.g. GNSS replaced by ``--gnss FILE.pos``) is encoded from the Recording:
-``sensor_msgs/msg/Imu`` on ``/imu/data`` (frame ``imu_link``), ``sensor_msgs/msg/NavSatFix``
-on ``/gnss/fix`` (frame ``gnss``) and, with GNSS velocity,
-``geometry_msgs/msg/TwistWithCovarianceStamped`` on ``/gnss/vel`` and, with wheel odometry
-(``Recording.odometry``), ``nav_msgs/msg/Odometry`` on ``/wheel/odom`` (child frame
-``base_link``), exactly as :func:`navpp.io.roswrite.write_mcap_ros2` writes them (navpp reads
-them back as the same arrays).  The odometry topic of an MCAP input is copied like the IMU's.
-The copied topics are identified by content: the recording's IMU stamps (header or
-log) and GNSS positions must all be found in the topic; a topic the copy cannot take whole (the
-last, partial chunk of a cut-off recording, which navpp's reader still decodes) is encoded too.
+Embedded input (``embed_input=True``): the input log in the same file, every topic as it was,
+so one file replays everything.
+
+- MCAP file, ROS 2 bag: every Message record copied as it is (:func:`_copied_input_streams`):
+  payload bytes, log time, topic, schema (name, encoding, definition) and, where the input has
+  them (MCAP files, rosbag2's mcap storage), publish time, sequence number and channel metadata
+  (e.g. rosbag2's QoS profiles).  A sqlite3 (or compressed) ROS 2 bag is read with rosbags: the
+  CDR payloads after the bag's own decompression, its one receive time as log and publish
+  time, its message definition (else ROS 2 Humble's) and QoS profiles.  A ROS 1 encoded MCAP
+  channel is converted to ROS 2 CDR as a ROS 1 bag is.
+- ROS 1 bag: every topic converted to ROS 2 CDR (:func:`_ros1_input_streams`).
+- CSV: the recording encoded: ``sensor_msgs/msg/Imu`` on ``/imu/data`` (frame ``imu_link``),
+  ``sensor_msgs/msg/NavSatFix`` on ``/gnss/fix`` (frame ``gnss``) and, with GNSS velocity,
+  ``geometry_msgs/msg/TwistWithCovarianceStamped`` on ``/gnss/vel`` and, with wheel odometry
+  (``Recording.odometry``), ``nav_msgs/msg/Odometry`` on ``/wheel/odom`` (child frame
+  ``base_link``), exactly as :func:`navpp.io.roswrite.write_mcap_ros2` writes them (navpp reads
+  them back as the same arrays).
+
+Left out, and listed (one ``"TOPIC (TYPE): reason"`` each, in the ``navpp`` metadata's
+``embedded_input_skipped`` and returned by :func:`write_trajectory_mcap` for the run's notes): an
+input topic named like one of navpp's output topics (``/tf``, ``/tf_static``, ``/navpp/...``),
+a channel neither CDR nor ROS 1 encoded (JSON, Protobuf, ...: the file's profile is ``ros2``), a
+topic of several types, a type that cannot be converted or has no definition.  The topics the
+recording's IMU, GNSS (with its velocity) and odometry came from are found by content (the
+recording's IMU stamps, header or log, and GNSS positions must all be found in the topic); what
+the copy does not hold is encoded from the recording as for CSV: GNSS from ``--gnss FILE.pos``,
+or a topic the copy cannot take whole (the last, partial chunk of a cut-off recording, which
+navpp's reader still decodes) on its own name; a name the input already uses becomes
+``/navpp/input/<name>``.
+
+The input's own frames join the tf tree: ``/tf_static`` also gets ``base_link`` -> the
+``header.frame_id`` of the embedded IMU messages navpp used (the IMU mounting, as for
+``imu_link``) and -> that of its GNSS NavSatFix messages (the lever arm, as for ``gnss``), when
+they are not already frames of the tree, so every embedded IMU and GNSS message resolves to
+``map``.  ``imu_link`` and ``gnss`` stay (navpp's own names, used by an encoded input).  Other
+sensors' frames are not linked: navpp does not know where they are mounted.
 
 File layout
 -----------
@@ -610,16 +628,24 @@ def _copied_input_streams(kind: str, path: Path, recording: Recording) -> _Embed
 def _raw_mcap_streams(paths: Sequence[Path]) -> tuple[list[_Stream], list[str]]:
     """Every channel of the MCAP files ``paths`` (read together, e.g. the storage files of a
     ROS 2 bag), its Message records copied as they are (:func:`_copy_topics`), except the topics
-    named like navpp's output topics and channels that are not CDR encoded: those are listed, one
-    line per topic.  Channels of the same topic, schema and metadata are joined into one."""
+    named like navpp's output topics and channels that are neither CDR nor ROS 1 encoded: those
+    are listed, one line per topic.  A ROS 1 encoded channel is converted to ROS 2 CDR
+    (:func:`_ros1_channel_as_cdr`).  Channels of the same topic, schema and metadata are joined
+    into one."""
     streams: list[_Stream] = []
     for p in paths:
         streams += _copy_topics(p, None)
     skipped: dict[str, str] = {}
     kept: list[_Stream] = []
+    stores: list[Any] = []              # the ROS 1 and ROS 2 typestores, made for the first ROS 1 channel
     for s in streams:
         if _output_topic_collision(s.topic):
             skipped.setdefault(s.topic, f"{s.topic} ({s.schema_name}): a navpp output topic")
+        elif s.message_encoding == "ros1":
+            try:
+                kept.append(_ros1_channel_as_cdr(s, stores))
+            except Exception as exc:  # noqa: BLE001 -- any failure: the type cannot be converted
+                skipped.setdefault(s.topic, f"{s.topic} ({s.schema_name}): cannot convert the ROS 1 type ({exc})")
         elif s.message_encoding != "cdr":
             skipped.setdefault(s.topic, f"{s.topic} ({s.schema_name}): {s.message_encoding or 'no'} encoding, not "
                                         "ROS 2 CDR (trajectory.mcap is a ros2-profile file)")
@@ -634,9 +660,36 @@ def _raw_mcap_streams(paths: Sequence[Path]) -> tuple[list[_Stream], list[str]]:
     return _joined([s for s in kept if s.topic not in skipped]), list(skipped.values())
 
 
+def _ros1_channel_as_cdr(stream: _Stream, stores: list[Any]) -> _Stream:
+    """A ROS 1 encoded MCAP channel as ROS 2 CDR, as a ROS 1 bag's topics are embedded
+    (:func:`_ros1_input_streams`): each message deserialised with rosbags from the channel's own
+    ``ros1msg`` schema and serialised as the ROS 2 Humble type of the same name (only
+    ``header.seq`` does not carry over); log and publish times and sequence numbers kept, the
+    ROS 1 channel metadata (md5sum, callerid, latching) not.
+    ``stores``: [ROS 1, ROS 2] typestores, filled on first use and shared across channels."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    from .ros import normalise_type
+
+    if not stores:
+        stores += [get_typestore(Stores.ROS1_NOETIC), get_typestore(Stores.ROS2_HUMBLE)]
+    ts1, ts2 = stores
+    if stream.schema_encoding != "ros1msg":
+        raise ValueError(f"schema encoding {stream.schema_encoding!r}, not ros1msg")
+    found = get_types_from_msg(stream.schema_data.decode(), stream.schema_name)
+    msgtype = next(k for k in found if normalise_type(k) == normalise_type(stream.schema_name))
+    ts1.register({k: v for k, v in found.items() if k not in ts1.fielddefs})
+    ts2.register({k: v for k, v in found.items() if k not in ts2.fielddefs})
+    assert isinstance(stream.payloads, _Raw)
+    data = [bytes(ts2.serialize_cdr(ts1.deserialize_ros1(d, msgtype), msgtype)) for d in stream.payloads.data]
+    schema = roswrite.MSGDEFS.get(msgtype) or ts2.generate_msgdef(msgtype, ros_version=2)[0]
+    return replace(stream, schema_name=msgtype, schema_encoding="ros2msg", schema_data=schema.encode(),
+                   message_encoding="cdr", payloads=_Raw(data), metadata={})
+
+
 def _joined(streams: Sequence[_Stream]) -> list[_Stream]:
     """Streams of the same topic, schema, encoding and channel metadata as one (log-time order)."""
-    groups: dict[tuple, list[_Stream]] = {}
+    groups: dict[tuple[Any, ...], list[_Stream]] = {}
     for s in streams:
         key = (s.topic, s.schema_name, s.schema_encoding, s.schema_data, s.message_encoding,
                tuple(sorted(s.metadata.items())))
@@ -1016,8 +1069,8 @@ def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, r
     diagnostics : :class:`navpp.engine.Diagnostics` -> ``/navpp/diagnostics``; None: no topic.
     biases : :class:`navpp.engine.BiasHistory` -> ``/navpp/bias/gyro``, ``/navpp/bias/accel``;
         None: no topics.
-    embed_input : also write the input IMU and GNSS messages (copied from an MCAP
-        ``input_log``, else encoded from ``recording``).
+    embed_input : also write the input log, every topic as it was (module docstring: copied from
+        an MCAP file or a ROS 2 bag, converted from ROS 1, encoded from ``recording`` for CSV).
     input_log : the input log's path (used with ``embed_input``).
     filter_name : recorded in the file's ``navpp`` metadata.
     forward : for a smoothed ``solution``, the forward filter's solution (same rows' time base):
@@ -1032,6 +1085,11 @@ def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, r
         ``base_link -> gnss`` translation of ``/tf_static``.
     rate_noise_std : rad/s, the gyro's white noise per sample (``[imu]`` ARW x sqrt(IMU rate)),
         added to the angular-velocity variance of ``/navpp/odometry``.
+
+    Returns
+    -------
+    list of str : the input topics ``embed_input`` left out, one ``"TOPIC (TYPE): reason"`` each
+        (also the file's ``embedded_input_skipped`` metadata); empty without ``embed_input``.
 
     Raises
     ------
