@@ -193,7 +193,7 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
         Bad arguments (no logs, ``jobs < 1``, ``reference`` with several logs, unknown filter,
         a bad ``config``).
     InputError
-        An output file cannot be written.
+        An output file cannot be written, or ``reference_anchor`` is not a position.
     """
     t_start = time.perf_counter()
     log_names = [str(p) for p in logs]

@@ -710,27 +710,28 @@ def _joined(streams: Sequence[_Stream]) -> list[_Stream]:
 
 
 def _raw_ros2_streams(path: Path) -> tuple[list[_Stream], list[str]]:
-    """Every topic of a ROS 2 bag directory as it was.  MCAP storage: the storage files'
-    records copied (:func:`_raw_mcap_streams`: payloads, log and publish times, sequence,
-    schemas, QoS metadata).  Otherwise (sqlite3, compressed files or messages) read with
+    """Every topic of a ROS 2 bag directory as it was.  MCAP storage without per-message
+    compression: the storage files' records copied (:func:`_raw_mcap_streams`: payloads, log
+    and publish times, sequence, schemas, QoS metadata).  Otherwise (sqlite3, compressed files or messages) read with
     rosbags: the CDR payloads as stored (after the bag's own decompression), log time = publish
     time = the bag's receive time (all a sqlite3 bag keeps), the schema the bag's message
     definition (else ROS 2 Humble's), the offered QoS profiles as rosbag2 writes them.  Topics
     named like navpp's output topics, not CDR encoded, of several types, or without a definition
     are left out and listed."""
-    from navpp.io.mcap import MCAP_MAGIC
-
-    files = sorted(path.glob("*.mcap"))
-    plain = bool(files) and all(_starts_with(f, MCAP_MAGIC) for f in files)
-    if plain and not any(f.is_file() and not f.name.endswith(".mcap") and f.name != "metadata.yaml"
-                         for f in path.iterdir()):
-        return _raw_mcap_streams(files)
     from rosbags.rosbag2 import Reader
+
+    from navpp.io.mcap import MCAP_MAGIC
 
     ts = _humble_typestore()
     streams: list[_Stream] = []
     skipped: list[str] = []
     with Reader(path) as reader:
+        files = sorted(path.glob("*.mcap"))
+        plain = (not reader.compression_mode and bool(files) and all(_starts_with(f, MCAP_MAGIC) for f in files)
+                 and not any(f.is_file() and not f.name.endswith(".mcap") and f.name != "metadata.yaml"
+                             for f in path.iterdir()))
+        if plain:            # mcap storage, payloads not compressed one by one: copy the records
+            return _raw_mcap_streams(files)
         topics: dict[str, list[Any]] = {}
         for conn in reader.connections:
             topics.setdefault(conn.topic, []).append(conn)
