@@ -9,15 +9,16 @@ Each case is a ``navpp`` command run as a child process (``python -m navpp ...``
 - ``smooth``: ``navpp process LOG --smooth``;
 - ``compare``: ``navpp compare LOG`` (the five default filters, one process).
 
-For each case the command runs first with ``NUMBA_CACHE_DIR`` pointing at a fresh, empty
-temporary directory (cold: every kernel it needs is compiled), then again with that directory
-(warm: loaded from the cache).  Then, after ``default`` has filled one shared cache, each other
-case once more ("after default": what a new filter or option costs once the Quick start ran).
-For every run: wall time and CPU time (user + sys of the child, from ``os.wait4``), s; for each
-case the cold-minus-warm difference; and whether the run said it was compiling (the
-``compiling navpp's numba kernels`` line on stderr, :class:`navpp.jitcache.CompileAnnouncer`):
-it must on every cold run and never on a warm one.  The outputs of the cold and the warm run
-are compared byte for byte (trajectory.csv; metrics.json without its timing fields).
+First ``navpp compile`` fills one cache (its CPU is printed).  Then each case runs three
+times, each a child process: "cold auto" with ``NUMBA_CACHE_DIR`` at a fresh, empty directory
+and the default ``--jit auto`` (navpp chooses interpreted or compiled, :mod:`navpp.jitmode`;
+the mode taken is printed); "cold --jit on" in another fresh directory (everything the path
+needs is compiled: the cost of compiling on a first run); "warm" with the compiled cache.
+For every run: CPU time (user + sys of the child, from ``os.wait4``), s, and the cold-minus-
+warm differences; whether the run said it was compiling (the ``compiling navpp's numba
+kernels`` line on stderr, :class:`navpp.jitcache.CompileAnnouncer`): it must on the forced
+cold run, never on a warm or an interpreted one.  The outputs of the cold runs are compared
+with the warm run's byte for byte (trajectory.csv; metrics.json without its timing fields).
 
 Figures depend on the machine (printed first) and on what else runs on it: the CPU seconds
 are the better measure on a busy machine.
@@ -36,6 +37,7 @@ import time
 from pathlib import Path
 
 ANNOUNCE = "compiling navpp's numba kernels"
+INTERPRETED = "kernels ran interpreted"
 CASES = {
     "default": ["process", "{log}"],
     "rwckf": ["process", "{log}", "--filter", "rwckf"],
@@ -66,7 +68,7 @@ def machine() -> str:
 def run(args: list[str], cache_dir: Path, out: Path) -> dict:
     """One ``navpp`` command in a child process; wall and CPU seconds, whether it announced compiling."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir))
-    cmd = [sys.executable, "-m", "navpp", *args, "--out", str(out), "--quiet"]
+    cmd = [sys.executable, "-m", "navpp", *args, "--out", str(out)]
     t0 = time.perf_counter()
     with tempfile.TemporaryFile() as err:
         proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=err)
@@ -78,6 +80,7 @@ def run(args: list[str], cache_dir: Path, out: Path) -> dict:
     if proc.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed ({proc.returncode}):\n{stderr}")
     return {"wall": wall, "cpu": usage.ru_utime + usage.ru_stime, "announced": stderr.count(ANNOUNCE),
+            "interpreted": INTERPRETED in stderr,
             "out": out}
 
 
@@ -121,31 +124,35 @@ def main() -> None:
         if c not in CASES:
             raise SystemExit(f"--cases: unknown case {c!r} (known: {', '.join(CASES)})")
     print(f"machine: {machine()}")
-    print(f"log: {args.log}; CPU = user + sys of the child (s); cold = empty NUMBA_CACHE_DIR")
-    print(f"{'case':<22} {'cold wall':>9} {'cold CPU':>9} {'warm wall':>9} {'warm CPU':>9} {'CPU diff':>9}  "
-          f"announced (cold/warm)  outputs")
+    print(f"log: {args.log}; CPU = user + sys of the child (s); cold = empty NUMBA_CACHE_DIR; "
+          "warm = after `navpp compile`")
     with tempfile.TemporaryDirectory(prefix="navpp-bench-startup-") as tmp:
         root = Path(tmp)
+        shared = root / "cache-compiled"
+        t0 = time.perf_counter()
+        env = dict(os.environ, NUMBA_CACHE_DIR=str(shared))
+        with tempfile.TemporaryFile() as err:
+            proc = subprocess.Popen([sys.executable, "-m", "navpp", "compile"], env=env,
+                                    stdout=subprocess.DEVNULL, stderr=err)
+            _, status, usage = os.wait4(proc.pid, 0)
+            if os.waitstatus_to_exitcode(status) != 0:
+                err.seek(0)
+                raise SystemExit(f"navpp compile failed:\n{err.read().decode(errors='replace')}")
+        print(f"navpp compile (every filter, smoother, readers): {time.perf_counter() - t0:.1f} s wall, "
+              f"{usage.ru_utime + usage.ru_stime:.1f} s CPU")
+        print(f"{'case':<9} {'cold auto':>17} {'cold --jit on':>14} {'warm':>6} {'auto-warm':>10} "
+              f"{'on-warm':>8}  announced (auto/on/warm)  outputs (auto, on vs warm)")
         for case in cases:
             cmd = [a.format(log=args.log) for a in CASES[case]]
-            cache = root / f"cache-{case}"
-            cold = run(cmd, cache, root / f"{case}-cold")
-            warm = run(cmd, cache, root / f"{case}-warm")
-            print(f"{case:<22} {cold['wall']:9.1f} {cold['cpu']:9.1f} {warm['wall']:9.1f} {warm['cpu']:9.1f} "
-                  f"{cold['cpu'] - warm['cpu']:9.1f}  {cold['announced']}/{warm['announced']:<19}  "
-                  f"{same_outputs(cold['out'], warm['out'])}", flush=True)
-        if "default" in cases:
-            shared = root / "cache-default"      # filled by the default case's runs
-            for case in cases:
-                if case == "default":
-                    continue
-                cmd = [a.format(log=args.log) for a in CASES[case]]
-                first = run(cmd, shared, root / f"{case}-after")
-                again = run(cmd, shared, root / f"{case}-after-warm")
-                print(f"{case + ' after default':<22} {first['wall']:9.1f} {first['cpu']:9.1f} {again['wall']:9.1f} "
-                      f"{again['cpu']:9.1f} {first['cpu'] - again['cpu']:9.1f}  "
-                      f"{first['announced']}/{again['announced']:<19}  "
-                      f"{same_outputs(first['out'], again['out'])}", flush=True)
+            auto = run(cmd, root / f"cache-{case}-auto", root / f"{case}-auto")
+            forced = run([*cmd, "--jit", "on"], root / f"cache-{case}-on", root / f"{case}-on")
+            warm = run(cmd, shared, root / f"{case}-warm")
+            mode = "interpreted" if auto["interpreted"] else "compiled"
+            print(f"{case:<9} {auto['cpu']:5.1f} {mode:>11} {forced['cpu']:14.1f} {warm['cpu']:6.1f} "
+                  f"{auto['cpu'] - warm['cpu']:10.1f} {forced['cpu'] - warm['cpu']:8.1f}  "
+                  f"{auto['announced']}/{forced['announced']}/{warm['announced']:<20}  "
+                  f"{same_outputs(auto['out'], warm['out'])}, {same_outputs(forced['out'], warm['out'])}",
+                  flush=True)
 
 
 if __name__ == "__main__":

@@ -51,7 +51,8 @@ OUTPUT_FILES = ("trajectory.csv", "trajectory_forward.csv", "diagnostics.csv", "
                 "reference.tum", "navpp.layout.json")
 #: Besides :data:`OUTPUT_FILES`, the labelled TUM copy (``<log>-<filter>.tum``,
 #: :func:`navpp.io.exports.labelled_tum_name`) an earlier run listed in the manifest is stale too
-#: when this run did not write it: names with this suffix.
+#: when this run did not write it: names with this suffix.  So are the figures of ``--plot``
+#: (:data:`navpp.outdir.FIGURE_SUFFIXES`).
 LABELLED_OUTPUT_SUFFIX = ".tum"
 #: The file each ``--format`` / ``[output] formats`` name writes.
 FORMAT_FILES = {"csv": "trajectory.csv", "mcap": "trajectory.mcap", "tum": "trajectory.tum",
@@ -243,7 +244,8 @@ def write_outputs(out: Path, outputs: Sequence[tuple[str, Callable[[Path], None]
     the run is interrupted, nothing in ``out`` changes: the previous run's outputs stay whole
     and consistent with each other.  The staging directory is always removed.
 
-    Stale outputs are the :data:`OUTPUT_FILES` of an earlier run that this one did not write;
+    Stale outputs are the :data:`OUTPUT_FILES`, labelled TUM copies and figures
+    (:data:`navpp.outdir.FIGURE_SUFFIXES`) of an earlier run that this one did not write;
     only those the directory's manifest (:mod:`navpp.outdir`) lists as written by navpp are
     removed, and never one of the run's ``inputs`` (``(device, inode)`` pairs,
     :func:`navpp.outdir.input_files`), which are never replaced either.  The manifest is then
@@ -277,8 +279,8 @@ def write_outputs(out: Path, outputs: Sequence[tuple[str, Callable[[Path], None]
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     ours = outdir.read_manifest(out)
-    labelled = sorted(n for n in ours if n.endswith(LABELLED_OUTPUT_SUFFIX) and n not in OUTPUT_FILES
-                      and os.sep not in n and "/" not in n)
+    labelled = sorted(n for n in ours if n.endswith((LABELLED_OUTPUT_SUFFIX, *outdir.FIGURE_SUFFIXES))
+                      and n not in OUTPUT_FILES and os.sep not in n and "/" not in n)
     for name in (*OUTPUT_FILES, *labelled):   # stale results of an earlier navpp run: not ours any more
         stale = out / name
         if (stale not in written and name in ours and stale.is_file() and not stale.is_symlink()
@@ -326,7 +328,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
             formats: str | Sequence[str] | None = None, embed_input: bool = False,
             gnss_outages: Sequence[tuple[float, float]] | None = None,
             smooth: bool | None = None, odometry_topic: str | None = None,
-            reference_anchor: str | Sequence[float] | None = None, plot: bool = False) -> ProcessResult:
+            reference_anchor: str | Sequence[float] | None = None, plot: bool = False,
+            jit: str | None = None) -> ProcessResult:
     """Read a log, run one filter, write trajectory (and metrics with a reference).
 
     ``navpp.process`` is this function.  Example::
@@ -392,12 +395,19 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     ProcessResult : with ``trajectory`` and ``diagnostics`` as pandas DataFrames and
         ``metrics`` as a dict (None without a reference).
 
+    jit : ``"on"`` (compiled; the default unless ``$NAVPP_JIT`` says otherwise), ``"off"``
+        (interpreted) or ``"auto"`` (by the job's size and what is cached): navpp's kernels in
+        this process (:mod:`navpp.jitmode`; decided at the first run, fixed after it).
+
     Raises
     ------
     NavppError : ConfigError for bad options or config (unknown formats, ``embed_input``
         without ``mcap``), InputError for unreadable input or unwritable output,
         FilterDivergedError when the filter diverges; each with a one-line message.
     """
+    from . import jitmode
+
+    choice = jitmode.choose(jit, [Path(log)], [filter_name], _smooth_hint(Path(log), smooth, config))
     plan = _plan(Path(log), filter_name=filter_name, config=config, reference=reference, out_dir=out_dir,
                  output_rate_hz=output_rate_hz, write=write, gnss_file=gnss_file, formats=formats,
                  embed_input=embed_input, gnss_outages=gnss_outages, smooth=smooth,
@@ -406,7 +416,21 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     if plot:
         plan = replace(plan, plot=True)
     with claimed_out_dir(plan.out, plan.out_label, OUTPUT_FILES) if write else nullcontext():
-        return _run(plan, progress)
+        res = _run(plan, progress)
+    line = jitmode.note(choice)
+    return replace(res, notes=(*res.notes, line)) if line else res
+
+
+def _smooth_hint(log: Path, smooth: bool | None, config: str | Path | Config | None) -> bool:
+    """Whether the run will smooth, for :func:`navpp.jitmode.choose` (a config that cannot be
+    read says no here; :func:`_plan` reports it)."""
+    if smooth is not None:
+        return bool(smooth)
+    try:
+        cfg = config if isinstance(config, Config) else resolve_config(log, config)
+    except NavppError:
+        return False
+    return bool(cfg.output.smooth)
 
 
 @dataclass(frozen=True)

@@ -231,6 +231,11 @@ def process(
                        "±3σ band, outages, rejected fixes; without a reference <log>_<filter>_innovations.png), "
                        "<log>_trajectory.png, <log>_adaptive.png and the zoomable overview map <log>_map.html.")
     ] = False,
+    jit: Annotated[str | None, typer.Option(
+        "--jit", metavar="auto|on|off", help="Compile navpp's kernels (on), run them as plain Python (off), or "
+        "choose by the log's size and what is cached (auto: interpreted when that is cheaper than compiling; "
+        "see `navpp compile`).  [default: $NAVPP_JIT, else auto]",
+        callback=_require(lambda v: v is None or v.lower() in ("auto", "on", "off"), "auto, on or off"))] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars, notes or summary (warnings about "
                                         "the data are still printed).")] = False,
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Also print where the config, reference and "
@@ -248,21 +253,21 @@ def process(
 
     t_start = time.perf_counter()
     try:
-        from . import api
+        from . import api, jitmode
         from .jitcache import CompileAnnouncer
 
-        with _Progress(quiet) as prog, CompileAnnouncer(prog.say) as jit:
+        with _Progress(quiet) as prog, CompileAnnouncer(prog.say) as announcer:
             res = api.process(log, filter_name=filter, config=config, reference=reference, out_dir=out,
                               output_rate_hz=output_rate, progress=prog, imu_topic=imu_topic,
                               gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss,
                               formats=formats, embed_input=embed_input, gnss_outages=gnss_outage, smooth=smooth,
                               odometry_topic=odometry_topic, reference_anchor=reference_anchor,
-                              plot=plot)
+                              plot=plot, jit=jitmode.requested(jit, "auto"))
     except NavppError as exc:
         _fail(str(exc), exc)
         return
     print_process_summary(res, quiet, process_details(res, prog.marks, t_start, time.perf_counter()) if verbose else [],
-                          compile_s=jit.seconds)
+                          compile_s=announcer.seconds)
 
 
 DEFAULT_COMPARE = "ekf,aekf,ckf,vce-ckf,rwckf"
@@ -319,6 +324,11 @@ def compare(
                                           "(at least 120 s); one that takes longer fails with a row naming the log "
                                           "and the rest go on. 0: no watchdog.",
         callback=_require(lambda v: math.isfinite(v) and v >= 0, "a number of seconds >= 0"))] = 600.0,
+    jit: Annotated[str | None, typer.Option(
+        "--jit", metavar="auto|on|off", help="Compile navpp's kernels (on), run them as plain Python (off), or "
+        "choose by the log's size and what is cached (auto: interpreted when that is cheaper than compiling; "
+        "see `navpp compile`).  [default: $NAVPP_JIT, else auto]",
+        callback=_require(lambda v: v is None or v.lower() in ("auto", "on", "off"), "auto, on or off"))] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars.")] = False,
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Also print each log's config and where it came "
                                           "from, each run's reference, and the wall time of each stage (reading "
@@ -338,8 +348,17 @@ def compare(
     tol, base_rows, limits = _gate_options(tolerance, max_rmse, baseline, scheduler, executor)
     t_start = time.perf_counter()
     try:
+        from . import jitmode
         from .outfiles import prepare_out_dir, remove_created_dirs
 
+        # before the filters are looked up: that imports the kernels, fixing the mode
+        choice = jitmode.choose(jit, list(logs), [f.strip().lower() for f in filters.split(",") if f.strip()],
+                                smooth, default="auto")
+        ahead = jitmode.workers_note(choice, min(jobs, len(logs) * len(filters.split(","))))
+        if ahead and not (quiet or json_out):
+            from rich.console import Console
+
+            note(Console(stderr=True, highlight=False, soft_wrap=True), ahead)
         names = cmp.parse_filters(filters)
         created = prepare_out_dir(out, "--out")
         from .jitcache import CompileAnnouncer
@@ -350,7 +369,7 @@ def compare(
                                      gnss_topic=gnss_topic, reference_topic=reference_topic,
                                      odometry_topic=odometry_topic, jobs=jobs,
                                      out_dir=out, progress=prog, smooth=smooth, executor=executor,
-                                     scheduler=scheduler, time_limit_s=time_limit,
+                                     scheduler=scheduler, time_limit_s=time_limit, jit=jit,
                                      reference_anchor=reference_anchor)
         except BaseException:
             remove_created_dirs(created)
@@ -363,6 +382,11 @@ def compare(
         verdict = result.gate(baseline=base_rows, tolerance_pct=tol, max_rmse=limits)
     failed = result.failed
     code = 1 if failed else 3 if verdict is not None and not verdict.passed else 0
+    line = jitmode.note(jitmode.CHOSEN[0]) if jitmode.CHOSEN else ""
+    if line and not (quiet or json_out):
+        from rich.console import Console
+
+        note(Console(stderr=True, highlight=False, soft_wrap=True), line)
     print_comparison(result, json_out, verdict, code)
     if verbose and not json_out:
         print_compare_details(result, logs, config, prog.marks, t_start, time.perf_counter())
@@ -655,6 +679,42 @@ def filters_cmd() -> None:
 
     for name, cls in sorted(FILTERS.items()):
         typer.echo(f"{name:<10} {cls.summary}  [{cls.paper}]")
+
+
+@app.command("compile")
+def compile_cmd(
+    filters: Annotated[str, typer.Option(help="Comma-separated filter names whose kernels to compile.",
+                                         autocompletion=_filter_names)] = "all",
+) -> None:
+    """Compile navpp's numba kernels once (every filter, the smoother, the MCAP/ROS readers) into the
+    cache, so that every later run loads them instead of compiling or running interpreted."""
+    import time
+
+    from rich.console import Console
+
+    from . import jitmode
+    from .errors import NavppError
+
+    err = Console(stderr=True, highlight=False, soft_wrap=True)
+    wanted = jitmode.ALL_FILTERS if filters.strip().lower() == "all" else tuple(
+        f.strip().lower() for f in filters.split(",") if f.strip())
+    t0 = time.process_time()
+    try:
+        if jitmode.decided() is False:
+            raise jitmode.interpreted_error()
+        jitmode.apply(True)                     # before the filters' modules are imported
+        from . import comparison as cmp
+
+        cmp.parse_filters(",".join(wanted))     # unknown names: one line, exit 1
+        steps = jitmode.compile_all(wanted, progress=lambda name: note(err, f"compiling: {name} ..."))
+    except NavppError as exc:
+        _fail(str(exc), exc)
+        return
+    for name, cpu in steps:
+        typer.echo(f"{name}: {cpu:.1f} s of CPU")
+    from .jitcache import cache_place
+
+    typer.echo(f"navpp's kernels are compiled ({time.process_time() - t0:.1f} s of CPU) and cached in {cache_place()}")
 
 
 @app.command("config")

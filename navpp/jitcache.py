@@ -107,6 +107,15 @@ def configure() -> None:
     NOTE.append(f"{why}: compiled kernels are cached in {where} ({kept}); set NUMBA_CACHE_DIR to choose")
 
 
+def cache_place() -> str:
+    """Where numba keeps navpp's compiled kernels, in words."""
+    chosen = os.environ.get("NUMBA_CACHE_DIR", "")
+    if chosen:
+        return chosen
+    root = os.path.dirname(os.path.abspath(__file__))
+    return f"the __pycache__ directories under {root} (else {_user_cache_dir()})"
+
+
 class CompileAnnouncer:
     """Says when navpp's kernels are about to compile, and how long compiling took.
 

@@ -3,9 +3,14 @@
 The page draws the layers (tracks, GNSS fixes accepted and rejected, outages) on a canvas in
 Web-Mercator pixels with a few lines of plain JavaScript: the mouse wheel zooms about the
 pointer, dragging pans, a double click fits the whole track again, and the legend's boxes show
-or hide a layer.  When the browser is online the page itself loads OpenStreetMap tiles
-(``https://tile.openstreetmap.org/{z}/{x}/{y}.png``) as the background; when a tile fails to
-load (offline, blocked) it falls back to a plain background with a scale bar, and says so.
+or hide a layer.  When the page is served over http(s) and the browser is online, it loads
+OpenStreetMap tiles (``https://tile.openstreetmap.org/{z}/{x}/{y}.png``) as the background; when
+tiles fail to load and none has loaded (offline, blocked) it falls back to a plain background and
+says so.  Opened from a file (``file://``, also inside a report opened from a file) it loads no
+tiles: OpenStreetMap's tile usage policy requires a Referer header, which a page opened from a
+file cannot send (such requests get "access blocked" tiles); the page says how to serve it.  A scale
+bar (1, 2 or 5 x 10^k m, at the view's centre latitude) is shown either way.  The wheel zooms one
+level per 500 px of wheel delta (lines and pages converted to px).
 
 Coordinates are geodetic WGS-84 (deg), embedded as JSON (``<script type="application/json"
 id="navpp-map-data">``) rounded to 1e-7 deg (about 1 cm).
@@ -69,7 +74,7 @@ def _coords(lat: np.ndarray, lon: np.ndarray) -> list[list[float]]:
     return [[round(float(a), COORD_DECIMALS), round(float(b), COORD_DECIMALS)] for a, b in zip(lat[ok], lon[ok])]
 
 
-def map_data(layers: Sequence[MapLayer]) -> dict:
+def map_data(layers: Sequence[MapLayer]) -> dict[str, list[dict[str, object]]]:
     """The JSON document the page embeds: ``{"layers": [{name, kind, color, width, marker,
     visible, segments: [[[lat, lon], ...], ...]}, ...]}`` (deg, :data:`COORD_DECIMALS`)."""
     return {"layers": [{"name": ly.name, "kind": ly.kind, "color": ly.color, "width": ly.width,
@@ -78,17 +83,22 @@ def map_data(layers: Sequence[MapLayer]) -> dict:
 
 
 _CSS = """
-body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 0; color: #222; }
-#head { padding: 0.4em 0.8em; font-size: 0.95em; }
-#wrap { position: relative; }
-#map { width: 100%; height: 78vh; min-height: 360px; display: block; background: #f4f3ef; cursor: grab;
-       touch-action: none; }
+html, body { height: 100%; }
+body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 0; color: #222;
+       display: flex; flex-direction: column; }
+#head { padding: 0.4em 0.8em; font-size: 0.95em; flex: none; }
+#wrap { position: relative; flex: 1 1 auto; min-height: 360px; }
+#map { position: absolute; left: 0; top: 0; width: 100%; height: 100%; display: block; background: #f4f3ef;
+       cursor: grab; touch-action: none; }
 #legend { position: absolute; top: 8px; right: 8px; background: rgba(255,255,255,0.92); padding: 6px 10px;
           border: 1px solid #bbb; border-radius: 4px; font-size: 0.85em; }
 #legend label { display: block; white-space: nowrap; }
 #legend .sw { display: inline-block; width: 18px; height: 4px; margin: 0 6px 3px 4px; vertical-align: middle; }
 #status { position: absolute; left: 8px; bottom: 6px; background: rgba(255,255,255,0.85); padding: 2px 6px;
           font-size: 0.8em; }
+#scale { position: absolute; right: 16px; bottom: 8px; font-size: 12px; color: #333; text-align: left;
+         pointer-events: none; }
+#scale-bar { height: 5px; border: 2px solid #333; border-top: none; box-sizing: border-box; }
 .note { color: #555; font-size: 0.85em; }
 """
 
@@ -97,7 +107,19 @@ _JS = r"""
   var D = JSON.parse(document.getElementById('navpp-map-data').textContent);
   var cv = document.getElementById('map'), ctx = cv.getContext('2d');
   var statusEl = document.getElementById('status'), legend = document.getElementById('legend');
-  var TILE = 256, tiles = {}, tilesFailed = false, tilesOk = 0;
+  var scaleBarEl = document.getElementById('scale-bar'), scaleLabelEl = document.getElementById('scale-label');
+  // tiles only for a page served over http(s): OpenStreetMap's tile policy requires a Referer,
+  // which a page opened from a file cannot send (a report's srcdoc frame: its parent's address)
+  function served() {
+    var loc = window.location;
+    try { if (loc.protocol === 'about:' && window.parent !== window) { loc = window.parent.location; } }
+    catch (e) { return false; }
+    return loc.protocol === 'http:' || loc.protocol === 'https:';
+  }
+  var useTiles = served();
+  // offline: a tile failed and none has loaded (one failed tile of many does not hide the others)
+  var TILE = 256, tiles = {}, tilesBad = 0, tilesOk = 0;
+  function offline() { return tilesBad > 0 && tilesOk === 0; }
   function mx(lon) { return (lon + 180) / 360; }
   function my(lat) { var s = Math.sin(lat * Math.PI / 180);
     return 0.5 - Math.log((1 + s) / (1 - s)) / (4 * Math.PI); }
@@ -127,7 +149,8 @@ _JS = r"""
     if (!tiles[k]) {
       var img = new Image();
       img.onload = function () { tilesOk += 1; draw(); };
-      img.onerror = function () { tilesFailed = true; draw(); };
+      img.onerror = function () { tilesBad += 1; draw(); };
+      img.referrerPolicy = 'strict-origin-when-cross-origin';   // the page's origin: what the policy asks
       img.src = 'https://tile.openstreetmap.org/' + k + '.png';
       tiles[k] = img;
     }
@@ -146,21 +169,19 @@ _JS = r"""
       }
     } }
   }
-  function scaleBar(r) {
+  function scaleBar() {   // the longest 1, 2 or 5 x 10^k m that fits in 120 px, at the view's centre
     var lat = Math.atan(Math.sinh(Math.PI * (1 - 2 * view.cy)));
     var mPerPx = 40075016.686 * Math.cos(lat) / scale();
     var target = mPerPx * 120, e = Math.pow(10, Math.floor(Math.log10(target))), m = e;
     [1, 2, 5, 10].forEach(function (f) { if (f * e <= target) { m = f * e; } });
-    var w = m / mPerPx, x = r.width - w - 16, y = r.height - 14;
-    ctx.strokeStyle = '#333'; ctx.lineWidth = 2; ctx.beginPath();
-    ctx.moveTo(x, y - 5); ctx.lineTo(x, y); ctx.lineTo(x + w, y); ctx.lineTo(x + w, y - 5); ctx.stroke();
-    ctx.fillStyle = '#333'; ctx.font = '12px sans-serif';
-    ctx.fillText(m >= 1000 ? (m / 1000) + ' km' : m + ' m', x + 2, y - 7);
+    m = Number(m.toPrecision(1));
+    scaleBarEl.style.width = (m / mPerPx).toFixed(1) + 'px';
+    scaleLabelEl.textContent = m >= 1000 ? (m / 1000) + ' km' : m + ' m';
   }
   function draw() {
     var r = size();
     ctx.fillStyle = '#f4f3ef'; ctx.fillRect(0, 0, r.width, r.height);
-    if (!tilesFailed) { drawTiles(r); }
+    if (useTiles && !offline()) { drawTiles(r); }
     L.forEach(function (l) {
       if (!l.src.visible) { return; }
       ctx.strokeStyle = l.src.color; ctx.fillStyle = l.src.color; ctx.lineWidth = l.src.width;
@@ -182,8 +203,10 @@ _JS = r"""
         }
       });
     });
-    scaleBar(r);
-    statusEl.innerHTML = tilesFailed ? 'offline: plain background (map tiles could not be loaded)'
+    scaleBar();
+    statusEl.innerHTML = !useTiles ? 'plain background: map tiles need this page served over http '
+      + '(<code>python3 -m http.server</code> in its folder), as OpenStreetMap\'s tile policy asks'
+      : offline() ? 'offline: plain background (map tiles could not be loaded)'
       : (tilesOk ? 'background &copy; <a href="https://www.openstreetmap.org/copyright">OpenStreetMap</a> contributors'
                  : 'loading map tiles ...');
   }
@@ -203,7 +226,9 @@ _JS = r"""
     var r = cv.getBoundingClientRect(), s = scale();
     var px = ev.clientX - r.left - r.width / 2, py = ev.clientY - r.top - r.height / 2;
     var wx = view.cx + px / s, wy = view.cy + py / s;
-    view.z = Math.max(0, Math.min(23, view.z - ev.deltaY * 0.002));
+    // 500 px of wheel = one zoom level; deltaMode 1 (lines, Firefox) and 2 (pages) in px
+    var dy = ev.deltaY * (ev.deltaMode === 1 ? 40 : ev.deltaMode === 2 ? r.height : 1);
+    view.z = Math.max(0, Math.min(23, view.z - dy * 0.002));
     s = scale(); view.cx = wx - px / s; view.cy = wy - py / s; draw();
   }, { passive: false });
   cv.addEventListener('pointerdown', function (ev) {
@@ -234,7 +259,8 @@ def map_html(title: str, layers: Sequence[MapLayer], notes: Sequence[str] = ()) 
     out += [f'<div class="note">{e(n)}</div>' for n in notes]
     out += ['<div class="note">Wheel: zoom; drag: pan; double click: whole track; the boxes show or hide a '
             "layer. Positions WGS-84.</div></div>",
-            '<div id="wrap"><canvas id="map"></canvas><div id="legend"></div><div id="status"></div></div>',
+            '<div id="wrap"><canvas id="map"></canvas><div id="legend"></div><div id="status"></div>'
+            '<div id="scale"><span id="scale-label"></span><div id="scale-bar"></div></div></div>',
             f'<script type="application/json" id="navpp-map-data">{data}</script>',
             f"<script>{_JS}</script>", "</body>", "</html>"]
     return "\n".join(out) + "\n"

@@ -11,8 +11,9 @@ The rules, used by :func:`navpp.api.process` and :func:`navpp.comparison.compare
   so a dead run never blocks a later one.  The lock file is removed when the run ends.
 - **Manifest** (``<out>/.navpp-manifest.json``): the names of the files navpp wrote there.
   A run removes an earlier result it did not write again (e.g. ``metrics.json`` of a run with a
-  reference) only if the manifest lists it, so a file the user put there under a navpp name is
-  never deleted; in a directory without a manifest no such file is removed.
+  reference, or a figure, :data:`FIGURE_SUFFIXES`, of a run with ``--plot`` or other filters)
+  only if the manifest lists it, so a file the user put there under a navpp name is never
+  deleted; in a directory without a manifest no such file is removed.
 - **Inputs** (:func:`input_files`): a file that is an input of the current run (same device
   and inode) is never removed or replaced; a run whose output would replace one of its inputs
   is refused before it starts (:func:`refuse_overwriting_inputs`).
@@ -35,6 +36,11 @@ from pathlib import Path
 from .errors import InputError
 
 LOCK_NAME = ".navpp.lock"
+#: Endings of the figure files navpp writes (``<log>_<kind>`` of ``process --plot`` and of a
+#: ``compare`` report, :mod:`navpp.plots`, :mod:`navpp.comparison.figures`): a run that did not
+#: write such a file again removes it when the manifest lists it (:func:`stale_figures`).
+FIGURE_SUFFIXES = ("_trajectory.png", "_error_time.png", "_error_cdf.png", "_adaptive.png", "_errors.png",
+                   "_innovations.png", "_map.html")
 MANIFEST_NAME = ".navpp-manifest.json"
 STAGING_PREFIX = ".navpp-run-"
 
@@ -166,6 +172,15 @@ def read_manifest(out: Path) -> set[str]:
     except (OSError, ValueError):
         return set()
     return {f for f in files if isinstance(f, str) and f and "/" not in f and f not in (".", "..")}
+
+
+def stale_figures(out: Path, written: Iterable[str], ours: Iterable[str]) -> list[Path]:
+    """The figures of an earlier run in ``out`` that this run did not write: files named in
+    the manifest (``ours``, :func:`read_manifest`) ending in :data:`FIGURE_SUFFIXES`, not among
+    ``written`` (names), regular files (not symbolic links), in name order."""
+    done = set(written)
+    return [Path(out) / n for n in sorted(ours) if n.endswith(FIGURE_SUFFIXES) and n not in done
+            and (Path(out) / n).is_file() and not (Path(out) / n).is_symlink()]
 
 
 def write_manifest(out: Path, names: Iterable[str]) -> None:

@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 
 import pytest
+
+# Compiled kernels for the whole test session and the CLI processes it starts: with the
+# command line's default (auto), a first short CLI run in this process would make every later
+# test run interpreted (navpp.jitmode).  Tests of the choice itself set the mode explicitly.
+os.environ["NAVPP_JIT"] = "on"
 
 #: The session log: 120 s at 125 Hz IMU / 5 Hz GNSS, 30 s still first, automotive IMU.
 SIM_DURATION_S = 120.0

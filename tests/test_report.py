@@ -32,7 +32,9 @@ def report_dir(sim_log_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> P
     (noref / "reference.csv").unlink()
     out = root / "out"
     out.mkdir()
-    (out / "old_trajectory.png").write_bytes(b"stale")
+    (out / "old_trajectory.png").write_bytes(b"stale")           # an earlier run's, in its manifest
+    (out / ".navpp-manifest.json").write_text('{"files": ["old_trajectory.png"]}')
+    (out / "holiday_trajectory.png").write_bytes(b"mine")        # the user's: navpp never wrote it
     (out / "notes.txt").write_text("mine")
     compare([sim_log_dir, noref], ["ekf", "vce-ckf"], out_dir=out)
     return out
@@ -46,11 +48,12 @@ def md_table(text: str) -> tuple[list[str], list[list[str]]]:
 
 def test_files_and_stale_figures(report_dir: Path):
     names = sorted(p.name for p in report_dir.iterdir())
-    assert names == ["drive_adaptive.png", "drive_ekf_errors.png", "drive_error_cdf.png", "drive_error_time.png",
-                     "drive_map.html", "drive_trajectory.png", "drive_vce-ckf_errors.png", "noref_adaptive.png",
-                     "noref_ekf_innovations.png", "noref_map.html", "noref_trajectory.png",
-                     "noref_vce-ckf_innovations.png",
+    assert names == [".navpp-manifest.json", "drive_adaptive.png", "drive_ekf_errors.png", "drive_error_cdf.png",
+                     "drive_error_time.png", "drive_map.html", "drive_trajectory.png", "drive_vce-ckf_errors.png",
+                     "holiday_trajectory.png", "noref_adaptive.png", "noref_ekf_innovations.png", "noref_map.html",
+                     "noref_trajectory.png", "noref_vce-ckf_innovations.png",
                      "notes.txt", "report.html", "report.md", "summary.csv"]
+    assert (report_dir / "holiday_trajectory.png").read_bytes() == b"mine"
     assert not list(report_dir.glob(".*.tmp"))
 
 
@@ -81,7 +84,7 @@ def test_markdown_numbers_are_the_summary_and_best_is_the_minimum(report_dir: Pa
             assert float(cells[head.index("time s")]) == pytest.approx(float(srow["runtime_s"]), abs=0.006)
     assert checked == 3 * len(HEADER_TO_COLUMN)              # the log without reference has no numbers
     text = (report_dir / "report.md").read_text()
-    for png in report_dir.glob("*.png"):
+    for png in (p for p in report_dir.glob("*.png") if p.name != "holiday_trajectory.png"):
         assert f"]({png.name})" in text
 
 
@@ -90,7 +93,7 @@ def test_html_is_self_contained_with_valid_pngs(report_dir: Path):
 
     text = (report_dir / "report.html").read_text()
     uris = re.findall(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"', text)
-    pngs = sorted(report_dir.glob("*.png"))
+    pngs = sorted(p for p in report_dir.glob("*.png") if p.name != "holiday_trajectory.png")   # the user's
     assert len(uris) == len(pngs) == 10
     assert sorted(base64.b64decode(u) for u in uris) == sorted(p.read_bytes() for p in pngs)
     for u in uris:

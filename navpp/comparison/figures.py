@@ -39,10 +39,6 @@ from .rows import SMOOTHED_SUFFIX, smoothed_name
 if TYPE_CHECKING:       # (not .runs: it imports navpp.api, which imports navpp.plots, which imports this)
     from .series import LogSeries, RunSeries
 
-#: File-name endings of the figures; files with these endings that a run did not write are
-#: removed from the output directory (they belong to an earlier comparison).
-FIGURE_SUFFIXES = ("_trajectory.png", "_error_time.png", "_error_cdf.png", "_adaptive.png", "_errors.png",
-                   "_innovations.png", "_map.html")
 _DPI = 110
 #: Two runs' plotted values within this (m, or the unit of the series) are "identical".
 COINCIDE_TOL = 1e-3

@@ -11,7 +11,7 @@ A log without a reference has status, rejected fixes and run time only, and no e
 (the trajectories, and the adaptive noise, need no reference); the report says so.
 The HTML embeds every PNG as a base64 data URI and its CSS inline, and each overview map as an
 inline ``<iframe srcdoc>`` (the map page itself, :mod:`navpp.mapview`): the only thing it may
-fetch is the map's background tiles, when online.
+fetch is the map's background tiles, when the report is served over http and online.
 """
 
 from __future__ import annotations
@@ -23,10 +23,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from .. import outdir
 from ..errors import InputError
 from ..outfiles import os_reason, write_text_file
 from ..version import __version__
-from .figures import FIGURE_SUFFIXES, Plot, log_label
+from .figures import Plot, log_label
 from .rows import CompareRow, with_raw_gnss
 
 #: Table columns: (summary.csv column, header); the error columns are metres.
@@ -63,8 +64,7 @@ def best_cells(rows: Sequence[CompareRow], columns: Sequence[str] | None = None)
     for log in logs:
         idx = [i for i, r in enumerate(rows) if r.log == log and not r.is_raw_gnss]
         for c in columns:
-            vals = {i: _number(rows[i], c) for i in idx}
-            vals = {i: v for i, v in vals.items() if v is not None}
+            vals = {i: v for i in idx if (v := _number(rows[i], c)) is not None}
             if vals:
                 low = min(vals.values())
                 best.update((i, c) for i, v in vals.items() if v == low)
@@ -237,9 +237,11 @@ def build_sections(rows: Sequence[CompareRow], plots: Mapping[str, Sequence[Plot
 
 def write_report(out_dir: Path, rows: Sequence[CompareRow], plots: Mapping[str, Sequence[Plot]]) -> list[Path]:
     """Write the figures (``plots``: log -> its drawn figures, :func:`render_figures`),
-    ``report.md`` and ``report.html`` into ``out_dir`` (atomically); remove
-    figures of an earlier comparison (names ending in :data:`FIGURE_SUFFIXES`) this one did not
-    write.  Returns the files written.  :class:`~navpp.errors.InputError` if one cannot be written."""
+    ``report.md`` and ``report.html`` into ``out_dir`` (atomically); remove the figures of an
+    earlier navpp run there (names ending in :data:`navpp.outdir.FIGURE_SUFFIXES`) this one did
+    not write, if the directory's manifest lists them (:mod:`navpp.outdir`: a file navpp did not
+    write is never removed); then update the manifest.  Returns the files written.
+    :class:`~navpp.errors.InputError` if one cannot be written or a stale one removed."""
     out_dir = Path(out_dir)
     sections = build_sections(rows, plots)
     files: list[Path] = []
@@ -254,12 +256,15 @@ def write_report(out_dir: Path, rows: Sequence[CompareRow], plots: Mapping[str, 
     version = __version__
     put(out_dir / "report.md", markdown(rows, sections, version))
     put(out_dir / "report.html", html_document(rows, sections, version))
-    written = {p.name for p in files}
-    for old in out_dir.iterdir():
-        if old.name.endswith(FIGURE_SUFFIXES) and old.name not in written and old.is_file():
-            try:
-                old.unlink()
-            except OSError as exc:
-                raise InputError(f"{old}: cannot remove this figure of an earlier comparison "
-                                 f"({os_reason(exc)})") from None
+    written = {p.name for p in files} | ({"summary.csv"} if (out_dir / "summary.csv").is_file() else set())
+    ours = outdir.read_manifest(out_dir)
+    for old in outdir.stale_figures(out_dir, written, ours):
+        try:
+            old.unlink()
+        except OSError as exc:
+            raise InputError(f"{old}: cannot remove this figure of an earlier run ({os_reason(exc)})") from None
+    try:
+        outdir.write_manifest(out_dir, written | {n for n in ours if (out_dir / n).exists()})
+    except OSError as exc:
+        raise InputError(f"{out_dir / outdir.MANIFEST_NAME}: cannot write ({os_reason(exc)})") from None
     return files

@@ -144,7 +144,7 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
             report: bool = True, progress: ProgressFn | None = None, smooth: bool = False,
             executor: str = "local", scheduler: str | None = None,
             time_limit_s: float = DEFAULT_TIME_LIMIT_S, odometry_topic: str | None = None,
-            reference_anchor: str | Sequence[float] | None = None) -> CompareResult:
+            jit: str | None = None, reference_anchor: str | Sequence[float] | None = None) -> CompareResult:
     """Run every filter on every log; rows in (log, filter) order.
 
     Parameters
@@ -181,6 +181,9 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
         many seconds per 100,000 IMU samples (at least :data:`WATCHDOG_MIN_S`) is stopped and
         becomes a failed row naming the log; the other runs go on.  0 turns it off.  Local runs
         only (the CLI's process and ``jobs`` workers), not Dask.
+    jit : ``"on"`` (compiled; the default unless ``$NAVPP_JIT`` says otherwise), ``"off"`` or
+        ``"auto"``: compiled or interpreted kernels, here and in the ``jobs`` workers
+        (:mod:`navpp.jitmode`); fixed in a process once its first run decided it.
 
     Returns
     -------
@@ -198,6 +201,9 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
     t_start = time.perf_counter()
     log_names = [str(p) for p in logs]
     names = list(filters)
+    from .. import jitmode
+
+    jitmode.choose(jit, [Path(p) for p in log_names], names, bool(smooth))
     _check_arguments(log_names, names, config=config, reference=reference, jobs=jobs, executor=executor,
                      scheduler=scheduler, time_limit_s=time_limit_s)
     anchor = _anchor_text(reference_anchor)

@@ -4,7 +4,7 @@ twist: wheel odometry) into :class:`LogContents` (Twist and Odometry topics in `
 
 The ``mcap`` package reads the summary (for :func:`list_topics`) and parses Schema and Channel
 records; the bulk of the file (Message records, in chunks or at top level) is scanned by a
-numba kernel (:func:`_scan`) over the raw record stream, as the MCAP specification lays it
+numba kernel (:func:`_scan_kernel`) over the raw record stream, as the MCAP specification lays it
 out: ``opcode u8, length u64, content``; a Message's content is ``channel_id u16, sequence u32,
 log_time u64, publish_time u64, data``.  Chunks are decompressed (zstd / lz4 / none, as the
 ``mcap`` package does), their CRC checked, scanned, and the payload spans of each decoded
@@ -34,6 +34,7 @@ from typing import Any, Literal
 import numpy as np
 from numba import njit
 
+from navpp import jitmode
 from navpp.errors import InputError
 from navpp.findings import Finding
 from navpp.io.messages import (
@@ -90,7 +91,7 @@ def _u64(buf, p):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _scan(buf, start, stop, top_level, fill, msg_chan, msg_log, msg_pos, msg_len,
+def _scan_kernel(buf, start, stop, top_level, fill, msg_chan, msg_log, msg_pos, msg_len,
           rec_op, rec_pos, rec_len):  # pragma: no cover - compiled
     """Walk the records of ``buf[start:stop]``.
 
@@ -141,11 +142,54 @@ def _scan(buf, start, stop, top_level, fill, msg_chan, msg_log, msg_pos, msg_len
     return n_msg, n_rec, pos, status
 
 
+_RECORD = struct.Struct("<BQ")        # opcode, content length
+_MESSAGE = struct.Struct("<HIQ")      # channel id, sequence, log time
+
+
+def _scan_struct(buf, start, stop, top_level, fill, msg_chan, msg_log, msg_pos, msg_len,
+                 rec_op, rec_pos, rec_len):
+    """:func:`_scan_kernel` with ``struct`` reads, for runs whose kernels are interpreted
+    (:mod:`navpp.jitmode`): the same arguments and results, a few times faster than the
+    kernel's byte loops run as Python."""
+    view = memoryview(buf)
+    pos = start
+    n_msg = n_rec = 0
+    while True:
+        if pos == stop:
+            return n_msg, n_rec, pos, _END
+        if pos + _RECORD_HEADER > stop:
+            return n_msg, n_rec, pos, _PARTIAL
+        op, length = _RECORD.unpack_from(view, pos)
+        if length > stop - pos - _RECORD_HEADER:
+            return n_msg, n_rec, pos, _PARTIAL
+        content = pos + _RECORD_HEADER
+        if op == _OP_MESSAGE:
+            if length < _MESSAGE_PREFIX:
+                return n_msg, n_rec, pos, _BAD_MESSAGE
+            if fill:
+                chan, _, log = _MESSAGE.unpack_from(view, content)
+                msg_chan[n_msg] = chan
+                msg_log[n_msg] = log if log < 2**63 else log - 2**64
+                msg_pos[n_msg] = content + _MESSAGE_PREFIX
+                msg_len[n_msg] = length - _MESSAGE_PREFIX
+            n_msg += 1
+        else:
+            if fill:
+                rec_op[n_rec] = op
+                rec_pos[n_rec] = content
+                rec_len[n_rec] = length
+            n_rec += 1
+            if top_level and op in (_OP_DATA_END, _OP_FOOTER):
+                return n_msg, n_rec, content + length, _DATA_END
+        pos = content + length
+
+
 class _Scan:
     """The records of one span: messages (chan, log, pos, len) and others (op, pos, len)."""
 
     def __init__(self, buf: np.ndarray, start: int, stop: int, top_level: bool) -> None:
         empty = np.zeros(0, dtype=np.int64)
+        _scan = _scan_struct if jitmode.interpreted() else _scan_kernel
         n_msg, n_rec, _, _ = _scan(buf, start, stop, top_level, False,
                                    empty, empty, empty, empty, empty, empty, empty)
         self.chan = np.empty(n_msg, dtype=np.int64)

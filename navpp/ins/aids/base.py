@@ -59,7 +59,7 @@ def points_kernel(model: Dispatcher[ModelKernel]) -> Dispatcher[PointsKernel]:
     recompiles its images.  After editing the template (or :func:`navpp.ins.model.plus`), clear
     numba's cache, as after editing any function a cached kernel calls.
     """
-    py_h = cast(types.FunctionType, model.py_func)
+    py_h = cast(types.FunctionType, getattr(model, "py_func", model))
     name = f"{py_h.__name__}_points"
     code = _points_template.__code__.replace(co_filename=py_h.__code__.co_filename, co_name=name,
                                              co_qualname=name)
