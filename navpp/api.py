@@ -763,3 +763,49 @@ def simulate_log(out: str | Path, **spec: Any) -> Path:
     sim = simulate(SimulationSpec(**spec))
     write_csv_log(sim, out)
     return Path(out)
+
+
+def compile_kernels(filters: Sequence[str] | None = None,
+                    progress: Callable[[str], None] | None = None) -> list[tuple[str, float]]:
+    """``navpp compile``: compile (or load from the cache) every kernel group ``filters`` (None:
+    all) need, the smoother's, the wheel-odometry aids' and the MCAP/ROS readers', by running
+    them on short simulated drives in a temporary directory (:mod:`navpp.jitmode`).
+
+    Returns (step, CPU seconds) per step.  Raises :class:`~navpp.errors.ConfigError` when this
+    process already runs interpreted.
+    """
+    import time
+
+    from . import jitmode
+
+    if jitmode.decided() is False:
+        raise jitmode.interpreted_error()
+    jitmode.apply(True)
+    jitmode.CHOSEN[:] = [jitmode.Choice(True, "navpp compile")]
+    filters = tuple(filters) if filters is not None else jitmode.ALL_FILTERS
+
+    steps: list[tuple[str, float]] = []
+    with tempfile.TemporaryDirectory(prefix="navpp-compile-") as tmp:
+        root = Path(tmp)
+        log = simulate_log(root / "drive", duration_s=90.0, still_s=30.0, seed=1)
+
+        def step(name: str, run: Callable[[], Any]) -> None:
+            if progress:
+                progress(name)
+            t0 = time.process_time()
+            run()
+            steps.append((name, time.process_time() - t0))
+
+        step("ekf, smoother, MCAP writer", lambda: process(
+            log, filter_name="ekf", smooth=True, formats="csv,mcap", embed_input=True, out_dir=root / "ekf"))
+        step("MCAP and ROS readers", lambda: process(
+            root / "ekf" / "trajectory.mcap", filter_name="ekf", write=False, imu_topic="/imu/data",
+            gnss_topic="/gnss/fix"))
+        for name in filters:
+            if name != "ekf":
+                step(name, lambda name=name: process(log, filter_name=name, write=False))
+        odo = simulate_log(root / "odometry", duration_s=90.0, still_s=30.0, seed=2, odometry=True,
+                           odometry_yaw_rate=True)
+        for name in filters:
+            step(f"{name} with wheel odometry", lambda name=name: process(odo, filter_name=name, write=False))
+    return steps

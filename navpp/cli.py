@@ -706,7 +706,9 @@ def compile_cmd(
         from . import comparison as cmp
 
         cmp.parse_filters(",".join(wanted))     # unknown names: one line, exit 1
-        steps = jitmode.compile_all(wanted, progress=lambda name: note(err, f"compiling: {name} ..."))
+        from . import api
+
+        steps = api.compile_kernels(wanted, progress=lambda name: note(err, f"compiling: {name} ..."))
     except NavppError as exc:
         _fail(str(exc), exc)
         return

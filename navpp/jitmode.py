@@ -56,7 +56,7 @@ GROUPS: dict[str, tuple[tuple[str, str], ...]] = {
     "mcap": (("io/mcap.py", "_scan_kernel"),),
     "sigma": (("ins/model.py", "_propagate_points"), ("ins/model.py", "gnss_points")),
     "vce": (("ins/model.py", "integrate_noise_groups"),),
-    "smooth": (("ins/model.py", "rts_means"), ("engine/output.py", "apply_node_corrections")),
+    "smooth": (("ins/model.py", "rts_means"), ("ins/model.py", "apply_node_corrections")),
 }
 #: CPU seconds to compile each group from an empty cache (2-core EPYC, numba 0.68).
 COMPILE_S = {"ins": 19.0, "ros": 1.5, "mcap": 0.5, "sigma": 9.0, "vce": 10.0, "smooth": 9.0}
@@ -348,48 +348,5 @@ def interpreted_error() -> Exception:
                        "compile in a process without it")
 
 
-#: Filters compiled by :func:`compile_all` when none are named.
+#: Filters compiled by :func:`navpp.api.compile_kernels` when none are named.
 ALL_FILTERS = ("ekf", "aekf", "ckf", "ukf", "vce-ckf", "rwckf", "aukf", "sif")
-
-
-def compile_all(filters: tuple[str, ...] = ALL_FILTERS, progress=None) -> list[tuple[str, float]]:
-    """Compile (or load from the cache) every kernel group ``filters`` need, the smoother's and
-    the MCAP/ROS readers', by running them on a short simulated drive in a temporary directory.
-
-    Returns (step, CPU seconds) per step.  Raises :class:`~navpp.errors.ConfigError` when this
-    process already runs interpreted.
-    """
-    import tempfile
-    import time
-
-    if decided() is False:
-        raise interpreted_error()
-    apply(True)
-    CHOSEN[:] = [Choice(True, "navpp compile")]
-    from . import api
-
-    steps: list[tuple[str, float]] = []
-    with tempfile.TemporaryDirectory(prefix="navpp-compile-") as tmp:
-        root = Path(tmp)
-        log = api.simulate_log(root / "drive", duration_s=90.0, still_s=30.0, seed=1)
-
-        def step(name: str, run) -> None:
-            if progress:
-                progress(name)
-            t0 = time.process_time()
-            run()
-            steps.append((name, time.process_time() - t0))
-
-        step("ekf, smoother, MCAP writer", lambda: api.process(
-            log, filter_name="ekf", smooth=True, formats="csv,mcap", embed_input=True, out_dir=root / "ekf"))
-        step("MCAP and ROS readers", lambda: api.process(
-            root / "ekf" / "trajectory.mcap", filter_name="ekf", write=False, imu_topic="/imu/data",
-            gnss_topic="/gnss/fix"))
-        for name in filters:
-            if name != "ekf":
-                step(name, lambda name=name: api.process(log, filter_name=name, write=False))
-        odo = api.simulate_log(root / "odometry", duration_s=90.0, still_s=30.0, seed=2, odometry=True,
-                               odometry_yaw_rate=True)
-        for name in filters:
-            step(f"{name} with wheel odometry", lambda name=name: api.process(odo, filter_name=name, write=False))
-    return steps

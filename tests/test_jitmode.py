@@ -57,6 +57,22 @@ def test_workers_are_announced() -> None:
     assert jitmode.workers_note(jitmode.decide("auto", [(10, 0, "csv")], ["ekf"], False, ()), 4) == ""
 
 
+def test_every_group_names_a_kernel_of_its_file() -> None:
+    """Each sentinel is a numba kernel defined (not merely imported) in the file it names, so a
+    rename or a move cannot leave a group that is never found in the cache."""
+    import importlib
+
+    from numba.core.dispatcher import Dispatcher
+
+    for group, kernels in jitmode.GROUPS.items():
+        for rel, name in kernels:
+            module = importlib.import_module("navpp." + rel.removesuffix(".py").replace("/", "."))
+            kernel = getattr(module, name)
+            assert isinstance(kernel, Dispatcher), (group, rel, name)
+            assert kernel.py_func.__code__.co_filename == str(jitmode._ROOT / rel), (group, rel, name)
+            assert jitmode._first_line(jitmode._ROOT / rel, name) == kernel.py_func.__code__.co_firstlineno
+
+
 def test_needed_groups() -> None:
     assert jitmode.needed_groups([(10, 0, "csv")], ["ekf"], False) == ("ins",)
     assert jitmode.needed_groups([(10, 12, "mcap")], ["vce-ckf", "ckf"], True) == (
@@ -241,3 +257,23 @@ def test_jit_option_errors(tmp_path: Path) -> None:
         "navpp: error: NAVPP_JIT: unknown mode 'fast'; choose one of auto, on, off"]
     res = runner.invoke(app, ["compile", "--filters", "ekf,nope"])
     assert res.exit_code == 1 and "nope" in res.output and "Traceback" not in res.output
+
+
+@pytest.mark.slow
+def test_navpp_compile_fills_the_cache(tmp_path: Path) -> None:
+    """`navpp compile --filters ekf` into an empty cache; then auto finds every group an EKF run on
+    an MCAP log needs (smoother included) and a run of the sample drive compiles nothing."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), NAVPP_JIT="")
+    done = subprocess.run([sys.executable, "-m", "navpp", "compile", "--filters", "ekf"], env=env,
+                          capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    assert "navpp's kernels are compiled" in done.stdout
+    probe = ("from navpp import jitmode; "
+             "print(jitmode.missing_groups(('ins', 'ros', 'mcap', 'smooth')), jitmode.missing_groups(('sigma',)))")
+    got = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, check=True)
+    assert got.stdout.split() == ["()", "('sigma',)"]
+    run = subprocess.run([sys.executable, "-m", "navpp", "process", str(SAMPLES / "drive.mcap"), "--smooth",
+                          "--out", str(tmp_path / "out")], env=env, capture_output=True, text=True, check=False)
+    assert run.returncode == 0, run.stderr
+    assert "compiling navpp's numba kernels" not in run.stderr
+    assert "ran interpreted" not in run.stderr
