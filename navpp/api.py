@@ -562,10 +562,11 @@ def _run(plan: _Plan, progress: Callable[[str, float], None] | None) -> ProcessR
         forward = run_metrics(rec, plan.cfg, result, result.solution, runtime_s=result.forward_runtime_s, **named)
         metrics = smoothing_metrics(metrics, forward, result.smoothed)
     files: list[Path] = []
+    written_notes: list[str] = []        # what a writer has to say (the embedded input's left-out topics)
     if plan.write:
         outputs = _outputs(plan.formats, log=plan.log, rec=rec, sol_out=sol_out, result=result, metrics=metrics,
                            filter_name=plan.filter_name, embed_input=plan.embed_input, forward_out=fwd_out,
-                           compared=sol, cfg=plan.cfg)
+                           compared=sol, cfg=plan.cfg, notes=written_notes)
         if plan.plot:
             from .plots import plot_outputs
 
@@ -574,7 +575,8 @@ def _run(plan: _Plan, progress: Callable[[str, float], None] | None) -> ProcessR
     cfg = plan.cfg
     notes = tuple(rec.notes) + tuple(cfg.notes) + tuple(result.notes) + tuple(result.alignment.lines) + tuple(
         f"GNSS outage {o['start_s']:g}-{o['end_s']:g} s ({o['duration_s']:g} s from the log start): "
-        f"{o['gnss_removed']} fixes removed, the INS coasts" for o in outages) + odometry_note(rec, cfg)
+        f"{o['gnss_removed']} fixes removed, the INS coasts" for o in outages) + odometry_note(rec, cfg) + tuple(
+        written_notes)
     warnings = (tuple(rec.warnings) + tuple(result.warnings) + tuple(forced_fix_warnings(rec, cfg, result))
                 + tuple(reference_checks(rec, cfg, metrics)))
     if plan.smooth:
@@ -683,11 +685,12 @@ def forced_fix_warnings(rec: Recording, cfg: Config, result: Any) -> list[str]:
 def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solution, result: Any,
              metrics: dict | None, filter_name: str, embed_input: bool,
              forward_out: Solution | None = None, compared: Solution | None = None,
-             cfg: Config | None = None) -> list[tuple[str, Callable[[Path], None]]]:
+             cfg: Config | None = None, notes: list[str] | None = None) -> list[tuple[str, Callable[[Path], None]]]:
     """``(file name, writer(path))`` for every file of a run, in the order they are listed.
     ``forward_out``: the forward solution of a smoothed run (``sol_out`` is then the smoothed one).
     ``compared``: the (full-rate) solution the metrics were computed on; its span picks the rows
-    of ``reference.tum``."""
+    of ``reference.tum``.  ``notes``: the writers append their lines for the run's notes there
+    (:func:`embed_note`)."""
     from .io import exports, writers
     from .io.foxglove import LAYOUT_FILE, write_layout
 
@@ -726,13 +729,26 @@ def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solu
             mounting = (result.calibration or {}).get("gross_mounting_rpy_deg", cfg.imu.mounting_rpy_deg)
             rate_hz = rec.imu.rate_hz
             rate_noise = cfg.imu.noise().gyro_arw * math.sqrt(rate_hz) if math.isfinite(rate_hz) else 0.0
-            outputs.append((FORMAT_FILES[fmt], lambda p, mounting=mounting, rate_noise=rate_noise: mcap_writer()(
-                p, solution=sol_out, recording=rec, diagnostics=result.diagnostics, biases=biases,
-                embed_input=embed_input, input_log=log, filter_name=filter_name,
-                imu_mounting_rpy_deg=mounting, gnss_lever_arm_m=cfg.gnss.lever_arm_m, rate_noise_std=rate_noise,
-                **({"forward": forward_out} if forward_out is not None else {}))))
+            def write_mcap(p: Path, mounting: Any = mounting, rate_noise: float = rate_noise) -> None:
+                skipped = mcap_writer()(
+                    p, solution=sol_out, recording=rec, diagnostics=result.diagnostics, biases=biases,
+                    embed_input=embed_input, input_log=log, filter_name=filter_name,
+                    imu_mounting_rpy_deg=mounting, gnss_lever_arm_m=cfg.gnss.lever_arm_m, rate_noise_std=rate_noise,
+                    **({"forward": forward_out} if forward_out is not None else {}))
+                if skipped and notes is not None:
+                    notes.append(embed_note(skipped))
+
+            outputs.append((FORMAT_FILES[fmt], write_mcap))
             outputs.append((LAYOUT_FILE, lambda p: write_layout(p, result.diagnostics)))
     return outputs
+
+
+def embed_note(skipped: Sequence[str]) -> str:
+    """The run's note on the input topics ``--embed-input`` left out of trajectory.mcap (one line;
+    ``skipped``: one ``"TOPIC (TYPE): reason"`` each, as the file's ``embedded_input_skipped``)."""
+    n = len(skipped)
+    return (f"--embed-input: {n} input topic{'s' if n != 1 else ''} not embedded in trajectory.mcap: "
+            + "; ".join(skipped))
 
 
 def simulate_log(out: str | Path, **spec: Any) -> Path:

@@ -279,11 +279,17 @@ def compare(
     filters: Annotated[str, typer.Option(help="Comma-separated filter names (see `navpp filters`).")] = DEFAULT_COMPARE,
     config: Annotated[Path | None, typer.Option(help="TOML config for every log; default: each log's navpp.toml, "
                                                    "else the automotive preset.")] = None,
-    reference: Annotated[Path | None, typer.Option(help="Reference CSV (one log only); default: each log's "
-                                                      "reference.csv.")] = None,
+    reference: Annotated[Path | None, typer.Option(help="Reference CSV or TUM file (one log only); default: each "
+                                                      "log's reference.csv.")] = None,
+    reference_anchor: Annotated[str | None, typer.Option(
+        metavar="LAT,LON,ALT", help="Origin of a TUM or Odometry/PoseStamped reference's local ENU frame: deg, deg, "
+        "m above the WGS-84 ellipsoid.  [default: the anchor navpp's own trajectory.tum / trajectory.mcap "
+        "record]")] = None,
     imu_topic: Annotated[str | None, typer.Option(help="IMU topic for ROS logs with several.")] = None,
     gnss_topic: Annotated[str | None, typer.Option(help="GNSS topic for ROS logs with several.")] = None,
-    reference_topic: Annotated[str | None, typer.Option(help="A NavSatFix topic to use as the reference.")] = None,
+    reference_topic: Annotated[str | None, typer.Option(
+        help="A topic to use as the reference: NavSatFix, or nav_msgs/Odometry or geometry_msgs/PoseStamped in a "
+             "local ENU frame (see --reference-anchor).")] = None,
     odometry_topic: Annotated[str | None, typer.Option(
         help="Wheel odometry topic for ROS logs, or none.  [default: chosen by frame and rate]")] = None,
     out: Annotated[Path, typer.Option(help="Directory for summary.csv, report.md, report.html and the figures, "
@@ -363,7 +369,8 @@ def compare(
                                      gnss_topic=gnss_topic, reference_topic=reference_topic,
                                      odometry_topic=odometry_topic, jobs=jobs,
                                      out_dir=out, progress=prog, smooth=smooth, executor=executor,
-                                     scheduler=scheduler, time_limit_s=time_limit, jit=jit)
+                                     scheduler=scheduler, time_limit_s=time_limit, jit=jit,
+                                     reference_anchor=reference_anchor)
         except BaseException:
             remove_created_dirs(created)
             raise

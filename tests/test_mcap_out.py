@@ -437,8 +437,8 @@ def test_embed_mcap_input_copies_the_records_exactly(mcap_input, tmp_path):
     res = api.process(mcap_input, write=False, output_rate_hz=5.0, reference_topic="/reference/fix")
     path = _write(tmp_path / "trajectory.mcap", res, embed_input=True, input_log=mcap_input)
     src, out = _raw_messages(mcap_input), _raw_messages(path)
-    assert set(out) == set(OUTPUT_TOPICS) | {"/imu/data", "/gnss/fix"}     # not the reference
-    for topic in ("/imu/data", "/gnss/fix"):
+    assert set(out) == set(OUTPUT_TOPICS) | {"/imu/data", "/gnss/fix", "/reference/fix"}   # every input topic
+    for topic in ("/imu/data", "/gnss/fix", "/reference/fix"):
         a, b = src[topic], out[topic]
         assert len(a) == len(b) > 0
         assert all(x[2].data == y[2].data for x, y in zip(a, b)), topic
@@ -466,17 +466,19 @@ def _stamp_of(item) -> int:
 
 
 def test_embed_mcap_input_whose_gnss_was_replaced_encodes_the_recordings_gnss(processed, mcap_input, tmp_path):
-    """GNSS from elsewhere (e.g. ``--gnss FILE.pos``): the IMU is copied, the GNSS encoded."""
+    """GNSS from elsewhere (e.g. ``--gnss FILE.pos``): every input topic is copied, the recording's
+    GNSS encoded beside them (on ``/navpp/input/gnss/fix``: the input has ``/gnss/fix``)."""
     rec = processed.recording
     g = dataclasses.replace(rec.gnss, lat_deg=rec.gnss.lat_deg + 1e-6)
     res = dataclasses.replace(processed, recording=dataclasses.replace(rec, gnss=g))
     path = _write(tmp_path / "trajectory.mcap", res, embed_input=True, input_log=mcap_input)
-    out = _raw_messages(path, ["/imu/data", "/gnss/fix"])
-    src = _raw_messages(mcap_input, ["/imu/data"])
-    assert [x[2].data for x in out["/imu/data"]] == [x[2].data for x in src["/imu/data"]]
-    lat = [_fix_lat(x) for x in out["/gnss/fix"]]
+    out = _raw_messages(path, ["/imu/data", "/gnss/fix", "/navpp/input/gnss/fix"])
+    src = _raw_messages(mcap_input, ["/imu/data", "/gnss/fix"])
+    for topic in ("/imu/data", "/gnss/fix"):
+        assert [x[2].data for x in out[topic]] == [x[2].data for x in src[topic]]
+    lat = [_fix_lat(x) for x in out["/navpp/input/gnss/fix"]]
     assert np.array_equal(lat, g.lat_deg)
-    assert [x[2].log_time for x in out["/gnss/fix"]] == [_stamp_of(x) for x in out["/gnss/fix"]]
+    assert [x[2].log_time for x in out["/navpp/input/gnss/fix"]] == [_stamp_of(x) for x in out["/navpp/input/gnss/fix"]]
 
 
 def _fix_lat(item) -> float:
@@ -712,14 +714,14 @@ def test_embedded_gnss_velocity_is_copied_or_encoded(processed, tmp_path, kind):
     mcap_out.write_trajectory_mcap(path, solution=processed.solution, recording=rec, embed_input=True,
                                    input_log=log)
     contents = read_mcap(path)
-    vel_topic = "/ins/gnss_vel" if kind == "mcap" else "/gnss/vel"
+    vel_topic = "/gnss/vel" if kind == "none" else "/ins/gnss_vel"
     assert {t.topic for t in contents.topics} == {"/imu/data", "/gnss/fix", vel_topic, *mcap_out.TOPICS} - {
         "/navpp/bias/gyro", "/navpp/bias/accel", "/navpp/diagnostics"}
     back = recording_from_log(contents, imu_topic="/imu/data", gnss_topic="/gnss/fix")
     assert np.array_equal(back.gnss.vel_enu, vel)
     assert np.array_equal(back.gnss.std_vel_enu, rec.gnss.std_vel_enu)
     if kind == "mcap":
-        src = _raw_messages(log, [vel_topic])[vel_topic]
+        src = _raw_messages(log, [vel_topic])[vel_topic]   # (a ROS 2 bag: tests/test_embed_inputs.py)
         assert [x[2].data for x in _raw_messages(path, [vel_topic])[vel_topic]] == [x[2].data for x in src]
 
 

@@ -119,6 +119,65 @@ def test_anchor_without_a_local_frame_reference_is_refused(sim_log_dir: Path, tm
     assert res.exit_code != 0 and "--reference-anchor" in flat(res.stderr) and "Traceback" not in res.output
 
 
+# --------------------------------------------------------------------------- compare --reference-anchor
+
+
+def _bare_tum(rec: Recording, tmp_path: Path) -> tuple[Path, str]:
+    """The truth as a TUM file without navpp's anchor comment, and that anchor as LAT,LON,ALT."""
+    from navpp.io.exports import write_tum
+    from navpp.io.frames import anchor_for
+
+    tum = tmp_path / "truth.tum"
+    write_tum(tum, truth_solution(rec), rec)
+    bare = tmp_path / "bare.tum"
+    bare.write_text("".join(line + "\n" for line in tum.read_text().splitlines() if not line.startswith("#")))
+    a = anchor_for(truth_solution(rec), rec)
+    return bare, f"{a.lat_deg!r},{a.lon_deg!r},{a.alt!r}"
+
+
+def test_compare_takes_a_reference_anchor(sim_log_dir: Path, rec: Recording, tmp_path: Path) -> None:
+    """Oracle: the same truth given as reference.csv (geodetic, no anchor needed)."""
+    from navpp.comparison import compare
+
+    bare, anchor = _bare_tum(rec, tmp_path)
+    (csv_row,) = compare([sim_log_dir], ["ekf"], report=False).rows
+    (tum_row,) = compare([sim_log_dir], ["ekf"], reference=bare, reference_anchor=anchor, report=False).rows
+    assert csv_row.status == tum_row.status == "ok" and str(bare) in tum_row.reference
+    for axis in ("horizontal", "up", "3d"):
+        assert tum_row.metrics["position_m"][axis]["rmse"] == pytest.approx(
+            csv_row.metrics["position_m"][axis]["rmse"], abs=2e-4), axis     # the TUM file rounds to 0.1 mm
+    (no_anchor,) = compare([sim_log_dir], ["ekf"], reference=bare, report=False).rows
+    assert "no anchor" in no_anchor.status and "--reference-anchor" in no_anchor.status
+
+
+@pytest.mark.parametrize("bad", ["45,x,300", "95,7,300", "45,7"])
+def test_compare_refuses_a_bad_anchor_as_process_does(sim_log_dir: Path, rec: Recording, tmp_path: Path,
+                                                      bad: str) -> None:
+    bare, _ = _bare_tum(rec, tmp_path)
+    runs = [invoke(cmd, sim_log_dir, "--reference", bare, "--reference-anchor", bad, "--out", tmp_path / cmd,
+                   *(["--filters", "ekf"] if cmd == "compare" else [])) for cmd in ("process", "compare")]
+    for res in runs:
+        assert res.exit_code == 1 and "Traceback" not in res.output, res.output
+    process_line, compare_line = (res.stderr.strip().splitlines()[-1] for res in runs)
+    assert compare_line == process_line and f"--reference-anchor: {bad!r}" in compare_line
+    assert not (tmp_path / "compare").exists()
+
+
+def test_compare_cli_passes_the_anchor_on(sim_log_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import navpp.comparison as cmp
+    from navpp.errors import ConfigError
+
+    seen = {}
+
+    def fake(logs, filters, **kw):
+        seen.update(kw)
+        raise ConfigError("stop here")
+
+    monkeypatch.setattr(cmp, "compare", fake)
+    res = invoke("compare", sim_log_dir, "--filters", "ekf", "--reference-anchor", "45,7,300", "--out", tmp_path / "o")
+    assert res.exit_code == 1 and "stop here" in res.stderr and seen["reference_anchor"] == "45,7,300"
+
+
 # --------------------------------------------------------------------------- ROS topics
 
 

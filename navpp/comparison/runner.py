@@ -144,7 +144,7 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
             report: bool = True, progress: ProgressFn | None = None, smooth: bool = False,
             executor: str = "local", scheduler: str | None = None,
             time_limit_s: float = DEFAULT_TIME_LIMIT_S, odometry_topic: str | None = None,
-            jit: str | None = None) -> CompareResult:
+            jit: str | None = None, reference_anchor: str | Sequence[float] | None = None) -> CompareResult:
     """Run every filter on every log; rows in (log, filter) order.
 
     Parameters
@@ -155,7 +155,10 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
         Problems with this file, or with the filter options it gives, raise
         :class:`~navpp.errors.ConfigError` before anything runs; problems with a log's own
         ``navpp.toml`` are that log's rows.
-    reference : a reference CSV; only with a single log (else each log's ``reference.csv``).
+    reference : a reference CSV or TUM file; only with a single log (else each log's ``reference.csv``).
+    reference_anchor : origin of a local-frame reference (a TUM file, an Odometry / PoseStamped
+        ``reference_topic``) as ``(lat_deg, lon_deg, alt_m)`` or ``"LAT,LON,ALT"``, as for
+        :func:`navpp.api.process`; checked before anything runs (:class:`InputError`).
     jobs : worker processes, >= 1; 1 runs everything in this process (Dask: the LocalCluster size).
     out_dir : write ``summary.csv`` and (with ``report``) ``report.md``, ``report.html`` and the
         PNG figures there (the directory must exist); None writes nothing.
@@ -193,7 +196,7 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
         Bad arguments (no logs, ``jobs < 1``, ``reference`` with several logs, unknown filter,
         a bad ``config``).
     InputError
-        An output file cannot be written.
+        An output file cannot be written, or ``reference_anchor`` is not a position.
     """
     t_start = time.perf_counter()
     log_names = [str(p) for p in logs]
@@ -203,10 +206,11 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
     jitmode.choose(jit, [Path(p) for p in log_names], names, bool(smooth))
     _check_arguments(log_names, names, config=config, reference=reference, jobs=jobs, executor=executor,
                      scheduler=scheduler, time_limit_s=time_limit_s)
+    anchor = _anchor_text(reference_anchor)
     tasks = [RunTask(i * len(names) + j, log, name, None if config is None else str(config),
                      None if reference is None else str(reference), imu_topic, gnss_topic, reference_topic,
                      report, report and j == 0, bool(smooth), time_limit_s=float(time_limit_s),
-                     odometry_topic=odometry_topic)
+                     odometry_topic=odometry_topic, reference_anchor=anchor)
              for i, log in enumerate(log_names) for j, name in enumerate(names)]
     out = Path(out_dir) if out_dir is not None else None
     labels = [x for n in names for x in ((n, smoothed_name(n)) if smooth else (n,))]
@@ -225,6 +229,17 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
                 if draw is not None:
                     files += write_report(out, rows, plots)
     return CompareResult(rows, tuple(files), out, workers, time.perf_counter() - t_start, log_series, run_series)
+
+
+def _anchor_text(anchor: str | Sequence[float] | None) -> str | None:
+    """``reference_anchor`` as the ``"LAT,LON,ALT"`` text the runs take, checked as ``navpp process``
+    checks it (:func:`navpp.io.refposes.parse_anchor`: the same one-line :class:`InputError`)."""
+    from ..io.refposes import parse_anchor
+
+    text = anchor if anchor is None or isinstance(anchor, str) else ",".join(repr(float(v)) for v in anchor)
+    if text is not None:
+        parse_anchor(text)
+    return text
 
 
 def _check_arguments(logs: Sequence[str], names: Sequence[str], *, config: str | Path | None,

@@ -48,6 +48,7 @@ class RunTask:
     path: str | None = None     # where to read the log (absolute for remote workers); None: ``log``
     time_limit_s: float = 0.0   # the watchdog's s per 100,000 IMU samples (:func:`watchdog_limit_s`); 0: off
     odometry_topic: str | None = None   # --odometry-topic (None: automatic, "none": off)
+    reference_anchor: str | None = None  # --reference-anchor "LAT,LON,ALT" of a local-frame reference
 
 
 @dataclass(frozen=True)
@@ -80,7 +81,7 @@ class RecordingCache:
         from .. import api
 
         key = (task.log, task.config, task.reference, task.imu_topic, task.gnss_topic, task.reference_topic,
-               task.odometry_topic)
+               task.odometry_topic, task.reference_anchor)
         if key != self.key:
             self.key, self.value = None, None          # free the previous recording first
             log = Path(task.path or task.log)
@@ -92,6 +93,7 @@ class RecordingCache:
                     rec = api.read_log(log, cfg, reference=task.reference, imu_topic=task.imu_topic,
                                        gnss_topic=task.gnss_topic, reference_topic=task.reference_topic,
                                        odometry_topic=task.odometry_topic,
+                                       reference_anchor=task.reference_anchor,
                                        progress=(lambda f: progress(label, f)) if progress else None)
                 if progress:
                     progress(label, 1.0)

@@ -15,7 +15,10 @@ Panels (a Foxglove layout is ``configById``, panel id ``"<Type>!<id>"`` -> its s
   ``names[k]`` of the diagnostics message: ``q_factor_*``, ``r_factor_*``, ``fading``, ...).
 
 The file is written beside ``trajectory.mcap`` whenever the MCAP format is written; it names
-only navpp's own topics, so one layout serves every run of the same filter.
+only navpp's own topics, so one layout serves every run of the same filter.  Every topic,
+message path and frame it names is checked against the ``trajectory.mcap`` of the same run
+(``tests/test_layout_topics.py``: channels, decoded fields, tf frames); Foxglove itself is not
+run by the tests.
 """
 
 from __future__ import annotations

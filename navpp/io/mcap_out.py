@@ -68,24 +68,42 @@ FLU (x forward, y left, z up).
 Every message's log time = publish time = header stamp: integer ns on the log's own time base,
 ``recording.t0_ns + round(t * 1e9)`` (:func:`navpp.io.roswrite.stamps_ns`).
 
-Embedded input (``embed_input=True``): the IMU and GNSS that navpp processed, in the same file,
-so one file replays everything.  From an MCAP input whose IMU / GNSS topics are CDR encoded,
-the Message records of those topics are copied (read with ``mcap``'s stream reader: payload,
-log and publish time, sequence; bytes identical) with their schemas, topics and channel metadata
-(e.g. rosbag2's QoS profiles); a GNSS velocity topic goes with the GNSS when the recording used one.
-From a ROS 1 bag, every topic is embedded as it was, converted to ROS 2 CDR
-(:func:`_ros1_input_streams`).  Anything
-else (CSV, ROS 2 bag, a ROS 1 encoded MCAP, or an MCAP whose topic does not hold the
-recording's data, e.g. GNSS replaced by ``--gnss FILE.pos``) is encoded from the Recording:
-``sensor_msgs/msg/Imu`` on ``/imu/data`` (frame ``imu_link``), ``sensor_msgs/msg/NavSatFix``
-on ``/gnss/fix`` (frame ``gnss``) and, with GNSS velocity,
-``geometry_msgs/msg/TwistWithCovarianceStamped`` on ``/gnss/vel`` and, with wheel odometry
-(``Recording.odometry``), ``nav_msgs/msg/Odometry`` on ``/wheel/odom`` (child frame
-``base_link``), exactly as :func:`navpp.io.roswrite.write_mcap_ros2` writes them (navpp reads
-them back as the same arrays).  The odometry topic of an MCAP input is copied like the IMU's.
-The copied topics are identified by content: the recording's IMU stamps (header or
-log) and GNSS positions must all be found in the topic; a topic the copy cannot take whole (the
-last, partial chunk of a cut-off recording, which navpp's reader still decodes) is encoded too.
+Embedded input (``embed_input=True``): the input log in the same file, every topic as it was,
+so one file replays everything.
+
+- MCAP file, ROS 2 bag: every Message record copied as it is (:func:`_copied_input_streams`):
+  payload bytes, log time, topic, schema (name, encoding, definition) and, where the input has
+  them (MCAP files, rosbag2's mcap storage), publish time, sequence number and channel metadata
+  (e.g. rosbag2's QoS profiles).  A sqlite3 (or compressed) ROS 2 bag is read with rosbags: the
+  CDR payloads after the bag's own decompression, its one receive time as log and publish
+  time, its message definition (else ROS 2 Humble's) and QoS profiles.  A ROS 1 encoded MCAP
+  channel is converted to ROS 2 CDR as a ROS 1 bag is.
+- ROS 1 bag: every topic converted to ROS 2 CDR (:func:`_ros1_input_streams`).
+- CSV: the recording encoded: ``sensor_msgs/msg/Imu`` on ``/imu/data`` (frame ``imu_link``),
+  ``sensor_msgs/msg/NavSatFix`` on ``/gnss/fix`` (frame ``gnss``) and, with GNSS velocity,
+  ``geometry_msgs/msg/TwistWithCovarianceStamped`` on ``/gnss/vel`` and, with wheel odometry
+  (``Recording.odometry``), ``nav_msgs/msg/Odometry`` on ``/wheel/odom`` (child frame
+  ``base_link``), exactly as :func:`navpp.io.roswrite.write_mcap_ros2` writes them (navpp reads
+  them back as the same arrays).
+
+Left out, and listed (one ``"TOPIC (TYPE): reason"`` each, in the ``navpp`` metadata's
+``embedded_input_skipped`` and returned by :func:`write_trajectory_mcap` for the run's notes): an
+input topic named like one of navpp's output topics (``/tf``, ``/tf_static``, ``/navpp/...``),
+a channel neither CDR nor ROS 1 encoded (JSON, Protobuf, ...: the file's profile is ``ros2``), a
+topic of several types, a type that cannot be converted or has no definition.  The topics the
+recording's IMU, GNSS (with its velocity) and odometry came from are found by content (the
+recording's IMU stamps, header or log, and GNSS positions must all be found in the topic); what
+the copy does not hold is encoded from the recording as for CSV: GNSS from ``--gnss FILE.pos``,
+or a topic the copy cannot take whole (the last, partial chunk of a cut-off recording, which
+navpp's reader still decodes) on its own name; a name the input already uses becomes
+``/navpp/input/<name>``.
+
+The input's own frames join the tf tree: ``/tf_static`` also gets ``base_link`` -> the
+``header.frame_id`` of the embedded IMU messages navpp used (the IMU mounting, as for
+``imu_link``) and -> that of its GNSS NavSatFix messages (the lever arm, as for ``gnss``), when
+they are not already frames of the tree, so every embedded IMU and GNSS message resolves to
+``map``.  ``imu_link`` and ``gnss`` stay (navpp's own names, used by an encoded input).  Other
+sensors' frames are not linked: navpp does not know where they are mounted.
 
 File layout
 -----------
@@ -245,14 +263,17 @@ def _ros2_stream(topic: str, msgtype: str, stamps: np.ndarray,
 def _solution_streams(solution: Solution, recording: Recording, diagnostics: Any,
                       biases: Any, forward: Solution | None = None, *,
                       static: tuple[np.ndarray, np.ndarray] | None = None,
-                      rate_noise_std: float = 0.0) -> tuple[list[_Stream], frames.Anchor]:
+                      rate_noise_std: float = 0.0,
+                      input_frames: tuple[Sequence[str], Sequence[str]] = ((), ())
+                      ) -> tuple[list[_Stream], frames.Anchor]:
     if len(solution) == 0:
         raise ValueError("the solution is empty: nothing to write")
     anchor = frames.anchor_for(solution, recording)
     streams = _pose_streams(solution, recording, anchor, TOPIC_FIX, TOPIC_ODOMETRY, tf=True, biases=biases,
                             rate_noise_std=rate_noise_std)
     mounting, lever = static if static is not None else (np.eye(3), np.zeros(3))
-    streams.append(_tf_static_stream(int(roswrite.stamps_ns(recording, solution.t[:1])[0]), mounting, lever))
+    streams.append(_tf_static_stream(int(roswrite.stamps_ns(recording, solution.t[:1])[0]), mounting, lever,
+                                     *input_frames))
     if forward is not None:
         streams += _pose_streams(forward, recording, anchor, TOPIC_FORWARD_FIX, TOPIC_FORWARD_ODOMETRY, tf=False,
                                  biases=None, rate_noise_std=rate_noise_std)
@@ -354,10 +375,12 @@ def odometry_covariances(solution: Solution, biases: Any = None, rate_noise_std:
     return pose, twist
 
 
-def _tf_static_stream(stamp_ns: int, mounting: np.ndarray, lever_arm_m: np.ndarray) -> _Stream:
+def _tf_static_stream(stamp_ns: int, mounting: np.ndarray, lever_arm_m: np.ndarray,
+                      imu_frames: Sequence[str] = (), gnss_frames: Sequence[str] = ()) -> _Stream:
     """One ``/tf_static`` message: map -> odom (identity), base_link -> imu_link (the IMU's
     mounting: the rotation taking sensor vectors into base_link), base_link -> gnss (the antenna
-    lever arm, m, base_link FLU)."""
+    lever arm, m, base_link FLU), and the same two transforms to the embedded input's own IMU and
+    GNSS frame ids (``imu_frames``, ``gnss_frames``) that the tree does not have yet."""
     ts = _humble_typestore()
     t = ts.types
     q = frames.quat_xyzw(np.asarray(mounting, dtype=float).reshape(1, 3, 3))[0]
@@ -372,11 +395,19 @@ def _tf_static_stream(stamp_ns: int, mounting: np.ndarray, lever_arm_m: np.ndarr
                 rotation=t["geometry_msgs/msg/Quaternion"](x=float(xyzw[0]), y=float(xyzw[1]), z=float(xyzw[2]),
                                                            w=float(xyzw[3]))))
 
-    msg = t["tf2_msgs/msg/TFMessage"](transforms=[
+    lever = np.asarray(lever_arm_m, dtype=float).reshape(3)
+    transforms = [
         transform(MAP_FRAME, ODOM_FRAME, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)),
         transform(BODY_FRAME, IMU_FRAME, (0.0, 0.0, 0.0), q),
-        transform(BODY_FRAME, GNSS_FRAME, np.asarray(lever_arm_m, dtype=float).reshape(3), (0.0, 0.0, 0.0, 1.0)),
-    ])
+        transform(BODY_FRAME, GNSS_FRAME, lever, (0.0, 0.0, 0.0, 1.0)),
+    ]
+    known = {MAP_FRAME, ODOM_FRAME, BODY_FRAME, IMU_FRAME, GNSS_FRAME}
+    for frames_of, xyz, xyzw in ((imu_frames, (0.0, 0.0, 0.0), q), (gnss_frames, lever, (0.0, 0.0, 0.0, 1.0))):
+        for frame in frames_of:
+            if frame not in known:
+                known.add(frame)
+                transforms.append(transform(BODY_FRAME, frame, xyz, xyzw))
+    msg = t["tf2_msgs/msg/TFMessage"](transforms=transforms)
     data = bytes(ts.serialize_cdr(msg, "tf2_msgs/msg/TFMessage"))
     st = np.array([stamp_ns], dtype=np.int64)
     msgtype = TOPICS[TOPIC_TF_STATIC]
@@ -467,29 +498,311 @@ def _odometry_rows(recording: Recording, rows: slice, stamps: np.ndarray) -> np.
                                   frame_id="odom", child_frame_id="base_link", twist_var=var)
 
 
-def _input_streams(recording: Recording, input_log: str | os.PathLike[str] | None
-                   ) -> tuple[list[_Stream], list[str]]:
-    """The input's IMU, GNSS and odometry: copied from an MCAP input where possible; every topic of
-    a ROS 1 bag, converted (:func:`_ros1_input_streams`); else encoded.  Also the input topics
-    left out, one line each."""
+@dataclass(frozen=True)
+class _Embedded:
+    """The embedded input: its streams, the input topics left out (one line each), and the
+    header frame ids of the input IMU and GNSS messages navpp used (for ``/tf_static``)."""
+
+    streams: list[_Stream]
+    skipped: list[str] = field(default_factory=list)
+    imu_frames: tuple[str, ...] = ()
+    gnss_frames: tuple[str, ...] = ()
+
+
+def _input_streams(recording: Recording, input_log: str | os.PathLike[str] | None) -> _Embedded:
+    """The input: every topic of an MCAP file or a ROS 2 bag copied as it was
+    (:func:`_copied_input_streams`); every topic of a ROS 1 bag, converted
+    (:func:`_ros1_input_streams`); else (CSV) the recording encoded."""
     if input_log is not None:
         from navpp.io.detect import log_kind
 
         kind, where = log_kind(Path(input_log))
-        if kind == "mcap":
-            return _mcap_input_streams(where, recording), []
+        if kind in ("mcap", "ros2"):
+            return _copied_input_streams(kind, where, recording)
         if kind == "ros1":
             return _ros1_input_streams(where, recording)
-    return [_encoded_imu(recording), *_encoded_gnss(recording, with_velocity=True), *_encoded_odometry(recording)], []
+    return _Embedded([_encoded_imu(recording), *_encoded_gnss(recording, with_velocity=True),
+                      *_encoded_odometry(recording)])
 
 
-def _ros1_input_streams(path: Path, recording: Recording) -> tuple[list[_Stream], list[str]]:
+def _output_topic_collision(topic: str) -> bool:
+    """Whether an input topic is named like one of navpp's output topics (it is left out)."""
+    return topic in _ALL_TOPICS
+
+
+def _free_topic(topic: str, taken: set[str]) -> str:
+    """``topic``, or ``/navpp/input<topic>`` when an embedded input topic already has that name."""
+    return topic if topic not in taken else "/navpp/input" + topic
+
+
+def _header_frames(streams: Sequence[_Stream], topic: str | None) -> tuple[str, ...]:
+    """The distinct ``header.frame_id`` of the CDR messages of ``topic`` among ``streams``, read
+    from the raw bytes (a ROS 2 message with a header starts with it: 4 bytes of CDR
+    encapsulation, ``stamp.sec``, ``stamp.nanosec``, then the frame id as a u32 length and
+    its NUL-terminated characters)."""
+    found: dict[str, None] = {}
+    for s in streams:
+        if s.topic != topic or s.message_encoding != "cdr" or not isinstance(s.payloads, _Raw):
+            continue
+        for data in s.payloads.data:
+            if len(data) < 16:
+                continue
+            little = data[1] == 1
+            (n,) = struct.unpack_from("<I" if little else ">I", data, 12)
+            if 0 < n <= len(data) - 16:
+                found.setdefault(data[16:16 + n - 1].decode("utf-8", "replace"), None)
+    return tuple(f for f in found if f)
+
+
+def _copied_input_streams(kind: str, path: Path, recording: Recording) -> _Embedded:
+    """Every topic of an MCAP file or a ROS 2 bag, copied as it was (:func:`_raw_mcap_streams`,
+    :func:`_raw_ros2_streams`), except the topics named like navpp's output topics and those
+    not ROS 2 CDR encoded (listed as skipped).  The topics the recording's IMU, GNSS (with its
+    velocity) and odometry came from are found by content: the recording's IMU stamps (header
+    or log) and GNSS positions must all be in the topic.  What the copy does not hold (GNSS
+    from ``--gnss FILE.pos``, a ROS 1 encoded topic, the last, partial chunk of a cut-off file
+    that navpp's reader still decodes) is encoded from the recording: a topic copied short on
+    its own name, the rest on ``/imu/data``, ``/gnss/fix``, ``/gnss/vel`` and ``/wheel/odom``
+    (``/navpp/input/...`` when the input has that name)."""
+    from navpp.io.detect import gnss_velocity_topics, list_topics, read_topics
+    from navpp.io.ros import FIX_TYPE, IMU_TYPE, ODOMETRY_TYPES, VELOCITY_TYPES
+
+    if kind == "mcap":
+        streams, skipped = _raw_mcap_streams([path])
+    else:
+        streams, skipped = _raw_ros2_streams(path)
+    infos = [t for t in list_topics(kind, path) if any(s.topic == t.topic for s in streams)]
+    exclude = _reference_topic(recording)
+    imu_cands = [t.topic for t in infos if t.msgtype == IMU_TYPE]
+    fix_cands = [t.topic for t in infos if t.msgtype == FIX_TYPE and t.topic != exclude]
+    od = recording.odometry
+    odom_cands = [t.topic for t in infos if od is not None and t.topic == od.source and t.msgtype in ODOMETRY_TYPES]
+    vel_cands = [t.topic for t in infos if t.msgtype in VELOCITY_TYPES]
+    decode = list(dict.fromkeys(imu_cands + fix_cands + odom_cands + vel_cands))
+    contents = read_topics(kind, path, decode) if decode else None
+
+    imu_topic = gnss_topic = odom_topic = vel_topic = None
+    g = recording.gnss
+    if contents is not None:
+        want = roswrite.stamps_ns(recording, recording.imu.t)
+        imu_topic = next((t for t in imu_cands if _contains_all(contents.imu[t].stamp_ns, want)
+                          or _contains_all(contents.imu[t].log_ns, want)), None)
+        gnss_topic = next((t for t in fix_cands if _contains_all(contents.fix[t].lat_deg, g.lat_deg)
+                           and _contains_all(contents.fix[t].lon_deg, g.lon_deg)), None)
+        if od is not None and odom_cands:
+            msgs = contents.twist[odom_cands[0]]
+            want = roswrite.stamps_ns(recording, od.t)
+            if _contains_all(msgs.stamp_ns, want) or _contains_all(msgs.log_ns, want):
+                odom_topic = odom_cands[0]
+        twists = gnss_velocity_topics(contents, od.source if od is not None else None)
+        if gnss_topic is not None and g.vel_enu is not None and len(twists) == 1:
+            vel_topic = twists[0]
+    # a cut-off file: the reader may have decoded messages a copy cannot take whole; encode those
+    expected = {t.topic: t.count for t in infos}
+    short = {t for t in (imu_topic, gnss_topic, vel_topic, odom_topic)
+             if t is not None and sum(len(s) for s in streams if s.topic == t) != expected[t]}
+    if gnss_topic in short and vel_topic is not None:
+        short.add(vel_topic)
+    streams = [s for s in streams if s.topic not in short]
+    taken = {s.topic for s in streams}
+    encoded: list[_Stream] = []
+    if imu_topic is None or imu_topic in short:
+        encoded.append(replace(_encoded_imu(recording), topic=imu_topic or _free_topic(EMBED_IMU_TOPIC, taken)))
+    if gnss_topic is None or gnss_topic in short:
+        fix, *vel = _encoded_gnss(recording, with_velocity=True)
+        encoded.append(replace(fix, topic=gnss_topic or _free_topic(EMBED_GNSS_TOPIC, taken)))
+        encoded += [replace(v, topic=_free_topic(EMBED_GNSS_VEL_TOPIC, taken) if vel_topic is None else vel_topic)
+                    for v in vel]
+    elif (vel_topic is None or vel_topic in short) and g.vel_enu is not None:
+        encoded += [replace(v, topic=vel_topic or _free_topic(EMBED_GNSS_VEL_TOPIC, taken))
+                    for v in _encoded_gnss(recording, with_velocity=True)[1:]]
+    if od is not None and (odom_topic is None or odom_topic in short):
+        encoded += [replace(o, topic=odom_topic or _free_topic(EMBED_ODOMETRY_TOPIC, taken))
+                    for o in _encoded_odometry(recording)]
+    copied_imu = None if imu_topic in short else imu_topic
+    copied_gnss = None if gnss_topic in short else gnss_topic
+    return _Embedded(streams + encoded, skipped, _header_frames(streams, copied_imu),
+                     _header_frames(streams, copied_gnss))
+
+
+def _raw_mcap_streams(paths: Sequence[Path]) -> tuple[list[_Stream], list[str]]:
+    """Every channel of the MCAP files ``paths`` (read together, e.g. the storage files of a
+    ROS 2 bag), its Message records copied as they are (:func:`_copy_topics`), except the topics
+    named like navpp's output topics and channels that are neither CDR nor ROS 1 encoded: those
+    are listed, one line per topic.  A ROS 1 encoded channel is converted to ROS 2 CDR
+    (:func:`_ros1_channel_as_cdr`).  Channels of the same topic, schema and metadata are joined
+    into one."""
+    streams: list[_Stream] = []
+    for p in paths:
+        streams += _copy_topics(p, None)
+    skipped: dict[str, str] = {}
+    kept: list[_Stream] = []
+    stores: list[Any] = []              # the ROS 1 and ROS 2 typestores, made for the first ROS 1 channel
+    for s in streams:
+        if _output_topic_collision(s.topic):
+            skipped.setdefault(s.topic, f"{s.topic} ({s.schema_name}): a navpp output topic")
+        elif s.message_encoding == "ros1":
+            try:
+                kept.append(_ros1_channel_as_cdr(s, stores))
+            except Exception as exc:  # noqa: BLE001 -- any failure: the type cannot be converted
+                skipped.setdefault(s.topic, f"{s.topic} ({s.schema_name}): cannot convert the ROS 1 type ({exc})")
+        elif s.message_encoding != "cdr":
+            skipped.setdefault(s.topic, f"{s.topic} ({s.schema_name}): {s.message_encoding or 'no'} encoding, not "
+                                        "ROS 2 CDR (trajectory.mcap is a ros2-profile file)")
+        else:
+            kept.append(s)
+    types: dict[str, set[str]] = {}
+    for s in kept:
+        types.setdefault(s.topic, set()).add(s.schema_name)
+    for topic, names in types.items():
+        if len(names) > 1:
+            skipped[topic] = f"{topic} ({', '.join(sorted(names))}): more than one message type"
+    return _joined([s for s in kept if s.topic not in skipped]), list(skipped.values())
+
+
+def _ros1_channel_as_cdr(stream: _Stream, stores: list[Any]) -> _Stream:
+    """A ROS 1 encoded MCAP channel as ROS 2 CDR, as a ROS 1 bag's topics are embedded
+    (:func:`_ros1_input_streams`): each message deserialised with rosbags from the channel's own
+    ``ros1msg`` schema and serialised as the ROS 2 Humble type of the same name (only
+    ``header.seq`` does not carry over); log and publish times and sequence numbers kept, the
+    ROS 1 channel metadata (md5sum, callerid, latching) not.
+    ``stores``: [ROS 1, ROS 2] typestores, filled on first use and shared across channels."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    from .ros import normalise_type
+
+    if not stores:
+        stores += [get_typestore(Stores.ROS1_NOETIC), get_typestore(Stores.ROS2_HUMBLE)]
+    ts1, ts2 = stores
+    if stream.schema_encoding != "ros1msg":
+        raise ValueError(f"schema encoding {stream.schema_encoding!r}, not ros1msg")
+    found = get_types_from_msg(stream.schema_data.decode(), stream.schema_name)
+    msgtype = next(k for k in found if normalise_type(k) == normalise_type(stream.schema_name))
+    ts1.register({k: v for k, v in found.items() if k not in ts1.fielddefs})
+    ts2.register({k: v for k, v in found.items() if k not in ts2.fielddefs})
+    assert isinstance(stream.payloads, _Raw)
+    data = [bytes(ts2.serialize_cdr(ts1.deserialize_ros1(d, msgtype), msgtype)) for d in stream.payloads.data]
+    schema = roswrite.MSGDEFS.get(msgtype) or ts2.generate_msgdef(msgtype, ros_version=2)[0]
+    return replace(stream, schema_name=msgtype, schema_encoding="ros2msg", schema_data=schema.encode(),
+                   message_encoding="cdr", payloads=_Raw(data), metadata={})
+
+
+def _joined(streams: Sequence[_Stream]) -> list[_Stream]:
+    """Streams of the same topic, schema, encoding and channel metadata as one (log-time order)."""
+    groups: dict[tuple[Any, ...], list[_Stream]] = {}
+    for s in streams:
+        key = (s.topic, s.schema_name, s.schema_encoding, s.schema_data, s.message_encoding,
+               tuple(sorted(s.metadata.items())))
+        groups.setdefault(key, []).append(s)
+    out = []
+    for group in groups.values():
+        if len(group) == 1:
+            out.append(group[0])
+            continue
+        log = np.concatenate([s.log_ns for s in group])
+        order = np.argsort(log, kind="stable")
+        data = [d for s in group for d in s.payloads.block(0, len(s))]
+        out.append(replace(group[0], log_ns=log[order],
+                           publish_ns=np.concatenate([s.publish_ns for s in group])[order],
+                           sequence=np.concatenate([s.sequence for s in group])[order],
+                           payloads=_Raw([data[i] for i in order.tolist()])))
+    return out
+
+
+def _raw_ros2_streams(path: Path) -> tuple[list[_Stream], list[str]]:
+    """Every topic of a ROS 2 bag directory as it was.  MCAP storage without per-message
+    compression: the storage files' records copied (:func:`_raw_mcap_streams`: payloads, log
+    and publish times, sequence, schemas, QoS metadata).  Otherwise (sqlite3, compressed files or messages) read with
+    rosbags: the CDR payloads as stored (after the bag's own decompression), log time = publish
+    time = the bag's receive time (all a sqlite3 bag keeps), the schema the bag's message
+    definition (else ROS 2 Humble's), the offered QoS profiles as rosbag2 writes them.  Topics
+    named like navpp's output topics, not CDR encoded, of several types, or without a definition
+    are left out and listed."""
+    from rosbags.rosbag2 import Reader
+
+    from navpp.io.mcap import MCAP_MAGIC
+
+    ts = _humble_typestore()
+    streams: list[_Stream] = []
+    skipped: list[str] = []
+    with Reader(path) as reader:
+        files = sorted(path.glob("*.mcap"))
+        plain = (not reader.compression_mode and bool(files) and all(_starts_with(f, MCAP_MAGIC) for f in files)
+                 and not any(f.is_file() and not f.name.endswith(".mcap") and f.name != "metadata.yaml"
+                             for f in path.iterdir()))
+        if plain:            # mcap storage, payloads not compressed one by one: copy the records
+            return _raw_mcap_streams(files)
+        topics: dict[str, list[Any]] = {}
+        for conn in reader.connections:
+            topics.setdefault(conn.topic, []).append(conn)
+        for topic, conns in topics.items():
+            msgtype = conns[0].msgtype
+            encoding = getattr(conns[0].ext, "serialization_format", "cdr") or "cdr"
+            schema = _ros2_schema(conns[0], ts)
+            reason = ("a navpp output topic" if _output_topic_collision(topic)
+                      else "more than one message type" if any(c.msgtype != msgtype for c in conns)
+                      else f"{encoding} encoding, not ROS 2 CDR" if encoding != "cdr"
+                      else "no message definition in the bag, and not a ROS 2 Humble type" if schema is None
+                      else "")
+            if reason:
+                skipped.append(f"{topic} ({msgtype}): {reason}")
+                continue
+            assert schema is not None
+            log, data = [], []
+            for _, stamp, raw in reader.messages(connections=conns):
+                log.append(int(stamp))
+                data.append(bytes(raw))
+            log_ns = np.asarray(log, dtype=np.int64)
+            order = np.argsort(log_ns, kind="stable")
+            qos = _qos_yaml(getattr(conns[0].ext, "offered_qos_profiles", None))
+            streams.append(_Stream(topic, msgtype, schema[0], schema[1], "cdr", log_ns[order], log_ns[order],
+                                   np.arange(log_ns.size, dtype=np.int64), _Raw([data[i] for i in order.tolist()]),
+                                   {"offered_qos_profiles": qos} if qos else {}))
+    return streams, skipped
+
+
+def _starts_with(path: Path, magic: bytes) -> bool:
+    try:
+        with open(path, "rb") as f:
+            return f.read(len(magic)) == magic
+    except OSError:
+        return False
+
+
+def _ros2_schema(conn: Any, ts: Any) -> tuple[str, bytes] | None:
+    """(schema encoding, schema data) of a rosbag2 connection: its stored definition (``.msg``
+    or ``.idl``), else ROS 2 Humble's for a standard type, else None."""
+    msgdef = getattr(conn, "msgdef", None)
+    text = getattr(msgdef, "data", "") if msgdef is not None else ""
+    if text:
+        fmt = str(getattr(getattr(msgdef, "format", None), "name", "MSG"))
+        return ("ros2idl" if fmt == "IDL" else "ros2msg"), text.encode()
+    if conn.msgtype in roswrite.MSGDEFS:
+        return "ros2msg", roswrite.MSGDEFS[conn.msgtype].encode()
+    if conn.msgtype in ts.fielddefs:
+        return "ros2msg", ts.generate_msgdef(conn.msgtype, ros_version=2)[0].encode()
+    return None
+
+
+def _qos_yaml(profiles: Any) -> str:
+    """rosbags' offered QoS profiles as the YAML text rosbag2 keeps in a channel's
+    ``offered_qos_profiles`` (rosbags' own dump); '' when there are none."""
+    if not profiles:
+        return ""
+    if isinstance(profiles, str):
+        return profiles
+    from rosbags.rosbag2.metadata import dump_qos_v8
+
+    return str(dump_qos_v8(list(profiles)))
+
+
+def _ros1_input_streams(path: Path, recording: Recording) -> _Embedded:
     """Every topic of a ROS 1 bag (a ``.bag`` file, or every ``.bag`` in a directory) as it was:
     same topic names, message types and field values, each message converted to ROS 2 CDR
     (rosbags: ROS 1 deserialise, ROS 2 Humble serialise; the ROS 1 ``header.seq``, which ROS 2
     messages do not have, is the only field that does not carry over), log time = the bag's
     receive time, schemas the ROS 2 definitions.  A topic named like one of navpp's output
-    topics (:data:`TOPICS`, e.g. an input ``/tf``) is left out, and so is a type neither ROS 2
+    topics (e.g. an input ``/tf``) is left out, and so is a type neither ROS 2
     Humble nor the bag's own definitions describe; both are listed in the file's metadata
     (``embedded_input_skipped``, :func:`write_trajectory_mcap`).  When the recording's GNSS is
     not one of the bag's NavSatFix topics (``--gnss FILE.pos``), it is encoded as for a CSV
@@ -497,13 +810,15 @@ def _ros1_input_streams(path: Path, recording: Recording) -> tuple[list[_Stream]
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-    from .ros import FIX_TYPE
+    from .ros import FIX_TYPE, IMU_TYPE, normalise_type
 
     ts2 = _humble_typestore()
     paths = sorted(path.glob("*.bag")) if path.is_dir() else [path]
     streams: list[_Stream] = []
     skipped: list[str] = []
     fix_found = False
+    imu_topic = gnss_topic = None
+    want_imu = roswrite.stamps_ns(recording, recording.imu.t)
     g = recording.gnss
     with AnyReader(paths, default_typestore=ts2) as reader:
         topics: dict[str, list[Any]] = {}
@@ -511,8 +826,9 @@ def _ros1_input_streams(path: Path, recording: Recording) -> tuple[list[_Stream]
             topics.setdefault(conn.topic, []).append(conn)
         for topic, conns in topics.items():
             msgtype = conns[0].msgtype
-            if topic in TOPICS or any(c.msgtype != msgtype for c in conns):
-                skipped.append(f"{topic} ({msgtype}): " + ("a navpp output topic" if topic in TOPICS
+            collides = _output_topic_collision(topic)
+            if collides or any(c.msgtype != msgtype for c in conns):
+                skipped.append(f"{topic} ({msgtype}): " + ("a navpp output topic" if collides
                                                           else "more than one message type"))
                 continue
             if msgtype not in ts2.fielddefs:
@@ -524,17 +840,25 @@ def _ros1_input_streams(path: Path, recording: Recording) -> tuple[list[_Stream]
                 except Exception as exc:  # noqa: BLE001 -- any failure: the type cannot be converted
                     skipped.append(f"{topic} ({msgtype}): cannot convert the type ({exc})")
                     continue
-            log, data, lats, lons = [], [], [], []
+            role = normalise_type(msgtype)      # rosbags names ROS 1 types as ROS 2 ones
+            log, data, lats, lons, stamps = [], [], [], [], []
             for conn, stamp, raw in reader.messages(connections=conns):
                 msg = reader.deserialize(raw, conn.msgtype)
                 log.append(int(stamp))
                 data.append(bytes(ts2.serialize_cdr(msg, msgtype)))
-                if msgtype == FIX_TYPE:
+                if role == FIX_TYPE:
                     lats.append(msg.latitude)
                     lons.append(msg.longitude)
-            if msgtype == FIX_TYPE and len(g) and _contains_all(np.array(lats), g.lat_deg) \
+                elif role == IMU_TYPE:
+                    stamps.append(int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec))
+            if role == FIX_TYPE and len(g) and _contains_all(np.array(lats), g.lat_deg) \
                     and _contains_all(np.array(lons), g.lon_deg):
                 fix_found = True
+                gnss_topic = gnss_topic or topic
+            if role == IMU_TYPE and imu_topic is None and (
+                    _contains_all(np.array(stamps, dtype=np.int64), want_imu)
+                    or _contains_all(np.array(log, dtype=np.int64), want_imu)):
+                imu_topic = topic
             schema = roswrite.MSGDEFS.get(msgtype) or ts2.generate_msgdef(msgtype, ros_version=2)[0]
             log_ns = np.asarray(log, dtype=np.int64)
             order = np.argsort(log_ns, kind="stable")
@@ -546,7 +870,7 @@ def _ros1_input_streams(path: Path, recording: Recording) -> tuple[list[_Stream]
         if EMBED_GNSS_TOPIC in taken:
             enc = [replace(e, topic="/navpp/input" + e.topic) for e in enc]
         streams += enc
-    return streams, skipped
+    return _Embedded(streams, skipped, _header_frames(streams, imu_topic), _header_frames(streams, gnss_topic))
 
 
 @functools.cache
@@ -575,73 +899,9 @@ def _contains_all(have: np.ndarray, values: np.ndarray) -> bool:
     return bool(np.all(have[idx] == values))
 
 
-def _mcap_input_streams(path: Path, recording: Recording) -> list[_Stream]:
-    """Find the MCAP topics the recording's IMU and GNSS came from; copy them or encode."""
-    from navpp.io.detect import gnss_velocity_topics
-    from navpp.io.mcap import list_topics, read_mcap
-    from navpp.io.ros import FIX_TYPE, IMU_TYPE, ODOMETRY_TYPES, VELOCITY_TYPES
-
-    infos = list_topics(path)
-    cdr = [t for t in infos if t.encoding == "cdr"]
-    exclude = _reference_topic(recording)
-    imu_cands = [t.topic for t in cdr if t.msgtype == IMU_TYPE]
-    fix_cands = [t.topic for t in cdr if t.msgtype == FIX_TYPE and t.topic != exclude]
-    od = recording.odometry
-    odom_cands = [t.topic for t in cdr if od is not None and t.topic == od.source and t.msgtype in ODOMETRY_TYPES]
-    vel_cands = [t.topic for t in infos if t.msgtype in VELOCITY_TYPES]
-    decode = list(dict.fromkeys(imu_cands + fix_cands + odom_cands + vel_cands))
-    contents = read_mcap(path, decode) if decode else None
-
-    imu_topic = None
-    gnss_topic = None
-    g = recording.gnss
-    if contents is not None:
-        want = roswrite.stamps_ns(recording, recording.imu.t)
-        for topic in imu_cands:
-            imu = contents.imu[topic]
-            if _contains_all(imu.stamp_ns, want) or _contains_all(imu.log_ns, want):
-                imu_topic = topic
-                break
-        for topic in fix_cands:
-            fix = contents.fix[topic]
-            if _contains_all(fix.lat_deg, g.lat_deg) and _contains_all(fix.lon_deg, g.lon_deg):
-                gnss_topic = topic
-                break
-    odom_topic = None
-    if contents is not None and od is not None and odom_cands:
-        msgs = contents.twist[odom_cands[0]]
-        want = roswrite.stamps_ns(recording, od.t)
-        if _contains_all(msgs.stamp_ns, want) or _contains_all(msgs.log_ns, want):
-            odom_topic = odom_cands[0]
-    vel_topic = None
-    twists = gnss_velocity_topics(contents, od.source if od is not None else None) if contents is not None else []
-    encodings = {t.topic: t.encoding for t in infos}
-    if gnss_topic is not None and g.vel_enu is not None and len(twists) == 1 and encodings[twists[0]] == "cdr":
-        vel_topic = twists[0]
-
-    copied = [t for t in (imu_topic, gnss_topic, vel_topic, odom_topic) if t is not None]
-    streams = _copy_topics(path, copied) if copied else []
-    # a cut-off file: the reader may have decoded messages a copy cannot take whole; encode instead
-    expected = {t.topic: t.count for t in infos}
-    short: set[str | None] = {t for t in copied if sum(len(s) for s in streams if s.topic == t) != expected[t]}
-    if gnss_topic in short:
-        short.add(vel_topic)
-    streams = [s for s in streams if s.topic not in short]
-    imu_topic, gnss_topic, vel_topic, odom_topic = (None if t in short else t
-                                                    for t in (imu_topic, gnss_topic, vel_topic, odom_topic))
-    if imu_topic is None:
-        streams.append(_encoded_imu(recording))
-    if gnss_topic is None:
-        streams += _encoded_gnss(recording, with_velocity=True)
-    elif vel_topic is None and g.vel_enu is not None:
-        streams += _encoded_gnss(recording, with_velocity=True)[1:]
-    if odom_topic is None:
-        streams += _encoded_odometry(recording)
-    return streams
-
-
-def _copy_topics(path: Path, topics: Sequence[str]) -> list[_Stream]:
-    """The Message records of ``topics`` in the data section (one stream per input channel), with
+def _copy_topics(path: Path, topics: Sequence[str] | None) -> list[_Stream]:
+    """The Message records of ``topics`` (None: every topic) in the data section (one stream per
+    input channel), with
     their schemas and channels, read with ``mcap``'s streaming reader.  Reading stops at the data
     section's end or before a record the file does not hold whole (a cut-off recording)."""
     from mcap.exceptions import EndOfFile
@@ -667,7 +927,7 @@ def _copy_topics(path: Path, topics: Sequence[str]) -> list[_Stream]:
             elif isinstance(record, Channel):
                 if record.id not in channels:
                     channels[record.id] = record
-                    if record.topic in topics:
+                    if topics is None or record.topic in topics:
                         wanted.add(record.id)
                         messages[record.id] = []
             elif isinstance(record, (DataEnd, Footer)):
@@ -794,7 +1054,8 @@ def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, r
                           input_log: str | os.PathLike[str] | None = None, filter_name: str = "",
                           forward: Solution | None = None, chunk_size: int = CHUNK_SIZE,
                           compression: str = "zstd", imu_mounting_rpy_deg: Sequence[float] = (0.0, 0.0, 0.0),
-                          gnss_lever_arm_m: Sequence[float] = (0.0, 0.0, 0.0), rate_noise_std: float = 0.0) -> None:
+                          gnss_lever_arm_m: Sequence[float] = (0.0, 0.0, 0.0), rate_noise_std: float = 0.0
+                          ) -> list[str]:
     """Write ``trajectory.mcap``: the solution, biases and filter diagnostics as ROS 2 messages.
 
     See the module docstring for the topics, frames, units and covariances.
@@ -809,8 +1070,8 @@ def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, r
     diagnostics : :class:`navpp.engine.Diagnostics` -> ``/navpp/diagnostics``; None: no topic.
     biases : :class:`navpp.engine.BiasHistory` -> ``/navpp/bias/gyro``, ``/navpp/bias/accel``;
         None: no topics.
-    embed_input : also write the input IMU and GNSS messages (copied from an MCAP
-        ``input_log``, else encoded from ``recording``).
+    embed_input : also write the input log, every topic as it was (module docstring: copied from
+        an MCAP file or a ROS 2 bag, converted from ROS 1, encoded from ``recording`` for CSV).
     input_log : the input log's path (used with ``embed_input``).
     filter_name : recorded in the file's ``navpp`` metadata.
     forward : for a smoothed ``solution``, the forward filter's solution (same rows' time base):
@@ -826,6 +1087,11 @@ def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, r
     rate_noise_std : rad/s, the gyro's white noise per sample (``[imu]`` ARW x sqrt(IMU rate)),
         added to the angular-velocity variance of ``/navpp/odometry``.
 
+    Returns
+    -------
+    list of str : the input topics ``embed_input`` left out, one ``"TOPIC (TYPE): reason"`` each
+        (also the file's ``embedded_input_skipped`` metadata); empty without ``embed_input``.
+
     Raises
     ------
     ValueError
@@ -839,12 +1105,14 @@ def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, r
 
     static = (rpy_deg_to_dcm(np.asarray(imu_mounting_rpy_deg, dtype=float).reshape(3)),
               np.asarray(gnss_lever_arm_m, dtype=float).reshape(3))
+    embedded = _input_streams(recording, input_log) if embed_input else _Embedded([])
+    linked = [f for f in (*embedded.imu_frames, *embedded.gnss_frames)
+              if f not in (MAP_FRAME, ODOM_FRAME, BODY_FRAME, IMU_FRAME, GNSS_FRAME)]
     streams, anchor = _solution_streams(solution, recording, diagnostics, biases, forward, static=static,
-                                        rate_noise_std=rate_noise_std)
-    skipped: list[str] = []
-    if embed_input:
-        embedded, skipped = _input_streams(recording, input_log)
-        streams = embedded + streams
+                                        rate_noise_std=rate_noise_std,
+                                        input_frames=(embedded.imu_frames, embedded.gnss_frames))
+    streams = embedded.streams + streams
+    skipped = embedded.skipped
     metadata = {
         "filter": filter_name,
         "solution": "smoothed (Rauch-Tung-Striebel)" if forward is not None else "forward",
@@ -857,9 +1125,10 @@ def write_trajectory_mcap(path: str | os.PathLike[str], *, solution: Solution, r
         "map_anchor_alt_m": repr(anchor.alt),
         "body_frame": "FLU (x forward, y left, z up)",
         "tf_tree": "map -> odom (static identity) -> base_link (/tf); base_link -> imu_link, base_link -> gnss "
-                   "(/tf_static)",
+                   + "".join(f", base_link -> {f}" for f in dict.fromkeys(linked)) + " (/tf_static)",
         "not_estimated_variance": repr(NOT_ESTIMATED_VARIANCE),
     }
     if skipped:
         metadata["embedded_input_skipped"] = "; ".join(skipped)
     _write(path, streams, metadata, chunk_size=chunk_size, compression=compression)
+    return skipped
