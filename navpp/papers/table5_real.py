@@ -34,12 +34,16 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import ConfigError, NavppError
 from .filter_spec import parse_filter_spec
 from .registry import BenchResult, Row, register_benchmark
+
+if TYPE_CHECKING:
+    from ..config import Config
 
 NAME = "paper001-table5-real"
 ENV = "NAVPP_REAL_DATA"
@@ -116,7 +120,7 @@ def east_north_errors(t_ref: np.ndarray, lat_ref_deg: np.ndarray, lon_ref_deg: n
     zero = np.zeros(len(t_ref))
     a = geodesy.geodetic_to_enu(np.radians(lat), np.radians(lon), zero, lat0, lon0, 0.0)
     b = geodesy.geodetic_to_enu(np.radians(lat_ref_deg), np.radians(lon_ref_deg), zero, lat0, lon0, 0.0)
-    return (a - b)[:, :2]
+    return np.asarray((a - b)[:, :2], dtype=float)
 
 
 def _held(t_fix: np.ndarray, t_query: np.ndarray) -> np.ndarray:
@@ -124,7 +128,7 @@ def _held(t_fix: np.ndarray, t_query: np.ndarray) -> np.ndarray:
     return np.searchsorted(t_fix, t_query, side="left") - 1
 
 
-def _config(log: RealLog, filt: str, seed: int):
+def _config(log: RealLog, filt: str, seed: int) -> tuple[str, Config]:
     from ..config import AutoConfig, load_config
 
     cfg = load_config(log.config)
@@ -169,7 +173,7 @@ def _walk_held(log: RealLog) -> np.ndarray:
                              g["lat"].to_numpy()[k], g["lon"].to_numpy()[k])
 
 
-def _car_fixes(log: RealLog):
+def _car_fixes(log: RealLog) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     from .. import api
     from ..config import Config
 
