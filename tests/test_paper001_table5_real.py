@@ -88,3 +88,17 @@ def test_without_a_data_path_the_shipped_walk_is_used(monkeypatch):
     logs, notes = table5_real.find_logs()
     assert [log.folder for log in logs] == [WALK] and logs[0].reference == WALK / "reference.csv"
     assert any(table5_real.ENV in n for n in notes)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (ROOT.parent / "shared" / "data" / "real" / "car_balzer82").is_dir(),
+                    reason="needs ../shared/data/real/car_balzer82 (not shipped)")
+def test_the_car_gives_bench_reals_figure_for_the_ekf(monkeypatch):
+    real = ROOT.parent / "shared" / "data" / "real"
+    monkeypatch.setenv(table5_real.ENV, str(real))
+    logs, _ = table5_real.find_logs()
+    (car,) = [log for log in logs if log.name == "car_balzer82"]
+    ours = table5_real.figures(table5_real._car_errors(car, "ekf", 0))["h_rmse"]
+    line = _bench_real()._car(real, "ekf", None)
+    h_rmse = float(re.search(r"H RMSE vs withheld fixes\s+([\d.]+) m", line).group(1))
+    assert ours == pytest.approx(h_rmse, abs=0.02), (ours, line)

@@ -207,14 +207,17 @@ def _car_held(log: RealLog) -> np.ndarray:
 
 
 def figures(err: np.ndarray) -> dict[str, float]:
-    """MAE and RMSE (m) of the east (longitude) and north (latitude) columns of ``err`` (K, 2)."""
+    """MAE and RMSE (m) of the east (longitude) and north (latitude) columns of ``err`` (K, 2),
+    and the horizontal RMSE (bench_real's figure)."""
     e, n = err[:, 0], err[:, 1]
     return {"lon_mae": float(np.mean(np.abs(e))), "lon_rmse": math.sqrt(float(np.mean(e ** 2))),
-            "lat_mae": float(np.mean(np.abs(n))), "lat_rmse": math.sqrt(float(np.mean(n ** 2)))}
+            "lat_mae": float(np.mean(np.abs(n))), "lat_rmse": math.sqrt(float(np.mean(n ** 2))),
+            "h_rmse": math.sqrt(float(np.mean(e ** 2 + n ** 2)))}
 
 
 _QUANTITIES = (("lon_mae", "longitude (east) MAE", 0, 0), ("lon_rmse", "longitude (east) RMSE", 0, 1),
-               ("lat_mae", "latitude (north) MAE", 1, 0), ("lat_rmse", "latitude (north) RMSE", 1, 1))
+               ("lat_mae", "latitude (north) MAE", 1, 0), ("lat_rmse", "latitude (north) RMSE", 1, 1),
+               ("h_rmse", "horizontal RMSE", -1, -1))
 
 
 def _rows(log: str, filt: str, runs: list[dict[str, float]]) -> list[Row]:
@@ -222,8 +225,9 @@ def _rows(log: str, filt: str, runs: list[dict[str, float]]) -> list[Row]:
     paper = PAPER_TABLE5.get(filt)
     for key, label, i, j in _QUANTITIES:
         v = np.array([r[key] for r in runs])
-        note = f"mean of {v.size} seeds, sd {np.std(v, ddof=1):.2f} m" if v.size > 1 else ""
-        rows.append(Row(f"{log} {label}", filt, float(v.mean()), paper[i][j] if paper else None, "m", note))
+        note = f"mean of {v.size} seeds, sd {np.std(v, ddof=1):.3f} m" if v.size > 1 else ""
+        rows.append(Row(f"{log} {label}", filt, float(v.mean()), paper[i][j] if paper and i >= 0 else None, "m",
+                        note))
     return rows
 
 
