@@ -244,15 +244,15 @@ def run_table5_real(runs: int, seed: int, filters: Sequence[str], data: str | Pa
             try:
                 got = [figures(_walk_errors(log, filt, s) if walk else _car_errors(log, filt, s)) for s in seeds]
             except NavppError as exc:
-                notes.append(f"{log.name} {filt}: failed: {str(exc)[:160]}")
+                notes.append(f"{log.name} {filt}: failed: {str(exc)[:240]}")
                 continue
             rows += _rows(log.name, filt, got)
     notes += [
         "paper: a car, SINS 125 Hz + GPS 5 Hz, 1000 s, DGPS reference (0.5 m), GNSS used throughout; here "
         "the errors are inside GNSS windows withheld from the filters (IMU alone), against RTK fixes "
         "(walk_0827, 2 x 15 s) or the withheld consumer fixes themselves (car_balzer82, 6 x 10 s, 3-5 m errors)",
-        f"{HELD}: a receiver holding its last fix through each window; rwckf and sif: seeds {seed}.."
-        f"{seed + runs - 1}, sd = seed-to-seed standard deviation",
+        f"{HELD}: a receiver holding its last fix through each window; filters with a seed option (rwckf, "
+        f"sif): seeds {seed}..{seed + runs - 1}, sd = seed-to-seed standard deviation; the others: one run",
     ]
     return BenchResult(NAME, "Paper 001 Table 5 protocol on real logs (longitude/latitude MAE, RMSE)", rows, notes,
                        runs, seed)
