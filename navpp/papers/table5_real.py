@@ -248,7 +248,7 @@ def run_table5_real(runs: int, seed: int, filters: Sequence[str], data: str | Pa
                 continue
             rows += _rows(log.name, filt, got)
     notes += [
-        "paper: a car, SINS 125 Hz + GPS 5 Hz, 1000 s, DGPS reference (0.5 m), GNSS used throughout; here "
+        "paper: a car, SINS 125 Hz + GPS 5 Hz, 1000 s, DGPS reference (0.5 m), GPS outages not stated; here "
         "the errors are inside GNSS windows withheld from the filters (IMU alone), against RTK fixes "
         "(walk_0827, 2 x 15 s) or the withheld consumer fixes themselves (car_balzer82, 6 x 10 s, 3-5 m errors)",
         f"{HELD}: a receiver holding its last fix through each window; filters with a seed option (rwckf, "
