@@ -17,7 +17,7 @@ from navpp.papers import montecarlo, sins, tracking, turn
 from navpp.papers.simulated import OneMeasurementPerEpoch, measurement_epochs
 
 PACKAGE = Path(papers.__file__).parent
-EXPERIMENTS = {"tracking", "sins", "bearing", "turn"}
+EXPERIMENTS = {"tracking", "sins", "bearing", "turn", "table5_real"}
 
 
 def _imports(path: Path) -> list[tuple[str, list[str]]]:
@@ -36,8 +36,11 @@ def _imports(path: Path) -> list[tuple[str, list[str]]]:
 
 @pytest.mark.parametrize("path", sorted(PACKAGE.glob("*.py")), ids=lambda p: p.name)
 def test_papers_import_no_application_layer_and_no_private_name(path):
+    # table5_real scores real logs, so it runs them as the application does (navpp.api, config);
+    # it still stays out of the command line
+    app_layer = ("navpp.cli",) if path.name == "table5_real.py" else ("navpp.api", "navpp.config", "navpp.cli")
     for mod, names in _imports(path):
-        assert mod not in ("navpp.api", "navpp.config", "navpp.cli"), (path.name, mod)
+        assert mod not in app_layer, (path.name, mod)
         # the package's own modules: no private name; elsewhere: only the listed leftover
         private = [n for n in names if n.startswith("_") and n != "__future__"]
         allowed: set[tuple[str, str]] = set()
@@ -51,7 +54,8 @@ def test_only_the_package_init_imports_the_experiments():
         imported = {mod.rsplit(".", 1)[-1] for mod, names in _imports(path) if mod.startswith("navpp.papers")}
         imported |= {n for mod, names in _imports(path) if mod == "navpp.papers" for n in names}
         assert not imported & EXPERIMENTS, (path.name, imported & EXPERIMENTS)
-    assert set(papers.BENCHMARKS) == {"paper001-tracking", "paper002-sins", "paper003-bearing", "paper003-turn"}
+    assert set(papers.BENCHMARKS) == {"paper001-tracking", "paper002-sins", "paper003-bearing", "paper003-turn",
+                                      "paper001-table5-real"}
 
 
 def test_one_measurement_per_epoch_source():
