@@ -232,7 +232,7 @@ def run_tracking(runs: int, seed: int, filters: Sequence[str]) -> BenchResult:
                        + (f" (paper {lo_hi[0]:.2f}-{lo_hi[1]:.2f})" if lo_hi else ""))
         note = f"paper {lo_hi[0]:.2f}-{lo_hi[1]:.2f} m, midpoint shown" if lo_hi else "no paper figure"
         rows.append(Row("position RMSE", name, rmse(s.err, (0, 2)), None if lo_hi is None else 0.5 * sum(lo_hi),
-                        "m", "; ".join(x for x in (note, _interval_note(s.err) if s.err.shape[0] > 1 else "",
+                        "m", "; ".join(x for x in (note, _interval_note(s.err),
                                            diverged_note(s, valid)) if x)))
         curve = rmse_curve(s.err, (0, 2))
         anees = np.mean(s.nees, axis=0) / 4.0 if s.nees.size else np.full(TRACK_STEPS, np.nan)
@@ -306,6 +306,9 @@ def _tracking_reading_rows(runs: int, seed: int) -> list[Row]:
 
 
 def _interval_note(err: np.ndarray) -> str:
+    """The 95 % interval over runs of the position RMSE, as a row note ("" under two runs)."""
+    if err.shape[0] < 2:
+        return ""
     lo, hi = rmse_interval(err)
     return f"95 % interval over runs {lo:.3f}-{hi:.3f} m"
 
@@ -354,11 +357,12 @@ def _tracking_best_rows(cases: list[Case], seed: int, g_at: str, suffix: str,
                     for r, c in done])
     seconds = (time.perf_counter() - t0) / len(done)
     pf = rmse(err, (0, 2))
-    note = [f"{PF_PARTICLES} particles, over {len(done)} runs", _interval_note(err)]
+    note = [x for x in (f"{PF_PARTICLES} particles, over {len(done)} runs", _interval_note(err)) if x]
     if kf is not None and all(kf[r] is not None and kf[r].error is None for r, _ in done):
         kf_err = np.array([kf[r].x - c.truth[1:] for r, c in done])
         lo, hi = ratio_interval(kf_err, err)
-        note.append(f"Kalman filter / PF = {rmse(kf_err, (0, 2)) / pf:.3f} (paired 95 % {lo:.3f}-{hi:.3f})")
+        note.append(f"Kalman filter / PF = {rmse(kf_err, (0, 2)) / pf:.3f}"
+                    + (f" (paired 95 % {lo:.3f}-{hi:.3f})" if len(done) > 1 else ""))
     rows.append(Row(f"position RMSE, particle filter that knows g{suffix}", "pf", pf, None, "m", "; ".join(note)))
     rows.append(Row("run time per run", f"pf{suffix.replace(', reading', ',')}", seconds, None, "s",
                     "particle filter, numpy, vectorised"))
@@ -370,7 +374,7 @@ def _tracking_best_rows(cases: list[Case], seed: int, g_at: str, suffix: str,
             f"{bound_se:.4f} m); the one-step bound 0.707 m is loose because it gives the estimator x_(k-1) "
             f"exactly, while any real estimator carries the previous step's error forward through Phi and g. "
             f"A bootstrap particle filter that knows g and the truth's Q0 ({PF_PARTICLES} particles) reaches "
-            f"{pf:.3f} m, an empirical best (doubling the particles moves it by < 0.1 %, docs/papers.md); the "
+            f"{pf:.3f} m, an empirical best (doubling the particles moves it by about 0.1 %, docs/papers.md); the "
             f"PF's run time is {seconds * 1e3:.0f} ms per run. Under the implicit reading g(x_k) the PCRB and the "
             f"PF are in the rows marked so; no truth runs away there.")
     return rows, notes, series
