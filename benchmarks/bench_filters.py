@@ -72,16 +72,16 @@ def main() -> None:
         for c in cases:
             rec = replace(base, gnss=replace(base.gnss, std_enu=base.gnss.std_enu * c))
             for n in names:
-                base, cfg = cfgs[n]
+                fname, cfg = cfgs[n]
                 t0 = time.perf_counter()
                 try:
-                    res = engine.run(rec, cfg, api.make_filter(base, cfg))
+                    res = engine.run(rec, cfg, api.make_filter(fname, cfg))
                 except NavppError:
                     failed[(n, c)] += 1
                     continue
                 if c == 1.0:
                     wall[n].append(time.perf_counter() - t0)
-                m = compute_metrics(res.solution, rec.reference, filter_name=base, log="sim", reference="truth",
+                m = compute_metrics(res.solution, rec.reference, filter_name=fname, log="sim", reference="truth",
                                     runtime_s=res.runtime_s, imu_samples=len(rec.imu), gnss_epochs=res.gnss_epochs,
                                     gnss_rejected=res.gnss_rejected, gnss=rec.gnss, lever_arm_m=(0, 0, 0))
                 h[(n, c)][seed] = m["position_m"]["horizontal"]["rmse"]
