@@ -139,8 +139,9 @@ def test_rwckf_nees_within_the_bound_of_its_weight_shift():
     ``b = E[max of C χ²_n]/(m+1)``; a linear update does not enlarge it in the posterior's
     norm (``(I-KH)ᵀ P⁺⁻¹ (I-KH) ≤ P⁻⁻¹``). By Minkowski's inequality the ANEES is then at most
     ``(√ANEES_ckf + √b)²`` (C = 1, the default, n = 4: b = 4/9, about 6.9 for the CKF's 3.8;
-    with C = 16, the default before issue 20, b = 1.15 and about 9.1). Its covariance being the CKF's, it cannot be pessimistic either: the
-    lower end of the chi-square band of a consistent filter holds.
+    with C = 16, the default before issue 20, b = 1.15 and about 9.1). Its covariance being the
+    CKF's, it cannot be pessimistic either: the lower end of the chi-square band of a consistent
+    filter holds.
     """
     runs = 20
     nees = _nees_runs("rwckf", runs)
