@@ -100,7 +100,7 @@ def test_aukf_update_equals_hand_computed_fading(predictions):
     Phi, Q, H, R, x0, P0, _ = _problem(seed=4)
     model = LinearModel(Phi, Q)
     z = H @ np.linalg.matrix_power(Phi, predictions) @ x0 + np.array([12.0, -9.0])
-    filt = AUKF()
+    filt = AUKF(AUKFOptions(max_fading=np.inf))            # the rule without navpp's cap
     state = GaussianState(0.0, x0, P0)
     for k in range(predictions):
         state = filt.predict(state, model, (float(k), k + 1.0)).state
@@ -124,6 +124,45 @@ def test_aukf_update_equals_hand_computed_fading(predictions):
     state = filt.predict(new, model, (float(predictions), predictions + 1.0)).state
     assert filt.adapter.Q_since_update is not None
     np.testing.assert_array_equal(filt.adapter.Q_since_update, Q)
+
+
+@pytest.mark.parametrize("fade", ["all", "observed"])
+def test_aukf_default_cap_and_observed_fading_equal_hand_computation(fade):
+    """The default caps lambda at 2; ``fade = "observed"`` adds ``(lambda - 1) P H' (H P H')^-1 H P``
+    to the prior instead (hand-computed Kalman update on that prior), which multiplies H P H' by
+    lambda as fading the whole prior does."""
+    Phi, Q, H, R, x0, P0, _ = _problem(seed=4)
+    model = LinearModel(Phi, Q)
+    z = H @ Phi @ x0 + np.array([12.0, -9.0])
+    filt = AUKF(AUKFOptions(fade=fade))
+    assert filt.options.max_fading == 2.0
+    up = filt.update(filt.predict(GaussianState(0.0, x0, P0), model, (0.0, 1.0)).state, model,
+                     LinearMeasurement(1.0, z, H, R))
+    x, P = Phi @ x0, Phi @ P0 @ Phi.T + Q
+    d = z - H @ x
+    assert (d @ d - np.trace(R)) / np.trace(H @ P @ H.T) > 2.0     # the cap binds
+    lam = 2.0
+    if fade == "all":
+        Pf = lam * (P - Q) + Q
+    else:
+        Pf = P + (lam - 1.0) * P @ H.T @ np.linalg.inv(H @ P @ H.T) @ H @ P
+        np.testing.assert_allclose(H @ Pf @ H.T, lam * H @ P @ H.T, rtol=1e-10)
+    x_ref, P_ref = _kalman(x, Pf, np.eye(len(x)), np.zeros_like(Q), z, H, R, steps=0)
+    assert filt.noise_report()["fading"][0] == lam
+    np.testing.assert_allclose(up.innovation.S, H @ Pf @ H.T + R, rtol=1e-10)
+    np.testing.assert_allclose(up.state.x, x_ref, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(up.state.P, P_ref, rtol=1e-8, atol=1e-10)
+
+
+def test_observed_part_leaves_unobserved_states_alone():
+    """A state uncorrelated with the measurement keeps its variance and zero cross-covariances."""
+    from navpp.filters.aukf import observed_part
+
+    P = np.array([[2.0, 0.5, 0.0], [0.5, 1.0, 0.0], [0.0, 0.0, 3.0]])
+    H = np.array([[1.0, 0.0, 0.0]])
+    G = observed_part(P @ H.T, H @ P @ H.T)
+    np.testing.assert_allclose(G, np.outer(P[:, 0], P[:, 0]) / P[0, 0], rtol=1e-12)
+    assert np.all(G[2] == 0.0) and np.all(G[:, 2] == 0.0)
 
 
 def test_aukf_gate_sees_the_unfaded_innovation():
@@ -157,6 +196,9 @@ def test_aukf_options_are_validated():
 
     with pytest.raises(ConfigError, match="max_fading"):
         AUKF.options_from_mapping({"max_fading": 0.5})
+    with pytest.raises(ConfigError, match="fade"):
+        AUKF.options_from_mapping({"fade": "some"})
+    assert AUKF.options_from_mapping({"max_fading": float("inf")}).max_fading == np.inf
     with pytest.raises(ConfigError, match="detect_probability"):
         AUKF.options_from_mapping({"detect_probability": 1.0})
     assert AUKF.options_from_mapping({"alpha": 0.5}).alpha == 0.5        # the UKF's own options

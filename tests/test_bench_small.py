@@ -226,9 +226,9 @@ def _check_figures(name, rows):
         assert rows[("position RMSE", "sif")] == pytest.approx(ekf, rel=1e-6)
         assert rows[("position RMSE lower bound, any estimator", "(truth)")] == pytest.approx(math.sqrt(0.5))
         near(("position RMSE", "ekf"), 1.234, 0.25)
-        near(("position RMSE", "rwckf"), 1.339, 0.25)
+        near(("position RMSE", "rwckf"), 1.268, 0.25)            # docs/papers.md, one candidate
         assert rows[("position RMSE", "rwckf")] > ekf                 # RWCKF worse than the KF here
-        for f, doc in (("ekf", 0.92), ("rwckf", 1.05)):
+        for f, doc in (("ekf", 0.92), ("rwckf", 0.97)):
             assert abs(rows[("ANEES", f)] - doc) < 0.4, (f, rows[("ANEES", f)])
     elif name == "paper003-bearing":
         near(("position RMSE", "ckf"), 0.361, 0.5)

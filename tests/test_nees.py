@@ -138,14 +138,15 @@ def test_rwckf_nees_within_the_bound_of_its_weight_shift():
     selection looks at, the chosen shift is at most the largest of the C candidates', of mean
     ``b = E[max of C χ²_n]/(m+1)``; a linear update does not enlarge it in the posterior's
     norm (``(I-KH)ᵀ P⁺⁻¹ (I-KH) ≤ P⁻⁻¹``). By Minkowski's inequality the ANEES is then at most
-    ``(√ANEES_ckf + √b)²`` (C = 16, n = 4: b = 1.15, about 9.1 for the CKF's 3.8; measured 4.6,
-    docs/papers.md). Its covariance being the CKF's, it cannot be pessimistic either: the
-    lower end of the chi-square band of a consistent filter holds.
+    ``(√ANEES_ckf + √b)²`` (C = 1, the default, n = 4: b = 4/9, about 6.9 for the CKF's 3.8;
+    with C = 16, the default before issue 20, b = 1.15 and about 9.1). Its covariance being the
+    CKF's, it cannot be pessimistic either: the lower end of the chi-square band of a consistent
+    filter holds.
     """
     runs = 20
     nees = _nees_runs("rwckf", runs)
     ckf = _nees_runs("ckf", runs)
-    C, m = RWCKFOptions().candidates, 2 * N_STATE             # candidates (default 16), cubature points
+    C, m = RWCKFOptions().candidates, 2 * N_STATE             # candidates (default 1), cubature points
     e_max = integrate.quad(lambda x: 1.0 - stats.chi2.cdf(x, N_STATE) ** C, 0.0, np.inf)[0]
     b = e_max / (m + 1)
     hi = (np.sqrt(ckf.mean()) + np.sqrt(b)) ** 2

@@ -18,10 +18,16 @@ Readings (docs/algorithms.md, "Randomly weighted CKF"):
   vector and keep the one maximising the Gaussian likelihood of the innovation
   (minimising ``d' Pzz*^-1 d + log det Pzz*``); ``"residual"``: the smallest ``|d|`` (the
   paper's words, literally); ``"none"``: one Dirichlet draw per epoch.
+  ``candidates`` defaults to 1 (the uniform vector against one Dirichlet draw): on the
+  simulated INS drives more candidates measure worse (issue 20: 1 / 4 / 16 / 64 candidates,
+  docs/papers.md gives the figures), because the likelihood selection fits the mean to the
+  measurement noise of the epoch, more closely the more vectors it may choose from; 16 was the
+  default before.
 - ``covariance`` says where the random weights enter the covariances.  ``"random"`` is the
   paper's eqs 25, 27, 28.  On the 15-state INS this collapses the covariance: a Dirichlet
   weight rescales each cubature direction by ``n (beta_i + beta_n+i)``, a factor with mean 1
-  but mean logarithm ``psi(2) - log 2 = -0.27``, so directions that the measurements do not
+  but mean logarithm ``log n + psi(2) - psi(2n)`` (-0.254 for the INS's n = 15, -0.207 for
+  n = 4; ``psi(2) - log 2 = -0.270`` as n grows), so directions that the measurements do not
   refill (the biases) shrink geometrically until the filter rejects every fix.  ``"uniform"``
   (navpp's default) lets the weights move the means (eqs 24, 26: the residual reduction of
   eqs 33-37 is about the means) and keeps the covariances at their cubature values: uniform
@@ -60,11 +66,12 @@ WEIGHTS = ("dirichlet", "uniform")
 
 @dataclass(frozen=True)
 class RWCKFOptions:
-    """``[filter.rwckf]``: weight selection rule, number of candidates, seed, where the random
-    weights enter the covariances, and ``weights = "uniform"`` (the CKF exactly)."""
+    """``[filter.rwckf]``: weight selection rule, number of Dirichlet candidates (default 1,
+    besides the uniform vector), seed, where the random weights enter the covariances, and
+    ``weights = "uniform"`` (the CKF exactly)."""
 
     select: str = "likelihood"
-    candidates: int = 16
+    candidates: int = 1
     seed: int = 0
     covariance: str = "uniform"
     weights: str = "dirichlet"

@@ -15,7 +15,7 @@ import numpy as np
 from ..filters.linear import LinearModel
 from ..filters.protocols import MeasurementBase
 from .angles import wrap_angle
-from .montecarlo import Case, collect, diverged_note, monte_carlo, rmse, rmse_curve
+from .montecarlo import Case, collect, diverged_note, monte_carlo, rmse, rmse_curve, spread_note
 from .registry import BenchResult, Row, register_benchmark
 from .vce_factors import factor_rows
 
@@ -118,6 +118,8 @@ def run_bearing(runs: int, seed: int, filters: Sequence[str]) -> BenchResult:
         ("With one scalar measurement per epoch VCE sees only d^2 against S, so it cannot tell Q from R "
          "through the shape of S (vce.py's identifiability note): where the factors do not reach 1/3 and "
          "1/4 together, that is the limit of the method on this model, not tuned away."),
+        spread_note({n: collect(cases, tracks[n]) for n in filters}, (0, 1), "position",
+                    "ckf" if "ckf" in filters else None),
         *vce_notes,
     ]
     return BenchResult("paper003-bearing", "Paper 003: bearing-only tracking, Q at 3x and R at 4x truth",

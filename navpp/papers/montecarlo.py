@@ -1,7 +1,8 @@
 """The Monte Carlo core of the papers' small benchmarks (paper 001's tracking, paper 003's
 bearing-only and coordinated-turn runs): one run's inputs (:class:`Case`), a filter's run over
 them (:class:`Track`), the runs of every filter (:func:`monte_carlo`) and the errors pooled
-over runs (:class:`Stats`, :func:`rmse`).
+over runs (:class:`Stats`, :func:`rmse`), with their spread over runs (:func:`rmse_interval`,
+:func:`paired_rmse_difference`, :func:`spread_note`).
 
 Within a run every filter sees the same truth and measurements and gets a fresh instance
 (:func:`~navpp.papers.filter_spec.make_bench_filter`: default options, the chi-square gate off,
@@ -143,7 +144,8 @@ def monte_carlo(make_case: Callable[[np.random.Generator], Case], runs: int, see
 class Stats:
     """Errors of one filter over the runs it completed: ``err`` (R, N, n) estimate minus truth,
     ``nees`` (R, N), ``seconds`` (R,),
-    ``reports`` name -> (R, N, k); ``diverged`` runs are excluded and counted."""
+    ``reports`` name -> (R, N, k); ``diverged`` runs are excluded and counted; ``runs`` (R,) the
+    indices of the kept runs in the cases (for pairing two filters' runs)."""
 
     err: np.ndarray
     nees: np.ndarray
@@ -152,12 +154,13 @@ class Stats:
     diverged: int
     messages: list[str]
     diagnostics: dict[str, np.ndarray] = field(default_factory=dict)
+    runs: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
 
 
 def collect(cases: list[Case], tracks: list[Track | None]) -> Stats:
     """One filter's :class:`Stats` over ``cases`` (runaway runs have no track; diverged are counted)."""
-    errs, nees, secs, reps, msgs, diags = [], [], [], [], [], []
-    for case, tr in zip(cases, tracks):
+    errs, nees, secs, reps, msgs, diags, kept = [], [], [], [], [], [], []
+    for r, (case, tr) in enumerate(zip(cases, tracks)):
         if tr is None:
             continue
         if tr.error is not None:
@@ -169,13 +172,14 @@ def collect(cases: list[Case], tracks: list[Track | None]) -> Stats:
         secs.append(tr.seconds)
         reps.append(tr.report)
         diags.append(tr.diagnostics)
+        kept.append(r)
     n = cases[0].x0.shape[0]
     N = len(cases[0].measurements)
     reports = {key: np.array([rep[key] for rep in reps if key in rep]) for key in (reps[0] if reps else {})}
     diagnostics = {key: np.mean([d[key] for d in diags], axis=0) for key in (diags[0] if diags else {})
                    if all(key in d and np.shape(d[key]) == np.shape(diags[0][key]) for d in diags)}
     return Stats(np.array(errs).reshape(-1, N, n), np.array(nees).reshape(-1, N), np.array(secs), reports,
-                 len(msgs), msgs, diagnostics)
+                 len(msgs), msgs, diagnostics, np.array(kept, dtype=int))
 
 
 def rmse(err: np.ndarray, idx: Sequence[int]) -> float:
@@ -197,3 +201,66 @@ def diverged_note(s: Stats, runs: int) -> str:
     """The row note for ``s.diverged`` runs of ``runs`` (empty when none diverged)."""
     return f"{s.diverged} of {runs} runs diverged, excluded" if s.diverged else ""
 
+
+
+#: resamples of the paired bootstrap over runs behind the 95 % intervals
+BOOTSTRAP_RESAMPLES = 2000
+
+
+def _run_mse(err: np.ndarray, idx: Sequence[int]) -> np.ndarray:
+    """Per run, the mean over epochs of ``sum_i err_i^2`` over the states ``idx``: (R,)."""
+    out: np.ndarray = np.mean(np.sum(err[..., list(idx)] ** 2, axis=-1), axis=-1)
+    return out
+
+
+def _resamples(n: int, seed: int = 0) -> np.ndarray:
+    """(BOOTSTRAP_RESAMPLES, n) run indices drawn with replacement (fixed seed: repeatable)."""
+    out: np.ndarray = np.random.default_rng(seed).integers(0, n, size=(BOOTSTRAP_RESAMPLES, n))
+    return out
+
+
+def rmse_interval(err: np.ndarray, idx: Sequence[int]) -> tuple[float, float, float]:
+    """:func:`rmse` with its spread over runs: ``(rmse, sd of the per-run RMSE, half-width of
+    the 95 % interval of the pooled RMSE)``, the interval from a bootstrap over runs (runs drawn
+    with replacement, the pooled RMSE recomputed; half the 2.5-97.5 % range).  NaNs without runs."""
+    if err.shape[0] == 0:
+        return float("nan"), float("nan"), float("nan")
+    mse = _run_mse(err, idx)
+    per_run = np.sqrt(mse)
+    boot = np.sqrt(np.mean(mse[_resamples(mse.size)], axis=1))
+    lo, hi = np.percentile(boot, [2.5, 97.5])
+    return float(np.sqrt(np.mean(mse))), float(np.std(per_run, ddof=1)) if mse.size > 1 else 0.0, float(0.5 * (hi - lo))
+
+
+def paired_rmse_difference(a: Stats, b: Stats, idx: Sequence[int]) -> tuple[float, float, int]:
+    """Pooled RMSE of ``a`` minus that of ``b`` over the runs both completed, with the half-width
+    of its 95 % interval from a paired bootstrap (the same resampled runs for both): ``(difference,
+    half-width, runs)``.  Both filters saw the same truth and measurements in a run, so the
+    pairing removes the run-to-run spread they share."""
+    common, ia, ib = np.intersect1d(a.runs, b.runs, return_indices=True)
+    if common.size == 0:
+        return float("nan"), float("nan"), 0
+    ma, mb = _run_mse(a.err[ia], idx), _run_mse(b.err[ib], idx)
+    pick = _resamples(common.size)
+    boot = np.sqrt(np.mean(ma[pick], axis=1)) - np.sqrt(np.mean(mb[pick], axis=1))
+    lo, hi = np.percentile(boot, [2.5, 97.5])
+    return float(np.sqrt(np.mean(ma)) - np.sqrt(np.mean(mb))), float(0.5 * (hi - lo)), int(common.size)
+
+
+def spread_note(stats: dict[str, Stats], idx: Sequence[int], what: str, reference: str | None = None,
+                unit: str = "m") -> str:
+    """One note line: each filter's ``what`` RMSE with its run-to-run sd and 95 % interval
+    (:func:`rmse_interval`) and, when ``reference`` is among them, its paired difference to the
+    reference (:func:`paired_rmse_difference`)."""
+    parts = []
+    for name, s in stats.items():
+        value, sd, half = rmse_interval(s.err, idx)
+        text = f"{name} {value:.3f} ± {half:.3f} (sd per run {sd:.3f})"
+        if reference is not None and reference in stats and name != reference:
+            diff, dhalf, _ = paired_rmse_difference(s, stats[reference], idx)
+            text += f", {diff:+.3f} ± {dhalf:.3f} vs {reference}"
+        parts.append(text)
+    return (f"Spread of the {what} RMSE ({unit}) over runs: value ± half-width of its 95 % interval (bootstrap "
+            f"over runs, {BOOTSTRAP_RESAMPLES} resamples), the sd of the per-run RMSE, and the paired difference "
+            f"to {reference or 'the first filter'} with its 95 % interval (same runs resampled for both): "
+            + "; ".join(parts) + ".")

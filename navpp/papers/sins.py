@@ -462,7 +462,34 @@ def run_scenario(base: Paper002Scenario, runs: int, seed: int, filters: Sequence
                 steady.append(f"{c.key} {f} {'/'.join(f'{v:.2f}' for v in pos)}")
     if steady:
         notes.append(_steady_note(steady))
+    notes.append(_spread_note(acc, filters, runs))
     return BenchResult("paper002-sins", TITLE, rows, notes, runs, seed, series=series)
+
+
+def _spread_note(acc: dict[tuple[str, str], _Acc], filters: Sequence[str], runs: int) -> str:
+    """Per case and filter: the position RMS E/N/U (mean over runs) ± the sd of the per-run RMS,
+    and the paired difference to the EKF (same draws; only when neither diverged in any run) ±
+    the half-width of its 95 % t interval."""
+    from scipy.stats import t as student_t
+
+    parts = []
+    for c in CASES:
+        for f in filters:
+            a = acc[(c.key, f)]
+            if not a.rms:
+                continue
+            r = np.array(a.rms)[:, 0:3]
+            sd = np.std(r, axis=0, ddof=1) if len(r) > 1 else np.zeros(3)
+            text = f"{c.key} {f} {'/'.join(f'{m:.2f}±{e:.2f}' for m, e in zip(r.mean(axis=0), sd))}"
+            ref = acc.get((c.key, "ekf"))
+            if f != "ekf" and ref is not None and len(ref.rms) == len(a.rms) == runs and runs > 1:
+                d = r - np.array(ref.rms)[:, 0:3]
+                half = student_t.ppf(0.975, runs - 1) * np.std(d, axis=0, ddof=1) / np.sqrt(runs)
+                text += f" (vs ekf {'/'.join(f'{m:+.2f}±{e:.2f}' for m, e in zip(d.mean(axis=0), half))})"
+            parts.append(text)
+    return ("Spread over runs, position RMS E/N/U in m: mean ± the sd of the per-run RMS, and the paired "
+            "difference to the EKF ± the half-width of its 95 % interval (t over the runs): " + "; ".join(parts)
+            + ".")
 
 
 def _monte_carlo(base: Paper002Scenario, runs: int, seed: int, filters: Sequence[str]

@@ -29,7 +29,7 @@ from .bounds import (
     rmse_interval,
     score_blocks,
 )
-from .montecarlo import Case, collect, diverged_note, filter_seed, monte_carlo, rmse, rmse_curve
+from .montecarlo import Case, collect, diverged_note, filter_seed, monte_carlo, rmse, rmse_curve, spread_note
 from .registry import BenchResult, Row, register_benchmark
 
 #: time step M (s), steps, truth start mean and covariance (paper 001 section 4.1)
@@ -285,6 +285,8 @@ def run_tracking(runs: int, seed: int, filters: Sequence[str]) -> BenchResult:
          "series. Run times: Python, per run of 100 predict+update steps (a 3-step warm-up per filter is "
          "not timed); the paper's are MATLAB on an i7 3.6 GHz (Table 1)."),
     ] + best_notes
+    notes.append(spread_note({n: collect(cases, tracks[n]) for n in filters}, (0, 2), "position",
+                             "ekf" if "ekf" in filters else None))
     return BenchResult("paper001-tracking", "Paper 001 sec. 4.1: target tracking with systematic model error",
                        rows, notes, runs, seed, series=series)
 

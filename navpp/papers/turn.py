@@ -17,7 +17,7 @@ import numpy as np
 from ..filters.linear import VectorSpace
 from ..filters.protocols import MeasurementBase
 from .angles import wrap_angle
-from .montecarlo import Case, collect, diverged_note, monte_carlo, rmse, rmse_curve
+from .montecarlo import Case, collect, diverged_note, monte_carlo, rmse, rmse_curve, spread_note
 from .registry import BenchResult, Row, register_benchmark
 from .vce_factors import factor_rows
 
@@ -209,6 +209,10 @@ def run_turn(runs: int, seed: int, filters: Sequence[str]) -> BenchResult:
          "every epoch and VCE cannot estimate it from single-epoch residuals; q1's is small because "
          "the filter's q1 M block (0.1 m^2 in position per step) is tiny against S (range 300 m^2). "
          "The measurement factors carry the adaptation."),
+        spread_note({n: collect(cases, tracks[n]) for n in filters}, (0, 2), "position",
+                    "ckf" if "ckf" in filters else None),
+        spread_note({n: collect(cases, tracks[n]) for n in filters}, (1, 3), "velocity",
+                    "ckf" if "ckf" in filters else None, "m/s"),
         *vce_notes,
     ]
     return BenchResult("paper003-turn", "Paper 003: 5-state coordinated turn, Q and R at 3x truth",
