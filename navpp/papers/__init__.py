@@ -1,6 +1,7 @@
 """The papers' benchmarks: each paper's experiment re-run with the filters that process logs.
 
-One module per experiment: :mod:`.tracking` (paper 001 section 4.1), :mod:`.sins` (paper 002
+One module per experiment: :mod:`.tracking` (paper 001 section 4.1), :mod:`.xpn` (paper 001
+section 4.2), :mod:`.sins` (paper 002
 section 4), :mod:`.bearing` and :mod:`.turn` (paper 003).  Importing this package imports
 them, and each registers its run function in :data:`.registry.BENCHMARKS` under the name
 ``navpp bench NAME`` takes.  :mod:`.registry` (results, the table, running and printing),
@@ -8,7 +9,7 @@ them, and each registers its run function in :data:`.registry.BENCHMARKS` under 
 benchmarks' runs), :mod:`.vce_factors` and :mod:`.angles` import none of the experiments.
 """
 
-from . import bearing, sins, tracking, turn  # noqa: F401  (register the benchmarks)
+from . import bearing, sins, tracking, turn, xpn  # noqa: F401  (register the benchmarks)
 from .filter_spec import make_bench_filter, parse_filter_spec
 from .registry import BENCHMARKS, Benchmark, BenchResult, Row, format_result, get_benchmark, run_benchmark
 
