@@ -268,20 +268,43 @@ def xpn_minus(x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
     return d
 
 
+@njit(cache=True)
 def error_dynamics(x: np.ndarray, f_b: np.ndarray) -> np.ndarray:
     """eq 47's A (15, 15) at nominal ``x`` with body specific force ``f_b`` (m/s^2, bias-corrected)."""
-    r = x[R_]
-    rn = float(np.linalg.norm(r))
-    N = MU_EARTH / rn ** 3 * (3.0 * np.outer(r, r) / rn ** 2 - np.eye(3))       # eq 48
-    C = quat_to_dcm(np.ascontiguousarray(x[Q_]))
+    r = x[0:3]
+    rn = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+    k = MU_EARTH / rn ** 3
+    C = quat_to_dcm(x[6:10].copy())
     f_i = C @ f_b
     A = np.zeros((15, 15))
-    A[0:3, 3:6] = np.eye(3)
-    A[3:6, 0:3] = N
-    A[3:6, 6:9] = np.array([[0.0, f_i[2], -f_i[1]], [-f_i[2], 0.0, f_i[0]], [f_i[1], -f_i[0], 0.0]])   # -[f x]
-    A[3:6, 12:15] = -C
-    A[6:9, 9:12] = -C
+    for i in range(3):
+        A[i, 3 + i] = 1.0
+        for j in range(3):
+            A[3 + i, j] = k * (3.0 * r[i] * r[j] / (rn * rn) - (1.0 if i == j else 0.0))   # eq 48
+            A[3 + i, 12 + j] = -C[i, j]
+            A[6 + i, 9 + j] = -C[i, j]
+    # -[f^i x]
+    A[3, 7], A[3, 8] = f_i[2], -f_i[1]
+    A[4, 6], A[4, 8] = -f_i[2], f_i[0]
+    A[5, 6], A[5, 7] = f_i[1], -f_i[0]
     return A
+
+
+@njit(cache=True)
+def xpn_transition(x: np.ndarray, i0: int, i1: int, dt: float, gyro: np.ndarray, accel: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The SINS nominal from sample ``i0`` to ``i1`` and eq 47's transition matrix over the
+    interval (A at its start with the mean specific force, third-order series of exp(A T))."""
+    xn = sins_propagate(x, i0, i1, dt, gyro, accel)
+    f_b = np.zeros(3)
+    if i1 > i0:
+        for k in range(i0, i1):
+            f_b += accel[k]
+        f_b = f_b / (i1 - i0) - x[13:16]
+    A = error_dynamics(x, f_b) * ((i1 - i0) * dt)
+    A2 = A @ A
+    Phi = np.eye(15) + A + A2 / 2.0 + A2 @ A / 6.0
+    return xn, Phi
 
 
 @dataclass
@@ -309,12 +332,7 @@ class XpnModel:
 
     def transition(self, x: np.ndarray, interval: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         i0, i1 = self._indices(interval)
-        xn = sins_propagate(np.ascontiguousarray(x, dtype=float), i0, i1, self.dt, self.gyro, self.accel)
-        T = interval[1] - interval[0]
-        f_b = np.mean(self.accel[i0:i1], axis=0) - x[BA_] if i1 > i0 else np.zeros(3)
-        A = error_dynamics(x, f_b) * T
-        A2 = A @ A
-        Phi = np.eye(15) + A + A2 / 2.0 + A2 @ A / 6.0
+        xn, Phi = xpn_transition(np.ascontiguousarray(x, dtype=float), i0, i1, self.dt, self.gyro, self.accel)
         return xn, Phi, self.process_noise(x, interval)
 
     def process_noise(self, x: np.ndarray, interval: tuple[float, float]) -> np.ndarray:
