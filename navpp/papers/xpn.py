@@ -36,7 +36,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 from numba import njit
@@ -184,8 +184,9 @@ def _rot(axis: int, ang: float) -> np.ndarray:
 
 
 def _perifocal_to_inertial(sc: XpnScenario) -> np.ndarray:
-    return (_rot(3, sc.raan_deg * DEG_TO_RAD) @ _rot(1, sc.inc_deg * DEG_TO_RAD)
-            @ _rot(3, sc.argp_deg * DEG_TO_RAD))
+    out: np.ndarray = (_rot(3, sc.raan_deg * DEG_TO_RAD) @ _rot(1, sc.inc_deg * DEG_TO_RAD)
+                       @ _rot(3, sc.argp_deg * DEG_TO_RAD))
+    return out
 
 
 def body_attitude(sc: XpnScenario, t: np.ndarray) -> np.ndarray:
@@ -202,7 +203,8 @@ def body_attitude(sc: XpnScenario, t: np.ndarray) -> np.ndarray:
 @njit(cache=True)
 def _gravity(r: np.ndarray) -> np.ndarray:
     rn = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
-    return -MU_EARTH / rn ** 3 * r
+    g: np.ndarray = -MU_EARTH / rn ** 3 * r
+    return g
 
 
 @njit(cache=True)
@@ -355,7 +357,8 @@ class XpnFix(MeasurementBase):
     axes: ClassVar[tuple[str, ...]] = ("x", "y", "z", "vx", "vy", "vz")
 
     def innovation_at(self, x: np.ndarray) -> np.ndarray:
-        return self.z - x[0:6]
+        nu: np.ndarray = self.z - x[0:6]
+        return nu
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         H = np.zeros((6, 15))
@@ -570,7 +573,8 @@ def _notes(sc: XpnScenario, runs: int) -> list[str]:
          f"{sc.gyro_bias_deg_per_h:g} deg/h and {sc.accel_bias_g:g} g as sigma (= eq 51's P0); gyro white "
          f"noise {sc.gyro_arw_deg_per_sqrt_h:g} deg/sqrt(h); the 'random drift {sc.accel_noise_g_sqrt_s:g} "
          "g/sqrt(s)' read as white accelerometer noise of that density (what Q's 0.001 m/s per 1 s velocity "
-         f"element covers; read as a bias random walk it would reach {sc.accel_noise_g_sqrt_s * math.sqrt(sc.duration_s):.2g} g "
+         "element covers; read as a bias random walk it would reach "
+         f"{sc.accel_noise_g_sqrt_s * math.sqrt(sc.duration_s):.2g} g "
          f"over the span). IMU {sc.imu_rate_hz:g} Hz, XPNAV fixes every {sc.fix_period_s:g} s with "
          f"{sc.pos_std_m:g} m / {sc.vel_std_mps:g} m/s white noise per inertial axis."),
         ("Initial errors as stated: +15 m, +0.1 m/s, +0.4 deg on every axis (the same in every run); the "
