@@ -15,7 +15,8 @@ import time
 
 import numpy as np
 
-from navpp.papers import format_result
+from navpp.errors import ConfigError
+from navpp.papers import format_result, parse_filter_spec
 from navpp.papers.xpn import XpnScenario, run_scenario
 
 
@@ -34,9 +35,14 @@ def main() -> None:
     if a.plot:
         plot(a.plot[0], a.plot[1:], a.window)
         return
-    sc = XpnScenario(duration_s=a.duration, window_s=tuple(a.window), added=a.added)
     t0 = time.perf_counter()
-    res = run_scenario(sc, a.runs, a.seed, [f for f in a.filters.split(",") if f])
+    try:
+        sc = XpnScenario(duration_s=a.duration, window_s=(a.window[0], a.window[1]), added=a.added)
+        for f in a.filters.split(","):
+            parse_filter_spec(f)
+        res = run_scenario(sc, a.runs, a.seed, [f for f in a.filters.split(",") if f])
+    except ConfigError as exc:
+        raise SystemExit(f"bench_xpn: {exc}") from None
     res.seconds = time.perf_counter() - t0
     print(format_result(res))
     if a.save:

@@ -84,5 +84,7 @@ def test_registered_with_the_papers_filters_and_runs():
 def test_bad_scenario_is_a_config_error():
     with pytest.raises(ConfigError, match="added"):
         xpn.XpnScenario(added="both")
+    with pytest.raises(ConfigError, match="window_s"):
+        xpn.XpnScenario(window_s=(200.0, 100.0))
     with pytest.raises(ConfigError, match="whole number"):
         xpn.XpnScenario(fix_period_s=0.25)

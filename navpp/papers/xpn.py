@@ -116,6 +116,8 @@ class XpnScenario:
             raise ConfigError(f"paper001-xpn: added must be 'truth' or 'filter', got {self.added!r}")
         if not (self.duration_s > 0 and self.fix_period_s > 0 and self.imu_rate_hz > 0):
             raise ConfigError("paper001-xpn: duration_s, fix_period_s and imu_rate_hz must be > 0")
+        if not (0.0 <= self.window_s[0] <= self.window_s[1]):
+            raise ConfigError(f"paper001-xpn: window_s must be (start, end), 0 <= start <= end, got {self.window_s}")
         steps = self.fix_period_s * self.imu_rate_hz
         if abs(steps - round(steps)) > 1e-9 or round(steps) < 1:
             raise ConfigError("paper001-xpn: the fix period must be a whole number of IMU intervals")
