@@ -17,7 +17,7 @@ from navpp.papers import montecarlo, sins, tracking, turn
 from navpp.papers.simulated import OneMeasurementPerEpoch, measurement_epochs
 
 PACKAGE = Path(papers.__file__).parent
-EXPERIMENTS = {"tracking", "sins", "bearing", "turn", "table5_real"}
+EXPERIMENTS = {"tracking", "sins", "bearing", "turn", "table5_real", "xpn"}
 
 
 def _imports(path: Path) -> list[tuple[str, list[str]]]:
@@ -54,8 +54,8 @@ def test_only_the_package_init_imports_the_experiments():
         imported = {mod.rsplit(".", 1)[-1] for mod, names in _imports(path) if mod.startswith("navpp.papers")}
         imported |= {n for mod, names in _imports(path) if mod == "navpp.papers" for n in names}
         assert not imported & EXPERIMENTS, (path.name, imported & EXPERIMENTS)
-    assert set(papers.BENCHMARKS) == {"paper001-tracking", "paper002-sins", "paper003-bearing", "paper003-turn",
-                                      "paper001-table5-real"}
+    assert set(papers.BENCHMARKS) == {"paper001-tracking", "paper001-xpn", "paper002-sins", "paper003-bearing",
+                                      "paper003-turn", "paper001-table5-real"}
 
 
 def test_one_measurement_per_epoch_source():
