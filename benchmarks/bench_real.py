@@ -100,6 +100,7 @@ def _car(data: Path, filt: str, auto_off: str | None) -> str:
     from navpp import api
 
     gn = api.read_log(d, cfg).gnss
+    stamp_t = gn.t.copy()       # what the outage windows remove by (start <= stamp <= start + duration)
     # the withheld fixes at the time they are valid: the README's measured 0.51 s latency, the
     # same for every variant (navpp's own estimate is what is being tested)
     gn = replace(gn, t=gn.t - CAR_LATENCY_S)
@@ -108,7 +109,7 @@ def _car(data: Path, filt: str, auto_off: str | None) -> str:
     from navpp import geodesy
     errs = []
     for s, dur in windows:
-        sel = (gn.t >= s) & (gn.t < s + dur)
+        sel = (stamp_t >= s) & (stamp_t <= s + dur)     # the fixes the run did not get, no others
         lat = np.interp(gn.t[sel], sol.t, sol.lat_deg)
         lon = np.interp(gn.t[sel], sol.t, sol.lon_deg)
         lat0, lon0 = math.radians(float(gn.lat_deg[sel][0])), math.radians(float(gn.lon_deg[sel][0]))
