@@ -188,8 +188,11 @@ def _car_windows(t_stamp: np.ndarray, by_valid_time: bool) -> list[np.ndarray]:
     are cut on the stamps, before navpp's clock-offset estimate moves them); with
     ``by_valid_time``, bench_real.py's choice (valid time inside the window), which scores
     about 5 fixes per window that the filter used and leaves out 5 withheld ones."""
-    t = t_stamp - CAR_LATENCY_S if by_valid_time else t_stamp
-    return [(t >= s) & (t < s + dur) for s, dur in CAR_WINDOWS_S]
+    if by_valid_time:
+        t = t_stamp - CAR_LATENCY_S
+        return [(t >= s) & (t < s + dur) for s, dur in CAR_WINDOWS_S]
+    # the windows remove start <= stamp <= start + duration (navpp.outages.apply_outages)
+    return [(t_stamp >= s) & (t_stamp <= s + dur) for s, dur in CAR_WINDOWS_S]
 
 
 def _car_errors(log: RealLog, filt: str, seed: int, by_valid_time: bool = False) -> np.ndarray:
