@@ -407,8 +407,9 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     """
     from . import jitmode
 
-    choice = jitmode.choose(jit, [Path(log)], [filter_name], _smooth_hint(Path(log), smooth, config))
-    plan = _plan(Path(log), filter_name=filter_name, config=config, reference=reference, out_dir=out_dir,
+    cfg = config if isinstance(config, Config) else resolve_config(Path(log), config)
+    choice = jitmode.choose(jit, [Path(log)], [filter_name], cfg.output.smooth if smooth is None else bool(smooth))
+    plan = _plan(Path(log), filter_name=filter_name, config=config, resolved=cfg, reference=reference, out_dir=out_dir,
                  output_rate_hz=output_rate_hz, write=write, gnss_file=gnss_file, formats=formats,
                  embed_input=embed_input, gnss_outages=gnss_outages, smooth=smooth,
                  topics=(imu_topic, gnss_topic, reference_topic, odometry_topic),
@@ -419,18 +420,6 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         res = _run(plan, progress)
     line = jitmode.note(choice)
     return replace(res, notes=(*res.notes, line)) if line else res
-
-
-def _smooth_hint(log: Path, smooth: bool | None, config: str | Path | Config | None) -> bool:
-    """Whether the run will smooth, for :func:`navpp.jitmode.choose` (a config that cannot be
-    read says no here; :func:`_plan` reports it)."""
-    if smooth is not None:
-        return bool(smooth)
-    try:
-        cfg = config if isinstance(config, Config) else resolve_config(log, config)
-    except NavppError:
-        return False
-    return bool(cfg.output.smooth)
 
 
 @dataclass(frozen=True)
@@ -474,13 +463,14 @@ def _anchor_arg(anchor: str | Sequence[float] | None) -> str | None:
 
 
 def _plan(log: Path, *, filter_name: str, config: str | Path | Config | None, reference: str | Path | None,
+          resolved: Config | None = None,
           out_dir: str | Path | None, output_rate_hz: float | None, write: bool, gnss_file: str | Path | None,
           formats: str | Sequence[str] | None, embed_input: bool, gnss_outages: Sequence[tuple[float, float]] | None,
           smooth: bool | None, topics: tuple[str | None, str | None, str | None, str | None],
           reference_anchor: str | None = None) -> _Plan:
     """Check every option of :func:`process` (in this order: config, output rate, formats,
     outages, filter, output directory against the inputs); the first problem raises."""
-    cfg = config if isinstance(config, Config) else resolve_config(log, config)
+    cfg = resolved or (config if isinstance(config, Config) else resolve_config(log, config))
     if output_rate_hz is not None:
         rate, rate_what = check_output_rate(output_rate_hz), "--output-rate"
     else:
@@ -780,9 +770,13 @@ def compile_kernels(filters: Sequence[str] | None = None,
 
     if jitmode.decided() is False:
         raise jitmode.interpreted_error()
-    jitmode.apply(True)
+    jitmode.apply(True)                 # before the filters' modules are imported
     jitmode.CHOSEN[:] = [jitmode.Choice(True, "navpp compile")]
     filters = tuple(filters) if filters is not None else jitmode.ALL_FILTERS
+    from .filters import get_filter
+
+    for name in filters:                # an unknown name: a ConfigError naming it, before any work
+        get_filter(name)
 
     steps: list[tuple[str, float]] = []
     with tempfile.TemporaryDirectory(prefix="navpp-compile-") as tmp:

@@ -700,12 +700,6 @@ def compile_cmd(
         f.strip().lower() for f in filters.split(",") if f.strip())
     t0 = time.process_time()
     try:
-        if jitmode.decided() is False:
-            raise jitmode.interpreted_error()
-        jitmode.apply(True)                     # before the filters' modules are imported
-        from . import comparison as cmp
-
-        cmp.parse_filters(",".join(wanted))     # unknown names: one line, exit 1
         from . import api
 
         steps = api.compile_kernels(wanted, progress=lambda name: note(err, f"compiling: {name} ..."))
