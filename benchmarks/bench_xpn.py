@@ -3,6 +3,7 @@
     python benchmarks/bench_xpn.py                      # 100 runs, 150,000 s, all five filters
     python benchmarks/bench_xpn.py --runs 2 --duration 20000 --window 5000 10000
     python benchmarks/bench_xpn.py --added filter       # the other reading of the added errors
+    python benchmarks/bench_xpn.py --runs 10 --jobs 2   # 10 runs on two worker processes
 
 Prints the table beside the paper's Table 3 (``navpp bench paper001-xpn`` runs the default
 scenario; this script also takes a shorter span and the other reading) and the wall time.
@@ -11,6 +12,9 @@ scenario; this script also takes a shorter span and the other reading) and the w
 from __future__ import annotations
 
 import argparse
+import os
+import platform
+import resource
 import time
 
 import numpy as np
@@ -28,6 +32,7 @@ def main() -> None:
     ap.add_argument("--window", type=float, nargs=2, default=(49_866.0, 99_732.0), help="added-error window, s")
     ap.add_argument("--added", choices=("truth", "filter"), default="truth")
     ap.add_argument("--filters", default="ckf,ukf,sif,aukf,rwckf")
+    ap.add_argument("--jobs", type=int, default=1, help="worker processes, one run each at a time")
     ap.add_argument("--save", help="write the series (ANEES and RMSE curves per filter) to this .npz")
     ap.add_argument("--plot", nargs="+", metavar=("PNG", "NPZ"),
                     help="only plot: PNG from the saved NPZ files (no run)")
@@ -35,20 +40,27 @@ def main() -> None:
     if a.plot:
         plot(a.plot[0], a.plot[1:], a.window)
         return
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _cpu()
     try:
         sc = XpnScenario(duration_s=a.duration, window_s=(a.window[0], a.window[1]), added=a.added)
         for f in a.filters.split(","):
             parse_filter_spec(f)
-        res = run_scenario(sc, a.runs, a.seed, [f for f in a.filters.split(",") if f])
+        res = run_scenario(sc, a.runs, a.seed, [f for f in a.filters.split(",") if f], jobs=a.jobs)
     except ConfigError as exc:
         raise SystemExit(f"bench_xpn: {exc}") from None
     res.seconds = time.perf_counter() - t0
     print(format_result(res))
     if a.save:
         np.savez_compressed(a.save, **res.series)
-    print(f"\nwall time {res.seconds:.0f} s for {a.runs} runs x {len(a.filters.split(','))} filters x "
-          f"{a.duration:g} s")
+    print(f"\nwall time {res.seconds:.0f} s, CPU {_cpu() - c0:.0f} s (this process and its workers) for "
+          f"{a.runs} runs x {len(a.filters.split(','))} filters x {a.duration:g} s, --jobs {a.jobs}; "
+          f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
+
+
+def _cpu() -> float:
+    """User + system CPU (s) of this process and its finished children."""
+    s, c = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return s.ru_utime + s.ru_stime + c.ru_utime + c.ru_stime
 
 
 def plot(png: str, npzs: list[str], window: tuple[float, float]) -> None:

@@ -32,9 +32,10 @@ elements to position and velocity); Titterton & Weston (inertial-frame mechanisa
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -340,7 +341,13 @@ class XpnModel:
         return xn, Phi, self.process_noise(x, interval)
 
     def process_noise(self, x: np.ndarray, interval: tuple[float, float]) -> np.ndarray:
-        return np.diag(self.q_per_s * (interval[1] - interval[0]))
+        span = interval[1] - interval[0]
+        if span != self._q_span:                     # every fix step has the same span: build Q once
+            self._q_span, self._q = span, np.diag(self.q_per_s * span)
+        return self._q.copy()
+
+    _q_span: float = field(default=float("nan"), init=False, repr=False)
+    _q: np.ndarray = field(default_factory=lambda: np.zeros((15, 15)), init=False, repr=False)
 
     def propagate_points(self, x: np.ndarray, dX: np.ndarray, interval: tuple[float, float]
                          ) -> tuple[np.ndarray, np.ndarray]:
@@ -396,7 +403,7 @@ def true_states(sc: XpnScenario, t: np.ndarray, bg: np.ndarray, ba: np.ndarray) 
     C = body_attitude(sc, t)
     x = np.zeros((r.shape[0], 16))
     x[:, R_], x[:, V_] = r, v
-    x[:, Q_] = np.array([dcm_to_quat(c) for c in C])
+    x[:, Q_] = dcm_to_quat(C)
     x[:, BG_], x[:, BA_] = bg, ba
     return x
 
@@ -431,19 +438,30 @@ def simulate_run(sc: XpnScenario, rng: np.random.Generator) -> XpnRun:
 
 class XpnRecorder(Recorder):
     """Per fix: the error truth ⊟ estimate of position and velocity (M, 6) and the position and
-    velocity NEES (M, 2) (3 degrees of freedom each)."""
+    velocity covariance blocks (M, 2, 3, 3); :meth:`nees` gives the position and velocity NEES
+    (M, 2) (3 degrees of freedom each), solved in one batch after the run."""
 
     def __init__(self, truth: np.ndarray) -> None:
         self.truth = truth
         m = truth.shape[0]
-        self.err, self.nees = np.full((m, 6), np.nan), np.full((m, 2), np.nan)
+        self.err = np.full((m, 6), np.nan)
+        self.cov = np.full((m, 2, 3, 3), np.nan)
 
     def epoch_done(self, epoch: Epoch, outcome: EpochOutcome) -> None:
         k, st = epoch.index, outcome.state
-        e = self.truth[k, 0:6] - st.x[0:6]
-        self.err[k] = e
-        self.nees[k, 0] = e[0:3] @ np.linalg.solve(st.P[0:3, 0:3], e[0:3])
-        self.nees[k, 1] = e[3:6] @ np.linalg.solve(st.P[3:6, 3:6], e[3:6])
+        self.err[k] = self.truth[k, 0:6] - st.x[0:6]
+        self.cov[k, 0] = st.P[0:3, 0:3]
+        self.cov[k, 1] = st.P[3:6, 3:6]
+
+    def nees(self) -> np.ndarray:
+        """(M, 2) e^T P^-1 e of position and velocity; NaN at fixes the run did not reach."""
+        out = np.full(self.err.shape[0], np.nan).repeat(2).reshape(-1, 2)
+        done = np.isfinite(self.err[:, 0])
+        if done.any():
+            e = self.err[done].reshape(-1, 2, 3)
+            sol = np.linalg.solve(self.cov[done], e[..., None])[..., 0]
+            out[done] = np.sum(e * sol, axis=-1)
+        return out
 
 
 @dataclass
@@ -472,8 +490,8 @@ def run_filter(spec: str, sc: XpnScenario, sim: XpnRun, seed: int = 0) -> XpnTra
     try:
         run_epochs(filt, model, state, measurement_epochs(sim.t_fix), OneMeasurementPerEpoch(fixes), rec)
     except FilterDivergedError as exc:
-        return XpnTrack(rec.err, rec.nees, time.perf_counter() - t0, str(exc))
-    return XpnTrack(rec.err, rec.nees, time.perf_counter() - t0)
+        return XpnTrack(rec.err, rec.nees(), time.perf_counter() - t0, str(exc))
+    return XpnTrack(rec.err, rec.nees(), time.perf_counter() - t0)
 
 
 # --------------------------------------------------------------------------- the benchmark
@@ -481,7 +499,7 @@ def run_filter(spec: str, sc: XpnScenario, sim: XpnRun, seed: int = 0) -> XpnTra
 
 @dataclass
 class _Acc:
-    per_run: list[np.ndarray] = field(default_factory=list)    # (4,) pos with/without, vel with/without
+    per_run: dict[int, np.ndarray] = field(default_factory=dict)  # run -> (4,) pos with/without, vel with/without
     nees_sum: np.ndarray | None = None                          # (M, 2)
     sq_sum: np.ndarray | None = None                            # (M, 2) |dP|^2, |dV|^2
     seconds: list[float] = field(default_factory=list)
@@ -495,27 +513,69 @@ def _window_rmse(err: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return np.array([np.sqrt(np.mean(p)), np.sqrt(np.mean(v))]) if mask.any() else np.full(2, np.nan)
 
 
-def run_scenario(sc: XpnScenario, runs: int, seed: int, filters: Sequence[str]) -> BenchResult:
-    """Every filter over ``runs`` draws (run i: the i-th child of ``SeedSequence(seed)``)."""
+@dataclass
+class _RunSummary:
+    """One filter on one run, reduced in the worker: the divergence message (or ""), the four
+    RMSEs (pos with/without, vel with/without), the run time (s), |dP|^2 and |dV|^2 (M, 2) and
+    the NEES (M, 2)."""
+
+    diverged: str
+    rmse: np.ndarray
+    seconds: float
+    sq: np.ndarray
+    nees: np.ndarray
+
+
+def _one_run(sc: XpnScenario, seq: np.random.SeedSequence, i: int, seed: int, filters: Sequence[str]
+             ) -> list[_RunSummary]:
+    """Run ``i`` (drawn from ``seq``) through every filter."""
+    sim = simulate_run(sc, np.random.default_rng(seq))
+    win = sc.in_window(sim.t_fix)
+    out = []
+    for f in filters:
+        tr = run_filter(f, sc, sim, seed=100_003 * seed + i)
+        w, o = _window_rmse(tr.err, win), _window_rmse(tr.err, ~win)
+        sq = np.column_stack([np.sum(tr.err[:, 0:3] ** 2, 1), np.sum(tr.err[:, 3:6] ** 2, 1)])
+        out.append(_RunSummary(tr.diverged, np.array([w[0], o[0], w[1], o[1]]), tr.seconds, sq, tr.nees))
+    return out
+
+
+def _one_run_star(args: tuple[XpnScenario, np.random.SeedSequence, int, int, Sequence[str]]) -> list[_RunSummary]:
+    return _one_run(*args)
+
+
+def run_scenario(sc: XpnScenario, runs: int, seed: int, filters: Sequence[str], jobs: int = 1) -> BenchResult:
+    """Every filter over ``runs`` draws (run i: the i-th child of ``SeedSequence(seed)``), on
+    ``jobs`` worker processes (the result does not depend on ``jobs``: each run has its own
+    draws and filter seed, and the runs are accumulated in their order)."""
     seeds = np.random.SeedSequence(seed).spawn(runs)
     acc = {f: _Acc() for f in filters}
     t_fix = sc.fix_times()
     win = sc.in_window(t_fix)
-    for i in range(runs):
-        sim = simulate_run(sc, np.random.default_rng(seeds[i]))
-        for f in filters:
-            tr = run_filter(f, sc, sim, seed=100_003 * seed + i)
-            a = acc[f]
-            if tr.diverged:
-                a.diverged += 1
-                a.first = a.first or tr.diverged
-                continue
-            w, o = _window_rmse(tr.err, win), _window_rmse(tr.err, ~win)
-            a.per_run.append(np.array([w[0], o[0], w[1], o[1]]))
-            a.seconds.append(tr.seconds)
-            sq = np.column_stack([np.sum(tr.err[:, 0:3] ** 2, 1), np.sum(tr.err[:, 3:6] ** 2, 1)])
-            a.sq_sum = sq if a.sq_sum is None else a.sq_sum + sq
-            a.nees_sum = tr.nees if a.nees_sum is None else a.nees_sum + tr.nees
+    tasks = [(sc, seeds[i], i, seed, tuple(filters)) for i in range(runs)]
+    with contextlib.ExitStack() as stack:
+        if jobs > 1 and runs > 1:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+
+            pool = stack.enter_context(ProcessPoolExecutor(min(jobs, runs),
+                                                           mp_context=multiprocessing.get_context("spawn")))
+            results: Iterable[list[_RunSummary]] = pool.map(_one_run_star, tasks)
+        else:
+            results = map(_one_run_star, tasks)
+        for i, summaries in enumerate(results):
+            for f, su in zip(filters, summaries):
+                a = acc[f]
+                if su.diverged:
+                    a.diverged += 1
+                    a.first = a.first or su.diverged
+                    continue
+                a.per_run[i] = su.rmse
+                a.seconds.append(su.seconds)
+                a.sq_sum = su.sq if a.sq_sum is None else a.sq_sum + su.sq
+                a.nees_sum = su.nees if a.nees_sum is None else a.nees_sum + su.nees
+    from scipy.stats import t as student_t
+
     rows: list[Row] = []
     series: dict[str, np.ndarray] = {"t": t_fix}
     labels = ("position RMSE, with the added errors", "position RMSE, without",
@@ -537,11 +597,18 @@ def run_scenario(sc: XpnScenario, runs: int, seed: int, filters: Sequence[str]) 
                   float(np.sqrt(np.mean(curve[~win, 0] ** 2))) if (~win).any() else float("nan"),
                   float(np.sqrt(np.mean(curve[win, 1] ** 2))) if win.any() else float("nan"),
                   float(np.sqrt(np.mean(curve[~win, 1] ** 2))) if (~win).any() else float("nan")]
-        per = np.array(a.per_run)
+        per = np.array(list(a.per_run.values()))
         sd = np.std(per, axis=0, ddof=1) if n_ok > 1 else np.full(4, np.nan)
+        half = student_t.ppf(0.975, n_ok - 1) * sd / math.sqrt(n_ok) if n_ok > 1 else np.full(4, np.nan)
+        ref = filters[0]
+        both = sorted(set(a.per_run) & set(acc[ref].per_run)) if f != ref else []
+        diff = np.array([a.per_run[k] - acc[ref].per_run[k] for k in both]).reshape(-1, 4)
         for j in range(4):
-            rows.append(Row(labels[j], f, pooled[j], None if paper is None else paper[j], units[j],
-                            f"seed-to-seed std {sd[j]:.3g} over {n_ok} runs"))
+            note = f"seed-to-seed sd {sd[j]:.3g}, 95 % interval of the mean ± {half[j]:.2g} ({n_ok} runs)"
+            if len(both) > 1:
+                note += (f"; paired − {ref}: {np.mean(diff[:, j]):+.3g} ± {np.std(diff[:, j], ddof=1):.2g} "
+                         f"(sd, {len(both)} runs)")
+            rows.append(Row(labels[j], f, pooled[j], None if paper is None else paper[j], units[j], note))
         anees = a.nees_sum / n_ok / 3.0
         for j, what in enumerate(("position", "velocity")):
             for lab, m in (("with", win), ("without", ~win)):
