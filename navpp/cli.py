@@ -455,6 +455,9 @@ def bench(
                                       callback=_require(lambda v: v >= 0, "an integer >= 0"))] = 0,
     filters: Annotated[str | None, typer.Option(help="Comma-separated filters  [default: the paper's "
                                                    "comparison]")] = None,
+    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Worker processes for the runs (benchmarks that "
+                                                            "can split them: paper001-xpn).",
+                                      callback=_require(lambda v: v >= 1, "an integer >= 1"))] = 1,
 ) -> None:
     """Run one of the papers' benchmarks and print our figures next to the paper's.
 
@@ -476,7 +479,13 @@ def bench(
                 raise ConfigError("--filters: give at least one filter, e.g. --filters ckf,vce-ckf")
             for spec in chosen:
                 benchmarks.parse_filter_spec(spec)
-        result = benchmarks.run_benchmark(name, runs=runs, seed=seed, filters=chosen)
+        cpu = benchmarks.expected_cpu_s(name, runs, chosen)
+        if cpu > 600:
+            per = benchmarks.BENCHMARKS[name].cpu_s_per_run
+            typer.echo(f"note: {name} takes about {per:.0f} s of CPU per run of the paper's filters (measured on a "
+                       f"2-core x86-64 machine): about {cpu / 3600:.1f} h of CPU here; --runs N and --jobs N "
+                       "shorten it", err=True)
+        result = benchmarks.run_benchmark(name, runs=runs, seed=seed, filters=chosen, jobs=jobs)
     except NavppError as exc:
         _fail(str(exc))
         return

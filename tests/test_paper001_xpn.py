@@ -111,3 +111,38 @@ def test_worker_processes_give_the_same_table_and_the_nees_matches_a_per_fix_sol
             e = rec.err[k, 3 * j:3 * j + 3]
             assert got[k, j] == pytest.approx(e @ np.linalg.solve(rec.cov[k, j], e), rel=1e-12)
     assert np.isnan(got[3]).all()
+
+
+def test_bench_cli_warns_of_a_long_run_and_passes_jobs(monkeypatch):
+    """`navpp bench paper001-xpn` with the paper's 100 runs says how long it will take before it
+    starts and hands --jobs to the benchmark; a benchmark that cannot split its runs says
+    --jobs was ignored.  (The run function is replaced: the real one takes hours.)"""
+    from dataclasses import replace
+
+    from typer.testing import CliRunner
+
+    from navpp import papers
+    from navpp.cli import app
+    from navpp.papers.registry import BenchResult
+
+    seen = {}
+
+    def fake(runs, seed, filters, jobs=1):
+        seen.update(runs=runs, jobs=jobs, filters=filters)
+        return BenchResult("paper001-xpn", xpn.TITLE, [], [], runs, seed)
+
+    b = papers.BENCHMARKS["paper001-xpn"]
+    monkeypatch.setitem(papers.BENCHMARKS, "paper001-xpn", replace(b, run=fake))
+    res = CliRunner().invoke(app, ["bench", "paper001-xpn", "--jobs", "2"])
+    assert res.exit_code == 0, res.output
+    assert seen == {"runs": 100, "jobs": 2, "filters": b.filters}
+    hours = 100 * xpn.CPU_S_PER_RUN / 3600
+    assert f"about {hours:.1f} h of CPU" in res.stderr and "--runs N and --jobs N" in res.stderr
+    assert papers.expected_cpu_s("paper001-xpn", 4, ["ckf"]) == pytest.approx(4 * xpn.CPU_S_PER_RUN / 5)
+    res = CliRunner().invoke(app, ["bench", "paper001-xpn", "--runs", "2", "--filters", "ckf"])
+    assert res.exit_code == 0 and "h of CPU" not in res.stderr and seen["jobs"] == 1
+    res = CliRunner().invoke(app, ["bench", "paper003-turn", "--runs", "1", "--jobs", "2"])
+    assert res.exit_code == 0, res.output
+    assert "--jobs 2 ignored: paper003-turn runs in one process" in res.stdout
+    res = CliRunner().invoke(app, ["bench", "paper003-turn", "--jobs", "0"])
+    assert res.exit_code == 2

@@ -11,7 +11,16 @@ benchmarks' runs), :mod:`.vce_factors` and :mod:`.angles` import none of the exp
 
 from . import bearing, sins, table5_real, tracking, turn, xpn  # noqa: F401  (register the benchmarks)
 from .filter_spec import make_bench_filter, parse_filter_spec
-from .registry import BENCHMARKS, Benchmark, BenchResult, Row, format_result, get_benchmark, run_benchmark
+from .registry import (
+           BENCHMARKS,
+           Benchmark,
+           BenchResult,
+           Row,
+           expected_cpu_s,
+           format_result,
+           get_benchmark,
+           run_benchmark,
+)
 
-__all__ = ["BENCHMARKS", "BenchResult", "Benchmark", "Row", "format_result", "get_benchmark", "make_bench_filter",
-           "parse_filter_spec", "run_benchmark"]
+__all__ = ["BENCHMARKS", "BenchResult", "Benchmark", "Row", "expected_cpu_s", "format_result", "get_benchmark",
+           "make_bench_filter", "parse_filter_spec", "run_benchmark"]

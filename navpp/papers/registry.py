@@ -58,26 +58,42 @@ RunFunction = Callable[[int, int, Sequence[str]], BenchResult]
 @dataclass(frozen=True)
 class Benchmark:
     """A registered benchmark: ``run(runs, seed, filters) -> BenchResult``; ``default_runs``
-    is the paper's number of Monte Carlo runs; ``filters`` the filters the paper compares."""
+    is the paper's number of Monte Carlo runs; ``filters`` the filters the paper compares.
+    ``parallel``: ``run`` also takes ``jobs=N`` (worker processes); ``cpu_s_per_run``: the
+    measured CPU seconds of one run of the paper's filters (0: short enough not to mention)."""
 
     name: str
     title: str
     run: RunFunction
     default_runs: int
     filters: tuple[str, ...]
+    parallel: bool = False
+    cpu_s_per_run: float = 0.0
 
 
 #: name -> benchmark; filled by the experiment modules as :mod:`navpp.papers` imports them.
 BENCHMARKS: dict[str, Benchmark] = {}
 
 
-def register_benchmark(name: str, title: str, default_runs: int,
-                       filters: Sequence[str]) -> Callable[[RunFunction], RunFunction]:
-    """Decorator registering ``run(runs, seed, filters) -> BenchResult`` under ``name``."""
+def register_benchmark(name: str, title: str, default_runs: int, filters: Sequence[str], *,
+                       parallel: bool = False, cpu_s_per_run: float = 0.0
+                       ) -> Callable[[RunFunction], RunFunction]:
+    """Decorator registering ``run(runs, seed, filters) -> BenchResult`` under ``name``
+    (``run(runs, seed, filters, jobs=N)`` too when ``parallel``)."""
     def deco(fn: RunFunction) -> RunFunction:
-        BENCHMARKS[name] = Benchmark(name, title, fn, int(default_runs), tuple(filters))
+        BENCHMARKS[name] = Benchmark(name, title, fn, int(default_runs), tuple(filters), parallel,
+                                     float(cpu_s_per_run))
         return fn
     return deco
+
+
+def expected_cpu_s(name: str, runs: int | None, filters: Sequence[str] | None) -> float:
+    """About how many CPU seconds benchmark ``name`` will take (0 when it is short): the measured
+    cost per run scaled by the runs and the share of the paper's filters chosen."""
+    bench = get_benchmark(name)
+    n = bench.default_runs if runs is None else int(runs)
+    share = len(filters) / len(bench.filters) if filters else 1.0
+    return bench.cpu_s_per_run * n * share
 
 
 def get_benchmark(name: str) -> Benchmark:
@@ -89,18 +105,27 @@ def get_benchmark(name: str) -> Benchmark:
 
 
 def run_benchmark(name: str, *, runs: int | None = None, seed: int = 0,
-                  filters: Sequence[str] | None = None) -> BenchResult:
+                  filters: Sequence[str] | None = None, jobs: int = 1) -> BenchResult:
     """Run benchmark ``name`` with ``runs`` Monte Carlo runs (default: the paper's) and the
-    given filters (default: the paper's comparison); the wall time is filled in."""
+    given filters (default: the paper's comparison), on ``jobs`` worker processes where the
+    benchmark can split its runs (the figures do not depend on ``jobs``; a benchmark that
+    cannot says so in a note); the wall time is filled in."""
     bench = get_benchmark(name)
     n = bench.default_runs if runs is None else int(runs)
     if n < 1:
         raise ConfigError(f"--runs must be >= 1, got {n}")
+    if jobs < 1:
+        raise ConfigError(f"--jobs must be >= 1, got {jobs}")
     chosen = tuple(filters) if filters else bench.filters
     for f in chosen:
         parse_filter_spec(f)              # unknown names and options fail with the choices
     t0 = time.perf_counter()
-    result = bench.run(n, int(seed), chosen)
+    if bench.parallel:
+        result = bench.run(n, int(seed), chosen, jobs=int(jobs))  # type: ignore[call-arg]
+    else:
+        result = bench.run(n, int(seed), chosen)
+        if jobs > 1:
+            result.notes.append(f"--jobs {jobs} ignored: {name} runs in one process (it is short)")
     result.seconds = time.perf_counter() - t0
     return result
 

@@ -621,11 +621,17 @@ def run_scenario(sc: XpnScenario, runs: int, seed: int, filters: Sequence[str], 
     return BenchResult("paper001-xpn", TITLE, rows, notes, runs, seed, series=series)
 
 
-@register_benchmark("paper001-xpn", TITLE, 100, ("ckf", "ukf", "sif", "aukf", "rwckf"))
-def run(runs: int, seed: int, filters: Sequence[str]) -> BenchResult:
+#: CPU seconds of one 150,000-s run of the five filters (benchmarks/bench_xpn.py, 10 runs, 2-core EPYC)
+CPU_S_PER_RUN = 280.0
+
+
+@register_benchmark("paper001-xpn", TITLE, 100, ("ckf", "ukf", "sif", "aukf", "rwckf"), parallel=True,
+                    cpu_s_per_run=CPU_S_PER_RUN)
+def run(runs: int, seed: int, filters: Sequence[str], jobs: int = 1) -> BenchResult:
     """Paper 001 section 4.2 on the paper's span (150,000 s) with the added errors drawn into
-    the fixes (reading "truth"); :func:`run_scenario` runs other spans and readings."""
-    return run_scenario(XpnScenario(), runs, seed, filters)
+    the fixes (reading "truth"), ``jobs`` worker processes; :func:`run_scenario` runs other
+    spans and readings."""
+    return run_scenario(XpnScenario(), runs, seed, filters, jobs=jobs)
 
 
 def _notes(sc: XpnScenario, runs: int) -> list[str]:
