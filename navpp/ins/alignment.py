@@ -27,7 +27,7 @@ from ..errors import InputError
 from ..findings import Finding
 from .aids.standstill import quiet_blocks
 from .attitude import dcm_to_quat, rph_to_dcm
-from .calibrate import MOVING_K, gnss_speed_at, spans
+from .calibrate import MOVING_K, gnss_scatter_h, gnss_speed_at, spans
 from .state import (
     ATT,
     BA,
@@ -88,10 +88,13 @@ class Alignment:
     lines: tuple[str, ...] = field(default_factory=tuple)
     warnings: tuple[str, ...] = field(default_factory=tuple)
     #: a still start's averaged fixes: the times of the first and last (s; None in motion or from
-    #: one fix), how many and as how many independent ones per ENU axis (3,)
+    #: one fix), how many and as how many independent ones per ENU axis (3,), and per ENU axis (3,)
+    #: the variance of one fix the start's mean was given over the one their sigmas declare
+    #: (their own scatter squared over the declared, at least 1: :func:`_start_fix`)
     start_fixes: tuple[float, float] | None = None
     start_count: int = 1
     start_n_eff: np.ndarray = field(default_factory=lambda: np.ones(3))
+    start_var_ratio: np.ndarray = field(default_factory=lambda: np.ones(3))
 
 
 #: A still start's position is the mean of the still period's fixes (``P`` holds that mean's
@@ -99,7 +102,10 @@ class Alignment:
 #: the adaptive filters innovations).  So that their information counts once, the filter's start
 #: holds this share of it (the mean with its variance over the share) and the fixes the rest (each
 #: fix's variance times ``N / (N_eff (1 - share))``, N_eff per axis from :func:`effective_count`;
-#: :func:`navpp.engine.prepare.start_fixes`): both parts are means of the same fixes, so the output
+#: :func:`navpp.engine.prepare.start_fixes`).  Both parts take one fix's variance as the larger of
+#: the declared one and the still fixes' own scatter (declared sigmas too small would otherwise
+#: give the fixes more weight than the start, and a filter, adaptive or not, would start by
+#: rejecting them).  Both parts are means of the same fixes, so the output
 #: does not jump when the filter starts, and at the end of the rest the filter's variance is the
 #: mean's (not half of it).  With the Gauss-Markov GNSS error model the start is also tied to the
 #: error states (:meth:`navpp.ins.gnss_error.GnssErrorModel.start`).
@@ -167,11 +173,14 @@ def detect_still(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_dura
     return runs[0] if runs else None
 
 
-def gnss_speed_bound(gnss: GnssData, sel: np.ndarray, lat: float, lon: float, h: float) -> tuple[float, float]:
+def gnss_speed_bound(gnss: GnssData, sel: np.ndarray, lat: float, lon: float, h: float,
+                     std_floor: float = 0.0) -> tuple[float, float]:
     """Horizontal speed (m/s) of the GNSS track over the fixes ``sel`` and its 1-sigma.
 
     From GNSS velocity when the log has it (median), else from a straight-line fit of the
-    positions against time.  With fewer than 3 fixes and no velocity: (0, inf).
+    positions against time, one fix's horizontal 1-sigma the larger of the log's and
+    ``std_floor`` (m: the fixes' own scatter, :func:`~navpp.ins.calibrate.gnss_scatter_h`, for
+    std columns that are optimistic).  With fewer than 3 fixes and no velocity: (0, inf).
     """
     if gnss.vel_enu is not None and sel.any():
         v = np.hypot(gnss.vel_enu[sel, 0], gnss.vel_enu[sel, 1])
@@ -189,7 +198,7 @@ def gnss_speed_bound(gnss: GnssData, sel: np.ndarray, lat: float, lon: float, h:
     ve = float(np.sum(tt * enu[:, 0]) / stt)
     vn = float(np.sum(tt * enu[:, 1]) / stt)
     sp = (float(np.mean(gnss.std_enu[idx][:, :2])) if gnss.std_enu is not None else 2.0)
-    return math.hypot(ve, vn), sp / math.sqrt(stt)
+    return math.hypot(ve, vn), max(sp, std_floor) / math.sqrt(stt)
 
 
 def _not_still(t: np.ndarray, accel: np.ndarray, gnss: GnssData, i0: int, i1: int, window_s: float = 1.0,
@@ -199,7 +208,9 @@ def _not_still(t: np.ndarray, accel: np.ndarray, gnss: GnssData, i0: int, i1: in
     The mean specific force must be gravity, its 1-s means must not drift from the run's
     median by more than ``max_change`` m/s^2 (vibration averages out, a pull-away does not),
     and the GNSS fixes of every 5-s stretch must not move (speed above 0.5 m/s and
-    :data:`~navpp.ins.calibrate.MOVING_K` sigma).
+    :data:`~navpp.ins.calibrate.MOVING_K` sigma; one fix's sigma at least the scatter of the fixes
+    near the run, as :func:`~navpp.ins.calibrate.gnss_speed_at` takes it: with std columns too
+    small, the noise of a resting receiver's fixes would read as motion).
     """
     t0, t1 = float(t[i0]), float(t[i1 - 1])
     near = (gnss.t >= t0 - 0.5) & (gnss.t <= t1 + 0.5)
@@ -209,6 +220,11 @@ def _not_still(t: np.ndarray, accel: np.ndarray, gnss: GnssData, i0: int, i1: in
                        math.radians(float(np.mean(gnss.lon_deg[near]))), float(np.mean(gnss.alt[near])))
     else:
         lat, lon, h = math.radians(float(gnss.lat_deg[0])), 0.0, 0.0
+    scatter = 0.0
+    if gnss.vel_enu is None and np.count_nonzero(near) >= 12:
+        enu_near = geodesy.geodetic_to_enu(np.radians(gnss.lat_deg[near]), np.radians(gnss.lon_deg[near]),
+                                           gnss.alt[near], lat, lon, h)
+        scatter = gnss_scatter_h(gnss.t[near], enu_near)
     f_norm = float(np.linalg.norm(f_mean))
     if abs(f_norm - float(geodesy.gravity(lat, h))) > 0.5:
         return f"specific force {f_norm:.2f} m/s^2, not gravity"
@@ -230,7 +246,7 @@ def _not_still(t: np.ndarray, accel: np.ndarray, gnss: GnssData, i0: int, i1: in
     wins = np.unique(cand[cand <= hi[:, None]])
     for a in t0 + 5.0 * wins.astype(float):
         sel = near & (gnss.t >= a - 0.5) & (gnss.t <= min(a + 5.0, t1) + 0.5)
-        speed, speed_std = gnss_speed_bound(gnss, sel, lat, lon, h)
+        speed, speed_std = gnss_speed_bound(gnss, sel, lat, lon, h, scatter)
         if speed > max(0.5, MOVING_K * speed_std):      # a 2-D speed: calibrate.MOVING_K
             return f"the GNSS track moves at {speed:.1f} m/s"
     return ""
@@ -606,14 +622,16 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: GnssData, se
         lines.append(f"position: the mean of the {fix.count} GNSS fix(es) of the still period (as {neff} independent "
                      f"ones E/N/U, from their autocorrelation), 1-sigma {sd} m; start at t = {t_start:.2f} s")
     span = (fix.t_first, fix.t_last) if (not lv.moving and fix.count > 1) else None
+    # one fix's variance the start's mean was given (the still fixes' scatter when larger) over the declared
+    var_ratio = np.maximum(np.square(fix.std_enu) * fix.n_eff / np.maximum(np.square(fix.fix_std), 1e-300), 1.0)
     if span is not None:
-        scale = fix.count / (fix.n_eff * (1.0 - START_SHARE))
+        scale = fix.count / (fix.n_eff * (1.0 - START_SHARE)) * var_ratio
         lines.append(f"the filter takes those fixes again, each with its variance times "
                      f"{'/'.join(f'{v:.1f}' for v in scale)} E/N/U, and starts from the mean at 1-sigma "
                      f"{'/'.join(f'{v:.2f}' for v in fix.std_enu / math.sqrt(START_SHARE))} m: each holds "
                      f"{1.0 - START_SHARE:.0%} of their information")
     return Alignment(t_start, lv.start, x, P, None if lv.moving else (lv.t_s0, lv.t_s1), tuple(lines),
-                     tuple(warnings), span, fix.count, fix.n_eff)
+                     tuple(warnings), span, fix.count, fix.n_eff, var_ratio)
 
 
 def _gnss_velocity_at(gnss: GnssData, t0: float, lat: float, lon: float, h: float, span: float = 2.0) -> np.ndarray:
