@@ -55,8 +55,7 @@ def alignment_settings(config: Config, noise=None, cal=None) -> AlignmentSetting
 
 def start_fixes(fixes: GnssFixes, al: Alignment) -> GnssFixes:
     """``fixes`` with the filter's R of a still start's averaged fixes (those at the times
-    ``al.start_fixes``) scaled by ``N / (N_eff (1 - START_SHARE))`` per ENU axis, and by
-    ``al.start_var_ratio`` where the still fixes scatter more than their sigmas declare: the start
+    ``al.start_fixes``) scaled by ``N / (N_eff (1 - START_SHARE))`` per ENU axis: the start
     (:func:`start_covariance`) holds :data:`~navpp.ins.alignment.START_SHARE` of their
     information, the filter takes the rest; ``fixes`` itself when the start is not such a mean.
     With the Gauss-Markov GNSS error model as well: N_eff then counts the fixes' correlated
@@ -69,8 +68,7 @@ def start_fixes(fixes: GnssFixes, al: Alignment) -> GnssFixes:
     if not inside.any():
         return fixes
     scale = np.ones((len(fixes), 3))
-    scale[inside] = (al.start_count / (np.asarray(al.start_n_eff, dtype=float) * (1.0 - START_SHARE))
-                     * np.asarray(al.start_var_ratio, dtype=float))
+    scale[inside] = al.start_count / (np.asarray(al.start_n_eff, dtype=float) * (1.0 - START_SHARE))
     return replace(fixes, r_scale=scale)
 
 

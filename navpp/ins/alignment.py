@@ -88,13 +88,10 @@ class Alignment:
     lines: tuple[str, ...] = field(default_factory=tuple)
     warnings: tuple[str, ...] = field(default_factory=tuple)
     #: a still start's averaged fixes: the times of the first and last (s; None in motion or from
-    #: one fix), how many and as how many independent ones per ENU axis (3,), and per ENU axis (3,)
-    #: the variance of one fix the start's mean was given over the one their sigmas declare
-    #: (their own scatter squared over the declared, at least 1: :func:`_start_fix`)
+    #: one fix), how many and as how many independent ones per ENU axis (3,)
     start_fixes: tuple[float, float] | None = None
     start_count: int = 1
     start_n_eff: np.ndarray = field(default_factory=lambda: np.ones(3))
-    start_var_ratio: np.ndarray = field(default_factory=lambda: np.ones(3))
 
 
 #: A still start's position is the mean of the still period's fixes (``P`` holds that mean's
@@ -102,10 +99,7 @@ class Alignment:
 #: the adaptive filters innovations).  So that their information counts once, the filter's start
 #: holds this share of it (the mean with its variance over the share) and the fixes the rest (each
 #: fix's variance times ``N / (N_eff (1 - share))``, N_eff per axis from :func:`effective_count`;
-#: :func:`navpp.engine.prepare.start_fixes`).  Both parts take one fix's variance as the larger of
-#: the declared one and the still fixes' own scatter (declared sigmas too small would otherwise
-#: give the fixes more weight than the start, and a filter, adaptive or not, would start by
-#: rejecting them).  Both parts are means of the same fixes, so the output
+#: :func:`navpp.engine.prepare.start_fixes`): both parts are means of the same fixes, so the output
 #: does not jump when the filter starts, and at the end of the rest the filter's variance is the
 #: mean's (not half of it).  With the Gauss-Markov GNSS error model the start is also tied to the
 #: error states (:meth:`navpp.ins.gnss_error.GnssErrorModel.start`).
@@ -622,16 +616,14 @@ def align(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: GnssData, se
         lines.append(f"position: the mean of the {fix.count} GNSS fix(es) of the still period (as {neff} independent "
                      f"ones E/N/U, from their autocorrelation), 1-sigma {sd} m; start at t = {t_start:.2f} s")
     span = (fix.t_first, fix.t_last) if (not lv.moving and fix.count > 1) else None
-    # one fix's variance the start's mean was given (the still fixes' scatter when larger) over the declared
-    var_ratio = np.maximum(np.square(fix.std_enu) * fix.n_eff / np.maximum(np.square(fix.fix_std), 1e-300), 1.0)
     if span is not None:
-        scale = fix.count / (fix.n_eff * (1.0 - START_SHARE)) * var_ratio
+        scale = fix.count / (fix.n_eff * (1.0 - START_SHARE))
         lines.append(f"the filter takes those fixes again, each with its variance times "
                      f"{'/'.join(f'{v:.1f}' for v in scale)} E/N/U, and starts from the mean at 1-sigma "
                      f"{'/'.join(f'{v:.2f}' for v in fix.std_enu / math.sqrt(START_SHARE))} m: each holds "
                      f"{1.0 - START_SHARE:.0%} of their information")
     return Alignment(t_start, lv.start, x, P, None if lv.moving else (lv.t_s0, lv.t_s1), tuple(lines),
-                     tuple(warnings), span, fix.count, fix.n_eff, var_ratio)
+                     tuple(warnings), span, fix.count, fix.n_eff)
 
 
 def _gnss_velocity_at(gnss: GnssData, t0: float, lat: float, lon: float, h: float, span: float = 2.0) -> np.ndarray:
