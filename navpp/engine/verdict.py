@@ -136,6 +136,32 @@ def consistency_checks(source: str, name: str, config: Config, tg: np.ndarray, n
     return None, warnings
 
 
+def std_label(recording: Recording, config: Config) -> str:
+    """Where the fixes' prior 1-sigma came from, for a message (the log's columns or the setting,
+    with ``[gnss] std_scale`` when it is not 1)."""
+    from ..plausibility import std_name
+
+    has_std = recording.gnss.std_enu is not None
+    label = std_name(recording.source, has_std)
+    if has_std and config.gnss.std_scale != 1.0:
+        label += f" times [gnss] std_scale = {config.gnss.std_scale:g}"
+    return label
+
+
+def gate_refusal_cause(recording: Recording, config: Config, t: np.ndarray, nu: np.ndarray,
+                       var0: np.ndarray) -> str | None:
+    """The likely cause of a run the gate refused when the fixes' own scatter says their sigmas
+    are far too small (:func:`navpp.plausibility.sigmas_too_small`: fixes t (M,) s, innovations
+    nu (M, 3) m, prior R var0 (M, 3) m^2), with the setting that fixes it; None otherwise (the
+    usual causes are ranked by :func:`likely_cause`)."""
+    from ..plausibility import sigmas_too_small
+
+    clause = sigmas_too_small(t, nu, var0, std_label(recording, config), config.gnss.gate_probability)
+    if clause is None:
+        return None
+    return f"{clause} ([gnss] std_scale; aekf, sage-husa learn it)"
+
+
 def plausibility_checks(recording: Recording, config: Config, name: str, solution: Solution,
                         smoothed: SmoothedRun | None, fixes, nu: np.ndarray, s_used: np.ndarray,
                         r_used: np.ndarray, accepted: np.ndarray, notes: list[str],
@@ -149,10 +175,7 @@ def plausibility_checks(recording: Recording, config: Config, name: str, solutio
     from .. import plausibility as pl
 
     src = recording.source
-    has_std = recording.gnss.std_enu is not None
-    label = pl.std_name(src, has_std)
-    if has_std and config.gnss.std_scale != 1.0:
-        label += f" times [gnss] std_scale = {config.gnss.std_scale:g}"
+    label = std_label(recording, config)
     found = pl.innovation_findings(name, label, fixes.t, nu, s_used, r_used, fixes.var, accepted,
                                    config.gnss.gate_probability, config.gnss.max_rejected_fraction)
     sols = [solution] + ([smoothed.solution] if smoothed is not None else [])
