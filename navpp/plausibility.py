@@ -197,27 +197,22 @@ def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray
     spread = fix_spread(z2)
     nu, S, R_used, var0, acc = nu[ok], S[ok], R_used[ok], var0[ok], accepted[ok]
     failed = _beyond_prior(nu, S, R_used, var0, acc, hi3, hi1, max_fraction)
-    if not np.any(spread > 1.0):
-        if failed is not None:
-            beyond, how = failed
-            out.append(Verdict(True, f"{name} diverged: {share(beyond, m)} fail the configured GNSS sigma's gate "
-                                     f"({how})"))
-        return out
-    # judged against the fixes' own scatter: a filter that learnt it (AEKF, Sage-Husa, VCE) is
-    # right to; one whose innovations lie beyond even that has lost the GNSS
-    widened = _beyond_prior(nu, S, R_used, var0 * spread ** 2, acc, hi3, hi1, max_fraction)
-    by = "/".join(f"{v:.1f}" for v in spread)
-    if widened is not None:
-        beyond, how = widened
-        out.append(Verdict(True, f"{name} diverged: {share(beyond, m)} fail the gate of the configured GNSS sigma "
-                                 f"times the fixes' own scatter ({by}x E/N/U; {how})"))
-    elif failed is not None or far_too_small(z2, gate_probability):
+    # judged against the fixes' own scatter where it is larger: a filter that learnt it (AEKF,
+    # Sage-Husa, VCE) is right to; one whose innovations lie beyond even that has lost the GNSS
+    # (and lies beyond the prior's gate all the more: the headline gives that one)
+    if failed is not None and (not np.any(spread > 1.0)
+                               or _beyond_prior(nu, S, R_used, var0 * spread ** 2, acc, hi3, hi1,
+                                                max_fraction) is not None):
+        beyond, how = failed
+        out.append(Verdict(True, f"{name} diverged: {share(beyond, m)} fail the configured GNSS sigma's gate ({how})"))
+    elif np.any(spread > 1.0) and (failed is not None or far_too_small(z2, gate_probability)):
+        by = "/".join(f"{v:.1f}" for v in spread)
         r_ratio = np.sqrt(np.median(np.diagonal(R_used, axis1=1, axis2=2) / var0, axis=0))
         learnt = (f"; {name} used R {'/'.join(f'{v:.1f}' for v in r_ratio)}x them" if np.any(r_ratio > 1.5)
                   else "")
         out.append(Verdict(False, f"GNSS noise {by}x (E/N/U) larger than {std_label} say (second differences of "
-                                  f"consecutive innovations){learnt}: judged against the "
-                                  "fixes' own scatter", "those sigmas are too small"))
+                                  f"consecutive innovations){learnt}: judged against the fixes' own scatter",
+                           "those sigmas are too small"))
     return out
 
 

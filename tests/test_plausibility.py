@@ -97,7 +97,7 @@ def test_a_learnt_r_hiding_large_innovations_is_a_divergence():
     t, nu, S, R, var0, acc = _white()
     nu = 4.0 * nu + _drift(t, var0, 120.0)
     (f,) = pl.innovation_findings("sage-husa", "std", t, nu, S * 16.0 ** 2, R * 16.0 ** 2, var0, acc, 0.9999, 0.25)
-    assert f.fatal and "times the fixes' own scatter" in f.headline, f
+    assert f.fatal and "sage-husa diverged" in f.headline and "configured GNSS sigma" in f.headline, f
 
 
 def test_fixes_noisier_than_their_sigmas_learnt_by_the_filter_only_warn():

@@ -399,7 +399,7 @@ def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared,
                                               recorder.accepted)
     if headline is not None:
         raise refusal(recording, config, headline, log.notes, log.warnings,
-                      gate_refusal_cause(recording, config, fixes.t, recorder.nu, fixes.var))
+                      measured=gate_refusal_cause(recording, config, fixes.t, recorder.nu, fixes.var))
     log.warnings += c_warnings
     log.warnings += plausibility_checks(recording, config, filt.name, solution, smoothed, fixes, recorder.nu,
                                         recorder.s_used, recorder.r_used, recorder.accepted, log.notes,
