@@ -265,7 +265,8 @@ def fix_spread(z: np.ndarray) -> np.ndarray:
     of ``z^2`` over the chi-square(1) median); ones below 20 of them."""
     if z.shape[0] < 20:
         return np.ones(3)
-    return np.sqrt(np.maximum(np.median(z * z, axis=0) / _CHI2_1_MEDIAN, 1.0))
+    spread: np.ndarray = np.sqrt(np.maximum(np.median(z * z, axis=0) / _CHI2_1_MEDIAN, 1.0))
+    return spread
 
 
 def far_too_small(z: np.ndarray, gate_probability: float) -> bool:
@@ -273,7 +274,7 @@ def far_too_small(z: np.ndarray, gate_probability: float) -> bool:
     small: at least 20 of them, more than half beyond the 3-dof gate quantile (the sigmas at
     least ``sqrt(chi2_3(p) / chi2_3 median)`` = 3x too small at the default p)."""
     hi3 = gate_quantiles(gate_probability)[0]
-    return z.shape[0] >= 20 and int(np.count_nonzero(np.sum(z * z, axis=1) > hi3)) > 0.5 * z.shape[0]
+    return bool(z.shape[0] >= 20 and int(np.count_nonzero(np.sum(z * z, axis=1) > hi3)) > 0.5 * z.shape[0])
 
 
 def sigmas_too_small(t: np.ndarray, nu: np.ndarray, var: np.ndarray, std_label: str,
