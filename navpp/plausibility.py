@@ -4,7 +4,8 @@ Adaptive filters learn the GNSS noise R from the innovations (Sage-Husa, AEKF, V
 the prediction (AUKF's fading): a filter that has lost the GNSS then accepts every fix with a
 normal-looking NIS, and the gate never fires.  So every filter is judged here against the
 PRIOR R: the 1-sigma the log declares per fix (``std_e, std_n, std_u`` of ``gnss.csv``, the
-NavSatFix covariance) or ``[gnss] default_std_m``.  All thresholds are chi-square quantiles at
+NavSatFix covariance) or ``[gnss] default_std_m``, widened only where the fixes' own scatter
+shows more noise than that (below).  All thresholds are chi-square quantiles at
 the configured gate probability (``[gnss] gate_probability``, 0.9999 by default) and shares of
 the fixes against ``[gnss] max_rejected_fraction``, as for the gate:
 
@@ -14,7 +15,15 @@ the fixes against ``[gnss] max_rejected_fraction``, as for the gate:
   times the prior's: no single consistent innovation makes R that large) or the solution away
   from the accepted fixes (the post-fit residual ``R_used S^-1 nu`` normalised by the prior R
   beyond the 3-dof gate quantile), each at more than that share (a learnt R alone is not
-  wrong: AEKF's holds the prediction error by design);
+  wrong: AEKF's holds the prediction error by design).  Where the fixes' own scatter is larger
+  than the prior R says (the second differences of consecutive innovations, normalised by the
+  prior R: the INS's smooth drift cancels, the fixes' noise stays; correlated fix errors only
+  lower them), the prior R is widened to that scatter per ENU axis first: an adaptive filter
+  that learnt the noise the fixes really have is right to, and the run only warns that the
+  sigmas are too small; a filter whose innovations lie beyond even the widened gate is refused.
+  A run the gate refused (``[gnss] max_rejected_fraction``) names those sigmas as the likely
+  cause when more than half of those normalised second differences lie beyond the 3-dof gate
+  quantile (sigmas at least 3x too small at the default p);
 - GNSS noise far SMALLER than the prior R says (standard deviations in cm read as m): the
   difference of consecutive innovations (the INS's drift cancels, the fixes' noise stays),
   normalised by the two fixes' prior R, below the lower chi-square quantile ``chi2_3(1 - p)``
@@ -168,17 +177,13 @@ def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray
     # INS's drift as well as the GNSS noise, and a filter that trusts a too-large sigma little
     # drifts until the two match; between consecutive fixes the drift hardly changes, so the
     # difference of consecutive innovations is the GNSS noise R claims to describe.
-    dt = np.diff(t)
-    step = float(np.median(dt)) if dt.size else 0.0
-    pair = ok[1:] & ok[:-1] & (dt <= 1.5 * step)
-    d_nu = (nu[1:] - nu[:-1])[pair]
-    q_d = np.sum(d_nu * d_nu / (var0[1:] + var0[:-1])[pair], axis=1)
+    z_d, r1, white = consecutive_differences(t, nu, var0, ok)
+    q_d = np.sum(z_d * z_d, axis=1)
     n_d = int(q_d.shape[0])
     low = int(np.count_nonzero(q_d < lo3))
     if n_d >= 20 and low > 0.5 * n_d:
         scale = math.sqrt(_CHI2_3_MEDIAN / max(float(np.median(q_d)), 1e-300))
-        r1 = _difference_lag1_correlation(d_nu / np.sqrt((var0[1:] + var0[:-1])[pair]), np.flatnonzero(pair))
-        if r1 <= WHITE_DIFFERENCE_CORRELATION:
+        if white:
             what = (f"GNSS noise {scale:.3g}x smaller than {std_label} say ({share(low, n_d)} below "
                     f"the chi-square {100.0 * _tail(gate_probability):.2g}% bound)")
             out.append(Verdict(max_fraction < 1.0, what, "those sigmas are too large (cm read as m?)"))
@@ -187,28 +192,130 @@ def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray
                                       f"say, but their errors are correlated from fix to fix (consecutive "
                                       f"differences correlate {r1:+.2f}, white noise: -0.5): navpp cannot tell "
                                       "whether those sigmas are too large or the receiver smooths its fixes"))
+    # far larger than the prior says: the fixes' own scatter, the R the data support
+    z2 = second_differences(t, nu, var0, ok)
+    spread = fix_spread(z2)
     nu, S, R_used, var0, acc = nu[ok], S[ok], R_used[ok], var0[ok], accepted[ok]
+    failed = _beyond_prior(nu, S, R_used, var0, acc, hi3, hi1, max_fraction)
+    # judged against the fixes' own scatter where it is larger: a filter that learnt it (AEKF,
+    # Sage-Husa, VCE) is right to; one whose innovations lie beyond even that has lost the GNSS
+    # (and lies beyond the prior's gate all the more: the headline gives that one)
+    if failed is not None and (not np.any(spread > 1.0)
+                               or _beyond_prior(nu, S, R_used, var0 * spread ** 2, acc, hi3, hi1,
+                                                max_fraction) is not None):
+        beyond, how = failed
+        out.append(Verdict(True, f"{name} diverged: {share(beyond, m)} fail the configured GNSS sigma's gate ({how})"))
+    elif np.any(spread > 1.0) and (failed is not None or far_too_small(z2, gate_probability)):
+        by = "/".join(f"{v:.1f}" for v in spread)
+        r_ratio = np.sqrt(np.median(np.diagonal(R_used, axis1=1, axis2=2) / var0, axis=0))
+        learnt = (f"; {name} used R {'/'.join(f'{v:.1f}' for v in r_ratio)}x them" if np.any(r_ratio > 1.5)
+                  else "")
+        out.append(Verdict(False, f"GNSS noise {by}x (E/N/U) larger than {std_label} say (second differences of "
+                                  f"consecutive innovations){learnt}: judged against the fixes' own scatter",
+                           "those sigmas are too small"))
+    return out
+
+
+def consecutive_differences(t: np.ndarray, nu: np.ndarray, var0: np.ndarray,
+                            ok: np.ndarray | None = None) -> tuple[np.ndarray, float, bool]:
+    """The differences of consecutive innovations normalised by the two fixes' prior R.
+
+    Between consecutive fixes the INS's drift hardly changes, so ``nu[k] - nu[k-1]`` is the
+    difference of the two fixes' noise, which the prior R claims to describe: ``z`` (K, 3) is
+    N(0, 1) per axis when the sigmas are right and the errors white.  t (M,) s; nu (M, 3) m;
+    var0 (M, 3) m^2; ok (M,) bool, the fixes to use (default: finite ones).  Only fixes at most
+    1.5 median intervals apart pair up.  Returns (z, their lag-1 correlation (0 below 20 pairs),
+    white: at least 20 pairs correlated at most :data:`WHITE_DIFFERENCE_CORRELATION`)."""
+    if ok is None:
+        ok = np.all(np.isfinite(nu), axis=1) & np.all(var0 > 0.0, axis=1)
+    dt = np.diff(t)
+    step = float(np.median(dt)) if dt.size else 0.0
+    pair = ok[1:] & ok[:-1] & (dt <= 1.5 * step)
+    z = (nu[1:] - nu[:-1])[pair] / np.sqrt((var0[1:] + var0[:-1])[pair])
+    n = int(z.shape[0])
+    r1 = _difference_lag1_correlation(z, np.flatnonzero(pair)) if n >= 20 else 0.0
+    return z, r1, n >= 20 and r1 <= WHITE_DIFFERENCE_CORRELATION
+
+
+def second_differences(t: np.ndarray, nu: np.ndarray, var: np.ndarray,
+                       ok: np.ndarray | None = None) -> np.ndarray:
+    """The second differences of the innovations ``nu[k+1] - 2 nu[k] + nu[k-1]`` normalised by
+    the three fixes' prior R, ``var[k+1] + 4 var[k] + var[k-1]``: (K, 3), N(0, 1) per axis for
+    white fix errors with the prior sigmas.  The INS's error between fixes (a drift) is smooth
+    and cancels; what remains of the filter's own prediction error adds at most its share
+    ``H P H'`` of the innovation variance (the innovations of a consistent filter are white with
+    variance ``H P H' + R``), small beside R at metre-level fixes; fix errors correlated from fix
+    to fix make them smaller, never larger.  t (M,) s; nu (M, 3) m; var (M, 3) m^2; ok (M,)
+    bool, the fixes to use (default: finite ones); only triplets at most 1.5 median intervals
+    apart."""
+    if ok is None:
+        ok = np.all(np.isfinite(nu), axis=1) & np.all(var > 0.0, axis=1)
+    dt = np.diff(t)
+    step = float(np.median(dt)) if dt.size else 0.0
+    close = dt <= 1.5 * step
+    tri = ok[2:] & ok[1:-1] & ok[:-2] & close[1:] & close[:-1]
+    z: np.ndarray = ((nu[2:] - 2.0 * nu[1:-1] + nu[:-2])[tri]
+                     / np.sqrt((var[2:] + 4.0 * var[1:-1] + var[:-2])[tri]))
+    return z
+
+
+def fix_spread(z: np.ndarray) -> np.ndarray:
+    """The fixes' own scatter over their prior sigma per ENU axis (3,), at least 1, from the
+    normalised second differences ``z`` (K, 3) of :func:`second_differences` (robust: the median
+    of ``z^2`` over the chi-square(1) median); ones below 20 of them."""
+    if z.shape[0] < 20:
+        return np.ones(3)
+    spread: np.ndarray = np.sqrt(np.maximum(np.median(z * z, axis=0) / _CHI2_1_MEDIAN, 1.0))
+    return spread
+
+
+def far_too_small(z: np.ndarray, gate_probability: float) -> bool:
+    """Whether the normalised second differences ``z`` (K, 3) say the prior sigmas are far too
+    small: at least 20 of them, more than half beyond the 3-dof gate quantile (the sigmas at
+    least ``sqrt(chi2_3(p) / chi2_3 median)`` = 3x too small at the default p)."""
+    hi3 = gate_quantiles(gate_probability)[0]
+    return bool(z.shape[0] >= 20 and int(np.count_nonzero(np.sum(z * z, axis=1) > hi3)) > 0.5 * z.shape[0])
+
+
+def sigmas_too_small(t: np.ndarray, nu: np.ndarray, var: np.ndarray, std_label: str,
+                     gate_probability: float) -> str | None:
+    """The likely cause of a refusal when the fixes' own scatter is far larger than their prior
+    sigma says (:func:`far_too_small` on the innovations' :func:`second_differences`, ``var``
+    the prior R's diagonal): a short clause naming ``std_label``, or None."""
+    z = second_differences(t, nu, var)
+    if not far_too_small(z, gate_probability):
+        return None
+    by = "/".join(f"{v:.1f}" for v in fix_spread(z))
+    return f"{std_label} {by}x (E/N/U) too small by the fixes' own scatter"
+
+
+def _beyond_prior(nu: np.ndarray, S: np.ndarray, R_used: np.ndarray, var: np.ndarray, acc: np.ndarray, hi3: float,
+                  hi1: float, max_fraction: float) -> tuple[int, str] | None:
+    """The divergence test of :func:`innovation_findings` against the GNSS variance ``var`` (M, 3),
+    m^2: (fixes beyond its gate, what else shows it) when it fails, else None.  nu (M, 3) m; S,
+    R_used (M, 3, 3) m^2 as the filter used them; acc (M,) bool."""
+    m = nu.shape[0]
     # far beyond the prior R (what a learnt R or an inflated P let through)
-    S0 = S - R_used + var0[:, :, None] * np.eye(3)
+    S0 = S - R_used + var[:, :, None] * np.eye(3)
     try:
         nis0 = np.einsum("ki,ki->k", nu, np.linalg.solve(S0, nu[:, :, None])[:, :, 0])
     except np.linalg.LinAlgError:
         nis0 = np.zeros(m)                       # no judgement without a solvable prior S
-    r_ratio = np.sqrt(np.diagonal(R_used, axis1=1, axis2=2) / var0).max(axis=1)
+    r_ratio = np.sqrt(np.diagonal(R_used, axis1=1, axis2=2) / var).max(axis=1)
     beyond = int(np.count_nonzero(~(nis0 <= hi3)))
     grown = int(np.count_nonzero(r_ratio > math.sqrt(hi1)))
     S_inv_nu = np.linalg.solve(S, nu[:, :, None])
     post = np.einsum("kij,kjl->kil", R_used, S_inv_nu)[:, :, 0]
-    q_post = np.sum(post * post / var0, axis=1)
+    q_post = np.sum(post * post / var, axis=1)
     far = int(np.count_nonzero(acc & ~(q_post <= hi3)))
     n_acc = int(np.count_nonzero(acc))
     # a learnt R (or an inflated P) alone is no divergence: AEKF's R holds the prediction error by
     # design; it is one when the fixes it let through lie beyond the gate of the prior R
     if beyond > max_fraction * m and (grown > max_fraction * m or far > max_fraction * max(n_acc, 1)):
         how = (f"learnt R {float(np.median(r_ratio)):.3g}x it" if grown > max_fraction * m
-               else f"solution off {share(far, n_acc)} it took")
-        out.append(Verdict(True, f"{name} diverged: {share(beyond, m)} fail the configured GNSS sigma's gate ({how})"))
-    return out
+               else f"solution off {far} of {n_acc} fixes ({100.0 * far / max(n_acc, 1):.0f}%) it took")
+        return beyond, how
+    return None
 
 
 def _tail(gate_probability: float) -> float:
@@ -218,6 +325,7 @@ def _tail(gate_probability: float) -> float:
 
 
 _CHI2_3_MEDIAN = 2.365973884375338     # median of the chi-square distribution with 3 dof
+_CHI2_1_MEDIAN = 0.454936423119572     # ... with 1 dof
 
 
 def solution_findings(name: str, vehicle_type: str, t: np.ndarray, alt: np.ndarray, vel_enu: np.ndarray,

@@ -91,9 +91,13 @@ def test_std_scale_gives_the_filter_the_true_r(scale_runs):
 
 
 def test_without_std_scale_the_small_sigmas_ruin_the_run(scale_runs):
+    # the EKF rejects half its fixes and ends 2.5x the true sigmas' error (1.71 against 0.68 m);
+    # before the still start took the fixes' own scatter (the 30-s rest was read as motion and the
+    # run started from one fix) it was 167 m, with 958 of 1000 fixes rejected
     rec, truth, _, small = scale_runs
     assert small.gnss_rejected > 0.2 * small.gnss_epochs
-    assert np.linalg.norm(_rmse_enu(rec, small.solution)) > 3.0 * np.linalg.norm(_rmse_enu(rec, truth.solution))
+    assert np.linalg.norm(_rmse_enu(rec, small.solution)) > 2.0 * np.linalg.norm(_rmse_enu(rec, truth.solution))
+    assert small.alignment.start_fixes is not None              # the still start, as with the true sigmas
 
 
 def test_std_scale_run_is_the_true_sigma_run(scale_runs):

@@ -80,13 +80,43 @@ def test_fix_to_fix_correlated_errors_only_warn_that_navpp_cannot_tell():
     assert g.fatal and "smaller than std say" in g.headline, g
 
 
+def _drift(t, var0, sigmas):
+    """A lost filter's error in its innovations: ``sigmas`` prior sigmas on every axis, moving
+    slowly (a 40-s period: the INS drifts, it does not jump from fix to fix)."""
+    return sigmas * np.sqrt(var0) * (1.0 + 0.5 * np.sin(2.0 * np.pi * t / 40.0))[:, None]
+
+
 def test_a_learnt_r_hiding_large_innovations_is_a_divergence():
     t, nu, S, R, var0, acc = _white()
-    nu = nu * 30.0                                  # innovations 30 sigma of the configured R ...
+    nu = nu + _drift(t, var0, 30.0)                 # innovations 30 sigma of the configured R ...
     R = R * 900.0                                   # ... which the filter learnt away
     S = S * 900.0
     (f,) = pl.innovation_findings("sage-husa", "std", t, nu, S, R, var0, acc, 0.9999, 0.25)
     assert f.fatal and "sage-husa diverged" in f.headline and "configured GNSS sigma" in f.headline
+    # the same with fixes 4x noisier than their sigmas: judged against their own scatter, still lost
+    t, nu, S, R, var0, acc = _white()
+    nu = 4.0 * nu + _drift(t, var0, 120.0)
+    (f,) = pl.innovation_findings("sage-husa", "std", t, nu, S * 16.0 ** 2, R * 16.0 ** 2, var0, acc, 0.9999, 0.25)
+    assert f.fatal and "sage-husa diverged" in f.headline and "configured GNSS sigma" in f.headline, f
+
+
+def test_fixes_noisier_than_their_sigmas_learnt_by_the_filter_only_warn():
+    """Oracle: the model's own numbers.  White fix errors 4x their declared sigma (R 16x too
+    small) that an adaptive filter learnt (R and S 16x): the innovations are what the fixes'
+    real noise makes them, so the run is not refused; the warning gives the factor, about 4 per
+    axis, and names the sigmas.  Without the learnt R (the filter told the prior), the same."""
+    t, nu, S, R, var0, acc = _white(m=2000)
+    nu = 4.0 * nu
+    (f,) = pl.innovation_findings("aekf", "std", t, nu, S * 16.0, R * 16.0, var0, acc, 0.9999, 0.25)
+    assert not f.fatal and "larger than std say" in f.headline and "too small" in f.cause, f
+    by = [float(v) for v in f.headline.split("GNSS noise ")[1].split("x")[0].split("/")]
+    assert all(3.6 < v < 4.4 for v in by), f
+    assert "used R 4.0/4.0/4.0x" in f.headline
+    assert pl.sigmas_too_small(t, nu, var0, "std", 0.9999).startswith("std ")
+    # the sigmas right: no finding, no cause
+    t, nu, S, R, var0, acc = _white(m=2000)
+    assert pl.innovation_findings("aekf", "std", t, nu, S, R, var0, acc, 0.9999, 0.25) == []
+    assert pl.sigmas_too_small(t, nu, var0, "std", 0.9999) is None
     # a learnt R alone, with innovations the prior explains (AEKF's R holds the prediction error)
     t, nu, S, R, var0, acc = _white()
     assert pl.innovation_findings("aekf", "std", t, nu, S * 9.0, R * 9.0, var0, acc, 0.9999, 0.25) == []

@@ -60,7 +60,15 @@ from .recorder import RunRecorder, new_path
 from .results import RunResult, SmoothedRun
 from .schedule import GnssFixes, epochs, gnss_fixes, with_prior_std
 from .segments import ProgressFn, imu_segments, run_segments
-from .verdict import aid_checks, consistency_checks, plausibility_checks, refusal, state_fault, velocity_sigma_checks
+from .verdict import (
+    aid_checks,
+    consistency_checks,
+    gate_refusal_cause,
+    plausibility_checks,
+    refusal,
+    state_fault,
+    velocity_sigma_checks,
+)
 
 
 def run(recording: Recording, config: Config, filt: Filter, *, progress: ProgressFn | None = None,
@@ -390,7 +398,8 @@ def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared,
     headline, c_warnings = consistency_checks(recording.source, filt.name, config, fixes.t, recorder.nis,
                                               recorder.accepted)
     if headline is not None:
-        raise refusal(recording, config, headline, log.notes, log.warnings)
+        raise refusal(recording, config, headline, log.notes, log.warnings,
+                      measured=gate_refusal_cause(recording, config, fixes.t, recorder.nu, fixes.var))
     log.warnings += c_warnings
     log.warnings += plausibility_checks(recording, config, filt.name, solution, smoothed, fixes, recorder.nu,
                                         recorder.s_used, recorder.r_used, recorder.accepted, log.notes,

@@ -73,10 +73,12 @@ NOTICED_CAUSES = (
 )
 
 
-def likely_cause(recording: Recording, config: Config, noticed: list[str]) -> tuple[str, list[str]]:
+def likely_cause(recording: Recording, config: Config, noticed: list[str],
+                 measured: str | None = None) -> tuple[str, list[str]]:
     """The single most likely cause of a filter and GNSS that disagree, and the rest (for a
     warning line): first the fixes themselves (all identical, radians), then what the run
-    noticed (the codes of its warnings), then the IMU's units and axes."""
+    noticed (the codes of its warnings), then ``measured`` (a cause the run's innovations show,
+    e.g. :func:`gate_refusal_cause`), then the IMU's units and axes."""
     from ..plausibility import fix_suspect
 
     g = recording.gnss
@@ -88,16 +90,19 @@ def likely_cause(recording: Recording, config: Config, noticed: list[str]) -> tu
     for code, cause in NOTICED_CAUSES:
         if code in codes:
             return f"check {cause}", [causes(config)]
+    if measured is not None:
+        return measured, [causes(config)]
     return "check the IMU's units and axes ([imu] mounting_rpy_deg)", [causes(config, imu=False)]
 
 
 def refusal(recording: Recording, config: Config, headline: str, notes: list[str], warnings: list[str],
-            cause: str | None = None, anyway: bool = True) -> RunRefused:
+            cause: str | None = None, anyway: bool = True, measured: str | None = None) -> RunRefused:
     """A :class:`~navpp.errors.RunRefused` as one short line (source, what was seen, the likely
     cause) with the run's warnings, the other causes and the way to write the trajectory anyway
-    as warnings after them (the CLI prints them first), and the run's notes."""
+    as warnings after them (the CLI prints them first), and the run's notes.  ``cause``: the
+    cause to name; else :func:`likely_cause` ranks the usual ones with ``measured``."""
     if cause is None:
-        cause, others = likely_cause(recording, config, warnings)
+        cause, others = likely_cause(recording, config, warnings, measured)
     else:
         others = [causes(config)]
     extra = Finding("refusal-causes", f"{recording.source}: other causes to check: {'; '.join(others)}"
@@ -136,6 +141,32 @@ def consistency_checks(source: str, name: str, config: Config, tg: np.ndarray, n
     return None, warnings
 
 
+def std_label(recording: Recording, config: Config) -> str:
+    """Where the fixes' prior 1-sigma came from, for a message (the log's columns or the setting,
+    with ``[gnss] std_scale`` when it is not 1)."""
+    from ..plausibility import std_name
+
+    has_std = recording.gnss.std_enu is not None
+    label = std_name(recording.source, has_std)
+    if has_std and config.gnss.std_scale != 1.0:
+        label += f" times [gnss] std_scale = {config.gnss.std_scale:g}"
+    return label
+
+
+def gate_refusal_cause(recording: Recording, config: Config, t: np.ndarray, nu: np.ndarray,
+                       var0: np.ndarray) -> str | None:
+    """A cause of a run the gate refused when the fixes' own scatter says their sigmas are far
+    too small (:func:`navpp.plausibility.sigmas_too_small`: fixes t (M,) s, innovations nu (M, 3)
+    m, prior R var0 (M, 3) m^2), with the setting that fixes it, for :func:`likely_cause` to rank
+    after the fixes themselves and what the run noticed; None otherwise."""
+    from ..plausibility import sigmas_too_small
+
+    clause = sigmas_too_small(t, nu, var0, std_label(recording, config), config.gnss.gate_probability)
+    if clause is None:
+        return None
+    return f"{clause} ([gnss] std_scale; aekf, sage-husa learn it)"
+
+
 def plausibility_checks(recording: Recording, config: Config, name: str, solution: Solution,
                         smoothed: SmoothedRun | None, fixes, nu: np.ndarray, s_used: np.ndarray,
                         r_used: np.ndarray, accepted: np.ndarray, notes: list[str],
@@ -149,10 +180,7 @@ def plausibility_checks(recording: Recording, config: Config, name: str, solutio
     from .. import plausibility as pl
 
     src = recording.source
-    has_std = recording.gnss.std_enu is not None
-    label = pl.std_name(src, has_std)
-    if has_std and config.gnss.std_scale != 1.0:
-        label += f" times [gnss] std_scale = {config.gnss.std_scale:g}"
+    label = std_label(recording, config)
     found = pl.innovation_findings(name, label, fixes.t, nu, s_used, r_used, fixes.var, accepted,
                                    config.gnss.gate_probability, config.gnss.max_rejected_fraction)
     sols = [solution] + ([smoothed.solution] if smoothed is not None else [])

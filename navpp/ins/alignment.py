@@ -27,7 +27,7 @@ from ..errors import InputError
 from ..findings import Finding
 from .aids.standstill import quiet_blocks
 from .attitude import dcm_to_quat, rph_to_dcm
-from .calibrate import MOVING_K, gnss_speed_at, spans
+from .calibrate import MOVING_K, gnss_scatter_h, gnss_speed_at, spans
 from .state import (
     ATT,
     BA,
@@ -167,11 +167,14 @@ def detect_still(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_dura
     return runs[0] if runs else None
 
 
-def gnss_speed_bound(gnss: GnssData, sel: np.ndarray, lat: float, lon: float, h: float) -> tuple[float, float]:
+def gnss_speed_bound(gnss: GnssData, sel: np.ndarray, lat: float, lon: float, h: float,
+                     std_floor: float = 0.0) -> tuple[float, float]:
     """Horizontal speed (m/s) of the GNSS track over the fixes ``sel`` and its 1-sigma.
 
     From GNSS velocity when the log has it (median), else from a straight-line fit of the
-    positions against time.  With fewer than 3 fixes and no velocity: (0, inf).
+    positions against time, one fix's horizontal 1-sigma the larger of the log's and
+    ``std_floor`` (m: the fixes' own scatter, :func:`~navpp.ins.calibrate.gnss_scatter_h`, for
+    std columns that are optimistic).  With fewer than 3 fixes and no velocity: (0, inf).
     """
     if gnss.vel_enu is not None and sel.any():
         v = np.hypot(gnss.vel_enu[sel, 0], gnss.vel_enu[sel, 1])
@@ -189,7 +192,7 @@ def gnss_speed_bound(gnss: GnssData, sel: np.ndarray, lat: float, lon: float, h:
     ve = float(np.sum(tt * enu[:, 0]) / stt)
     vn = float(np.sum(tt * enu[:, 1]) / stt)
     sp = (float(np.mean(gnss.std_enu[idx][:, :2])) if gnss.std_enu is not None else 2.0)
-    return math.hypot(ve, vn), sp / math.sqrt(stt)
+    return math.hypot(ve, vn), max(sp, std_floor) / math.sqrt(stt)
 
 
 def _not_still(t: np.ndarray, accel: np.ndarray, gnss: GnssData, i0: int, i1: int, window_s: float = 1.0,
@@ -199,7 +202,9 @@ def _not_still(t: np.ndarray, accel: np.ndarray, gnss: GnssData, i0: int, i1: in
     The mean specific force must be gravity, its 1-s means must not drift from the run's
     median by more than ``max_change`` m/s^2 (vibration averages out, a pull-away does not),
     and the GNSS fixes of every 5-s stretch must not move (speed above 0.5 m/s and
-    :data:`~navpp.ins.calibrate.MOVING_K` sigma).
+    :data:`~navpp.ins.calibrate.MOVING_K` sigma; one fix's sigma at least the scatter of the fixes
+    near the run, as :func:`~navpp.ins.calibrate.gnss_speed_at` takes it: with std columns too
+    small, the noise of a resting receiver's fixes would read as motion).
     """
     t0, t1 = float(t[i0]), float(t[i1 - 1])
     near = (gnss.t >= t0 - 0.5) & (gnss.t <= t1 + 0.5)
@@ -209,6 +214,11 @@ def _not_still(t: np.ndarray, accel: np.ndarray, gnss: GnssData, i0: int, i1: in
                        math.radians(float(np.mean(gnss.lon_deg[near]))), float(np.mean(gnss.alt[near])))
     else:
         lat, lon, h = math.radians(float(gnss.lat_deg[0])), 0.0, 0.0
+    scatter = 0.0
+    if gnss.vel_enu is None and np.count_nonzero(near) >= 12:
+        enu_near = geodesy.geodetic_to_enu(np.radians(gnss.lat_deg[near]), np.radians(gnss.lon_deg[near]),
+                                           gnss.alt[near], lat, lon, h)
+        scatter = gnss_scatter_h(gnss.t[near], enu_near)
     f_norm = float(np.linalg.norm(f_mean))
     if abs(f_norm - float(geodesy.gravity(lat, h))) > 0.5:
         return f"specific force {f_norm:.2f} m/s^2, not gravity"
@@ -230,7 +240,7 @@ def _not_still(t: np.ndarray, accel: np.ndarray, gnss: GnssData, i0: int, i1: in
     wins = np.unique(cand[cand <= hi[:, None]])
     for a in t0 + 5.0 * wins.astype(float):
         sel = near & (gnss.t >= a - 0.5) & (gnss.t <= min(a + 5.0, t1) + 0.5)
-        speed, speed_std = gnss_speed_bound(gnss, sel, lat, lon, h)
+        speed, speed_std = gnss_speed_bound(gnss, sel, lat, lon, h, scatter)
         if speed > max(0.5, MOVING_K * speed_std):      # a 2-D speed: calibrate.MOVING_K
             return f"the GNSS track moves at {speed:.1f} m/s"
     return ""
