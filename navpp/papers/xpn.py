@@ -621,8 +621,8 @@ def run_scenario(sc: XpnScenario, runs: int, seed: int, filters: Sequence[str], 
     return BenchResult("paper001-xpn", TITLE, rows, notes, runs, seed, series=series)
 
 
-#: CPU seconds of one 150,000-s run of the five filters (benchmarks/bench_xpn.py, 10 runs, 2-core EPYC)
-CPU_S_PER_RUN = 280.0
+#: CPU seconds of one 150,000-s run of the five filters (benchmarks/bench_xpn.py: 10 runs, 3,175 s, 2-core EPYC)
+CPU_S_PER_RUN = 320.0
 
 
 @register_benchmark("paper001-xpn", TITLE, 100, ("ckf", "ukf", "sif", "aukf", "rwckf"), parallel=True,
