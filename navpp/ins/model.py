@@ -173,6 +173,15 @@ def error_dynamics(x: np.ndarray, fn: np.ndarray, inv_tau_g: float, inv_tau_a: f
     """Continuous error-state matrix F (15, 15) at nominal ``x`` with ENU specific force ``fn``
     (m/s^2) and bias correlation rates ``inv_tau_g``, ``inv_tau_a`` (1/s); equations in the
     module docstring."""
+    F = _error_dynamics_state(x, inv_tau_g, inv_tau_a)
+    _set_neg_skew(F, DX_VEL, DX_ATT, fn)
+    return F
+
+
+@njit(cache=True, inline="always")
+def _error_dynamics_state(x: np.ndarray, inv_tau_g: float, inv_tau_a: float) -> np.ndarray:
+    """:func:`error_dynamics` without the specific force's block (velocity rows, attitude
+    columns: its off-diagonal elements are left zero), the part that depends on ``x`` alone."""
     F = np.zeros((N_ERR, N_ERR))
     vel = x[NOMINAL_VEL]
     lat, h = x[X_LAT], x[X_H]
@@ -190,8 +199,8 @@ def error_dynamics(x: np.ndarray, fn: np.ndarray, inv_tau_g: float, inv_tau_a: f
             F[DX_ATT + r, DX_VEL + c] = -mv[r, c]
             F[DX_ATT + r, DX_BG + c] = -C[r, c]
             F[DX_VEL + r, DX_BA + c] = -C[r, c]
-    # velocity rows: phi x f_n = -[f_n x] phi, ([v x] M_v - [(2 w_ie + w_en) x]) dv, gravity's height gradient
-    _set_neg_skew(F, DX_VEL, DX_ATT, fn)
+    # velocity rows: phi x f_n = -[f_n x] phi (set by error_dynamics), ([v x] M_v - [(2 w_ie + w_en) x]) dv,
+    # gravity's height gradient
     w2 = 2.0 * wie + wen
     sk_v = np.array([[0.0, -vel[2], vel[1]], [vel[2], 0.0, -vel[0]], [-vel[1], vel[0], 0.0]])
     vm = sk_v @ mv
@@ -216,41 +225,44 @@ def transition_from_segments(x_start: np.ndarray, seg_x: np.ndarray, seg_fn: np.
     """(Phi, Qd), each (15, 15), accumulated over the strapdown's ``n_seg`` segments (nominal
     ``seg_x[j]`` (16,) at the end of segment j, its mean ENU specific force ``seg_fn[j]`` m/s^2
     and length ``seg_T[j]`` s) from the nominal ``x_start``; ``psd`` (15,) the diagonal of
-    G Qc G^T.  Per segment: :func:`_segment_phi` and the trapezoid Qd of :func:`_segment_qd`.
+    G Qc G^T.  Per segment: ``Phi_j = I + FT + (FT)^2/2 + (FT)^3/6`` with F the mean of F at the segment's
+    start and end states (its mean specific force ``fn`` in both; the third-order term carries
+    gyro bias -> attitude -> velocity -> position within one step) and the trapezoid Qd,
+    ``(Phi_j GQG Phi_j^T + GQG) T / 2`` with GQG = diag(psd).
+
+    The x-dependent part of F at each node is computed once and shared by the two segments
+    that meet there (:func:`_segment_phi_shared`), and the trapezoid's two sandwiches are one:
+    ``Phi_j Qd Phi_j^T + Phi_j D Phi_j^T + D = Phi_j (Qd + D) Phi_j^T + D`` with
+    ``D = diag(psd) T / 2`` (two 15x15 products per segment instead of four).
     """
     Phi = np.eye(N_ERR)
     Qd = np.zeros((N_ERR, N_ERR))
-    F_prev_state = x_start
+    F_prev = _error_dynamics_state(x_start, inv_tau_g, inv_tau_a)
     for j in range(n_seg):
         T = seg_T[j]
-        Phi_j = _segment_phi(F_prev_state, seg_x[j], seg_fn[j], T, inv_tau_g, inv_tau_a)
+        F_next = _error_dynamics_state(seg_x[j], inv_tau_g, inv_tau_a)
+        Phi_j = _segment_phi_shared(F_prev, F_next, seg_fn[j], T)
         Phi = Phi_j @ Phi
-        Qd = Phi_j @ Qd @ Phi_j.T + _segment_qd(Phi_j, psd, T)
-        F_prev_state = seg_x[j]
+        for k in range(N_ERR):
+            Qd[k, k] += 0.5 * T * psd[k]
+        Qd = Phi_j @ Qd @ Phi_j.T
+        for k in range(N_ERR):
+            Qd[k, k] += 0.5 * T * psd[k]
+        F_prev = F_next
     return Phi, Qd
 
 
 @njit(cache=True, inline="always")
-def _segment_phi(x_start: np.ndarray, x_end: np.ndarray, fn: np.ndarray, T: float, inv_tau_g: float,
-                inv_tau_a: float) -> np.ndarray:
-    """Phi (15, 15) of one segment of ``T`` s: F the mean of F at its start and end states (with
-    the segment's mean specific force ``fn``), ``Phi = I + FT + (FT)^2/2 + (FT)^3/6`` (the
-    third-order term carries gyro bias -> attitude -> velocity -> position within one step)."""
-    F = 0.5 * (error_dynamics(x_start, fn, inv_tau_g, inv_tau_a) + error_dynamics(x_end, fn, inv_tau_g, inv_tau_a))
+def _segment_phi_shared(F_start: np.ndarray, F_end: np.ndarray, fn: np.ndarray, T: float) -> np.ndarray:
+    """:func:`_segment_phi` from the x-dependent parts of F at the segment's two ends
+    (:func:`_error_dynamics_state`) and its mean specific force ``fn``: the same F element for
+    element (the specific-force block is the mean of two equal blocks)."""
+    F = 0.5 * (F_start + F_end)
+    _set_neg_skew(F, DX_VEL, DX_ATT, fn)
     FT = F * T
     FT2 = FT @ FT
     Phi: np.ndarray = np.eye(N_ERR) + FT + 0.5 * FT2 + (FT2 @ FT) / 6.0
     return Phi
-
-
-@njit(cache=True, inline="always")
-def _segment_qd(Phi_j: np.ndarray, psd: np.ndarray, T: float) -> np.ndarray:
-    """Qd (15, 15) of one segment of ``T`` s by the trapezoid: (Phi_j GQG Phi_j^T + GQG) T / 2
-    with GQG = diag(psd)."""
-    Qd_j: np.ndarray = Phi_j * (psd * (0.5 * T)) @ Phi_j.T
-    for k in range(N_ERR):
-        Qd_j[k, k] += 0.5 * T * psd[k]
-    return Qd_j
 
 
 @njit(cache=True)
@@ -295,13 +307,20 @@ def _noise_groups_from_segments(x_start: np.ndarray, seg_x: np.ndarray, seg_fn: 
     """
     G = psd_groups.shape[0]
     Qg = np.zeros((G, N_ERR, N_ERR))
-    F_prev_state = x_start
+    F_prev = _error_dynamics_state(x_start, inv_tau_g, inv_tau_a)
     for j in range(n_seg):
         T = seg_T[j]
-        Phi_j = _segment_phi(F_prev_state, seg_x[j], seg_fn[j], T, inv_tau_g, inv_tau_a)
+        F_next = _error_dynamics_state(seg_x[j], inv_tau_g, inv_tau_a)
+        Phi_j = _segment_phi_shared(F_prev, F_next, seg_fn[j], T)
         for g in range(G):
-            Qg[g] = Phi_j @ Qg[g] @ Phi_j.T + _segment_qd(Phi_j, psd_groups[g], T)
-        F_prev_state = seg_x[j]
+            Q = Qg[g].copy()
+            for k in range(N_ERR):
+                Q[k, k] += 0.5 * T * psd_groups[g, k]
+            Q = Phi_j @ Q @ Phi_j.T
+            for k in range(N_ERR):
+                Q[k, k] += 0.5 * T * psd_groups[g, k]
+            Qg[g] = Q
+        F_prev = F_next
     return Qg
 
 
