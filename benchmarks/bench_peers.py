@@ -151,7 +151,7 @@ def write_kfgins_inputs(log: Path, out: Path, noise: dict[str, float]) -> Path:
     g = np.column_stack([gnss[:, 0] - t0 + 1.0, gnss[:, 1:4], gnss[:, 5], gnss[:, 4], gnss[:, 6]])
     np.savetxt(out / "gnss.txt", g, fmt="%.6f %.12f %.12f %.4f %.4f %.4f %.4f")
     s = initial_state(ref)
-    rate = 1.0 / float(np.median(np.diff(imu[:, 0])))
+    rate = round(1.0 / float(np.median(np.diff(imu[:, 0]))), 3)   # Hz; unix-time rounding off
     tau_h = noise["gyro_bias_corr_time_s"] / 3600.0
     sf = noise["scale_factor_ppm"]
     bg, ba = noise["gyro_bias_deg_per_h"], noise["accel_bias_mg"] * MGAL_PER_MG
@@ -411,7 +411,8 @@ def main() -> None:
                   f"peak memory {a['peak_mb'] / b['peak_mb']:.3f}, horizontal RMSE "
                   f"{acc['navpp']['horizontal_m'] / acc[peer]['horizontal_m']:.3f}, "
                   f"up RMSE {acc['navpp']['up_m'] / acc[peer]['up_m']:.3f}")
-    print("differences: pyins compiles its numba kernels in every run (no cache); pyins and KF-GINS start from the true state, navpp aligns itself; pyins: biases "
+    print("differences: pyins compiles its numba kernels in every run (no cache); pyins and KF-GINS start "
+          "from the true state, navpp aligns itself; pyins: biases "
           "random constant + random walk, no scale factors, covariance every 0.1 s, one GNSS sd per axis; "
           "KF-GINS: scale factors estimated; navpp: zero-velocity/zero-rate updates at standstill, "
           "metrics vs reference.csv inside its run. All: GNSS position only, feedback, no smoothing.")
