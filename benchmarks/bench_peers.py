@@ -20,9 +20,11 @@ fresh process, end to end (read the files, filter, write the IMU-rate trajectory
 * KF-GINS: its input files (IMU increments, GNSS positions, YAML config) written once in
   KF-GINS's formats (``write_kfgins_inputs``, not timed), then ``KF-GINS config.yaml``.
 
-pyins is slow (pandas in its per-step loop: on the 2-core machine about 0.6 s of wall time per
-second of log), so ``--duration 120`` is the practical size to compare with it; navpp's own
-scaling to hours is bench_process.py's.
+pyins is slow (pandas in its per-step loop: on the 2-core machine about 0.5 s of CPU time per
+second of log, measured on a 120 s log), so a 1-hour log costs it about half an hour per run;
+``--duration 120`` is the practical size to compare with it (navpp's figures there are mostly
+start-up: import and loading the cached kernels); navpp's own scaling to hours is
+bench_process.py's.
 
 Timing: navpp and pyins alternate, ``--repeats`` times each (KF-GINS after them in each
 round); the figures are medians.  Wall time is the parent's clock around the child; CPU time is
