@@ -123,7 +123,8 @@ def flu_to_frd(v: np.ndarray) -> np.ndarray:
 
 def initial_state(ref: np.ndarray) -> dict[str, list[float]]:
     """True initial state from reference.csv's first row: lat/lon deg, alt m; velocity NED m/s;
-    roll, pitch, heading deg of FRD body to NED (the same angles as navpp's FLU-to-ENU ones)."""
+    roll, pitch, heading deg of FRD body to NED, taken as navpp's FLU-to-ENU angles (the same
+    heading; the simulated drive starts level, so roll/pitch sign conventions do not enter)."""
     r = ref[0]
     return {"lla": [r[1], r[2], r[3]], "vel_ned": [r[5], r[4], -r[6]], "rph": [r[7], r[8], r[9]]}
 
