@@ -20,8 +20,9 @@ fresh process, end to end (read the files, filter, write the IMU-rate trajectory
 * KF-GINS: its input files (IMU increments, GNSS positions, YAML config) written once in
   KF-GINS's formats (``write_kfgins_inputs``, not timed), then ``KF-GINS config.yaml``.
 
-pyins is slow (pandas in its per-step loop: on the 2-core machine about 0.5 s of CPU time per
-second of log, measured on a 120 s log), so a 1-hour log costs it about half an hour per run;
+pyins is slow (pandas in its per-step loop: on the 2-core machine about 0.38 s of CPU time per
+second of log beyond a fixed ~13 s, from 120 s and 300 s logs), so a 1-hour log would cost it
+about 23 CPU minutes per run;
 ``--duration 120`` is the practical size to compare with it (navpp's figures there are mostly
 start-up: import and loading the cached kernels); navpp's own scaling to hours is
 bench_process.py's.
