@@ -1,6 +1,15 @@
 """End-to-end speed of `navpp process` on a simulated 1-hour, 125 Hz IMU + 5 Hz GNSS CSV log.
 
 Usage:  python benchmarks/bench_process.py [--duration 3600] [--filter ekf] [--smooth] [--workdir DIR]
+        python benchmarks/bench_process.py --hours 1,4,8 [--repeats 3] [--filter ekf] [--workdir DIR]
+        python benchmarks/bench_process.py --duration 14400 --memory-map [--smooth]
+
+``--hours``: for each duration, ``process`` and ``process --smooth`` in one table: per-stage
+seconds (read + validate, forward filter incl. alignment, RTS smoothing, trajectory.csv write)
+with microseconds per IMU sample, CPU seconds, and the measuring child's VmHWM; the median of
+``--repeats`` runs (each a fresh child, one at a time); then the growth per hour of log, the
+slope of a least-squares line through the durations.  ``--memory-map``: where the memory of
+one run goes (see :func:`memory_map`); slower, not a timing.
 
 With ``--smooth`` the runs also smooth backwards (RTS, issue 7): the processing figure then
 includes the smoothing, which is printed on its own line with its share of the forward filter's
@@ -216,11 +225,12 @@ def _arrays(obj, name: str, out: dict, seen: set, depth: int = 0) -> None:
 
 
 def memory_map(log: Path, filter_name: str, out: Path, smooth: bool) -> None:
-    """Where the memory of one run goes: tracemalloc (numpy registers its buffers with it) at
-    the stage boundaries and at hooks inside ``engine.run`` (wrapping navpp functions in this
-    process only), each with the traced size now, the traced peak since the previous
-    checkpoint, VmRSS, and the top allocation sites still alive; then the numpy arrays the
-    recording, the recorder and the result hold, with dtype, shape and size."""
+    """Where the memory of one run goes: at the stage boundaries and at hooks inside
+    ``engine.run`` (wrapping navpp functions in this process only), VmRSS and the VmHWM since
+    the previous checkpoint (reset at each); for the read and the write, tracemalloc's top
+    allocation sites still alive (numpy registers its buffers with tracemalloc); then the numpy
+    arrays the recording, the engine (prepared model, recorder), the smoother's store and the
+    result hold, with dtype, shape and size."""
     import functools
     import importlib
     import tracemalloc
@@ -236,6 +246,12 @@ def memory_map(log: Path, filter_name: str, out: Path, smooth: bool) -> None:
     held: dict[str, object] = {}
 
     def checkpoint(label: str, top: int = 10) -> None:
+        rss = _vm_rss_mb()
+        hwm, _ = peak_memory_mb()
+        reset_peak_memory()     # the next checkpoint's VmHWM is the peak between the two
+        print(f"\n== {label}: VmRSS {rss:.0f} MB, VmHWM since the previous checkpoint {hwm:.0f} MB", flush=True)
+        if not tracemalloc.is_tracing():
+            return
         cur, peak = tracemalloc.get_traced_memory()
         tracemalloc.reset_peak()
         snap = tracemalloc.take_snapshot()
@@ -245,9 +261,8 @@ def memory_map(log: Path, filter_name: str, out: Path, smooth: bool) -> None:
             e = sites.setdefault(key, [0, 0])
             e[0] += st.size
             e[1] += st.count
-        rss = _vm_rss_mb()
-        print(f"\n== {label}: traced now {cur / 1e6:.0f} MB, traced peak since last checkpoint {peak / 1e6:.0f} MB, "
-              f"VmRSS {rss:.0f} MB" if rss is not None else "", flush=True)
+        print(f"   traced now {cur / 1e6:.0f} MB, traced peak since the previous checkpoint {peak / 1e6:.0f} MB; "
+              "top allocation sites alive:")
         for key, (size, count) in sorted(sites.items(), key=lambda kv: -kv[1][0])[:top]:
             if size < 1e6:
                 break
@@ -286,24 +301,23 @@ def memory_map(log: Path, filter_name: str, out: Path, smooth: bool) -> None:
         hook(eng_output, "smooth_arrays", None, "smoothing: after the backward pass (smooth_arrays)")
         hook(eng_output, "solution_from_path", "smoothing: smoothed IMU-rate path corrected, before its solution", None)
 
-    tracemalloc.start(16)
     cfg = api.resolve_config(log, None)
     filt = api.make_filter(filter_name, cfg)
     checkpoint("start (navpp imported)")
-    rec = api.read_log(log, cfg)
+    tracemalloc.start(16)       # tracing the read and the write only: the filter loop's many small
+    rec = api.read_log(log, cfg)  # allocations would make a traced run many times slower
     n_imu[0] = len(rec.imu)
     checkpoint("after read_log")
+    tracemalloc.stop()
     _arrays(rec, "recording", held.setdefault("reader", {}), set())
     res = engine.run(rec, cfg, filt, smooth=smooth)
     checkpoint("after engine.run (result held)")
     out.mkdir(parents=True, exist_ok=True)
     sol = res.smoothed.solution if smooth else res.solution
-    tracemalloc.reset_peak()
+    tracemalloc.start(16)
     writers.write_trajectory_csv(out / "trajectory.csv", sol, t0_s=rec.t0_ns * 1e-9)
-    _, wpeak = tracemalloc.get_traced_memory()
-    checkpoint(f"after write_trajectory_csv (its traced peak {wpeak / 1e6:.0f} MB)")
+    checkpoint("after write_trajectory_csv")
     tracemalloc.stop()
-    hwm, _ = peak_memory_mb()
     _arrays(res, "result", held.setdefault("result", {}), set(map(id, [rec.imu.t])))
 
     n, m = n_imu[0], res.gnss_epochs
@@ -321,7 +335,7 @@ def memory_map(log: Path, filter_name: str, out: Path, smooth: bool) -> None:
             vtxt = f"(+{view / 1e6:.1f} MB view)" if view else ""
             print(f"   {owned / 1e6:8.1f} MB {vtxt:>18} {owned / 1e6 / hours:7.1f} MB/h  {dtype:<8} "
                   f"{shape!s:<20} {rate:<4} {name}")
-    print(f"  VmHWM of this process {hwm:.0f} MB (tracemalloc's own bookkeeping included)")
+    print("  (a view's memory belongs to its base: the solution's columns are views of the path)")
 
 
 def _loadavg() -> str:
