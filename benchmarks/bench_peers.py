@@ -61,7 +61,6 @@ import argparse
 import json
 import math
 import os
-import platform
 import resource
 import statistics
 import subprocess
@@ -302,16 +301,6 @@ def load_csv_positions(path: Path) -> np.ndarray:
 
 # --------------------------------------------------------------------------- main
 
-def machine_line() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    return f"machine: {cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
-
-
 def versions() -> dict[str, str]:
     from importlib import metadata
 
@@ -386,6 +375,8 @@ def main() -> None:
     if kf_cmd is not None:
         sols["KF-GINS"] = read_kfgins_result(kf_out, float(d["imu"][0, 0]))
     acc = rmse_against_truth(d["reference"], sols)
+
+    from bench_process import machine_line  # a sibling script: benchmarks/ is sys.path[0]
 
     print(machine_line())
     print("versions: " + ", ".join(f"{k} {v}" for k, v in versions().items()))

@@ -43,6 +43,17 @@ import time
 from pathlib import Path
 
 
+def machine_line() -> str:
+    """``machine: CPU model, N cores, Python X.Y.Z`` (the model from /proc/cpuinfo where there is one)."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return f"machine: {cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
+
+
 def _vm_hwm_kb() -> int | None:
     """This process's peak resident set size, kB, from /proc/self/status (None without /proc)."""
     try:
@@ -485,13 +496,7 @@ def main() -> None:
         if proc.returncode != 0:
             sys.exit(f"bench_process: the {attempt} run failed:\n{proc.stderr}")
     r = json.loads(proc.stdout)
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    print(f"machine: {cpu}, {os.cpu_count()} cores, Python {platform.python_version()}")
+    print(machine_line())
     print(f"log: {r['imu_samples']} IMU samples (125 Hz), {r['gnss_epochs']} GNSS epochs (5 Hz), filter {args.filter}")
     print(f"import navpp      {r['import_s']:7.3f} s")
     print(f"read + validate   {r['read_s']:7.3f} s")
