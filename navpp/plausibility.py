@@ -170,9 +170,6 @@ def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray
     hi3, lo3, hi1 = gate_quantiles(gate_probability)
     out: list[Verdict] = []
 
-    def share(n: int, of: int) -> str:
-        return f"{n} of {of} fixes ({100.0 * n / max(of, 1):.0f}%)"
-
     # far smaller than predicted: the declared sigma is too large.  The innovation carries the
     # INS's drift as well as the GNSS noise, and a filter that trusts a too-large sigma little
     # drifts until the two match; between consecutive fixes the drift hardly changes, so the
@@ -184,7 +181,7 @@ def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray
     if n_d >= 20 and low > 0.5 * n_d:
         scale = math.sqrt(_CHI2_3_MEDIAN / max(float(np.median(q_d)), 1e-300))
         if white:
-            what = (f"GNSS noise {scale:.3g}x smaller than {std_label} say ({share(low, n_d)} below "
+            what = (f"GNSS noise {scale:.3g}x smaller than {std_label} say ({_share(low, n_d)} below "
                     f"the chi-square {100.0 * _tail(gate_probability):.2g}% bound)")
             out.append(Verdict(max_fraction < 1.0, what, "those sigmas are too large (cm read as m?)"))
         else:
@@ -204,7 +201,7 @@ def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray
                                or _beyond_prior(nu, S, R_used, var0 * spread ** 2, acc, hi3, hi1,
                                                 max_fraction) is not None):
         beyond, how = failed
-        out.append(Verdict(True, f"{name} diverged: {share(beyond, m)} fail the configured GNSS sigma's gate ({how})"))
+        out.append(Verdict(True, f"{name} diverged: {_share(beyond, m)} fail the configured GNSS sigma's gate ({how})"))
     elif np.any(spread > 1.0) and (failed is not None or far_too_small(z2, gate_probability)):
         by = "/".join(f"{v:.1f}" for v in spread)
         r_ratio = np.sqrt(np.median(np.diagonal(R_used, axis1=1, axis2=2) / var0, axis=0))
@@ -226,11 +223,8 @@ def consecutive_differences(t: np.ndarray, nu: np.ndarray, var0: np.ndarray,
     var0 (M, 3) m^2; ok (M,) bool, the fixes to use (default: finite ones).  Only fixes at most
     1.5 median intervals apart pair up.  Returns (z, their lag-1 correlation (0 below 20 pairs),
     white: at least 20 pairs correlated at most :data:`WHITE_DIFFERENCE_CORRELATION`)."""
-    if ok is None:
-        ok = np.all(np.isfinite(nu), axis=1) & np.all(var0 > 0.0, axis=1)
-    dt = np.diff(t)
-    step = float(np.median(dt)) if dt.size else 0.0
-    pair = ok[1:] & ok[:-1] & (dt <= 1.5 * step)
+    ok, close = _paired(t, nu, var0, ok)
+    pair = ok[1:] & ok[:-1] & close
     z = (nu[1:] - nu[:-1])[pair] / np.sqrt((var0[1:] + var0[:-1])[pair])
     n = int(z.shape[0])
     r1 = _difference_lag1_correlation(z, np.flatnonzero(pair)) if n >= 20 else 0.0
@@ -248,11 +242,7 @@ def second_differences(t: np.ndarray, nu: np.ndarray, var: np.ndarray,
     to fix make them smaller, never larger.  t (M,) s; nu (M, 3) m; var (M, 3) m^2; ok (M,)
     bool, the fixes to use (default: finite ones); only triplets at most 1.5 median intervals
     apart."""
-    if ok is None:
-        ok = np.all(np.isfinite(nu), axis=1) & np.all(var > 0.0, axis=1)
-    dt = np.diff(t)
-    step = float(np.median(dt)) if dt.size else 0.0
-    close = dt <= 1.5 * step
+    ok, close = _paired(t, nu, var, ok)
     tri = ok[2:] & ok[1:-1] & ok[:-2] & close[1:] & close[:-1]
     z: np.ndarray = ((nu[2:] - 2.0 * nu[1:-1] + nu[:-2])[tri]
                      / np.sqrt((var[2:] + 4.0 * var[1:-1] + var[:-2])[tri]))
@@ -313,9 +303,24 @@ def _beyond_prior(nu: np.ndarray, S: np.ndarray, R_used: np.ndarray, var: np.nda
     # design; it is one when the fixes it let through lie beyond the gate of the prior R
     if beyond > max_fraction * m and (grown > max_fraction * m or far > max_fraction * max(n_acc, 1)):
         how = (f"learnt R {float(np.median(r_ratio)):.3g}x it" if grown > max_fraction * m
-               else f"solution off {far} of {n_acc} fixes ({100.0 * far / max(n_acc, 1):.0f}%) it took")
+               else f"solution off {_share(far, n_acc)} it took")
         return beyond, how
     return None
+
+
+def _share(n: int, of: int) -> str:
+    """``n of OF fixes (P%)`` for a message."""
+    return f"{n} of {of} fixes ({100.0 * n / max(of, 1):.0f}%)"
+
+
+def _paired(t: np.ndarray, nu: np.ndarray, var: np.ndarray, ok: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The fixes to use (``ok``, default: finite innovations and positive prior variances) and,
+    per consecutive pair, whether the two are at most 1.5 median intervals apart."""
+    if ok is None:
+        ok = np.all(np.isfinite(nu), axis=1) & np.all(var > 0.0, axis=1)
+    dt = np.diff(t)
+    step = float(np.median(dt)) if dt.size else 0.0
+    return ok, dt <= 1.5 * step
 
 
 def _tail(gate_probability: float) -> float:
