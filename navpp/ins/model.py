@@ -243,18 +243,27 @@ def transition_from_segments(x_start: np.ndarray, seg_x: np.ndarray, seg_fn: np.
         F_next = _error_dynamics_state(seg_x[j], inv_tau_g, inv_tau_a)
         Phi_j = _segment_phi_shared(F_prev, F_next, seg_fn[j], T)
         Phi = Phi_j @ Phi
-        for k in range(N_ERR):
-            Qd[k, k] += 0.5 * T * psd[k]
-        Qd = Phi_j @ Qd @ Phi_j.T
-        for k in range(N_ERR):
-            Qd[k, k] += 0.5 * T * psd[k]
+        Qd = _trapezoid_step(Qd, Phi_j, psd, T)
         F_prev = F_next
     return Phi, Qd
 
 
 @njit(cache=True, inline="always")
+def _trapezoid_step(Q: np.ndarray, Phi_j: np.ndarray, psd: np.ndarray, T: float) -> np.ndarray:
+    """``Q`` (15, 15) carried over one segment of ``T`` s with its trapezoid noise:
+    ``Phi_j (Q + D) Phi_j^T + D``, ``D = diag(psd) T / 2`` (``Q`` is not modified)."""
+    Qn = Q.copy()
+    for k in range(N_ERR):
+        Qn[k, k] += 0.5 * T * psd[k]
+    out: np.ndarray = Phi_j @ Qn @ Phi_j.T
+    for k in range(N_ERR):
+        out[k, k] += 0.5 * T * psd[k]
+    return out
+
+
+@njit(cache=True, inline="always")
 def _segment_phi_shared(F_start: np.ndarray, F_end: np.ndarray, fn: np.ndarray, T: float) -> np.ndarray:
-    """:func:`_segment_phi` from the x-dependent parts of F at the segment's two ends
+    """Phi (15, 15) of one segment of ``T`` s from the x-dependent parts of F at its two ends
     (:func:`_error_dynamics_state`) and its mean specific force ``fn``: the same F element for
     element (the specific-force block is the mean of two equal blocks)."""
     F = 0.5 * (F_start + F_end)
@@ -313,13 +322,7 @@ def _noise_groups_from_segments(x_start: np.ndarray, seg_x: np.ndarray, seg_fn: 
         F_next = _error_dynamics_state(seg_x[j], inv_tau_g, inv_tau_a)
         Phi_j = _segment_phi_shared(F_prev, F_next, seg_fn[j], T)
         for g in range(G):
-            Q = Qg[g].copy()
-            for k in range(N_ERR):
-                Q[k, k] += 0.5 * T * psd_groups[g, k]
-            Q = Phi_j @ Q @ Phi_j.T
-            for k in range(N_ERR):
-                Q[k, k] += 0.5 * T * psd_groups[g, k]
-            Qg[g] = Q
+            Qg[g] = _trapezoid_step(Qg[g], Phi_j, psd_groups[g], T)
         F_prev = F_next
     return Qg
 
