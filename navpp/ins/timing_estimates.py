@@ -515,16 +515,18 @@ def estimate_clock_offset(
     turn = np.abs(g - bias) * (b - a) / m
     turn_deg = float(np.degrees(np.sum(turn)))
 
-    # the gyro means of every sample at every lag of a fine grid, once: the jackknife's many
-    # block-deleted fits are then a few matrix products each (no spline evaluations)
-    grid = np.arange(-max_lag_s, max_lag_s + 0.5 * _JACK_STEP_S, _JACK_STEP_S)
-    table = np.stack([fit.gyro_mean(d) for d in grid])            # (L, n)
-    sigma = _jackknife_sigma(grid, table, r, offset, np.ones(n, bool), n_blocks, max_lag_s)
     # the two halves of the turning, each searched over the whole window, each with its own
     # jackknife sigma (the whole log's would grow with their disagreement)
     half = np.cumsum(turn) <= 0.5 * np.sum(turn)
     lag_1, _, _ = fit.best_lag(half)
     lag_2, _, _ = fit.best_lag(~half)
+    # the gyro means of every sample at every lag of a fine grid, once: the jackknife's many
+    # block-deleted fits are then a few matrix products each (no spline evaluations); only the
+    # lags some jackknife looks at (within max_lag_s / 2 of its centre) are evaluated
+    grid = np.arange(-max_lag_s, max_lag_s + 0.5 * _JACK_STEP_S, _JACK_STEP_S)
+    grid = grid[np.any(np.abs(grid[:, None] - np.array([offset, lag_1, lag_2])) <= 0.5 * max_lag_s, axis=1)]
+    table = np.stack([fit.gyro_mean(d) for d in grid]) if grid.size else np.empty((0, n))     # (L, n)
+    sigma = _jackknife_sigma(grid, table, r, offset, np.ones(n, bool), n_blocks, max_lag_s)
     sig_12 = math.hypot(_jackknife_sigma(grid, table, r, lag_1, half, n_blocks, max_lag_s),
                         _jackknife_sigma(grid, table, r, lag_2, ~half, n_blocks, max_lag_s))
     split = abs(lag_1 - lag_2) / sig_12 if sig_12 > 0 else float("inf")
