@@ -126,7 +126,8 @@ class RunMeasurements:
     def fix_measurements(self, epoch: Epoch) -> list[Any]:
         """The position fix of ``epoch`` and its velocity (when there is one)."""
         k, f = epoch.fix, self.fixes
-        self._drift = self.reopen is not None and drifting(np.asarray(self._rejected_nis, dtype=float))
+        self._drift = (self.reopen is not None and len(self._rejected_nis) >= 4
+                       and drifting(np.asarray(self._rejected_nis, dtype=float)))
         var = f.var[k] * self.r_share if f.r_scale is None else f.var[k] * self.r_share * f.r_scale[k]
         out: list[Any] = [GnssPosition(epoch.t, float(f.lat[k]), float(f.lon[k]), float(f.alt[k]),
                                        np.diag(var), self.lever,

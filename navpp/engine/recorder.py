@@ -97,13 +97,14 @@ class RunRecorder:
         self.tick = max(1, n_epochs // 200)
         self.knot(start)
 
-    def knot(self, state: GaussianState, prior: np.ndarray | None = None) -> None:
+    def knot(self, state: GaussianState, prior: GaussianState | None = None) -> None:
         """A knot at ``state.t``: attitude, velocity and position variance (:data:`KNOT`) before
-        (``prior``, default the state's) and after."""
-        v = state.P.diagonal()[KNOT]
+        (``prior``'s, default the state's) and after (appended as the doubles' bytes: a fraction
+        of the cost of extending by array elements)."""
+        v = state.P.diagonal()[KNOT].tobytes()
         self.knots.append(state.t)
-        self.knots.extend(v if prior is None else prior)
-        self.knots.extend(v)
+        self.knots.frombytes(v if prior is None else prior.P.diagonal()[KNOT].tobytes())
+        self.knots.frombytes(v)
 
     # the loop's Recorder -------------------------------------------------------------------
     def predicted(self, epoch: Epoch, prediction: Prediction) -> None:
@@ -139,15 +140,16 @@ class RunRecorder:
             self.store.updated(outcome.prior_used, state, outcome.reset)
         if outcome.applied and epoch.sample >= 0:
             self.path[epoch.sample] = state.x[:self.n_path]     # the epoch's own sample shows the posterior
-        self.knot(state, outcome.prior.P.diagonal()[KNOT].copy())
+        self.knot(state, outcome.prior)
         k = epoch.fix
         if k >= 0:
             if self.store is not None:
                 self.epoch_node[k] = self.store.n - 1
             self.bias[k, :3] = state.x[NOMINAL_BG]
             self.bias[k, 3:] = state.x[NOMINAL_BA]
-            self.bias_var[k, :3] = state.P.diagonal()[BG]
-            self.bias_var[k, 3:] = state.P.diagonal()[BA]
+            variance = state.P.diagonal()
+            self.bias_var[k, :3] = variance[BG]
+            self.bias_var[k, 3:] = variance[BA]
             if self.extra_values is not None:
                 n = len(self.extra)
                 for j, (_, ie, ix) in enumerate(self.extra):

@@ -19,6 +19,7 @@ import numpy as np
 from ..config import Config
 from ..errors import RunRefused
 from ..filters.base import GaussianState
+from ..filters.linalg import finite_with_positive_variances
 from ..findings import Finding, code_of
 from ..recording import Recording, Solution
 from .results import SmoothedRun
@@ -27,8 +28,8 @@ from .results import SmoothedRun
 def state_fault(state: GaussianState) -> str | None:
     """What is wrong with a filter state (non-finite state or covariance, a covariance that is
     not positive definite on its diagonal), or None."""
-    if math.isfinite(float(state.x.sum()) + float(state.P.sum())) and float(np.diagonal(state.P).min()) > 0.0:
-        return None                     # the common case, in two reductions
+    if finite_with_positive_variances(state.x, state.P):
+        return None                     # the common case, in one compiled pass
     if not np.all(np.isfinite(state.x)):
         return "the state became non-finite (NaN or inf)"
     if not np.all(np.isfinite(state.P)):

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
@@ -234,7 +235,7 @@ class Filter:
         """The posterior: ``x ⊞ K nu``; Joseph form when linearised, else ``P - K S K^T``."""
         x = model.plus(state.x, K @ pred.nu)
         P = joseph(state.P, K, pred.H, R) if pred.H is not None else sigma_posterior(state.P, K, S)
-        if not (np.isfinite(x.sum()) and np.isfinite(P.sum())):
+        if not (math.isfinite(x.sum()) and math.isfinite(P.sum())):
             raise FilterDivergedError.in_filter(self.name, f"state became non-finite at t={state.t:.3f} s")
         return GaussianState(state.t, x, P)
 

@@ -22,9 +22,18 @@ def compiled(fn: F) -> F:
 
 
 def symmetrise(P: np.ndarray) -> np.ndarray:
-    """``(P + P^T) / 2``."""
-    out: np.ndarray = 0.5 * (P + P.T)
+    """``(P + P^T) / 2`` (a new array; halved in place, the same figures as ``0.5 * (P + P.T)``)."""
+    out: np.ndarray = P + P.T
+    out *= 0.5
     return out
+
+
+@compiled
+def finite_with_positive_variances(x: np.ndarray, P: np.ndarray) -> bool:
+    """Whether the sums of the state ``x`` (n,) and its covariance ``P`` (m, m) are finite
+    (so is every element then) and every variance on ``P``'s diagonal is positive: a state that
+    needs no closer look (:func:`navpp.engine.verdict.state_fault`)."""
+    return bool(np.isfinite(x.sum() + P.sum()) and np.diag(P).min() > 0.0)
 
 
 @compiled

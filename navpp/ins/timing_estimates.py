@@ -178,16 +178,25 @@ def find_stale_rows(
     repeats = np.concatenate([[False], rep])            # (N,) row k repeats row k-1
     k_obs = int(rep.sum())
 
-    # 1. excess over chance, window by window
+    # 1. excess over chance, window by window: each window's channel rates from per-window counts
+    # (the same figures as _channel_rates over its rows), the chance once per distinct rates
     expected = 0.0
-    global_q = _channel_rates(same_ch[~rep])
-    for s in range(0, n - 1, window_rows):
-        w_same, w_rep = same_ch[s:s + window_rows], rep[s:s + window_rows]
-        if w_rep.size < window_rows // 2 and s > 0:      # a short tail joins the global rates
+    fresh = ~rep
+    global_q = _channel_rates(same_ch[fresh])
+    starts = np.arange(0, n - 1, window_rows)
+    sizes = np.diff(np.append(starts, n - 1))
+    n_fresh = np.add.reduceat(fresh.astype(np.int64), starts)
+    n_same = np.add.reduceat((same_ch & fresh[:, None]).astype(np.int64), starts, axis=0)
+    chance: dict[bytes, float] = {}
+    for w in range(starts.shape[0]):
+        if sizes[w] < window_rows // 2 and w > 0:       # a short tail joins the global rates
             q = global_q
         else:
-            q = _channel_rates(w_same[~w_rep]) if (~w_rep).sum() >= 20 else global_q
-        expected += w_rep.size * _chance_all_repeat(q)
+            q = n_same[w] / n_fresh[w] if n_fresh[w] >= 20 else global_q
+        key = q.tobytes()
+        if key not in chance:
+            chance[key] = _chance_all_repeat(q)
+        expected += int(sizes[w]) * chance[key]
     # P(Poisson(expected) >= k_obs): special.pdtrc is what stats.poisson.sf evaluates, without
     # importing scipy.stats (about 0.4 s of every run's start)
     p_tail = float(special.pdtrc(k_obs - 1, expected)) if k_obs > 0 else 1.0
@@ -506,16 +515,18 @@ def estimate_clock_offset(
     turn = np.abs(g - bias) * (b - a) / m
     turn_deg = float(np.degrees(np.sum(turn)))
 
-    # the gyro means of every sample at every lag of a fine grid, once: the jackknife's many
-    # block-deleted fits are then a few matrix products each (no spline evaluations)
-    grid = np.arange(-max_lag_s, max_lag_s + 0.5 * _JACK_STEP_S, _JACK_STEP_S)
-    table = np.stack([fit.gyro_mean(d) for d in grid])            # (L, n)
-    sigma = _jackknife_sigma(grid, table, r, offset, np.ones(n, bool), n_blocks, max_lag_s)
     # the two halves of the turning, each searched over the whole window, each with its own
     # jackknife sigma (the whole log's would grow with their disagreement)
     half = np.cumsum(turn) <= 0.5 * np.sum(turn)
     lag_1, _, _ = fit.best_lag(half)
     lag_2, _, _ = fit.best_lag(~half)
+    # the gyro means of every sample at every lag of a fine grid, once: the jackknife's many
+    # block-deleted fits are then a few matrix products each (no spline evaluations); only the
+    # lags some jackknife looks at (within max_lag_s / 2 of its centre) are evaluated
+    grid = np.arange(-max_lag_s, max_lag_s + 0.5 * _JACK_STEP_S, _JACK_STEP_S)
+    grid = grid[np.any(np.abs(grid[:, None] - np.array([offset, lag_1, lag_2])) <= 0.5 * max_lag_s, axis=1)]
+    table = np.stack([fit.gyro_mean(d) for d in grid]) if grid.size else np.empty((0, n))     # (L, n)
+    sigma = _jackknife_sigma(grid, table, r, offset, np.ones(n, bool), n_blocks, max_lag_s)
     sig_12 = math.hypot(_jackknife_sigma(grid, table, r, lag_1, half, n_blocks, max_lag_s),
                         _jackknife_sigma(grid, table, r, lag_2, ~half, n_blocks, max_lag_s))
     split = abs(lag_1 - lag_2) / sig_12 if sig_12 > 0 else float("inf")
