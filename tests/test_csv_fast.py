@@ -84,6 +84,18 @@ def test_plain_forms_take_the_fast_path(tmp_path: Path, text: str) -> None:
     assert got is not None and got[0].tolist() == [1.0, 3.0]
 
 
+def test_more_rows_than_the_first_block_suggests(tmp_path: Path) -> None:
+    """Long rows first, then short ones over several blocks: the output grows, every row kept."""
+    from navpp.io.csvparse import parse_columns
+
+    path = tmp_path / "f.csv"
+    long = [f"{k},{'x' * 200}" for k in range(1000)]
+    short = [f"{k}," for k in range(1000, 1_200_000)]
+    path.write_text("a,note\n" + "\n".join(long + short) + "\n")
+    got = parse_columns(path, 2, [0])
+    assert got is not None and np.array_equal(got[0], np.arange(1_200_000, dtype=float))
+
+
 @pytest.mark.parametrize("text", [
     "1,2\n\n3,4\n", "1,2\n3,4\n\n", "1, 2\n3,4\n", '1,"2"\n3,4\n', "1,nan\n3,4\n", "1,\n3,4\n", "1\n3,4\n",
     "1,2,5\n3,4\n", "1.,2\n3,4\n", ".5,2\n3,4\n", "1e,2\n3,4\n", "1,2\r3,4\n", "1,1e400\n3,4\n", "1,1e-310\n3,4\n",

@@ -240,12 +240,14 @@ def parse_columns(path: Path, n_fields: int, positions: list[int],
     buf = np.empty(_BLOCK_BYTES, dtype=np.uint8)
     with open(path, "rb") as fh:
         header = fh.readline(_BLOCK_BYTES)
-        first = fh.readline(_BLOCK_BYTES)
         if not header.endswith(b"\n") or b'"' in header:
             return None
+        sample = fh.read(1 << 16)
         fh.seek(len(header))
-        # room for the rows if they are as long as the first one, and 5 % more; grown if not
-        out = np.empty((len(positions), int((size - len(header)) / max(len(first), 1) * 1.05) + 16), dtype=np.uint64)
+        # room for the rows if they are as long as those of the first 64 KiB, and 5 % more;
+        # grown if not (pages never written cost no memory)
+        per_row = len(sample) / max(sample.count(b"\n"), 1)
+        out = np.empty((len(positions), int((size - len(header)) / max(per_row, 1.0) * 1.05) + 16), dtype=np.uint64)
         rows = 0
         kept = 0                              # bytes of an incomplete line carried to the next block
         while True:
