@@ -43,14 +43,10 @@ def _powers_of_five() -> np.ndarray:
             z = power5.bit_length()           # the least z with 2^z >= 5^-q (never a power of 2)
             b = z + 127 if q >= -27 else 2 * z + 128
             c = 2 ** b // power5 + 1
-            while c >= 1 << 128:
-                c //= 2
         else:
             c = 5 ** q
-            while c < 1 << 127:
-                c *= 2
-            while c >= 1 << 128:
-                c //= 2
+        shift = c.bit_length() - 128          # top bit to bit 127: shifted left, or truncated right
+        c = c << -shift if shift < 0 else c >> shift
         words += [c >> 64, c & ((1 << 64) - 1)]
     return np.array(words, dtype=np.uint64)
 
