@@ -25,7 +25,8 @@ REPO = Path(__file__).resolve().parents[1]
 def _parse(path: Path, n_fields: int) -> np.ndarray | None:
     from navpp.io.csvparse import parse_columns
 
-    return parse_columns(path, n_fields, list(range(n_fields)))
+    got = parse_columns(path, n_fields, list(range(n_fields)))
+    return None if got is None else got[0]
 
 
 def _random_cells(rng: np.random.Generator, n: int) -> list[str]:
@@ -81,7 +82,7 @@ def test_plain_forms_take_the_fast_path(tmp_path: Path, text: str) -> None:
     path.write_bytes(b"a,b\n" + text.encode())
     wanted = [0] if "x" in text else [0, 1]
     got = parse_columns(path, 2, wanted)
-    assert got is not None and got[0].tolist() == [1.0, 3.0]
+    assert got is not None and got[0][0].tolist() == [1.0, 3.0]
 
 
 def test_more_rows_than_the_first_block_suggests(tmp_path: Path) -> None:
@@ -92,8 +93,32 @@ def test_more_rows_than_the_first_block_suggests(tmp_path: Path) -> None:
     long = [f"{k},{'x' * 200}" for k in range(1000)]
     short = [f"{k}," for k in range(1000, 1_200_000)]
     path.write_text("a,note\n" + "\n".join(long + short) + "\n")
-    got = parse_columns(path, 2, [0])
-    assert got is not None and np.array_equal(got[0], np.arange(1_200_000, dtype=float))
+    got = parse_columns(path, 2, [0], 0)
+    assert got is not None and np.array_equal(got[0][0], np.arange(1_200_000, dtype=float))
+    assert got[1] is not None and np.array_equal(got[1], np.arange(1_200_000) * 1_000_000_000)
+
+
+def test_stamps_become_the_exact_nanoseconds_of_their_text(tmp_path: Path) -> None:
+    """As the text path (decimal.Decimal, half-even at 1 ns): unix stamps with 9 and more
+    decimals, e-notation, signs, ties below 1 ns; None when one does not fit int64."""
+    from decimal import Decimal
+
+    from navpp.io.csvparse import parse_columns
+
+    rng = np.random.default_rng(5)
+    cells = [f"17{rng.integers(0, 10**8):08d}.{rng.integers(0, 10**9):09d}" for _ in range(2000)]
+    cells += [f"{rng.integers(0, 10**9)}.{rng.integers(0, 10**9):09d}{rng.integers(0, 10):d}" for _ in range(2000)]
+    cells += ["0.0000000005", "0.0000000015", "-0.0000000025", "1.700000000000000005e9", "+12.5E-3", "-0.0",
+              "9.223372036854775807e9", "0.00000000000000000000000001"]
+    path = tmp_path / "t.csv"
+    path.write_text("t,x\n" + "".join(f"{c},1\n" for c in cells))
+    got = parse_columns(path, 2, [0, 1], 0)
+    assert got is not None and got[1] is not None
+    want = [int(Decimal(c).scaleb(9).to_integral_value()) for c in cells]
+    assert got[1].tolist() == want
+    path.write_text("t,x\n1,1\n1e10,1\n")
+    got = parse_columns(path, 2, [0, 1], 0)
+    assert got is not None and got[1] is None
 
 
 @pytest.mark.parametrize("text", [

@@ -394,6 +394,7 @@ class _Table:
     path: Path
     data: dict[str, np.ndarray]
     lines: np.ndarray  # (n,) int64, line number in the file (header = 1)
+    stamps_ns: np.ndarray | None = None  # (n,) int64, the ``t`` text's exact ns, when the parser gave them
 
     @property
     def n(self) -> int:
@@ -417,7 +418,8 @@ class _Table:
 
     def take(self, keep: np.ndarray) -> _Table:
         """The rows selected by ``keep`` (a boolean mask or indices)."""
-        return _Table(self.path, {k: v[keep] for k, v in self.data.items()}, self.lines[keep])
+        return _Table(self.path, {k: v[keep] for k, v in self.data.items()}, self.lines[keep],
+                      None if self.stamps_ns is None else self.stamps_ns[keep])
 
 
 def _check_options(time_base: str, gyro_units: str, accel_units: str) -> tuple[float, float]:
@@ -467,8 +469,9 @@ def _stamps_ns(table: _Table, header: list[str]) -> np.ndarray:
     while ``|t| 10^d < 2^51``, and the residual ``|t 10^d - round(t 10^d)|`` stays within
     float64's error (4 eps |t| 10^d).  A larger residual means a later row carries more
     decimals: then, as when ``|t| 10^d >= 2^51`` (e.g. unix stamps with 7+ decimals), the
-    column is re-read as text and converted exactly (half-even at 1 ns).  A later row whose
-    extra decimals lie below float64's resolution of ``t`` is rounded to ``d`` decimals."""
+    column is converted exactly from its text (half-even at 1 ns; by the fast parser when it
+    read the file, ``table.stamps_ns``, else re-read).  A later row whose extra decimals lie
+    below float64's resolution of ``t`` is rounded to ``d`` decimals."""
     t = table.data["t"]
     d = min(_stamp_decimals(table.path, header), 9)
     if t.size == 0:
@@ -480,6 +483,8 @@ def _stamps_ns(table: _Table, header: list[str]) -> np.ndarray:
         rounded = np.round(scaled)
         if float(np.max(np.abs(scaled - rounded))) <= 4.0 * np.finfo(np.float64).eps * t_max * scale:
             return rounded.astype(np.int64) * 10 ** (9 - d)
+    if table.stamps_ns is not None:     # the exact path's result, from the fast parser
+        return table.stamps_ns
     return _stamps_ns_text(table, header)
 
 
@@ -684,9 +689,10 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
     if extra:
         warnings.append(f"{path.name}: ignoring extra column(s) {_names(extra)}")
     positions = [header.index(c) for c in wanted]
-    block = None if jitmode.interpreted() else _parse_plain(path, len(header), positions, progress)
-    if block is None:
-        block = _parse_with_pandas(path, header, wanted, positions, progress)
+    parsed = None if jitmode.interpreted() else _parse_plain(path, len(header), positions, header.index("t"),
+                                                             progress)
+    block, stamps_ns = parsed if parsed is not None else (_parse_with_pandas(path, header, wanted, positions,
+                                                                              progress), None)
     finite = np.isfinite(block)
     n = block.shape[1]
     # Blank lines at the end of the file are harmless: drop them.
@@ -707,17 +713,18 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
             what = f"non-finite value {float(value)!r}"
         raise InputError(f"{path}: line {row + 2}, column {wanted[j]!r}: {what}")
     data = {name: block[j] for j, name in enumerate(wanted)}
-    return _Table(path, data, np.arange(2, n + 2, dtype=np.int64))
+    return _Table(path, data, np.arange(2, n + 2, dtype=np.int64), None if stamps_ns is None else stamps_ns[:n])
 
 
-def _parse_plain(path: Path, n_fields: int, positions: list[int],
-                 progress: Callable[[float], None] | None) -> np.ndarray | None:
-    """(len(positions), n) float64 columns by :func:`navpp.io.csvparse.parse_columns`; None when
-    the file is not plain (then :func:`_parse_with_pandas` reads it and names the fault)."""
+def _parse_plain(path: Path, n_fields: int, positions: list[int], stamp_position: int,
+                 progress: Callable[[float], None] | None) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """(len(positions), n) float64 columns and the exact ns of field ``stamp_position`` (or None)
+    by :func:`navpp.io.csvparse.parse_columns`; None when the file is not plain (then
+    :func:`_parse_with_pandas` reads it and names the fault)."""
     from navpp.io.csvparse import parse_columns
 
     try:
-        return parse_columns(path, n_fields, positions, progress)
+        return parse_columns(path, n_fields, positions, stamp_position, progress)
     except OSError as e:
         raise InputError(f"{path}: cannot read: {e}") from e
 
@@ -923,7 +930,7 @@ def _check_integral(table: _Table, names: Sequence[str]) -> None:
 
 def _with_ns(table: _Table, header: list[str]) -> _Table:
     """``table`` with its stamps as exact integer ns in ``data["t_ns"]`` (see :func:`_stamps_ns`)."""
-    return _Table(table.path, {**table.data, "t_ns": _stamps_ns(table, header)}, table.lines)
+    return _Table(table.path, {**table.data, "t_ns": _stamps_ns(table, header)}, table.lines, table.stamps_ns)
 
 
 def _check_lone_stamp(table: _Table) -> None:

@@ -7,10 +7,11 @@ separated by ``,``, ended by ``\\n`` or ``\\r\\n`` (the last one may lack it); a
 Eisel-Lemire algorithm (Lemire, "Number parsing at a gigabyte per second", 2021; the form
 without fallback of Mushtak and Lemire, 2023, as in the ``fast_float`` library): correctly
 rounded (half-even), so every value is the double Python's ``float`` and pandas give for the
-same text.  Anything else (an empty or quoted cell, ``nan``, blanks, a blank line, a wrong
-number of cells, a byte outside ASCII, more than 19 significant digits, a value
-that would be subnormal or overflow) makes :func:`parse_columns` return None, and the caller
-reads the file with its exact, slower parser that also locates and names the fault.
+same text; the stamp column also becomes exact integer nanoseconds.  Anything else (an empty
+or quoted cell, ``nan``, blanks, a blank line, a wrong number of cells, a byte outside ASCII,
+more than 19 significant digits, a value that would be subnormal or overflow) makes
+:func:`parse_columns` return None, and the caller reads the file with its exact, slower parser
+that also locates and names the fault.
 """
 
 from __future__ import annotations
@@ -126,6 +127,39 @@ def _digits(buf, i, w):
         i += 1
 
 
+_NO_NS = np.uint64(1) << np.uint64(63)
+"""In the stamp row: a value whose nanoseconds do not fit int64 (as int64: its minimum)."""
+
+
+@njit(cache=True, inline="always")
+def _exact_ns(w, q, negative):
+    """``w * 10^(q + 9)`` (``w`` uint64 of at most 19 digits) rounded half-even to an integer,
+    with the sign, as int64 two's-complement bits in a uint64; :data:`_NO_NS` if it does not fit."""
+    ten = np.uint64(10)
+    shift = q + 9
+    if shift >= 0:
+        for _ in range(shift):
+            if w > np.uint64(922337203685477580):    # (2^63 - 1) // 10: the next step overflows
+                return _NO_NS
+            w *= ten
+    elif w != 0:
+        if shift < -19:
+            w = np.uint64(0)                         # below 10^-19 of 1 ns: rounds to 0
+        else:
+            p = np.uint64(1)
+            for _ in range(-shift):
+                p *= ten
+            quotient = w // p
+            rest = w - quotient * p
+            half = p >> np.uint64(1)
+            if rest > half or (rest == half and quotient & np.uint64(1) == np.uint64(1)):
+                quotient += np.uint64(1)
+            w = quotient
+    if w >= _NO_NS:
+        return _NO_NS
+    return (~w + np.uint64(1)) if negative and w != 0 else w
+
+
 @njit(cache=True)
 def _lines_end(buf, n):
     """Index after the last ``\n`` in ``buf[:n]`` (0: none)."""
@@ -135,11 +169,13 @@ def _lines_end(buf, n):
 
 
 @njit(cache=True)
-def _parse_block(buf, stop, column_of, out, row0, pow5):
+def _parse_block(buf, stop, column_of, stamp_field, out, row0, pow5):
     """Parse the lines of ``buf[:stop]`` (each ended by ``\n``, so is the last) into
     ``out[column_of[field], row0 + row]`` as IEEE bits (``out`` (k, capacity) uint64).
 
     ``column_of`` (n_fields,) int64: the output row of each field, -1 for a field not wanted.
+    Field ``stamp_field`` (if >= 0) is also written to ``out[k - 1]`` as the exact integer
+    nanoseconds its text says (:func:`_exact_ns`).
     Returns (rows parsed, bytes consumed, status): ``_OK``; ``_FULL`` when ``out`` has no room
     for the next line (consumed stops before it); ``_FALLBACK`` when a line is not in the plain
     form (see the module docstring)."""
@@ -211,6 +247,8 @@ def _parse_block(buf, stop, column_of, out, row0, pow5):
                     if not ok:
                         return row - row0, pos, _FALLBACK
                 out[col, row] = bits
+                if field == stamp_field:
+                    out[out.shape[0] - 1, row] = _exact_ns(w, exp10, negative)
             if field < n_fields - 1:
                 if buf[i] != 44:
                     return row - row0, pos, _FALLBACK   # too few fields, or not a plain number
@@ -224,14 +262,18 @@ def _parse_block(buf, stop, column_of, out, row0, pow5):
     return row - row0, pos, _OK
 
 
-def parse_columns(path: Path, n_fields: int, positions: list[int],
-                  progress: Callable[[float], None] | None = None) -> np.ndarray | None:
+def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_position: int | None = None,
+                  progress: Callable[[float], None] | None = None) -> tuple[np.ndarray, np.ndarray | None] | None:
     """The data rows of CSV file ``path`` (a header line, then rows of ``n_fields`` cells) as a
-    (len(positions), n_rows) float64 array, row ``j`` holding field ``positions[j]``; None when
+    (len(positions), n_rows) float64 array, row ``j`` holding field ``positions[j]``, and, for
+    field ``stamp_position`` (one of ``positions``), the exact integer nanoseconds each cell's
+    text says ((n_rows,) int64, half-even at 1 ns; None if one does not fit int64).  None when
     the file is not in the plain form the kernel takes (then nothing is known about why).
     ``progress(fraction)`` follows the bytes read."""
     column_of = np.full(n_fields, -1, dtype=np.int64)
     column_of[positions] = np.arange(len(positions))
+    stamp_field = -1 if stamp_position is None else stamp_position
+    k = len(positions) + (stamp_position is not None)       # the stamps' ns in the last row
     size = path.stat().st_size
     buf = np.empty(_BLOCK_BYTES, dtype=np.uint8)
     with open(path, "rb") as fh:
@@ -243,7 +285,7 @@ def parse_columns(path: Path, n_fields: int, positions: list[int],
         # room for the rows if they are as long as those of the first 64 KiB, and 5 % more;
         # grown if not (pages never written cost no memory)
         per_row = len(sample) / max(sample.count(b"\n"), 1)
-        out = np.empty((len(positions), int((size - len(header)) / max(per_row, 1.0) * 1.05) + 16), dtype=np.uint64)
+        out = np.empty((k, int((size - len(header)) / max(per_row, 1.0) * 1.05) + 16), dtype=np.uint64)
         rows = 0
         kept = 0                              # bytes of an incomplete line carried to the next block
         while True:
@@ -257,7 +299,8 @@ def parse_columns(path: Path, n_fields: int, positions: list[int],
                 return None                   # no line end in a block: the slow path says why
             consumed = 0
             while True:
-                done, used, status = _parse_block(buf[consumed:stop], stop - consumed, column_of, out, rows, _POW5)
+                done, used, status = _parse_block(buf[consumed:stop], stop - consumed, column_of, stamp_field, out,
+                                                  rows, _POW5)
                 rows += done
                 consumed += used
                 if status != _FULL:
@@ -271,7 +314,11 @@ def parse_columns(path: Path, n_fields: int, positions: list[int],
                 break
             kept = n - consumed
             buf[:kept] = buf[consumed:n]
-    return out[:, :rows].view(np.float64)
+    values = out[:len(positions), :rows].view(np.float64)
+    if stamp_position is None:
+        return values, None
+    stamps = out[-1, :rows]
+    return values, None if bool(np.any(stamps == _NO_NS)) else stamps.view(np.int64)
 
 
 def _grown(out: np.ndarray, rows: int, capacity: int) -> np.ndarray:
