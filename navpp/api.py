@@ -22,25 +22,39 @@ from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from .config import Config, check_outages, parse_formats
 from .errors import ConfigError, InputError, NavppError
 from .findings import with_code
 from .inspection import StreamSummary, inspect
-from .outages import apply_outages
 from .outdir import input_files, refuse_overwriting_inputs
 from .outfiles import claimed_out_dir, os_reason
 from .reading import CONFIG_IN_LOG_DIR, companion, read_log, resolve_config
-from .recording import Recording, Solution
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from .outages import apply_outages
+    from .recording import Recording, Solution
 
 __all__ = ["CONFIG_IN_LOG_DIR", "FORMAT_FILES", "FORWARD_OUTPUTS", "OUTPUT_FILES", "ProcessResult", "StreamSummary",
            "apply_outages", "check_formats", "check_output_rate", "companion", "default_out_dir",
            "forced_fix_warnings", "forward_outputs_note", "inspect", "make_filter", "mcap_writer", "process",
            "read_log", "reference_checks", "resample_solution", "resolve_config", "run_inputs", "run_metrics",
            "simulate_log", "smoothing_metrics", "write_outputs"]
+
+
+
+def __getattr__(name: str) -> Any:
+    """:func:`navpp.outages.apply_outages`, importable from here, imported on first use (with
+    numpy: ``import navpp.api`` itself loads none of the numerical modules)."""
+    if name == "apply_outages":
+        from .outages import apply_outages
+
+        return apply_outages
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 #: Files navpp writes into an output directory.  After a successful run, any of these that the
 #: run did not write (e.g. metrics from an earlier run with a reference, or a trajectory.kml
@@ -140,6 +154,8 @@ class ProcessResult:
 
 def make_filter(name: str, config: Config, *, seed: int | None = None):
     """Instantiate a registered filter with its ``[filter.<name>]`` options and the GNSS gate."""
+    import numpy as np
+
     from .filters import FILTERS, get_filter
 
     for key in config.filters:
@@ -159,6 +175,8 @@ def make_filter(name: str, config: Config, *, seed: int | None = None):
 
 def check_output_rate(rate_hz: object, what: str = "--output-rate") -> float:
     """``rate_hz`` as a float if it is a finite number > 0 Hz; :class:`ConfigError` naming ``what``."""
+    import numpy as np
+
     ok = isinstance(rate_hz, (int, float, np.integer, np.floating)) and not isinstance(rate_hz, (bool, np.bool_))
     if not ok or not math.isfinite(float(rate_hz)) or float(rate_hz) <= 0.0:
         raise ConfigError(f"{what} must be a finite number of Hz > 0, got {rate_hz!r}")
@@ -171,7 +189,10 @@ def resample_solution(sol: Solution, rate_hz: float) -> Solution:
     Raises :class:`ConfigError` if ``rate_hz`` is not a finite number > 0, or so low that no
     whole multiple of the period falls within the solution's time span.
     """
+    import numpy as np
+
     from .metrics import interpolate_solution
+    from .recording import Solution
 
     rate_hz = check_output_rate(rate_hz, "output rate")
     period = 1.0 / rate_hz
@@ -197,6 +218,8 @@ def resample_solution(sol: Solution, rate_hz: float) -> Solution:
 def reference_checks(rec: Recording, cfg: Config, metrics: dict | None) -> list[str]:
     """Warn when the raw GNSS disagrees with the reference far beyond its stated sigma: the
     reference is then on another time base or datum, and every figure against it misleads."""
+    import numpy as np
+
     if metrics is None:
         return []
     raw = metrics.get("gnss_position_m", {}).get("horizontal")
@@ -509,6 +532,8 @@ def _read(plan: _Plan, progress: Callable[[str, float], None] | None) -> tuple[R
                    odometry_topic=odometry_topic, reference_anchor=plan.reference_anchor)
     if progress:
         progress("reading", 1.0)
+    from .outages import apply_outages
+
     rec, outages = apply_outages(rec, plan.windows, str(plan.log))
     imu_rate = rec.imu.rate_hz
     # 0.1 % slack: the IMU rate is a median of stamp differences (jitter, stamp rounding)
@@ -598,6 +623,8 @@ def forward_outputs_note(formats: Sequence[str], write: bool = True) -> str:
 def odometry_note(rec: Recording, cfg: Config) -> tuple[str, ...]:
     """The run's note on its odometry input: which stream (topic or file), samples and rate, and
     what of it the run used (``[odometry] use``, ``use_yaw_rate``)."""
+    import numpy as np
+
     od = rec.odometry
     if od is None or len(od) == 0:
         return ()
@@ -658,6 +685,8 @@ def forced_fix_warnings(rec: Recording, cfg: Config, result: Any) -> list[str]:
     The filter then re-anchors its position covariance on the fix (it takes itself, not the
     GNSS, to be wrong), and the trajectory may jump there: the user should know when.
     """
+    import numpy as np
+
     diag = getattr(result, "diagnostics", None)
     forced = np.asarray(getattr(diag, "forced", ()), dtype=bool)
     if not forced.any():

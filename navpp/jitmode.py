@@ -54,12 +54,13 @@ GROUPS: dict[str, tuple[tuple[str, str], ...]] = {
             ("engine/output.py", "interpolated_std")),
     "ros": (("io/messages.py", "_decode_kernel"),),
     "mcap": (("io/mcap.py", "_scan_kernel"),),
+    "csv": (("io/csvparse.py", "_parse_block"),),
     "sigma": (("ins/model.py", "_propagate_points"), ("ins/model.py", "gnss_points")),
     "vce": (("ins/model.py", "integrate_noise_groups"),),
     "smooth": (("ins/model.py", "rts_means"), ("ins/model.py", "apply_node_corrections")),
 }
 #: CPU seconds to compile each group from an empty cache (2-core EPYC, numba 0.68).
-COMPILE_S = {"ins": 19.0, "ros": 1.5, "mcap": 0.5, "sigma": 9.0, "vce": 10.0, "smooth": 9.0}
+COMPILE_S = {"ins": 19.0, "ros": 1.5, "mcap": 0.5, "csv": 1.5, "sigma": 9.0, "vce": 10.0, "smooth": 9.0}
 #: Extra CPU µs per IMU sample when interpreted, per filter (forward run), and per sample
 #: for the smoother's backward pass; per message for decoding a ROS log.
 INTERPRETED_US = {"ekf": 40.0, "aekf": 60.0, "sif": 900.0, "ckf": 950.0, "ukf": 950.0, "aukf": 1000.0,
@@ -73,7 +74,7 @@ FILTER_GROUPS = {"ckf": ("sigma",), "ukf": ("sigma",), "aukf": ("sigma",), "rwck
                  "sif": ("sigma",), "vce-ckf": ("sigma", "vce")}
 #: navpp modules whose import decorates kernels: once one is imported, the mode is fixed.
 KERNEL_MODULES = ("navpp.ins.strapdown", "navpp.ins.model", "navpp.filters.linalg", "navpp.io.messages",
-                  "navpp.io.mcap", "navpp.engine.output")
+                  "navpp.io.mcap", "navpp.io.csvparse", "navpp.engine.output")
 
 _ROOT = Path(__file__).resolve().parent
 

@@ -14,11 +14,11 @@ from typing import TYPE_CHECKING
 
 from .config import Config, load_config
 from .errors import ConfigError, InputError
-from .recording import Recording, ReferenceData
 
 if TYPE_CHECKING:
     from .io.frames import Anchor
     from .io.ros import LogContents
+    from .recording import Recording, ReferenceData
 
 #: The configuration file navpp looks for beside (or inside) a log.
 CONFIG_IN_LOG_DIR = "navpp.toml"

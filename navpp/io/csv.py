@@ -39,8 +39,8 @@ from pathlib import Path
 from typing import BinaryIO, cast
 
 import numpy as np
-import pandas as pd
 
+from navpp import jitmode
 from navpp.errors import ConfigError, InputError
 from navpp.recording import GnssData, ImuData, OdometryData, Recording, ReferenceData, lone_stamp
 
@@ -394,6 +394,7 @@ class _Table:
     path: Path
     data: dict[str, np.ndarray]
     lines: np.ndarray  # (n,) int64, line number in the file (header = 1)
+    stamps_ns: np.ndarray | None = None  # (n,) int64, the ``t`` text's exact ns, when the parser gave them
 
     @property
     def n(self) -> int:
@@ -417,7 +418,8 @@ class _Table:
 
     def take(self, keep: np.ndarray) -> _Table:
         """The rows selected by ``keep`` (a boolean mask or indices)."""
-        return _Table(self.path, {k: v[keep] for k, v in self.data.items()}, self.lines[keep])
+        return _Table(self.path, {k: v[keep] for k, v in self.data.items()}, self.lines[keep],
+                      None if self.stamps_ns is None else self.stamps_ns[keep])
 
 
 def _check_options(time_base: str, gyro_units: str, accel_units: str) -> tuple[float, float]:
@@ -467,8 +469,9 @@ def _stamps_ns(table: _Table, header: list[str]) -> np.ndarray:
     while ``|t| 10^d < 2^51``, and the residual ``|t 10^d - round(t 10^d)|`` stays within
     float64's error (4 eps |t| 10^d).  A larger residual means a later row carries more
     decimals: then, as when ``|t| 10^d >= 2^51`` (e.g. unix stamps with 7+ decimals), the
-    column is re-read as text and converted exactly (half-even at 1 ns).  A later row whose
-    extra decimals lie below float64's resolution of ``t`` is rounded to ``d`` decimals."""
+    column is converted exactly from its text (half-even at 1 ns; by the fast parser when it
+    read the file, ``table.stamps_ns``, else re-read).  A later row whose extra decimals lie
+    below float64's resolution of ``t`` is rounded to ``d`` decimals."""
     t = table.data["t"]
     d = min(_stamp_decimals(table.path, header), 9)
     if t.size == 0:
@@ -480,6 +483,8 @@ def _stamps_ns(table: _Table, header: list[str]) -> np.ndarray:
         rounded = np.round(scaled)
         if float(np.max(np.abs(scaled - rounded))) <= 4.0 * np.finfo(np.float64).eps * t_max * scale:
             return rounded.astype(np.int64) * 10 ** (9 - d)
+    if table.stamps_ns is not None:     # the exact path's result, from the fast parser
+        return table.stamps_ns
     return _stamps_ns_text(table, header)
 
 
@@ -487,6 +492,8 @@ def _stamps_ns_text(table: _Table, header: list[str]) -> np.ndarray:
     """Slow exact path of :func:`_stamps_ns`: the ``t`` cells of ``table``'s rows as text,
     converted with :class:`decimal.Decimal` (any float form), a chunk at a time."""
     from decimal import Decimal, InvalidOperation
+
+    import pandas as pd
 
     want = table.lines - 2          # data row index of every kept row, increasing
     out = np.empty(want.shape[0], dtype=np.int64)
@@ -672,12 +679,62 @@ _CHUNK_ROWS = 65536
 
 def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list[str],
                 progress: Callable[[float], None] | None = None) -> _Table:
-    """Parse ``wanted`` columns as float64 and check every cell is a finite number."""
+    """Parse ``wanted`` columns as float64 and check every cell is a finite number.
+
+    A plain file goes through the numba kernel of :mod:`navpp.io.csvparse` (same values, no
+    pandas); any other (or when kernels run interpreted) through pandas, whose errors locate
+    the faulty line and cell."""
     # Unnamed columns (trailing commas) are ignored silently: there is nothing to name.
     extra = [name for name in header if name and name not in wanted]
     if extra:
         warnings.append(f"{path.name}: ignoring extra column(s) {_names(extra)}")
     positions = [header.index(c) for c in wanted]
+    parsed = None if jitmode.interpreted() else _parse_plain(path, len(header), positions, header.index("t"),
+                                                             progress)
+    block, stamps_ns = parsed if parsed is not None else (_parse_with_pandas(path, header, wanted, positions,
+                                                                              progress), None)
+    finite = np.isfinite(block)
+    n = block.shape[1]
+    # Blank lines at the end of the file are harmless: drop them.
+    row_empty = cast(np.ndarray, np.isnan(block).all(axis=0))      # (n,) bool, for every (k, n) block
+    while n > 0 and row_empty[n - 1]:
+        n -= 1
+    if n == 0:
+        raise InputError(f"{path}: line 1 (header) is not followed by any data row; expected at least one")
+    block, finite = block[:, :n], finite[:, :n]
+    if not finite.all():
+        row, j = _first_true((~finite).T)
+        value = block[j, row]
+        if row_empty[row]:
+            what = "blank line"
+        elif np.isnan(value):
+            what = "missing value (empty cell or NaN)"
+        else:
+            what = f"non-finite value {float(value)!r}"
+        raise InputError(f"{path}: line {row + 2}, column {wanted[j]!r}: {what}")
+    data = {name: block[j] for j, name in enumerate(wanted)}
+    return _Table(path, data, np.arange(2, n + 2, dtype=np.int64), None if stamps_ns is None else stamps_ns[:n])
+
+
+def _parse_plain(path: Path, n_fields: int, positions: list[int], stamp_position: int,
+                 progress: Callable[[float], None] | None) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """(len(positions), n) float64 columns and the exact ns of field ``stamp_position`` (or None)
+    by :func:`navpp.io.csvparse.parse_columns`; None when the file is not plain (then
+    :func:`_parse_with_pandas` reads it and names the fault)."""
+    from navpp.io.csvparse import parse_columns
+
+    try:
+        return parse_columns(path, n_fields, positions, stamp_position, progress)
+    except OSError as e:
+        raise InputError(f"{path}: cannot read: {e}") from e
+
+
+def _parse_with_pandas(path: Path, header: list[str], wanted: list[str], positions: list[int],
+                       progress: Callable[[float], None] | None) -> np.ndarray:
+    """(len(wanted), n) float64 columns parsed by pandas, NaN for empty cells; an InputError
+    naming the line (and the cell when one is not a number) for a file pandas cannot read."""
+    import pandas as pd
+
     size = max(path.stat().st_size, 1)
     try:
         # Chunked parsing keeps the peak memory near the size of the data itself (a one-shot
@@ -707,35 +764,15 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
     except OSError as e:
         raise InputError(f"{path}: cannot read: {e}") from e
     # assemble chunk by chunk, releasing each one: the peak is the table plus one chunk
-    block = np.empty((sum(p.shape[0] for p in parts), len(wanted)))
+    block = np.empty((len(wanted), sum(p.shape[0] for p in parts)))
     row = 0
     parts.reverse()
     while parts:
         part = parts.pop()
-        block[row:row + part.shape[0]] = part
+        block[:, row:row + part.shape[0]] = part.T
         row += part.shape[0]
         del part
-    finite = np.isfinite(block)
-    n = block.shape[0]
-    # Blank lines at the end of the file are harmless: drop them.
-    row_empty = cast(np.ndarray, np.isnan(block).all(axis=1))      # (n,) bool, for every (n, k) block
-    while n > 0 and row_empty[n - 1]:
-        n -= 1
-    if n == 0:
-        raise InputError(f"{path}: line 1 (header) is not followed by any data row; expected at least one")
-    block, finite = block[:n], finite[:n]
-    if not finite.all():
-        row, j = _first_true(~finite)
-        value = block[row, j]
-        if row_empty[row]:
-            what = "blank line"
-        elif np.isnan(value):
-            what = "missing value (empty cell or NaN)"
-        else:
-            what = f"non-finite value {float(value)!r}"
-        raise InputError(f"{path}: line {row + 2}, column {wanted[j]!r}: {what}")
-    data = {name: block[:, j] for j, name in enumerate(wanted)}
-    return _Table(path, data, np.arange(2, n + 2, dtype=np.int64))
+    return block
 
 
 def _first_true(mask: np.ndarray) -> tuple[int, int]:
@@ -773,6 +810,8 @@ def _locate_non_numeric(path: Path, wanted: list[str], positions: list[int], cau
     """Slow path, only after the fast parse failed: find the first cell that is not a number
     (read as text a chunk at a time, so memory stays bounded)."""
     # usecols returns columns in file order; map back to names by position.
+    import pandas as pd
+
     by_position = dict(zip(positions, wanted))
     start = 0
     try:
@@ -891,7 +930,7 @@ def _check_integral(table: _Table, names: Sequence[str]) -> None:
 
 def _with_ns(table: _Table, header: list[str]) -> _Table:
     """``table`` with its stamps as exact integer ns in ``data["t_ns"]`` (see :func:`_stamps_ns`)."""
-    return _Table(table.path, {**table.data, "t_ns": _stamps_ns(table, header)}, table.lines)
+    return _Table(table.path, {**table.data, "t_ns": _stamps_ns(table, header)}, table.lines, table.stamps_ns)
 
 
 def _check_lone_stamp(table: _Table) -> None:

@@ -1,0 +1,328 @@
+"""Fast path of the CSV reader: the numeric columns of a plain comma-separated file, parsed by
+a numba kernel (:func:`_parse_block`) a block of the file at a time, without pandas.
+
+The kernel takes only the plain form every logger writes: each data line ``n_fields`` cells
+separated by ``,``, ended by ``\\n`` or ``\\r\\n`` (the last one may lack it); a wanted cell is
+``[+-]digits[.digits][(e|E)[+-]digits]`` with no blanks.  Decimal to binary is the
+Eisel-Lemire algorithm (Lemire, "Number parsing at a gigabyte per second", 2021; the form
+without fallback of Mushtak and Lemire, 2023, as in the ``fast_float`` library): correctly
+rounded (half-even), so every value is the double Python's ``float`` and pandas give for the
+same text; the stamp column also becomes exact integer nanoseconds.  Anything else (an empty
+or quoted cell, ``nan``, blanks, a blank line, a wrong number of cells, a byte outside ASCII,
+more than 19 significant digits, a value that would be subnormal or overflow) makes
+:func:`parse_columns` return None, and the caller reads the file with its exact, slower parser
+that also locates and names the fault.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+__all__ = ["parse_columns"]
+
+_BLOCK_BYTES = 1 << 22
+"""Bytes read per call of the kernel (4 MiB): the file is never held whole."""
+
+_OK, _FALLBACK, _FULL = 0, 1, 2     # kernel status: block done; not the plain form; output full
+
+_SMALLEST_POWER = -342              # 10^q with q below this is 0, above _LARGEST_POWER infinite
+_LARGEST_POWER = 308
+
+
+def _powers_of_five() -> np.ndarray:
+    """(2 * 651,) uint64: for q = -342..308, 5^q as a 128-bit number normalised so that its top
+    bit is bit 127 (high word, low word), truncated for q >= 0 and rounded up (with extra
+    precision) for q < 0, as ``fast_float``'s table generator makes it."""
+    words: list[int] = []
+    for q in range(_SMALLEST_POWER, _LARGEST_POWER + 1):
+        if q < 0:
+            power5 = 5 ** -q
+            z = power5.bit_length()           # the least z with 2^z >= 5^-q (never a power of 2)
+            b = z + 127 if q >= -27 else 2 * z + 128
+            c = 2 ** b // power5 + 1
+        else:
+            c = 5 ** q
+        shift = c.bit_length() - 128          # top bit to bit 127: shifted left, or truncated right
+        c = c << -shift if shift < 0 else c >> shift
+        words += [c >> 64, c & ((1 << 64) - 1)]
+    return np.array(words, dtype=np.uint64)
+
+
+_POW5 = _powers_of_five()
+
+
+@njit(cache=True, inline="always")
+def _mul128(a, b):
+    """High and low 64-bit words of the 128-bit product of uint64 ``a`` and ``b``."""
+    m32 = np.uint64(0xFFFFFFFF)
+    s32 = np.uint64(32)
+    a_lo, a_hi = a & m32, a >> s32
+    b_lo, b_hi = b & m32, b >> s32
+    p0 = a_lo * b_lo
+    p1 = a_lo * b_hi
+    p2 = a_hi * b_lo
+    p3 = a_hi * b_hi
+    mid = (p0 >> s32) + (p1 & m32) + (p2 & m32)
+    lo = (p0 & m32) | (mid << s32)
+    hi = p3 + (p1 >> s32) + (p2 >> s32) + (mid >> s32)
+    return hi, lo
+
+
+@njit(cache=True, inline="always")
+def _to_bits(w, q, n_digits, negative, pow5):
+    """IEEE-754 bits (uint64) of the double nearest ``w * 10^q`` (``w`` uint64 > 0 of
+    ``n_digits`` <= 19 digits), or 0 with ``ok`` False when the result would be subnormal or
+    overflow."""
+    one = np.uint64(1)
+    sign = np.uint64(1) << np.uint64(63) if negative else np.uint64(0)
+    if q < _SMALLEST_POWER or q > _LARGEST_POWER:
+        return np.uint64(0), False
+    lz = 63 - (n_digits * 3322) // 1000     # 10^(n-1) <= w < 2^(3.3222 n): lz or a little more
+    w <<= np.uint64(lz)
+    while w < (one << np.uint64(63)):
+        w <<= one
+        lz += 1
+    index = 2 * (q - _SMALLEST_POWER)
+    hi, lo = _mul128(w, pow5[index])
+    mask = np.uint64(0x1FF)                   # the bits below the 55 the rounding needs
+    if hi & mask == mask:                     # the truncated power may matter: refine
+        hi2, _ = _mul128(w, pow5[index + 1])
+        new_lo = lo + hi2
+        if hi2 > new_lo:
+            hi += one
+        lo = new_lo
+    upper = hi >> np.uint64(63)
+    shift = upper + np.uint64(9)
+    mantissa = hi >> shift
+    power2 = (((152170 + 65536) * q) >> 16) + 63 + np.int64(upper) - lz + 1023
+    if power2 <= 0:
+        return np.uint64(0), False
+    if lo <= one and -4 <= q <= 23 and mantissa & np.uint64(3) == one and (mantissa << shift) == hi:
+        mantissa &= ~one                      # exactly half-way: round to even
+    mantissa += mantissa & one
+    mantissa >>= one
+    if mantissa >= (np.uint64(2) << np.uint64(52)):
+        mantissa = one << np.uint64(52)
+        power2 += 1
+    mantissa &= ~(one << np.uint64(52))
+    if power2 >= 0x7FF:
+        return np.uint64(0), False
+    return sign | mantissa | (np.uint64(power2) << np.uint64(52)), True
+
+
+@njit(cache=True)
+def _digits(buf, i, w):
+    """``w`` with the decimal digits from ``buf[i]`` on appended (uint64, wraps beyond 19
+    digits), and the index of the first byte that is not a digit."""
+    ten = np.uint64(10)
+    while True:
+        d = np.uint64(buf[i]) - np.uint64(48)      # wraps to a huge value below '0'
+        if d > 9:
+            return w, i
+        w = w * ten + d
+        i += 1
+
+
+_NO_NS = np.uint64(1) << np.uint64(63)
+"""In the stamp row: a value whose nanoseconds do not fit int64 (as int64: its minimum)."""
+
+
+@njit(cache=True, inline="always")
+def _exact_ns(w, q, negative):
+    """``w * 10^(q + 9)`` (``w`` uint64 of at most 19 digits) rounded half-even to an integer,
+    with the sign, as int64 two's-complement bits in a uint64; :data:`_NO_NS` if it does not fit."""
+    ten = np.uint64(10)
+    shift = q + 9
+    if shift >= 0:
+        for _ in range(shift):
+            if w > np.uint64(922337203685477580):    # (2^63 - 1) // 10: the next step overflows
+                return _NO_NS
+            w *= ten
+    elif w != 0:
+        if shift < -19:
+            w = np.uint64(0)                         # below 10^-19 of 1 ns: rounds to 0
+        else:
+            p = np.uint64(1)
+            for _ in range(-shift):
+                p *= ten
+            quotient = w // p
+            rest = w - quotient * p
+            half = p >> np.uint64(1)
+            if rest > half or (rest == half and quotient & np.uint64(1) == np.uint64(1)):
+                quotient += np.uint64(1)
+            w = quotient
+    if w >= _NO_NS:
+        return _NO_NS
+    return (~w + np.uint64(1)) if negative and w != 0 else w
+
+
+@njit(cache=True)
+def _lines_end(buf, n):
+    """Index after the last ``\n`` in ``buf[:n]`` (0: none)."""
+    while n > 0 and buf[n - 1] != 10:
+        n -= 1
+    return n
+
+
+@njit(cache=True)
+def _parse_block(buf, stop, column_of, stamp_field, out, row0, pow5):
+    """Parse the lines of ``buf[:stop]`` (each ended by ``\n``, so is the last) into
+    ``out[column_of[field], row0 + row]`` as IEEE bits (``out`` (k, capacity) uint64).
+
+    ``column_of`` (n_fields,) int64: the output row of each field, -1 for a field not wanted.
+    Field ``stamp_field`` (if >= 0) is also written to ``out[k - 1]`` as the exact integer
+    nanoseconds its text says (:func:`_exact_ns`).
+    Returns (rows parsed, bytes consumed, status): ``_OK``; ``_FULL`` when ``out`` has no room
+    for the next line (consumed stops before it); ``_FALLBACK`` when a line is not in the plain
+    form (see the module docstring)."""
+    n_fields = column_of.shape[0]
+    capacity = out.shape[1]
+    pos = 0
+    row = row0
+    while pos < stop:
+        if row == capacity:
+            return row - row0, pos, _FULL
+        i = pos
+        for field in range(n_fields):
+            col = column_of[field]
+            if col < 0:                       # a field not wanted: skip it
+                while True:
+                    c = buf[i]
+                    if c == 44 or c == 10 or (c == 13 and buf[i + 1] == 10):
+                        break
+                    if c == 34 or c >= 128:
+                        return row - row0, pos, _FALLBACK
+                    i += 1
+            else:
+                c = buf[i]
+                negative = c == 45
+                if c == 45 or c == 43:
+                    i += 1
+                int_start = i
+                while buf[i] == 48:           # leading zeros
+                    i += 1
+                sig_start = i
+                w, i = _digits(buf, i, np.uint64(0))
+                n_sig = i - sig_start
+                if i == int_start:
+                    return row - row0, pos, _FALLBACK   # no digit before the point (or the cell)
+                exp10 = 0
+                if buf[i] == 46:
+                    i += 1
+                    frac_start = i
+                    if n_sig == 0:
+                        while buf[i] == 48:   # zeros after "0.": not significant
+                            i += 1
+                    sig_start = i
+                    w, i = _digits(buf, i, w)
+                    n_sig += i - sig_start
+                    exp10 = frac_start - i
+                    if i == frac_start:
+                        return row - row0, pos, _FALLBACK   # no digit after the point
+                if n_sig > 19:
+                    return row - row0, pos, _FALLBACK       # more precision than 19 digits
+                c = buf[i]
+                if c == 101 or c == 69:
+                    i += 1
+                    c = buf[i]
+                    e_negative = c == 45
+                    if c == 45 or c == 43:
+                        i += 1
+                    e_start = i
+                    while buf[i] == 48:
+                        i += 1
+                    digits_start = i
+                    e, i = _digits(buf, i, np.uint64(0))
+                    if i == e_start or i - digits_start > 4:
+                        return row - row0, pos, _FALLBACK   # no exponent digit, or an absurd one
+                    exp10 += -np.int64(e) if e_negative else np.int64(e)
+                if w == 0:
+                    bits = np.uint64(1) << np.uint64(63) if negative else np.uint64(0)
+                else:
+                    bits, ok = _to_bits(w, exp10, n_sig, negative, pow5)
+                    if not ok:
+                        return row - row0, pos, _FALLBACK
+                out[col, row] = bits
+                if field == stamp_field:
+                    out[out.shape[0] - 1, row] = _exact_ns(w, exp10, negative)
+            if field < n_fields - 1:
+                if buf[i] != 44:
+                    return row - row0, pos, _FALLBACK   # too few fields, or not a plain number
+                i += 1
+        if buf[i] == 13:
+            i += 1
+        if buf[i] != 10:
+            return row - row0, pos, _FALLBACK           # too many fields, or not a plain number
+        row += 1
+        pos = i + 1
+    return row - row0, pos, _OK
+
+
+def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_position: int | None = None,
+                  progress: Callable[[float], None] | None = None) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """The data rows of CSV file ``path`` (a header line, then rows of ``n_fields`` cells) as a
+    (len(positions), n_rows) float64 array, row ``j`` holding field ``positions[j]``, and, for
+    field ``stamp_position`` (one of ``positions``), the exact integer nanoseconds each cell's
+    text says ((n_rows,) int64, half-even at 1 ns; None if one does not fit int64).  None when
+    the file is not in the plain form the kernel takes (then nothing is known about why).
+    ``progress(fraction)`` follows the bytes read."""
+    column_of = np.full(n_fields, -1, dtype=np.int64)
+    column_of[positions] = np.arange(len(positions))
+    stamp_field = -1 if stamp_position is None else stamp_position
+    k = len(positions) + (stamp_position is not None)       # the stamps' ns in the last row
+    size = path.stat().st_size
+    buf = np.empty(_BLOCK_BYTES, dtype=np.uint8)
+    with open(path, "rb") as fh:
+        header = fh.readline(_BLOCK_BYTES)
+        if not header.endswith(b"\n") or b'"' in header:
+            return None
+        sample = fh.read(1 << 16)
+        fh.seek(len(header))
+        # room for the rows if they are as long as those of the first 64 KiB, and 5 % more;
+        # grown if not (pages never written cost no memory)
+        per_row = len(sample) / max(sample.count(b"\n"), 1)
+        out = np.empty((k, int((size - len(header)) / max(per_row, 1.0) * 1.05) + 16), dtype=np.uint64)
+        rows = 0
+        kept = 0                              # bytes of an incomplete line carried to the next block
+        while True:
+            n = kept + fh.readinto(buf[kept:].data)
+            final = n < buf.shape[0]
+            if final and n and buf[n - 1] != 10:
+                buf[n] = 10                   # the last line's missing end
+                n += 1
+            stop = n if final else _lines_end(buf, n)
+            if stop == 0:
+                return None                   # no line end in a block: the slow path says why
+            consumed = 0
+            while True:
+                done, used, status = _parse_block(buf[consumed:stop], stop - consumed, column_of, stamp_field, out,
+                                                  rows, _POW5)
+                rows += done
+                consumed += used
+                if status != _FULL:
+                    break
+                out = _grown(out, rows, out.shape[1] * 5 // 4 + 1024)
+            if status == _FALLBACK:
+                return None
+            if progress is not None:
+                progress(min(fh.tell() / max(size, 1), 1.0))
+            if final:
+                break
+            kept = n - consumed
+            buf[:kept] = buf[consumed:n]
+    values = out[:len(positions), :rows].view(np.float64)
+    if stamp_position is None:
+        return values, None
+    stamps = out[-1, :rows]
+    return values, None if bool(np.any(stamps == _NO_NS)) else stamps.view(np.int64)
+
+
+def _grown(out: np.ndarray, rows: int, capacity: int) -> np.ndarray:
+    """``out`` (k, capacity) with its first ``rows`` columns kept and room for ``capacity``."""
+    bigger = np.empty((out.shape[0], capacity), dtype=out.dtype)
+    bigger[:, :rows] = out[:, :rows]
+    return bigger
