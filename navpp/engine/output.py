@@ -7,6 +7,7 @@ m/s, rad, rad, m); :func:`solution_from_path` converts them in place to degrees.
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -153,8 +154,8 @@ def _body_rate_into(out, t, path, gyro, bias_t, bias_gyro, bias0):
         rm, rn = radii(lat)
         # w_in^n = w_ie^n + w_en^n, ENU, rad/s
         w_e = -vn / (rm + h)
-        w_n = OMEGA_E * np.cos(lat) + ve / (rn + h)
-        w_u = OMEGA_E * np.sin(lat) + ve * np.tan(lat) / (rn + h)
+        w_n = OMEGA_E * math.cos(lat) + ve / (rn + h)
+        w_u = OMEGA_E * math.sin(lat) + ve * math.tan(lat) / (rn + h)
         # C_bn w_in^n: the columns of C_nb (the rotation body FLU -> nav ENU) against w_in^n
         r0 = (1.0 - 2.0 * (y * y + z * z)) * w_e + 2.0 * (x * y + w * z) * w_n + 2.0 * (x * z - w * y) * w_u
         r1 = 2.0 * (x * y - w * z) * w_e + (1.0 - 2.0 * (x * x + z * z)) * w_n + 2.0 * (y * z + w * x) * w_u
