@@ -327,7 +327,8 @@ def write_trajectory_csv(path: str | os.PathLike[str], sol: Solution, *, t0_s: f
         for start in range(0, n, _CHUNK_ROWS):
             stop = min(n, start + _CHUNK_ROWS)
             fields = [_time_field(np.asarray(sol.t)[start:stop], t0_s)]
-            fields += [_field_from_values(np.asarray(c)[start:stop], d) for c, d in zip(columns, TRAJECTORY_DECIMALS[1:])]
+            fields += [_field_from_values(np.asarray(c)[start:stop], d)
+                       for c, d in zip(columns, TRAJECTORY_DECIMALS[1:])]
             f.write(_layout(fields, stop - start).data)
 
     atomic_write(path, write, mode="wb")
