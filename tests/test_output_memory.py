@@ -103,3 +103,17 @@ def test_trajectory_csv_of_float32_columns_is_their_float64_copy(tmp_path, monke
     rng.bit_generator.state = state
     writers.write_trajectory_csv(tmp_path / "b.csv", sol(std32.astype(np.float64)), t0_s=1.7e9)
     assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "b.csv").read_bytes()
+
+
+def test_block_statistics_in_parts_are_the_whole_log_at_once(monkeypatch):
+    rng = np.random.default_rng(5)
+    n = 125 * 47 + 17
+    t = np.arange(n) / 125.0
+    gyro, accel = rng.normal(0, 1e-2, (n, 3)), rng.normal(0, 0.1, (n, 3)) + [0.0, 0.0, 9.8]
+    monkeypatch.setattr(calibrate, "_STAT_CHUNK_BLOCKS", 10 ** 6)
+    whole = calibrate.block_statistics(t, gyro, accel)
+    for blocks in (1, 5, whole.nb - 1):       # the last part a single block, then two parts
+        monkeypatch.setattr(calibrate, "_STAT_CHUNK_BLOCKS", blocks)
+        parts = calibrate.block_statistics(t, gyro, accel)
+        assert all(np.array_equal(getattr(parts, k), getattr(whole, k))
+                   for k in ("gyro_mean", "gyro_std", "gyro_lp", "accel_mean", "accel_std", "accel_lp")), blocks

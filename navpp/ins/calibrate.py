@@ -62,6 +62,7 @@ NOISE_TAU_S = 0.1        #: averaging time of the noise reading, s
 NOISE_TAU_STEPS = (1, 2, 5)  #: ... and its multiples read too (the quietest band is the white floor)
 NOISE_SPAN = 5           #: samples of the local mean the top band is read against
 _TOP_CHUNK_BLOCKS = 512   #: noise-profile blocks whose top-band residuals are formed at a time
+_STAT_CHUNK_BLOCKS = 1024  #: standstill blocks whose statistics are taken at a time
 QUIET_PERCENTILE = 5.0   #: the log's quietest level: this percentile of the block spreads
 K_QUIET = 3.0            #: quiet = within this factor of the quietest level (no GNSS to confirm)
 K_WHITE = 4.0            #: or within this many white-noise sigmas of the configured IMU
@@ -168,10 +169,6 @@ def sample_period(t: np.ndarray) -> float:
     return float(d.mean()) if d.size else med
 
 
-def _blocks(x: np.ndarray, w: int, nb: int) -> np.ndarray:
-    return x[: nb * w].reshape(nb, w, x.shape[1])
-
-
 @dataclass(frozen=True)
 class BlockStatistics:
     """The IMU cut into ``nb`` blocks of ``w`` samples, each into sub-blocks of ``m`` samples
@@ -201,9 +198,14 @@ def block_statistics(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s
     nb = n // w
     per_sensor: list[np.ndarray] = []
     for x in (gyro, accel):
-        b = _blocks(x, w, nb)
-        sub = b.reshape(nb, w // m, m, 3).mean(axis=2)
-        per_sensor += [b.mean(axis=1), b.std(axis=1), sub.std(axis=1)]
+        mean, std, lp = np.empty((nb, 3)), np.empty((nb, 3)), np.empty((nb, 3))
+        # _STAT_CHUNK_BLOCKS blocks at a time: std's deviations are no array as long as the log
+        for b0 in range(0, nb, _STAT_CHUNK_BLOCKS):
+            b1 = min(nb, b0 + _STAT_CHUNK_BLOCKS)
+            b = x[b0 * w:b1 * w].reshape(b1 - b0, w, 3)
+            mean[b0:b1], std[b0:b1] = b.mean(axis=1), b.std(axis=1)
+            lp[b0:b1] = b.reshape(b1 - b0, w // m, m, 3).mean(axis=2).std(axis=1)
+        per_sensor += [mean, std, lp]
     return BlockStatistics(w, m, nb, dt, *per_sensor)
 
 
@@ -422,7 +424,8 @@ def standstill(t: np.ndarray, stats: BlockStatistics, gnss: GnssData, gyro_arw: 
 
 def spans(t: np.ndarray, mask: np.ndarray, min_s: float) -> list[tuple[int, int]]:
     """Index ranges [i0, i1) of runs of ``mask`` lasting at least ``min_s``."""
-    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    edge = np.zeros(1, dtype=np.int8)      # int8 throughout: no int64 copy of the mask
+    d = np.diff(np.concatenate([edge, mask.astype(np.int8), edge]))
     starts, ends = np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]
     return [(int(a), int(b)) for a, b in zip(starts, ends) if b - a >= 2 and t[b - 1] - t[a] >= min_s]
 
