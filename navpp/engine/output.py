@@ -7,6 +7,7 @@ m/s, rad, rad, m); :func:`solution_from_path` converts them in place to degrees.
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -14,9 +15,9 @@ from numba import njit
 
 from ..filters.protocols import SmoothableModel
 from ..filters.smoother import ForwardStore, smooth_arrays
-from ..geodesy import OMEGA_E, radii
+from ..geodesy import OMEGA_E
 from ..ins.model import ATT, BA, BG, POS, VEL, apply_node_corrections
-from ..ins.strapdown import NOMINAL_BA, NOMINAL_BG
+from ..ins.strapdown import NOMINAL_BA, NOMINAL_BG, radii
 from ..recording import Solution
 from .results import BiasHistory, SmoothedRun
 
@@ -132,28 +133,36 @@ def body_rate(t: np.ndarray, path: np.ndarray, gyro: np.ndarray, bias_t: np.ndar
     model integrated (mounting applied), ``b_g`` the gyro bias estimate after the last fix at or
     before each time (``bias_t`` (M,) s, ``bias_gyro`` (M, 3)), ``bias0`` before the first fix;
     the attitude ``C_nb``, velocity and position from the recorded ``path`` rows (N, 10: q_nb,
-    vel_enu, lat rad, lon rad, h m; read before :func:`solution_from_path` converts them)."""
-    t = np.asarray(t, dtype=float)
-    k = np.searchsorted(np.asarray(bias_t, dtype=float), t, side="right") - 1
-    bg = np.where((k >= 0)[:, None], np.asarray(bias_gyro, dtype=float)[np.maximum(k, 0)],
-                  np.asarray(bias0, dtype=float)[None, :])
-    w, x, y, z = (path[:, i] for i in range(4))
-    lat, h = path[:, 7], path[:, 9]
-    ve, vn = path[:, 4], path[:, 5]
-    rm, rn = radii(lat)
-    w_in = np.column_stack([-vn / (rm + h), OMEGA_E * np.cos(lat) + ve / (rn + h),
-                            OMEGA_E * np.sin(lat) + ve * np.tan(lat) / (rn + h)])
-    c_nb = np.empty((t.shape[0], 3, 3))
-    c_nb[:, 0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    c_nb[:, 0, 1] = 2.0 * (x * y - w * z)
-    c_nb[:, 0, 2] = 2.0 * (x * z + w * y)
-    c_nb[:, 1, 0] = 2.0 * (x * y + w * z)
-    c_nb[:, 1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    c_nb[:, 1, 2] = 2.0 * (y * z - w * x)
-    c_nb[:, 2, 0] = 2.0 * (x * z - w * y)
-    c_nb[:, 2, 1] = 2.0 * (y * z + w * x)
-    c_nb[:, 2, 2] = 1.0 - 2.0 * (x * x + y * y)
-    return np.asarray(gyro, dtype=float) - bg - np.einsum("nji,nj->ni", c_nb, w_in)
+    vel_enu, lat rad, lon rad, h m; read before :func:`solution_from_path` converts them).
+    One compiled pass (:func:`_body_rate_into`): the result is the only IMU-rate array made."""
+    out = np.empty((path.shape[0], 3))
+    _body_rate_into(out, np.asarray(t, dtype=float), path, np.asarray(gyro, dtype=float),
+                    np.asarray(bias_t, dtype=float), np.asarray(bias_gyro, dtype=float),
+                    np.asarray(bias0, dtype=float))
+    return out
+
+
+@njit(cache=True)
+def _body_rate_into(out, t, path, gyro, bias_t, bias_gyro, bias0):
+    """:func:`body_rate` row by row into ``out`` (N, 3) rad/s, body FLU; the sums in the order
+    numpy's vectorised form took them, so the figures are the same to the last bit."""
+    for i in range(path.shape[0]):
+        k = np.searchsorted(bias_t, t[i], side="right") - 1
+        bg = bias_gyro[k] if k >= 0 else bias0
+        w, x, y, z = path[i, 0], path[i, 1], path[i, 2], path[i, 3]
+        ve, vn, lat, h = path[i, 4], path[i, 5], path[i, 7], path[i, 9]
+        rm, rn = radii(lat)
+        # w_in^n = w_ie^n + w_en^n, ENU, rad/s
+        w_e = -vn / (rm + h)
+        w_n = OMEGA_E * math.cos(lat) + ve / (rn + h)
+        w_u = OMEGA_E * math.sin(lat) + ve * math.tan(lat) / (rn + h)
+        # C_bn w_in^n: the columns of C_nb (the rotation body FLU -> nav ENU) against w_in^n
+        r0 = (1.0 - 2.0 * (y * y + z * z)) * w_e + 2.0 * (x * y + w * z) * w_n + 2.0 * (x * z - w * y) * w_u
+        r1 = 2.0 * (x * y - w * z) * w_e + (1.0 - 2.0 * (x * x + z * z)) * w_n + 2.0 * (y * z + w * x) * w_u
+        r2 = 2.0 * (x * z + w * y) * w_e + 2.0 * (y * z - w * x) * w_n + (1.0 - 2.0 * (x * x + y * y)) * w_u
+        out[i, 0] = gyro[i, 0] - bg[0] - r0
+        out[i, 1] = gyro[i, 1] - bg[1] - r1
+        out[i, 2] = gyro[i, 2] - bg[2] - r2
 
 
 def solution_from_path(t: np.ndarray, path: np.ndarray, std_enu: np.ndarray, t0_ns: int, *,

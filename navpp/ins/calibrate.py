@@ -61,6 +61,8 @@ OUTLIER_K = 10.0  #: departures beyond this many block medians are glitches, not
 NOISE_TAU_S = 0.1        #: averaging time of the noise reading, s
 NOISE_TAU_STEPS = (1, 2, 5)  #: ... and its multiples read too (the quietest band is the white floor)
 NOISE_SPAN = 5           #: samples of the local mean the top band is read against
+_TOP_CHUNK_BLOCKS = 512   #: noise-profile blocks whose top-band residuals are formed at a time
+_STAT_CHUNK_BLOCKS = 1024  #: standstill blocks whose statistics are taken at a time
 QUIET_PERCENTILE = 5.0   #: the log's quietest level: this percentile of the block spreads
 K_QUIET = 3.0            #: quiet = within this factor of the quietest level (no GNSS to confirm)
 K_WHITE = 4.0            #: or within this many white-noise sigmas of the configured IMU
@@ -167,10 +169,6 @@ def sample_period(t: np.ndarray) -> float:
     return float(d.mean()) if d.size else med
 
 
-def _blocks(x: np.ndarray, w: int, nb: int) -> np.ndarray:
-    return x[: nb * w].reshape(nb, w, x.shape[1])
-
-
 @dataclass(frozen=True)
 class BlockStatistics:
     """The IMU cut into ``nb`` blocks of ``w`` samples, each into sub-blocks of ``m`` samples
@@ -200,9 +198,14 @@ def block_statistics(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s
     nb = n // w
     per_sensor: list[np.ndarray] = []
     for x in (gyro, accel):
-        b = _blocks(x, w, nb)
-        sub = b.reshape(nb, w // m, m, 3).mean(axis=2)
-        per_sensor += [b.mean(axis=1), b.std(axis=1), sub.std(axis=1)]
+        mean, std, lp = np.empty((nb, 3)), np.empty((nb, 3)), np.empty((nb, 3))
+        # _STAT_CHUNK_BLOCKS blocks at a time: std's deviations are no array as long as the log
+        for b0 in range(0, nb, _STAT_CHUNK_BLOCKS):
+            b1 = min(nb, b0 + _STAT_CHUNK_BLOCKS)
+            b = x[b0 * w:b1 * w].reshape(b1 - b0, w, 3)
+            mean[b0:b1], std[b0:b1] = b.mean(axis=1), b.std(axis=1)
+            lp[b0:b1] = b.reshape(b1 - b0, w // m, m, 3).mean(axis=2).std(axis=1)
+        per_sensor += [mean, std, lp]
     return BlockStatistics(w, m, nb, dt, *per_sensor)
 
 
@@ -274,12 +277,23 @@ def gnss_speed_at(gnss: GnssData, times: np.ndarray, half_window: float = 1.0) -
 def _pooled_var(v: np.ndarray) -> np.ndarray:
     """(nb,) mean square per row of ``v`` (nb, k) pooled with the neighbouring rows (a 3-row
     window), departures beyond ``OUTLIER_K`` times the row's median |v| left out (glitches)."""
+    return _pooled(*_row_sums(v))
+
+
+def _row_sums(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(nb,) sum of squares and (nb,) count of the values kept per row of ``v`` (nb, k): those
+    within ``OUTLIER_K`` times the row's median |v| (each row on its own: rows may come in parts)."""
     av = np.abs(v)
     with np.errstate(invalid="ignore", over="ignore"):
         med = np.median(np.where(np.isfinite(av), av, np.inf), axis=1)
         keep = np.isfinite(av) & (av <= OUTLIER_K * med[:, None])
         sq = np.where(keep, av, 0.0) ** 2
-    ssq, cnt = sq.sum(axis=1), keep.sum(axis=1).astype(float)
+    return sq.sum(axis=1), keep.sum(axis=1).astype(float)
+
+
+def _pooled(ssq: np.ndarray, cnt: np.ndarray) -> np.ndarray:
+    """(nb,) mean square from the per-row sums of squares ``ssq`` and counts ``cnt`` (:func:`_row_sums`),
+    each row pooled with its neighbours (a 3-row window)."""
     ssq3, cnt3 = ssq.copy(), cnt.copy()
     ssq3[1:] += ssq[:-1]
     cnt3[1:] += cnt[:-1]
@@ -287,6 +301,26 @@ def _pooled_var(v: np.ndarray) -> np.ndarray:
     cnt3[:-1] += cnt[1:]
     pooled: np.ndarray = ssq3 / np.maximum(cnt3, 1.0)
     return pooled
+
+
+def _top_row_sums(xb: np.ndarray, w: int, nb: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_row_sums` of the top band's residuals (each sample of ``xb`` (nb * w, 3) against the
+    mean of the ``NOISE_SPAN`` samples around it, ``np.convolve``'s ``"same"`` window) per block of
+    ``w`` samples, :data:`_TOP_CHUNK_BLOCKS` blocks at a time: no residual array as long as the log.
+    Each part is convolved with ``NOISE_SPAN`` samples either side of it, so every residual is the
+    one the whole log's convolution gives, to the last bit."""
+    kernel = np.ones(NOISE_SPAN) / NOISE_SPAN
+    n = nb * w
+    ssq, cnt = np.empty(nb), np.empty(nb)
+    for b0 in range(0, nb, _TOP_CHUNK_BLOCKS):
+        b1 = min(nb, b0 + _TOP_CHUNK_BLOCKS)
+        s, e = b0 * w, b1 * w
+        lo, hi = max(0, s - NOISE_SPAN), min(n, e + NOISE_SPAN)
+        res = np.empty((e - s, 3))
+        for j in range(3):
+            res[:, j] = xb[s:e, j] - np.convolve(xb[lo:hi, j], kernel, mode="same")[s - lo:e - lo]
+        ssq[b0:b1], cnt[b0:b1] = _row_sums(res.reshape(b1 - b0, w * 3))
+    return ssq, cnt
 
 
 def noise_profile(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: float = NOISE_BLOCK_S,
@@ -334,11 +368,7 @@ def noise_profile(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: f
             d[0], d[-1] = d[1], d[-2]
             band = np.minimum(band, _pooled_var(d.reshape(nb, per // mult * 3)) / 6.0 * (tau * mult))
         # the top of the band: each sample against the mean of the NOISE_SPAN around it
-        kernel = np.ones(NOISE_SPAN) / NOISE_SPAN
-        res = np.empty_like(xb)
-        for j in range(3):
-            res[:, j] = xb[:, j] - np.convolve(xb[:, j], kernel, mode="same")
-        top = _pooled_var(res.reshape(nb, w * 3)) * NOISE_SPAN / (NOISE_SPAN - 1.0) * dt
+        top = _pooled(*_top_row_sums(xb, w, nb)) * NOISE_SPAN / (NOISE_SPAN - 1.0) * dt
         # white noise is flat: the quieter band bounds it (a mount's shaking fills the top, a
         # walker's steps the band around 1 / tau)
         dens.append(np.sqrt(np.minimum(band, top)))
@@ -394,7 +424,8 @@ def standstill(t: np.ndarray, stats: BlockStatistics, gnss: GnssData, gyro_arw: 
 
 def spans(t: np.ndarray, mask: np.ndarray, min_s: float) -> list[tuple[int, int]]:
     """Index ranges [i0, i1) of runs of ``mask`` lasting at least ``min_s``."""
-    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    edge = np.zeros(1, dtype=np.int8)      # int8 throughout: no int64 copy of the mask
+    d = np.diff(np.concatenate([edge, mask.astype(np.int8), edge]))
     starts, ends = np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]
     return [(int(a), int(b)) for a, b in zip(starts, ends) if b - a >= 2 and t[b - 1] - t[a] >= min_s]
 

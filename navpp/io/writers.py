@@ -314,9 +314,10 @@ def write_trajectory_csv(path: str | os.PathLike[str], sol: Solution, *, t0_s: f
     if not math.isfinite(t0_s) or abs(t0_s) >= 1.0e12:
         raise ValueError(f"t0_s must be finite and below 1e12 s in magnitude, got {t0_s!r}")
     n = len(sol)
-    vel = np.asarray(sol.vel_enu, dtype=np.float64).reshape(n, 3)
-    rph = np.asarray(sol.rph_deg, dtype=np.float64).reshape(n, 3)
-    std = np.asarray(sol.std_enu, dtype=np.float64).reshape(n, 3)
+    # in their own dtype (the 1-sigma is float32): each block is made float64 as it is formatted
+    vel = np.asarray(sol.vel_enu).reshape(n, 3)
+    rph = np.asarray(sol.rph_deg).reshape(n, 3)
+    std = np.asarray(sol.std_enu).reshape(n, 3)
     columns = [sol.lat_deg, sol.lon_deg, sol.alt, vel[:, 0], vel[:, 1], vel[:, 2],
                rph[:, 0], rph[:, 1], rph[:, 2], std[:, 0], std[:, 1], std[:, 2]]
     header = (",".join(TRAJECTORY_COLUMNS) + "\n").encode("ascii")
@@ -326,7 +327,7 @@ def write_trajectory_csv(path: str | os.PathLike[str], sol: Solution, *, t0_s: f
         for start in range(0, n, _CHUNK_ROWS):
             stop = min(n, start + _CHUNK_ROWS)
             fields = [_time_field(np.asarray(sol.t)[start:stop], t0_s)]
-            fields += [_field_from_values(np.asarray(c, dtype=np.float64)[start:stop], d)
+            fields += [_field_from_values(np.asarray(c)[start:stop], d)
                        for c, d in zip(columns, TRAJECTORY_DECIMALS[1:])]
             f.write(_layout(fields, stop - start).data)
 
