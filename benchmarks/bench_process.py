@@ -248,7 +248,6 @@ def memory_map(log: Path, filter_name: str, out: Path, smooth: bool) -> None:
 
     from navpp import api, engine
     from navpp.engine import output as eng_output
-    from navpp.filters import smoother
     from navpp.io import writers
 
     eng_run = importlib.import_module("navpp.engine.run")   # the module: navpp.engine.run is also a function
@@ -302,14 +301,13 @@ def memory_map(log: Path, filter_name: str, out: Path, smooth: bool) -> None:
         _arrays(a[4], "recorder", held["engine"], seen)
 
     def walk_store(a) -> None:
-        _arrays(a[0]._nodes, "ForwardStore._nodes", held.setdefault("store", {}), set())
+        _arrays(a[0]._blocks, "ForwardStore._blocks", held.setdefault("store", {}), set())
 
     hook(eng_run, "finished", "engine: forward run done, before output (recorder full)", None, walk_finished)
     hook(eng_run, "solution_from_path", "engine.finished: forward solution (std interpolated, body rate)", None)
     if smooth:
-        hook(smoother.ForwardStore, "arrays", "smoothing: before ForwardStore.arrays (node references)",
-             "smoothing: after ForwardStore.arrays (packed nodes)", walk_store)
-        hook(eng_output, "smooth_arrays", None, "smoothing: after the backward pass (smooth_arrays)")
+        hook(eng_output, "rts_smooth", "smoothing: before the backward pass (the store's blocks)",
+             "smoothing: after the backward pass (rts_smooth)", walk_store)
         hook(eng_output, "solution_from_path", "smoothing: smoothed IMU-rate path corrected, before its solution", None)
 
     cfg = api.resolve_config(log, None)

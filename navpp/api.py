@@ -24,7 +24,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .config import Config, check_outages, parse_formats
+from .config import Config, check_outages, parse_formats, with_memory
 from .errors import ConfigError, InputError, NavppError
 from .findings import with_code
 from .inspection import StreamSummary, inspect
@@ -352,7 +352,7 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
             gnss_outages: Sequence[tuple[float, float]] | None = None,
             smooth: bool | None = None, odometry_topic: str | None = None,
             reference_anchor: str | Sequence[float] | None = None, plot: bool = False,
-            jit: str | None = None) -> ProcessResult:
+            jit: str | None = None, memory: str | int | None = None) -> ProcessResult:
     """Read a log, run one filter, write trajectory (and metrics with a reference).
 
     ``navpp.process`` is this function.  Example::
@@ -409,6 +409,9 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         smoothed 1-sigma), ``trajectory_forward.csv`` (with ``csv``) and the MCAP's
         ``/navpp/forward/*`` topics the forward one, and the metrics show both.  Overrides
         ``[output] smooth``; None uses it (default off).
+    memory : memory the smoother's stored forward run may hold before it spills to a temporary
+        file, bytes or text (``"500MB"``, ``"1GB"``, ``"2G"``); overrides ``[output] memory``
+        (default 1 GB); None uses it.
     plot : also write the run's figures beside the outputs (:mod:`navpp.plots`: the error per
         axis with its +-3-sigma band, the trajectory, the adaptive noise, an HTML overview map);
         ignored with ``write=False``.
@@ -431,6 +434,8 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
     from . import jitmode
 
     cfg = config if isinstance(config, Config) else resolve_config(Path(log), config)
+    if memory is not None:
+        cfg = with_memory(cfg, memory)
     choice = jitmode.choose(jit, [Path(log)], [filter_name], cfg.output.smooth if smooth is None else bool(smooth))
     plan = _plan(Path(log), filter_name=filter_name, config=config, resolved=cfg, reference=reference, out_dir=out_dir,
                  output_rate_hz=output_rate_hz, write=write, gnss_file=gnss_file, formats=formats,

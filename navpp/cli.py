@@ -226,6 +226,10 @@ def process(
         "hold the smoothed trajectory, trajectory_forward.csv/.tum (and the MCAP's forward topics) the forward one, "
         "the metrics show both.  "
         "[default: [output] smooth, else off]", show_default=False)] = None,
+    memory: Annotated[str | None, typer.Option(
+        "--memory", metavar="SIZE", help="Memory the smoother's stored forward run may hold (500MB, 1GB, 2G; "
+        "binary units); beyond it the stored blocks go to a temporary file, deleted at the end.  "
+        "[default: [output] memory, else 1GB]", show_default=False)] = None,
     plot: Annotated[bool, typer.Option(
         "--plot", help="Also write figures beside the outputs: <log>_<filter>_errors.png (error per axis with the "
                        "±3σ band, outages, rejected fixes; without a reference <log>_<filter>_innovations.png), "
@@ -262,7 +266,7 @@ def process(
                               gnss_topic=gnss_topic, reference_topic=reference_topic, gnss_file=gnss,
                               formats=formats, embed_input=embed_input, gnss_outages=gnss_outage, smooth=smooth,
                               odometry_topic=odometry_topic, reference_anchor=reference_anchor,
-                              plot=plot, jit=jitmode.requested(jit, "auto"))
+                              plot=plot, jit=jitmode.requested(jit, "auto"), memory=memory)
     except NavppError as exc:
         _fail(str(exc), exc)
         return
@@ -312,6 +316,10 @@ def compare(
     smooth: Annotated[bool, typer.Option(
         "--smooth", help="Also smooth every run backwards (Rauch-Tung-Striebel): a second row per filter, "
                          "<filter>+rts, beside the forward one.")] = False,
+    memory: Annotated[str | None, typer.Option(
+        "--memory", metavar="SIZE", help="Memory each run's smoother store may hold (500MB, 1GB, 2G; binary "
+        "units); beyond it the stored blocks go to a temporary file.  [default: [output] memory, else 1GB]",
+        show_default=False)] = None,
     executor: Annotated[str, typer.Option(
         "--executor", help="Where the runs go: local (this machine, --jobs processes) or dask (a Dask cluster: "
                            "--scheduler, else a LocalCluster of --jobs workers; pip install 'navpp[dask]').",
@@ -370,7 +378,7 @@ def compare(
                                      odometry_topic=odometry_topic, jobs=jobs,
                                      out_dir=out, progress=prog, smooth=smooth, executor=executor,
                                      scheduler=scheduler, time_limit_s=time_limit, jit=jit,
-                                     reference_anchor=reference_anchor)
+                                     reference_anchor=reference_anchor, memory=memory)
         except BaseException:
             remove_created_dirs(created)
             raise

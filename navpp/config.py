@@ -7,7 +7,7 @@ One TOML file, every field optional (README.md, "Configuration file"; `navpp con
     [time]     base, source
     [init]     method, roll_deg, pitch_deg, heading_deg, ...
     [vehicle]  type, nhc, zupt, zaru and their noise, rate and standstill-detector keys
-    [output]   rate_hz, formats, smooth
+    [output]   rate_hz, formats, smooth, memory
     [auto]     which self-calibration steps run (standstill, noise, biases, mounting, ...)
     [filter.<name>]  each filter's own options, kept raw and validated by that filter
 
@@ -28,7 +28,7 @@ import math
 import numbers
 import tomllib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Final
@@ -693,16 +693,55 @@ class OutputConfig:
         the written trajectory is the smoothed one, the forward one is kept beside it
         (``trajectory_forward.csv``, ``trajectory_forward.tum``, the MCAP's forward topics, by
         the formats written) and the metrics show both; ``--smooth`` turns it on.
+    memory : int bytes, > 0, default 1 GiB; TOML may give ``"500MB"``, ``"1GB"``, ``"2G"``
+        (:func:`parse_memory`).  Memory the smoother's stored forward run may hold; beyond
+        it the stored blocks go to a temporary file (deleted at the end) and are read back by
+        the backward pass (:class:`navpp.filters.smoother.ForwardStore`); ``--memory``
+        overrides it.
     """
 
     rate_hz: float | None = None
     formats: tuple[str, ...] = ("csv",)
     smooth: bool = False
+    memory: int = 1 << 30
 
     def __post_init__(self) -> None:
         _fix_optional_float(self, "output", "rate_hz", minimum=0.0, strict_min=True)
         _set(self, "formats", parse_formats(self.formats, "[output] formats"))
         _as_bool("output", "smooth", self.smooth)
+        _set(self, "memory", parse_memory(self.memory, "[output] memory"))
+
+
+#: multiples of a byte a memory size may name (binary: 1 GB = 1024^3 bytes)
+MEMORY_UNITS: Final = {"": 1, "B": 1, "K": 1 << 10, "KB": 1 << 10, "M": 1 << 20, "MB": 1 << 20, "G": 1 << 30,
+                       "GB": 1 << 30, "T": 1 << 40, "TB": 1 << 40}
+
+
+def with_memory(cfg: Config, memory: object) -> Config:
+    """``cfg`` with ``[output] memory`` replaced by the ``--memory`` value ``memory`` (:func:`parse_memory`)."""
+    return replace(cfg, output=replace(cfg.output, memory=parse_memory(memory, "--memory")))
+
+
+def parse_memory(value: object, what: str) -> int:
+    """Bytes from a memory size: an int (bytes) or text such as ``"500MB"``, ``"1GB"``, ``"2G"``,
+    ``"1.5 GB"`` (:data:`MEMORY_UNITS`, case-insensitive, binary).  ``what`` (``"[output]
+    memory"``, ``"--memory"``) starts the message of the :class:`ConfigError` a value that is
+    not a size above zero raises."""
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+        number, unit = float(value), ""
+    elif isinstance(value, str):
+        text = value.strip().upper()
+        digits = text.rstrip("KMGTB ")
+        unit = text[len(digits):].strip()
+        try:
+            number = float(digits)
+        except ValueError:
+            number = math.nan
+    else:
+        number, unit = math.nan, ""
+    if not (math.isfinite(number) and number > 0 and unit in MEMORY_UNITS and number * MEMORY_UNITS[unit] >= 1):
+        raise ConfigError(f"{what}: expected a memory size such as 500MB, 1GB or 2G, got {value!r}")
+    return int(number * MEMORY_UNITS[unit])
 
 
 def parse_formats(value: object, what: str) -> tuple[str, ...]:

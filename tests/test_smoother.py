@@ -7,7 +7,7 @@ from scenarios import linear_problem
 
 from navpp.filters import FILTERS, GaussianState, Prediction
 from navpp.filters.linear import LinearMeasurement, LinearModel
-from navpp.filters.smoother import ForwardStore, rts_smooth, smooth_arrays
+from navpp.filters.smoother import ForwardStore, rts_smooth
 
 
 def _problem(seed=3, n=4, m=2, steps=12):
@@ -37,10 +37,12 @@ def _textbook_rts(x0, P0, Phi, Q, H, R, zs, skip=()):
     return np.array(xs), np.array(Ps)
 
 
-def _navpp_forward(filt, model, x0, P0, zs, H, R, skip=()):
-    """The engine's protocol on a linear model: a node per time update, the update recorded."""
+def _navpp_forward(filt, model, x0, P0, zs, H, R, skip=(), reset_at=None, **store_options):
+    """The engine's protocol on a linear model: a node per time update, the update recorded
+    (the one of node ``reset_at`` as if its fix had been forced).  A float64 store unless
+    ``store_options`` say otherwise."""
     state = GaussianState(0.0, x0, P0)
-    store = ForwardStore(len(x0), len(x0))
+    store = ForwardStore(len(x0), len(x0), **{"dtype": np.float64, **store_options})
     store.start(state)
     innovations = []
     for k, z in enumerate(zs, start=1):
@@ -51,7 +53,7 @@ def _navpp_forward(filt, model, x0, P0, zs, H, R, skip=()):
             continue
         up = filt.update(state, model, LinearMeasurement(float(k), z, H, R))
         state, inn = up.state, up.innovation
-        store.updated(up.prior_used, state, inn.forced)
+        store.updated(up.prior_used, state, inn.forced or k == reset_at)
         innovations.append(inn)
     return store, innovations
 
@@ -67,22 +69,25 @@ def test_every_filter_smooths_like_textbook_rts_on_a_linear_model(name):
     sm = rts_smooth(store, model)
     xs, Ps = _textbook_rts(x0, P0, Phi, Q, H, R, zs, skip)
     np.testing.assert_allclose(sm.x, xs, rtol=1e-8, atol=1e-9)
-    np.testing.assert_allclose(sm.P, Ps, rtol=1e-7, atol=1e-10)
+    np.testing.assert_allclose(sm.var, np.diagonal(Ps, axis1=1, axis2=2), rtol=1e-7, atol=1e-10)
     np.testing.assert_allclose(sm.t, np.arange(len(zs) + 1.0))
     assert sm.breaks == 0 and sm.repaired == 0
 
 
-def test_smoothed_covariance_is_below_the_filtered_one():
+def test_smoothed_variance_is_below_the_filtered_one():
     Phi, Q, H, R, x0, P0, zs = _problem(seed=5)
     model = LinearModel(Phi, Q)
     filt = FILTERS["ekf"]()
+    state, filtered = GaussianState(0.0, x0, P0), [np.diag(P0)]
+    for k, z in enumerate(zs, start=1):
+        state = filt.predict(state, model, (k - 1.0, float(k))).state
+        if k - 1 not in {3, 4, 5, 6}:
+            state = filt.update(state, model, LinearMeasurement(float(k), z, H, R)).state
+        filtered.append(np.diag(state.P))
     store, _ = _navpp_forward(filt, model, x0, P0, zs, H, R, skip={3, 4, 5, 6})
-    nodes = store.arrays()
-    P_filtered = nodes["P_post"].copy()
-    sm = smooth_arrays(nodes, model)
-    for k in range(len(P_filtered)):
-        assert np.linalg.eigvalsh(sm.P[k] - P_filtered[k]).max() < 1e-9
-    np.testing.assert_array_equal(sm.P[-1], P_filtered[-1])       # the last node is the filter's
+    sm = rts_smooth(store, model)
+    assert np.all(sm.var <= np.array(filtered) + 1e-12)
+    np.testing.assert_array_equal(sm.var[-1], filtered[-1])       # the last node is the filter's
 
 
 def test_a_rejected_measurement_smooths_as_if_it_were_absent():
@@ -100,22 +105,51 @@ def test_a_rejected_measurement_smooths_as_if_it_were_absent():
     sm = rts_smooth(store, model)
     xs, Ps = _textbook_rts(x0, P0, Phi, Q, H, R, zs, skip={5})
     np.testing.assert_allclose(sm.x, xs, rtol=1e-8, atol=1e-9)
-    np.testing.assert_allclose(sm.P, Ps, rtol=1e-7, atol=1e-10)
+    np.testing.assert_allclose(sm.var, np.diagonal(Ps, axis1=1, axis2=2), rtol=1e-7, atol=1e-10)
 
 
 def test_no_information_is_carried_back_across_a_reanchored_fix():
     Phi, Q, H, R, x0, P0, zs = _problem(seed=11)
     model = LinearModel(Phi, Q)
-    store, _ = _navpp_forward(FILTERS["ekf"](), model, x0, P0, zs, H, R)
-    nodes = store.arrays()
-    nodes["reset"][7] = True                    # as if the fix of node 7 had been forced
-    sm = smooth_arrays(nodes, model)
+    store, _ = _navpp_forward(FILTERS["ekf"](), model, x0, P0, zs, H, R, reset_at=7)
+    plain, _ = _navpp_forward(FILTERS["ekf"](), model, x0, P0, zs, H, R)
+    x_post = rts_smooth(plain, model).x_post                  # the forward posteriors (no reset)
+    sm = rts_smooth(store, model)
     # before the reset: exactly the smoothing of the run that ends at node 6
     xs, Ps = _textbook_rts(x0, P0, Phi, Q, H, R, zs[:6])
     np.testing.assert_allclose(sm.x[:7], xs, rtol=1e-8, atol=1e-9)
-    np.testing.assert_allclose(sm.P[:7], Ps, rtol=1e-7, atol=1e-10)
+    np.testing.assert_allclose(sm.var[:7], np.diagonal(Ps, axis1=1, axis2=2), rtol=1e-7, atol=1e-10)
     assert sm.breaks == 1
-    np.testing.assert_array_equal(sm.gains[7], 0.0)
+    np.testing.assert_array_equal(sm.x[6], x_post[6])          # node 6 keeps its forward posterior
+
+
+def test_blocks_and_spilling_change_nothing(tmp_path):
+    """Blocks of 3 nodes against one block; a budget below one block (every full block spilled
+    to a temporary file in ``tmp_path``, deleted when the store closes): the same bytes."""
+    Phi, Q, H, R, x0, P0, zs = _problem(seed=13, steps=40)
+    model = LinearModel(Phi, Q)
+    filt = FILTERS["ekf"]()
+    one, _ = _navpp_forward(filt, model, x0, P0, zs, H, R, skip={10, 11}, dtype=np.float32)
+    small, _ = _navpp_forward(filt, model, x0, P0, zs, H, R, skip={10, 11}, dtype=np.float32, block_nodes=3)
+    spilled, _ = _navpp_forward(filt, model, x0, P0, zs, H, R, skip={10, 11}, dtype=np.float32, block_nodes=3,
+                                budget_bytes=1, spill_dir=str(tmp_path))
+    assert spilled.spilled_blocks == 12 and list(tmp_path.iterdir()) == []    # unlinked at once
+    a, b, c = (rts_smooth(s, model) for s in (one, small, spilled))
+    for field in ("t", "x", "var", "x_post", "x_ref"):
+        np.testing.assert_array_equal(getattr(b, field), getattr(a, field))
+        np.testing.assert_array_equal(getattr(c, field), getattr(a, field))
+    assert spilled.n == 0 and spilled.spilled_blocks == 0
+
+
+def test_float32_storage_changes_the_smoothing_by_rounding_only():
+    Phi, Q, H, R, x0, P0, zs = _problem(seed=17, steps=40)
+    model = LinearModel(Phi, Q)
+    filt = FILTERS["ekf"]()
+    f8, _ = _navpp_forward(filt, model, x0, P0, zs, H, R, skip={20, 21, 22})
+    f4, _ = _navpp_forward(filt, model, x0, P0, zs, H, R, skip={20, 21, 22}, dtype=np.float32)
+    a, b = rts_smooth(f8, model), rts_smooth(f4, model)
+    np.testing.assert_allclose(b.x, a.x, rtol=0, atol=1e-6 * np.abs(a.x).max())
+    np.testing.assert_allclose(b.var, a.var, rtol=1e-5)
 
 
 def test_store_refuses_a_cross_covariance_of_the_wrong_shape():
@@ -167,15 +201,11 @@ def test_compiled_ins_mean_recursion_equals_the_generic_one():
     x[0] = 1.0
     x[7], x[8], x[9] = np.radians(45.0), np.radians(7.0), 300.0
     m = 30
-    a = {"t": np.arange(m, dtype=float),
-         "x_post": np.array([plus(x, rng.normal(scale=1e-3, size=15)) for _ in range(m)]),
+    a = {"x_post": np.array([plus(x, rng.normal(scale=1e-3, size=15)) for _ in range(m)]),
          "x_prior": np.array([plus(x, rng.normal(scale=1e-3, size=15)) for _ in range(m)]),
-         "x_ref": np.zeros((m, 16)), "reset": np.zeros(m, bool)}
+         "gains": 0.3 * rng.normal(size=(m, 15, 15)), "reset": np.zeros(m, bool)}
     a["reset"][11] = True
-    for name in ("P_post", "P_prior"):
-        B = rng.normal(size=(m, 15, 15))
-        a[name] = B @ B.transpose(0, 2, 1) + np.eye(15)
-    a["D"] = 0.3 * rng.normal(size=(m, 15, 15))
+    a["gains"][11] = 0.0
     ins = InsModel(np.arange(3.0), np.zeros((3, 3)), np.zeros((3, 3)), NoiseModel(0, 0, 0, np.inf, 0, np.inf))
 
     class Generic:                         # the recursion written out over the same plus / minus
@@ -189,7 +219,6 @@ def test_compiled_ins_mean_recursion_equals_the_generic_one():
                                                                                                     x_prior[k + 1]))
             return xs
 
-    b = {k: v.copy() for k, v in a.items()}
-    fast, slow = smooth_arrays(a, ins), smooth_arrays(b, Generic())
-    np.testing.assert_allclose(fast.x, slow.x, rtol=0, atol=1e-12)
-    np.testing.assert_array_equal(fast.P, slow.P)
+    fast = ins.rts_means(a["x_post"], a["x_prior"], a["gains"], a["reset"])
+    slow = Generic().rts_means(a["x_post"], a["x_prior"], a["gains"], a["reset"])
+    np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12)

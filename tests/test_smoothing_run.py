@@ -196,3 +196,33 @@ def test_compare_smooth_rows(sim_log_dir, tmp_path):
     parallel = compare([sim_log_dir], ["ekf", "ckf"], smooth=True, jobs=2, report=False)
     for a, b in zip(res.rows, parallel.rows):
         assert (a.filter, a.metrics["position_m"]) == (b.filter, b.metrics["position_m"])
+
+
+def test_a_spilled_store_smooths_to_the_same_bytes(sim_log_dir, monkeypatch, tmp_path):
+    """Blocks of 64 nodes and a budget of one byte: every full block goes to a temporary file
+    (in $TMPDIR, gone afterwards) and the smoothed solution is the in-memory one, bit for bit."""
+    import tempfile
+
+    from navpp.filters import smoother
+
+    monkeypatch.setattr(smoother, "BLOCK_NODES", 64)
+    kept = api.process(sim_log_dir, write=False, gnss_outages=[OUTAGE], smooth=True)
+    opened, temporary_file = [], tempfile.TemporaryFile
+    monkeypatch.setattr(tempfile, "TemporaryFile", lambda **kw: opened.append(kw) or temporary_file(**kw))
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    spilled = api.process(sim_log_dir, write=False, gnss_outages=[OUTAGE], smooth=True, memory=1)
+    assert len(opened) == 1 and list(tmp_path.iterdir()) == []
+    for name in ("t", "lat_deg", "lon_deg", "alt", "vel_enu", "rph_deg", "std_enu", "std_att", "std_vel_enu",
+                 "rate_body"):
+        np.testing.assert_array_equal(getattr(spilled.solution, name), getattr(kept.solution, name), err_msg=name)
+
+
+def test_memory_option_and_config_are_validated(log_copy, tmp_path):
+    r = CliRunner().invoke(app, ["process", str(log_copy), "--smooth", "--memory", "12XB", "--out", str(tmp_path)])
+    assert r.exit_code == 1
+    assert "--memory: expected a memory size such as 500MB, 1GB or 2G, got '12XB'" in r.output
+    assert config_from_dict({"output": {"memory": "1.5GB"}}, "t.toml").output.memory == 3 << 29
+    assert config_from_dict({"output": {"memory": "500MB"}}, "t.toml").output.memory == 500 << 20
+    with pytest.raises(ConfigError, match=r"\[output\] memory: expected a memory size"):
+        config_from_dict({"output": {"memory": 0}}, "t.toml")

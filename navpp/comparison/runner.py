@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .. import interrupts
+from ..config import parse_memory
 from ..errors import ConfigError
 from ..outfiles import claimed_out_dir
 from .dask_executor import run_dask
@@ -144,7 +145,8 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
             report: bool = True, progress: ProgressFn | None = None, smooth: bool = False,
             executor: str = "local", scheduler: str | None = None,
             time_limit_s: float = DEFAULT_TIME_LIMIT_S, odometry_topic: str | None = None,
-            jit: str | None = None, reference_anchor: str | Sequence[float] | None = None) -> CompareResult:
+            jit: str | None = None, reference_anchor: str | Sequence[float] | None = None,
+            memory: str | int | None = None) -> CompareResult:
     """Run every filter on every log; rows in (log, filter) order.
 
     Parameters
@@ -177,6 +179,8 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
         rows, the forward filter's (``runtime_s`` its own time) and ``"<filter>+rts"`` (the
         smoothed solution; ``runtime_s`` forward plus smoothing), side by side in the summary,
         the report and its plots.
+    memory : memory each run's smoother store may hold before it spills to a temporary file
+        (``"500MB"``, ``"1GB"``, bytes); overrides ``[output] memory``; None uses it.
     time_limit_s : the watchdog: a run (reading its log included) that takes longer than this
         many seconds per 100,000 IMU samples (at least :data:`WATCHDOG_MIN_S`) is stopped and
         becomes a failed row naming the log; the other runs go on.  0 turns it off.  Local runs
@@ -207,10 +211,11 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
     _check_arguments(log_names, names, config=config, reference=reference, jobs=jobs, executor=executor,
                      scheduler=scheduler, time_limit_s=time_limit_s)
     anchor = _anchor_text(reference_anchor)
+    budget = None if memory is None else parse_memory(memory, "--memory")
     tasks = [RunTask(i * len(names) + j, log, name, None if config is None else str(config),
                      None if reference is None else str(reference), imu_topic, gnss_topic, reference_topic,
                      report, report and j == 0, bool(smooth), time_limit_s=float(time_limit_s),
-                     odometry_topic=odometry_topic, reference_anchor=anchor)
+                     odometry_topic=odometry_topic, reference_anchor=anchor, memory=budget)
              for i, log in enumerate(log_names) for j, name in enumerate(names)]
     out = Path(out_dir) if out_dir is not None else None
     labels = [x for n in names for x in ((n, smoothed_name(n)) if smooth else (n,))]

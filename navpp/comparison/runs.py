@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from ..config import with_memory
 from ..errors import NavppError
 from .rows import CompareRow, smoothed_name
 from .series import LogSeries, RunSeries, log_series_of, run_series_of
@@ -49,6 +50,7 @@ class RunTask:
     time_limit_s: float = 0.0   # the watchdog's s per 100,000 IMU samples (:func:`watchdog_limit_s`); 0: off
     odometry_topic: str | None = None   # --odometry-topic (None: automatic, "none": off)
     reference_anchor: str | None = None  # --reference-anchor "LAT,LON,ALT" of a local-frame reference
+    memory: int | None = None   # --memory: bytes the smoother's store may hold (None: [output] memory)
 
 
 @dataclass(frozen=True)
@@ -89,6 +91,8 @@ class RecordingCache:
             limit = watchdog_limit_s(task.time_limit_s, log_size_bytes(log) / WATCHDOG_BYTES_PER_SAMPLE)
             try:
                 cfg = api.resolve_config(log, task.config)
+                if task.memory is not None:
+                    cfg = with_memory(cfg, task.memory)
                 with Watchdog(limit):
                     rec = api.read_log(log, cfg, reference=task.reference, imu_topic=task.imu_topic,
                                        gnss_topic=task.gnss_topic, reference_topic=task.reference_topic,

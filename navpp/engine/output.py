@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit
 
 from ..filters.protocols import SmoothableModel
-from ..filters.smoother import ForwardStore, smooth_arrays
+from ..filters.smoother import ForwardStore, rts_smooth
 from ..geodesy import OMEGA_E
 from ..ins.model import ATT, BA, BG, POS, VEL, apply_node_corrections
 from ..ins.strapdown import NOMINAL_BA, NOMINAL_BG, radii
@@ -53,13 +53,11 @@ def smoothed_run(store: ForwardStore, model: SmoothableModel, t_out: np.ndarray,
     gyro bias); None: no body rate.
     """
     t_start = time.perf_counter()
-    nodes = store.arrays()
-    mb = sum(a.nbytes for a in nodes.values()) / 1e6
-    x_post, x_ref = nodes["x_post"], nodes["x_ref"]
-    sm = smooth_arrays(nodes, model)
+    mb = store.nbytes / 1e6
+    sm = rts_smooth(store, model)
     spath = path.copy()
-    apply_node_corrections(spath, t_out, sm.t, sm.x, x_post, x_ref)
-    var = np.ascontiguousarray(np.diagonal(sm.P, axis1=1, axis2=2))
+    apply_node_corrections(spath, t_out, sm.t, sm.x, sm.x_post, sm.x_ref)
+    var = sm.var
     std = {}
     for name, block in (("pos", POS), ("vel", VEL), ("att", ATT)):
         v = np.ascontiguousarray(var[:, block])

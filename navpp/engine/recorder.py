@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..filters.base import GaussianState, Prediction, Update
-from ..filters.smoother import ForwardStore
+from ..filters.smoother import DEFAULT_BUDGET_BYTES, ForwardStore
 from ..ins.model import ATT, BA, BG, POS, VEL
 from ..ins.strapdown import NOMINAL_BA, NOMINAL_BG, PATH_SIZE
 from .loop import EpochOutcome
@@ -52,12 +52,14 @@ class RunRecorder:
     start : the start state; ``start_sample`` its IMU sample (its path row is written here).
     noise_report : the filter's :meth:`~navpp.filters.base.Filter.noise_report`, read after each fix.
     velocity : whether the run has GNSS velocity measurements.
-    smooth : keep the forward run for smoothing.
+    smooth : keep the forward run for smoothing; ``store_bytes`` the memory its store may hold
+        before it spills to a temporary file (``[output] memory``).
     progress, n_epochs : called with the fraction of the ``n_epochs`` measurement epochs done.
     """
 
     def __init__(self, fixes: GnssFixes, path: np.ndarray, start: GaussianState, start_sample: int,
                  noise_report: Callable[[], dict[str, np.ndarray]], *, velocity: bool, smooth: bool,
+                 store_bytes: int = DEFAULT_BUDGET_BYTES,
                  progress: ProgressFn | None = None, n_epochs: int = 1,
                  extra_states: list[tuple[str, int, int]] | None = None, aids: tuple[str, ...] = ()) -> None:
         m = len(fixes)
@@ -91,7 +93,7 @@ class RunRecorder:
         self.store: ForwardStore | None = None
         self.epoch_node = np.zeros(m, np.int64)       # the smoother's node of each GNSS epoch
         if smooth:
-            self.store = ForwardStore(start.P.shape[0], start.x.shape[0])
+            self.store = ForwardStore(start.P.shape[0], start.x.shape[0], budget_bytes=store_bytes)
             self.store.start(start)
         self.progress, self.n_epochs = progress, n_epochs
         self.tick = max(1, n_epochs // 200)

@@ -290,7 +290,7 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     elif isinstance(fmodel, AugmentedInsModel):
         start = GaussianState(al.t, *fmodel.start(al.x, start.P))
     recorder = RunRecorder(fixes, prep.path, start, al.index, filt.noise_report, velocity=aiding.has_velocity,
-                           smooth=smooth, progress=progress, n_epochs=n_epochs,
+                           smooth=smooth, store_bytes=config.output.memory, progress=progress, n_epochs=n_epochs,
                            extra_states=fmodel.state_labels() if isinstance(fmodel, AugmentedInsModel) else None,
                            aids=aiding.recorded_kinds)
     source = RunMeasurements(fixes, recording.gnss, lever, reopen, aiding, model=fmodel,
