@@ -68,7 +68,6 @@ class RunRecorder:
         self.nis = np.full(m, np.nan)
         self.accepted = np.zeros(m, bool)
         self.forced = np.zeros(m, bool)
-        self.r_std = np.full((m, 3), np.nan)
         self.s_used = np.full((m, 3, 3), np.nan)     # each fix's innovation covariance and R as the filter had them
         self.r_used = np.full((m, 3, 3), np.nan)
         self.adaptive: dict[str, np.ndarray] = {}
@@ -121,7 +120,6 @@ class RunRecorder:
             self.nis[k] = inn.nis
             self.accepted[k] = inn.accepted
             self.forced[k] = inn.forced
-            self.r_std[k] = np.sqrt(np.diagonal(inn.R))
             self.s_used[k] = inn.S
             self.r_used[k] = inn.R
             for name, value in self.noise_report().items():
@@ -159,6 +157,13 @@ class RunRecorder:
             self.progress(epoch.index / self.n_epochs)
 
     # results -------------------------------------------------------------------------------
+    @property
+    def r_std(self) -> np.ndarray:
+        """Each fix's 1-sigma noise as the filter used it (M, 3) ENU m (NaN where none was
+        recorded): the square roots of :attr:`r_used`'s diagonals, taken once at the end."""
+        out: np.ndarray = np.sqrt(np.diagonal(self.r_used, axis1=1, axis2=2))
+        return out
+
     def knot_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The knots: times (K,) s, prior and posterior position variance (K, 3) ENU m^2."""
         t, prior, post = self.knot_arrays_all()

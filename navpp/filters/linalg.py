@@ -138,6 +138,15 @@ def joseph(P: np.ndarray, K: np.ndarray, H: np.ndarray, R: np.ndarray) -> np.nda
 
 
 @compiled
+def joseph_correction(P: np.ndarray, K: np.ndarray, H: np.ndarray, R: np.ndarray, nu: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """A linearised filter's correction in one call: the error estimate ``K nu`` (n,) and the
+    Joseph-form posterior covariance (:func:`joseph`)."""
+    dx: np.ndarray = K @ nu
+    return dx, joseph(P, K, H, R)
+
+
+@compiled
 def sigma_posterior(P: np.ndarray, K: np.ndarray, S: np.ndarray) -> np.ndarray:
     """Posterior ``P - K S K^T`` of a filter without a Jacobian, symmetrised."""
     Pn = P - K @ S @ K.T
