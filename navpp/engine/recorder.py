@@ -31,6 +31,11 @@ AID_COLUMNS = {"odometer": "odo", "odometer_yaw": "yaw"}
 KNOT = slice(ATT.start, POS.stop)
 _KNOT_N = KNOT.stop - KNOT.start
 assert (ATT.stop, VEL.start, VEL.stop, POS.start) == (3, 3, 6, 6) and _KNOT_N == 9
+#: the gyro then accelerometer biases, adjacent in the nominal and in the error state: each
+#: recorded per fix in one copy
+BIASES_X = slice(NOMINAL_BG.start, NOMINAL_BA.stop)
+BIASES_DX = slice(BG.start, BA.stop)
+assert (NOMINAL_BG.stop, BG.stop) == (NOMINAL_BA.start, BA.start)
 
 ProgressFn = Callable[[float], None]   # called with the fraction done, 0..1
 
@@ -143,11 +148,9 @@ class RunRecorder:
         if k >= 0:
             if self.store is not None:
                 self.epoch_node[k] = self.store.n - 1
-            self.bias[k, :3] = state.x[NOMINAL_BG]
-            self.bias[k, 3:] = state.x[NOMINAL_BA]
+            self.bias[k] = state.x[BIASES_X]
             variance = state.P.diagonal()
-            self.bias_var[k, :3] = variance[BG]
-            self.bias_var[k, 3:] = variance[BA]
+            self.bias_var[k] = variance[BIASES_DX]
             if self.extra_values is not None:
                 n = len(self.extra)
                 for j, (_, ie, ix) in enumerate(self.extra):
