@@ -129,8 +129,9 @@ class RunMeasurements:
         self._drift = (self.reopen is not None and len(self._rejected_nis) >= 4
                        and drifting(np.asarray(self._rejected_nis, dtype=float)))
         var = f.var[k] * self.r_share if f.r_scale is None else f.var[k] * self.r_share * f.r_scale[k]
-        out: list[Any] = [GnssPosition(epoch.t, float(f.lat[k]), float(f.lon[k]), float(f.alt[k]),
-                                       np.diag(var), self.lever,
+        R = np.zeros((3, 3))
+        R.ravel()[::4] = var            # diag(var), ENU m^2, without np.diag's Python wrapper
+        out: list[Any] = [GnssPosition(epoch.t, float(f.lat[k]), float(f.lon[k]), float(f.alt[k]), R, self.lever,
                                        self.reopen if self._drift else None)]
         vmeas = self.aiding.velocity(k, epoch.t)
         if vmeas is not None:

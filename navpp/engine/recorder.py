@@ -31,6 +31,11 @@ AID_COLUMNS = {"odometer": "odo", "odometer_yaw": "yaw"}
 KNOT = slice(ATT.start, POS.stop)
 _KNOT_N = KNOT.stop - KNOT.start
 assert (ATT.stop, VEL.start, VEL.stop, POS.start) == (3, 3, 6, 6) and _KNOT_N == 9
+#: the gyro then accelerometer biases, adjacent in the nominal and in the error state: each
+#: recorded per fix in one copy
+BIASES_X = slice(NOMINAL_BG.start, NOMINAL_BA.stop)
+BIASES_DX = slice(BG.start, BA.stop)
+assert (NOMINAL_BG.stop, BG.stop) == (NOMINAL_BA.start, BA.start)
 
 ProgressFn = Callable[[float], None]   # called with the fraction done, 0..1
 
@@ -70,7 +75,6 @@ class RunRecorder:
         self.nis = np.full(m, np.nan)
         self.accepted = np.zeros(m, bool)
         self.forced = np.zeros(m, bool)
-        self.r_std = np.full((m, 3), np.nan)
         self.s_used = np.full((m, 3, 3), np.nan)     # each fix's innovation covariance and R as the filter had them
         self.r_used = np.full((m, 3, 3), np.nan)
         self.adaptive: dict[str, np.ndarray] = {}
@@ -123,7 +127,6 @@ class RunRecorder:
             self.nis[k] = inn.nis
             self.accepted[k] = inn.accepted
             self.forced[k] = inn.forced
-            self.r_std[k] = np.sqrt(np.diagonal(inn.R))
             self.s_used[k] = inn.S
             self.r_used[k] = inn.R
             for name, value in self.noise_report().items():
@@ -147,11 +150,9 @@ class RunRecorder:
         if k >= 0:
             if self.store is not None:
                 self.epoch_node[k] = self.store.n - 1
-            self.bias[k, :3] = state.x[NOMINAL_BG]
-            self.bias[k, 3:] = state.x[NOMINAL_BA]
+            self.bias[k] = state.x[BIASES_X]
             variance = state.P.diagonal()
-            self.bias_var[k, :3] = variance[BG]
-            self.bias_var[k, 3:] = variance[BA]
+            self.bias_var[k] = variance[BIASES_DX]
             if self.extra_values is not None:
                 n = len(self.extra)
                 for j, (_, ie, ix) in enumerate(self.extra):
@@ -161,6 +162,13 @@ class RunRecorder:
             self.progress(epoch.index / self.n_epochs)
 
     # results -------------------------------------------------------------------------------
+    @property
+    def r_std(self) -> np.ndarray:
+        """Each fix's 1-sigma noise as the filter used it (M, 3) ENU m (NaN where none was
+        recorded): the square roots of :attr:`r_used`'s diagonals, taken once at the end."""
+        out: np.ndarray = np.sqrt(np.diagonal(self.r_used, axis1=1, axis2=2))
+        return out
+
     def knot_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The knots: times (K,) s, prior and posterior position variance (K, 3) ENU m^2."""
         t, prior, post = self.knot_arrays_all()

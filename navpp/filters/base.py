@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
@@ -29,7 +28,7 @@ from scipy.special import chdtri
 
 from ..errors import ConfigError, FilterDivergedError
 from .adaptation import Adaptation, Predictor
-from .linalg import gain_and_nis, joseph, sigma_posterior, symmetrise
+from .linalg import all_finite, innovation_gain, joseph_correction, sigma_posterior, symmetrise
 from .protocols import Interval, Measurement, Model
 from .states import GaussianState, Innovation, MeasurementPrediction, Prediction, Update
 
@@ -213,8 +212,7 @@ class Filter:
                  R: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """Innovation covariance ``S = Pzz + R``, gain and NIS; divergence when S is not
         positive definite."""
-        S = symmetrise(pred.Pzz + R)
-        K, nis, ok = gain_and_nis(pred.Pxz, S, pred.nu)
+        S, K, nis, ok = innovation_gain(pred.Pzz, R, pred.Pxz, pred.nu)
         if not ok:
             raise FilterDivergedError.in_filter(
                 self.name, f"innovation covariance is not positive definite at t={state.t:.3f} s")
@@ -233,9 +231,12 @@ class Filter:
     def _correct(self, state: GaussianState, model: Model, pred: MeasurementPrediction,
                  K: np.ndarray, S: np.ndarray, R: np.ndarray) -> GaussianState:
         """The posterior: ``x ⊞ K nu``; Joseph form when linearised, else ``P - K S K^T``."""
-        x = model.plus(state.x, K @ pred.nu)
-        P = joseph(state.P, K, pred.H, R) if pred.H is not None else sigma_posterior(state.P, K, S)
-        if not (math.isfinite(x.sum()) and math.isfinite(P.sum())):
+        if pred.H is not None:
+            dx, P = joseph_correction(state.P, K, pred.H, R, pred.nu)
+        else:
+            dx, P = K @ pred.nu, sigma_posterior(state.P, K, S)
+        x = model.plus(state.x, dx)
+        if not all_finite(x, P):
             raise FilterDivergedError.in_filter(self.name, f"state became non-finite at t={state.t:.3f} s")
         return GaussianState(state.t, x, P)
 

@@ -10,7 +10,7 @@ Groves (2013) ch. 14.
 from __future__ import annotations
 
 from .base import Filter, register
-from .linalg import symmetrise
+from .linalg import linear_moments, propagated_covariance
 from .protocols import Interval, Measurement, Model
 from .states import GaussianState, MeasurementPrediction, Prediction
 
@@ -22,11 +22,10 @@ class EKF(Filter):
 
     def time_update(self, state: GaussianState, model: Model, interval: Interval) -> Prediction:
         x, Phi, Qd = model.transition(state.x, interval)
-        PPhit = state.P @ Phi.T               # E[dx_k dx_k+1^T] = P Phi^T (the smoother's cross-covariance)
-        P = Phi @ PPhit + Qd                  # P- = Phi P Phi^T + Qd
-        return Prediction(GaussianState(interval[1], x, symmetrise(P)), PPhit, x)
+        P, PPhit = propagated_covariance(state.P, Phi, Qd)    # P- = Phi P Phi^T + Qd; P Phi^T
+        return Prediction(GaussianState(interval[1], x, P), PPhit, x)
 
     def predict_measurement(self, state: GaussianState, model: Model, meas: Measurement) -> MeasurementPrediction:
         H = meas.jacobian(state.x)
-        PHt = state.P @ H.T
-        return MeasurementPrediction(meas.innovation_at(state.x), H @ PHt, PHt, H)
+        PHt, Pzz = linear_moments(state.P, H)
+        return MeasurementPrediction(meas.innovation_at(state.x), Pzz, PHt, H)

@@ -29,11 +29,38 @@ def symmetrise(P: np.ndarray) -> np.ndarray:
 
 
 @compiled
+def propagated_covariance(P: np.ndarray, Phi: np.ndarray, Qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The EKF's covariance time update in one call: the prior ``Phi P Phi^T + Qd`` (n, n),
+    symmetrised (:func:`symmetrise`'s figures), and the cross-covariance ``P Phi^T`` of the errors
+    at the interval's start and end (the smoother's)."""
+    PPhit = P @ Phi.T
+    Pn = Phi @ PPhit + Qd
+    out = Pn + Pn.T
+    out *= 0.5
+    return out, PPhit
+
+
+@compiled
+def linear_moments(P: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Predicted-measurement moments of a linearised measurement with Jacobian ``H`` (m, n)
+    about the covariance ``P`` (n, n): ``P H^T`` (n, m) and ``H P H^T`` (m, m), before R."""
+    PHt = P @ H.T
+    return PHt, H @ PHt
+
+
+@compiled
+def all_finite(x: np.ndarray, P: np.ndarray) -> bool:
+    """Whether the sums of the state ``x`` (n,) and its covariance ``P`` (m, m) are finite (so is
+    every element then)."""
+    return bool(np.isfinite(x.sum() + P.sum()))
+
+
+@compiled
 def finite_with_positive_variances(x: np.ndarray, P: np.ndarray) -> bool:
-    """Whether the sums of the state ``x`` (n,) and its covariance ``P`` (m, m) are finite
-    (so is every element then) and every variance on ``P``'s diagonal is positive: a state that
-    needs no closer look (:func:`navpp.engine.verdict.state_fault`)."""
-    return bool(np.isfinite(x.sum() + P.sum()) and np.diag(P).min() > 0.0)
+    """Whether :func:`all_finite` holds for the state ``x`` (n,) and its covariance ``P`` (m, m)
+    and every variance on ``P``'s diagonal is positive: a state that needs no closer look
+    (:func:`navpp.engine.verdict.state_fault`)."""
+    return all_finite(x, P) and np.diag(P).min() > 0.0
 
 
 @compiled
@@ -88,12 +115,35 @@ def gain_and_nis(Pxz: np.ndarray, S: np.ndarray, nu: np.ndarray) -> tuple[np.nda
 
 
 @compiled
+def innovation_gain(Pzz: np.ndarray, R: np.ndarray, Pxz: np.ndarray, nu: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, float, bool]:
+    """Innovation covariance ``S = Pzz + R`` (m, m), symmetrised (:func:`symmetrise`'s figures),
+    with :func:`gain_and_nis` about it: ``(S, K, nis, ok)``."""
+    m = Pzz.shape[0]
+    S = np.empty((m, m))
+    for i in range(m):
+        for j in range(m):
+            S[i, j] = ((Pzz[i, j] + R[i, j]) + (Pzz[j, i] + R[j, i])) * 0.5
+    K, nis, ok = gain_and_nis(Pxz, S, nu)
+    return S, K, nis, ok
+
+
+@compiled
 def joseph(P: np.ndarray, K: np.ndarray, H: np.ndarray, R: np.ndarray) -> np.ndarray:
     """Joseph-form posterior ``(I - K H) P (I - K H)^T + K R K^T``, symmetrised."""
     I_KH = np.eye(P.shape[0]) - K @ H
     Pn = I_KH @ P @ I_KH.T + K @ R @ K.T
     out: np.ndarray = 0.5 * (Pn + Pn.T)
     return out
+
+
+@compiled
+def joseph_correction(P: np.ndarray, K: np.ndarray, H: np.ndarray, R: np.ndarray, nu: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """A linearised filter's correction in one call: the error estimate ``K nu`` (n,) and the
+    Joseph-form posterior covariance (:func:`joseph`)."""
+    dx: np.ndarray = K @ nu
+    return dx, joseph(P, K, H, R)
 
 
 @compiled

@@ -529,6 +529,9 @@ class InsModel:
         self.gyro = np.ascontiguousarray(self.gyro, dtype=float)
         self.accel = np.ascontiguousarray(self.accel, dtype=float)
         self._psd = self.noise.psd()
+        # the configured white-noise densities squared (gyro, accel) as Python floats: psd_over's
+        # comparison once per interval without numpy scalars
+        self._white_psd = (float(self._psd[DX_ATT]), float(self._psd[DX_VEL]))
         self._inv_tau = self.noise.inv_tau()
         if self.path is None:
             self.path = np.full((self.t.shape[0], PATH_SIZE), np.nan)
@@ -543,12 +546,12 @@ class InsModel:
         if self.profile is None:
             return self._psd
         g, a = self.profile.over(interval[0], interval[1])
-        psd = self._psd
-        if g * g <= psd[DX_ATT] and a * a <= psd[DX_VEL]:
-            return psd
-        psd = psd.copy()
-        psd[ATT] = max(psd[DX_ATT], g * g)
-        psd[VEL] = max(psd[DX_VEL], a * a)
+        white_g, white_a = self._white_psd
+        if g * g <= white_g and a * a <= white_a:
+            return self._psd
+        psd = self._psd.copy()
+        psd[ATT] = max(white_g, g * g)
+        psd[VEL] = max(white_a, a * a)
         return psd
 
     def gap_noise(self, interval: tuple[float, float]) -> np.ndarray | None:
