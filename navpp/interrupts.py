@@ -152,13 +152,35 @@ def commit() -> Iterator[None]:
     yield
 
 
+#: Seconds the interpreter's teardown may take after an interrupt before :func:`exit_now` cuts it short.
+TEARDOWN_S = 5.0
+
+
+def exit_now(code: int) -> None:
+    """End the process at once with ``code`` (``os._exit``), after releasing what multiprocessing's
+    resource tracker holds for this process (the worker pool's and queues' semaphores, with
+    multiprocessing's own finalizers for them): without that, the tracker prints "leaked semaphore objects"
+    on stderr after the one line an interrupted run owes the user."""
+    import sys
+
+    util, sync = sys.modules.get("multiprocessing.util"), sys.modules.get("multiprocessing.synchronize")
+    if util is not None and sync is not None:
+        with suppress(Exception):   # only the semaphores' unlinks: nothing that could wait on a lock
+            cleanup = sync.SemLock._cleanup
+            for fin in list(util._finalizer_registry.values()):
+                if getattr(fin, "_callback", None) is cleanup:
+                    fin()           # once: the registry drops a finalizer before calling it
+    with suppress(Exception):
+        sys.stderr.flush()
+    os._exit(code)
+
+
 def exit_interrupted(signum: int) -> None:
     """One line for a run stopped by ``signum`` (``navpp: interrupted by SIGINT``, and when the
     run held an output directory ``; nothing was written to DIR (earlier results there are
     unchanged)``), then exit 130.  The interpreter's teardown still runs (it releases the worker pool's semaphores,
     else multiprocessing's resource tracker complains on stderr), under a watchdog: if it
-    hangs for 5 s, the process exits at once."""
-    import os
+    takes longer than :data:`TEARDOWN_S` (a loaded machine), :func:`exit_now` ends the process."""
     import sys
     import threading
 
@@ -173,7 +195,7 @@ def exit_interrupted(signum: int) -> None:
     sys.stderr.write(f"navpp: interrupted by {name}{where}\n")
     sys.stderr.flush()
     ignore_from_now()
-    watchdog = threading.Timer(5.0, os._exit, (130,))
+    watchdog = threading.Timer(TEARDOWN_S, exit_now, (130,))
     watchdog.daemon = True
     watchdog.start()
     raise SystemExit(130)

@@ -178,3 +178,29 @@ def test_interrupt_of_sif_smoothing_inside_numba(tmp_path: Path) -> None:
         (out / name).write_text(text)
     for delay in (2.0, 3.5):
         assert _run_trial(Trial(_process_argv("sif", out), delay, signal.SIGINT, False), out) == "interrupted"
+
+
+_HELD_SEMAPHORES = """
+import multiprocessing, os, sys
+ctx = multiprocessing.get_context("spawn")
+held = ctx.Queue(), ctx.Lock()        # semaphores multiprocessing's resource tracker follows
+if sys.argv[1] == "exit_now":
+    from navpp.interrupts import exit_now
+    exit_now(130)
+os._exit(130)
+"""
+
+
+@pytest.mark.parametrize("how", ["os._exit", "exit_now"])
+def test_a_cut_short_teardown_leaves_no_semaphore_for_the_tracker_to_report(how: str) -> None:
+    """The watchdog of an interrupted run (a teardown over TEARDOWN_S on a loaded machine) ends
+    the process without the tracker's "leaked semaphore objects" warning after the run's one line;
+    a bare ``os._exit`` (the oracle: what the watchdog did before) shows the warning."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, "-c", _HELD_SEMAPHORES, how], env=env, capture_output=True, text=True,
+                          timeout=60)       # stderr closes when the tracker, which shares it, has finished
+    assert proc.returncode == 130
+    if how == "os._exit":
+        assert "leaked semaphore" in proc.stderr
+    else:
+        assert proc.stderr == ""
