@@ -160,33 +160,43 @@ def find_stale_rows(
     StaleRows
     """
     t = np.asarray(t, dtype=float)
-    vals = np.concatenate([np.asarray(gyro, dtype=float).reshape(-1, 3),
-                           np.asarray(accel, dtype=float).reshape(-1, 3)], axis=1)
+    gyro, accel = np.asarray(gyro), np.asarray(accel)
     n = t.shape[0]
-    if vals.shape[0] != n:
-        raise ValueError(f"find_stale_rows: t has {n} rows, gyro/accel {vals.shape[0]}")
+    if gyro.shape[0] != n or accel.shape[0] != n:
+        raise ValueError(f"find_stale_rows: t has {n} rows, gyro/accel {gyro.shape[0]}/{accel.shape[0]}")
     nan = float("nan")
     if n < 3:
         mask = np.zeros(n, dtype=bool)
         return StaleRows(mask, 0, 0.0, _rate(t), _median_rate(t), 0, 0.0, nan, False,
                          f"only {n} rows: nothing to judge")
 
-    # bitwise comparison: -0.0 vs +0.0 and NaN payloads count as different / equal by bits
-    bits = vals.view(np.int64) if vals.flags.c_contiguous else np.ascontiguousarray(vals).view(np.int64)
-    same_ch = bits[1:] == bits[:-1]                     # (N-1, 6)
-    rep = same_ch.all(axis=1)                           # (N-1,)
-    repeats = np.concatenate([[False], rep])            # (N,) row k repeats row k-1
-    k_obs = int(rep.sum())
-
-    # 1. excess over chance, window by window: each window's channel rates from per-window counts
-    # (the same figures as _channel_rates over its rows), the chance once per distinct rates
-    expected = 0.0
-    fresh = ~rep
-    global_q = _channel_rates(same_ch[fresh])
+    # bitwise comparison: -0.0 vs +0.0 and NaN payloads count as different / equal by bits;
+    # block by block (whole windows each): per window its fresh rows and their per-channel repeats
+    repeats = np.zeros(n, dtype=bool)                   # (N,) row k repeats row k-1
+    rep = repeats[1:]                                   # (N-1,) view
     starts = np.arange(0, n - 1, window_rows)
     sizes = np.diff(np.append(starts, n - 1))
-    n_fresh = np.add.reduceat(fresh.astype(np.int64), starts)
-    n_same = np.add.reduceat((same_ch & fresh[:, None]).astype(np.int64), starts, axis=0)
+    n_fresh = np.empty(starts.shape[0], dtype=np.int64)
+    n_same = np.empty((starts.shape[0], 6), dtype=np.int64)
+    block = max(1, _BLOCK_ROWS // window_rows) * window_rows
+    for lo in range(0, n - 1, block):
+        hi = min(lo + block, n - 1)
+        same_ch = np.concatenate([_bits(x[lo:hi + 1]) for x in (gyro, accel)], axis=1)     # (B+1, 6)
+        same_ch = same_ch[1:] == same_ch[:-1]                                               # (B, 6)
+        same_ch.all(axis=1, out=rep[lo:hi])
+        fresh = ~rep[lo:hi]
+        w = slice(lo // window_rows, lo // window_rows + -(-(hi - lo) // window_rows))
+        local = starts[w] - lo
+        n_fresh[w] = np.add.reduceat(fresh.astype(np.int64), local)
+        n_same[w] = np.add.reduceat((same_ch & fresh[:, None]).astype(np.int64), local, axis=0)
+    k_obs = int(np.count_nonzero(rep))
+
+    # 1. excess over chance, window by window: each window's channel rates from its counts (each
+    # channel's repeat rate over the window's fresh rows), the chance once per distinct rates;
+    # the global rates from the sums of the counts
+    expected = 0.0
+    n_fresh_all = int(n_fresh.sum())
+    global_q = n_same.sum(axis=0) / n_fresh_all if n_fresh_all else np.zeros(6)
     chance: dict[bytes, float] = {}
     for w in range(starts.shape[0]):
         if sizes[w] < window_rows // 2 and w > 0:       # a short tail joins the global rates
@@ -225,7 +235,7 @@ def find_stale_rows(
         confident, reason = False, "not stale, ambiguous: " + msg
 
     mask = repeats if stale else np.zeros(n, dtype=bool)
-    kept = t[~mask]
+    kept = t[~mask] if stale else t
     count = int(mask.sum())
     return StaleRows(mask=mask, count=count, fraction=count / n, fresh_rate_hz=_rate(kept),
                      fresh_median_rate_hz=_median_rate(kept), n_repeats=k_obs,
@@ -233,12 +243,10 @@ def find_stale_rows(
                      confident=bool(confident), reason=reason)
 
 
-def _channel_rates(same: np.ndarray) -> np.ndarray:
-    """Per-channel repeat rate of the rows ``same`` (R, C) bool; 0 for R = 0."""
-    if same.shape[0] == 0:
-        return np.zeros(same.shape[1])
-    rates: np.ndarray = same.mean(axis=0)
-    return rates
+def _bits(x: np.ndarray) -> np.ndarray:
+    """The rows ``x`` (R, 3) as float64, their bits as int64 (R, 3)."""
+    bits: np.ndarray = np.ascontiguousarray(x, dtype=float).reshape(-1, 3).view(np.int64)
+    return bits
 
 
 def _rate(t: np.ndarray) -> float:
@@ -250,7 +258,7 @@ def _rate(t: np.ndarray) -> float:
 def _median_rate(t: np.ndarray) -> float:
     if t.shape[0] < 2:
         return float("nan")
-    return float(1.0 / np.median(np.diff(t)))
+    return float(1.0 / np.median(np.diff(t), overwrite_input=True))
 
 
 def fresh_count_dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_s: float = 1.0) -> float:
@@ -265,9 +273,14 @@ def fresh_count_dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_
     edges = np.arange(t[0], t[-1], window_s)
     if edges.shape[0] < 7:                      # >= 5 complete windows once the ends are cut
         return float("nan")
-    idx = np.searchsorted(edges, t, side="right") - 1
-    rows = np.bincount(idx, minlength=edges.shape[0])[1:-1]     # drop the partial ends
-    fresh = np.bincount(idx, weights=(~repeats).astype(float), minlength=edges.shape[0])[1:-1]
+    # the rows and fresh rows per window, counted block by block (exact sums of 1s)
+    rows = np.zeros(edges.shape[0], dtype=np.int64)
+    fresh = np.zeros(edges.shape[0])
+    for lo in range(0, t.shape[0], _BLOCK_ROWS):
+        idx = np.searchsorted(edges, t[lo:lo + _BLOCK_ROWS], side="right") - 1
+        rows += np.bincount(idx, minlength=edges.shape[0])
+        fresh += np.bincount(idx, weights=~repeats[lo:lo + _BLOCK_ROWS], minlength=edges.shape[0])
+    rows, fresh = rows[1:-1], fresh[1:-1]       # drop the partial ends
     binom = float(np.mean(rows * f * (1.0 - f)))
     if binom < 2.0:
         return float("nan")
