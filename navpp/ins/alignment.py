@@ -27,7 +27,7 @@ from ..errors import InputError
 from ..findings import Finding
 from .aids.standstill import quiet_blocks
 from .attitude import dcm_to_quat, rph_to_dcm
-from .calibrate import MOVING_K, gnss_scatter_h, gnss_speed_at, spans
+from .calibrate import MOVING_K, gnss_scatter_h, gnss_speed_at, spans, trapezoid_integral
 from .state import (
     ATT,
     BA,
@@ -122,7 +122,7 @@ def still_runs(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_durati
     gravity and the GNSS track.
     """
     n = t.shape[0]
-    dt = float(np.median(np.diff(t))) if n > 1 else 1.0
+    dt = float(np.median(np.diff(t), overwrite_input=True)) if n > 1 else 1.0
     sig_a = accel_vrw / math.sqrt(dt)
     sig_g = gyro_arw / math.sqrt(dt)
     # generous: an idling engine shakes the IMU; align() confirms every run with gravity and GNSS
@@ -674,9 +674,10 @@ def _rotated_track(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_start: flo
     below ``min_speed``), else from positions, the still position as the origin."""
     C = rph_to_dcm(roll, pitch, 0.0)
     i0 = int(np.searchsorted(t, t_start))
-    w_up = gyro[i0:] @ C[2] - geodesy.OMEGA_E * math.sin(lat)
+    w_up = gyro[i0:] @ C[2]
+    w_up -= geodesy.OMEGA_E * math.sin(lat)
     ts = t[i0:]
-    turned = np.concatenate([[0.0], np.cumsum(0.5 * (w_up[1:] + w_up[:-1]) * np.diff(ts))])
+    turned = trapezoid_integral(ts, w_up)
     after = gnss.t > t_still_end
     tg = gnss.t[after]
     if tg.size == 0:

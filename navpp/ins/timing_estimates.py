@@ -26,6 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import interpolate, optimize, special
 
+from .calibrate import BLOCK_ROWS, trapezoid_integral
+
 __all__ = [
     "ClockOffset",
     "StaleRows",
@@ -578,27 +580,9 @@ def _failed(reason: str, n_used: int = 0) -> ClockOffset:
 AngleAt = Callable[[np.ndarray], np.ndarray]
 
 
-#: Rows per block of the block-wise passes over the IMU (angle integral, spline evaluations,
-#: stale-row comparison): a few MB of temporaries whatever the log's length.
-_BLOCK_ROWS = 1 << 16
-
-
-def _trapezoid_integral(t: np.ndarray | float, w: np.ndarray) -> np.ndarray:
-    """The trapezoidal integral of the rate ``w`` (N,) at the stamps ``t`` (N,) s (or at a
-    constant step ``t`` s) from 0 at the first, (N,): ``concatenate([[0], cumsum(0.5 * (w[1:] +
-    w[:-1]) * diff(t))])`` to the bit, block by block (the running sum carried from block to
-    block, in the same order)."""
-    n = w.shape[0]
-    theta = np.empty(n)
-    theta[0] = 0.0
-    for lo in range(1, n, _BLOCK_ROWS):
-        hi = min(lo + _BLOCK_ROWS, n)
-        dt = t if isinstance(t, float) else t[lo:hi] - t[lo - 1:hi - 1]
-        inc = 0.5 * (w[lo:hi] + w[lo - 1:hi - 1]) * dt
-        if lo > 1:          # the carry first: the same sequence of additions as one cumsum
-            inc[0] = theta[lo - 1] + inc[0]
-        np.cumsum(inc, out=theta[lo:hi])
-    return theta
+#: Rows per block of the block-wise passes over the IMU (spline evaluations, stale-row
+#: comparison): a few MB of temporaries whatever the log's length.
+_BLOCK_ROWS = BLOCK_ROWS
 
 
 def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[AngleAt, float, float]:
@@ -609,11 +593,11 @@ def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[Angl
     that aligns the GNSS stamps with IMU stamps, and the minimum sticks to them.  The moving
     average is evaluated block by block and the raw integral's spline freed before the smoothed
     one is built: the peak is one spline's construction."""
-    theta_at = interpolate.CubicSpline(t_imu, _trapezoid_integral(t_imu, w), extrapolate=False)
+    theta_at = interpolate.CubicSpline(t_imu, trapezoid_integral(t_imu, w), extrapolate=False)
     t_lo, t_hi = float(t_imu[0]), float(t_imu[-1])
     if smooth_s > 0.0 and t_hi - t_lo > 4.0 * smooth_s:
         # the centred moving average, on a uniform grid at the IMU's median step; its integral
-        step = float(np.median(np.diff(t_imu)))
+        step = float(np.median(np.diff(t_imu), overwrite_input=True))
         grid = np.arange(t_lo + 0.5 * smooth_s, t_hi - 0.5 * smooth_s, step)
         ws = np.empty(grid.shape[0])
         for k in range(0, grid.shape[0], _BLOCK_ROWS):
@@ -622,7 +606,7 @@ def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[Angl
             hi = np.clip(g + 0.5 * smooth_s, t_lo, t_hi)
             ws[k:k + g.shape[0]] = (theta_at(hi) - theta_at(lo)) / (hi - lo)
         del theta_at
-        theta_at = interpolate.CubicSpline(grid, _trapezoid_integral(step, ws),
+        theta_at = interpolate.CubicSpline(grid, trapezoid_integral(step, ws),
                                            extrapolate=False)
         t_lo, t_hi = float(grid[0]), float(grid[-1])
     return theta_at, t_lo, t_hi
@@ -799,7 +783,7 @@ def yaw_scale_from_track(t_imu: np.ndarray, gyro_z_up: np.ndarray, t_gnss: np.nd
     if t_g.shape[0] < 4 or t_imu.shape[0] < 4:
         return YawScale(nan, nan, 0.0, 0)
     sig = np.broadcast_to(np.nan_to_num(np.asarray(std_h_m, dtype=float), nan=0.0), t_g.shape)
-    theta = _trapezoid_integral(t_imu, w)
+    theta = trapezoid_integral(t_imu, w)
     dt_med = float(np.median(np.diff(t_g)))
     gap = np.concatenate([[0], np.cumsum(np.diff(t_g) > 3.0 * dt_med)])   # gap count up to each epoch
     starts = []
