@@ -24,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import interpolate, optimize, special
+from scipy import interpolate, linalg, optimize, special
 
 from .calibrate import BLOCK_ROWS, trapezoid_integral
 
@@ -187,10 +187,10 @@ def find_stale_rows(
         same_ch = same_ch[1:] == same_ch[:-1]                                               # (B, 6)
         same_ch.all(axis=1, out=rep[lo:hi])
         fresh = ~rep[lo:hi]
-        w = slice(lo // window_rows, lo // window_rows + -(-(hi - lo) // window_rows))
-        local = starts[w] - lo
-        n_fresh[w] = np.add.reduceat(fresh.astype(np.int64), local)
-        n_same[w] = np.add.reduceat((same_ch & fresh[:, None]).astype(np.int64), local, axis=0)
+        win = slice(lo // window_rows, lo // window_rows + -(-(hi - lo) // window_rows))
+        local = starts[win] - lo
+        n_fresh[win] = np.add.reduceat(fresh.astype(np.int64), local)
+        n_same[win] = np.add.reduceat((same_ch & fresh[:, None]).astype(np.int64), local, axis=0)
     k_obs = int(np.count_nonzero(rep))
 
     # 1. excess over chance, window by window: each window's channel rates from its counts (each
@@ -585,6 +585,56 @@ AngleAt = Callable[[np.ndarray], np.ndarray]
 _BLOCK_ROWS = BLOCK_ROWS
 
 
+def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
+    """``scipy.interpolate.CubicSpline(x, y, extrapolate=False)`` (not-a-knot ends) for (N,) float
+    ``x`` (strictly increasing) and ``y``, to the bit, with a third of its temporaries: the same
+    tridiagonal solve (LAPACK ``gtsv``, as ``solve_banded`` calls it), then the coefficients block
+    by block; the polynomial keeps ``x`` itself (not a copy).  Fewer than 4 points: CubicSpline."""
+    n = x.shape[0]
+    spline: AngleAt
+    if n < 4:
+        spline = interpolate.CubicSpline(x, y, extrapolate=False)
+        return spline
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
+        raise ValueError("_spline: x and y must be finite")
+    dx = np.diff(x)
+    if not np.all(dx > 0):
+        raise ValueError("_spline: x must be strictly increasing")
+    slope = np.diff(y)
+    slope /= dx
+    ab = np.zeros((3, n))                   # the banded matrix: upper, main, lower diagonal
+    ab[1, 1:-1] = 2 * (dx[:-1] + dx[1:])
+    ab[0, 2:] = dx[:-1]
+    ab[-1, :-2] = dx[1:]
+    b = np.empty((n, 1))
+    for lo in range(1, n - 1, BLOCK_ROWS):
+        hi = min(lo + BLOCK_ROWS, n - 1)
+        b[lo:hi, 0] = 3 * (dx[lo:hi] * slope[lo - 1:hi - 1] + dx[lo - 1:hi - 1] * slope[lo:hi])
+    ab[1, 0] = dx[1]
+    ab[0, 1] = d = x[2] - x[0]
+    b[0] = ((dx[0] + 2 * d) * dx[1] * slope[0] + dx[0] ** 2 * slope[1]) / d
+    ab[1, -1] = dx[-2]
+    ab[-1, -2] = d = x[-1] - x[-3]
+    b[-1] = (dx[-1] ** 2 * slope[-2] + (2 * d + dx[-1]) * dx[-2] * slope[-1]) / d
+    gtsv, = linalg.get_lapack_funcs(("gtsv",), (ab, b))
+    sol, info = gtsv(ab[2, :-1], ab[1, :], ab[0, 1:], b, True, True, True, True)[3:]   # (N, 1), int
+    if info != 0:
+        raise ValueError(f"_spline: the tridiagonal solve failed (info {info})")
+    del ab
+    sd = sol[:, 0]                          # the first derivatives at x
+    c = np.empty((4, n - 1))
+    for lo in range(0, n - 1, BLOCK_ROWS):
+        hi = min(lo + BLOCK_ROWS, n - 1)
+        h, m = dx[lo:hi], slope[lo:hi]
+        t = (sd[lo:hi] + sd[lo + 1:hi + 1] - 2 * m) / h
+        c[0, lo:hi] = t / h
+        c[1, lo:hi] = (m - sd[lo:hi]) / h - t
+        c[2, lo:hi] = sd[lo:hi]
+        c[3, lo:hi] = y[lo:hi]
+    spline = interpolate.PPoly(c, x, extrapolate=False)
+    return spline
+
+
 def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[AngleAt, float, float]:
     """The integral of the vertical rate ``w`` (rad/s at ``t_imu``) as a C2 interpolant, after a
     centred moving average over ``smooth_s`` s (0: none), with the span (s) it covers.
@@ -593,7 +643,7 @@ def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[Angl
     that aligns the GNSS stamps with IMU stamps, and the minimum sticks to them.  The moving
     average is evaluated block by block and the raw integral's spline freed before the smoothed
     one is built: the peak is one spline's construction."""
-    theta_at = interpolate.CubicSpline(t_imu, trapezoid_integral(t_imu, w), extrapolate=False)
+    theta_at = _spline(t_imu, trapezoid_integral(t_imu, w))
     t_lo, t_hi = float(t_imu[0]), float(t_imu[-1])
     if smooth_s > 0.0 and t_hi - t_lo > 4.0 * smooth_s:
         # the centred moving average, on a uniform grid at the IMU's median step; its integral
@@ -606,8 +656,7 @@ def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[Angl
             hi = np.clip(g + 0.5 * smooth_s, t_lo, t_hi)
             ws[k:k + g.shape[0]] = (theta_at(hi) - theta_at(lo)) / (hi - lo)
         del theta_at
-        theta_at = interpolate.CubicSpline(grid, trapezoid_integral(step, ws),
-                                           extrapolate=False)
+        theta_at = _spline(grid, trapezoid_integral(step, ws))
         t_lo, t_hi = float(grid[0]), float(grid[-1])
     return theta_at, t_lo, t_hi
 
