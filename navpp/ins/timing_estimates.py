@@ -656,7 +656,9 @@ def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[Angl
             hi = np.clip(g + 0.5 * smooth_s, t_lo, t_hi)
             ws[k:k + g.shape[0]] = (theta_at(hi) - theta_at(lo)) / (hi - lo)
         del theta_at
-        theta_at = _spline(grid, trapezoid_integral(step, ws))
+        phi = trapezoid_integral(step, ws)
+        del ws
+        theta_at = _spline(grid, phi)
         t_lo, t_hi = float(grid[0]), float(grid[-1])
     return theta_at, t_lo, t_hi
 
