@@ -27,7 +27,7 @@ from ..errors import InputError
 from ..findings import Finding
 from .aids.standstill import quiet_blocks
 from .attitude import dcm_to_quat, rph_to_dcm
-from .calibrate import MOVING_K, gnss_scatter_h, gnss_speed_at, spans
+from .calibrate import BLOCK_ROWS, MOVING_K, gnss_scatter_h, gnss_speed_at, spans, trapezoid_integral
 from .state import (
     ATT,
     BA,
@@ -122,7 +122,7 @@ def still_runs(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_durati
     gravity and the GNSS track.
     """
     n = t.shape[0]
-    dt = float(np.median(np.diff(t))) if n > 1 else 1.0
+    dt = float(np.median(np.diff(t), overwrite_input=True)) if n > 1 else 1.0
     sig_a = accel_vrw / math.sqrt(dt)
     sig_g = gyro_arw / math.sqrt(dt)
     # generous: an idling engine shakes the IMU; align() confirms every run with gravity and GNSS
@@ -503,9 +503,9 @@ def _heading(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, settings: Alignmen
 
     def track_heading(use_velocity: bool) -> tuple[float, float, float]:
         if settings.first_motion:
-            return _heading_first_motion(t, gyro - bias_g, gnss, t_start, lv.t_s1, lv.roll, lv.pitch, fix.lat,
+            return _heading_first_motion(t, gyro, gnss, t_start, lv.t_s1, lv.roll, lv.pitch, fix.lat,
                                          fix.lon, fix.h, fix.fix_std, settings.min_speed_mps, bias_g_std,
-                                         settings.heading_floor, use_velocity=use_velocity)
+                                         settings.heading_floor, use_velocity=use_velocity, gyro_bias=bias_g)
         return _heading_from_gnss(t, gyro, gnss, t_start, lv.t_s1, lv.roll, lv.pitch, fix.lat, fix.lon, fix.h,
                                   fix.fix_std, settings.min_speed_mps, use_velocity=use_velocity)
 
@@ -665,18 +665,24 @@ class _Track:
 
 
 def _rotated_track(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_start: float, t_still_end: float, roll: float,
-                   pitch: float, lat: float, lon: float, h: float, min_speed: float, use_velocity: bool) -> _Track:
+                   pitch: float, lat: float, lon: float, h: float, min_speed: float, use_velocity: bool,
+                   gyro_bias: np.ndarray | None = None) -> _Track:
     """The GNSS track after the still period, as displacements, with the gyro's turn since
     ``t_start`` at each of them (shared by :func:`_heading_from_gnss` and
     :func:`_heading_first_motion`).
 
     Displacements come from GNSS velocity x dt when the log has it and ``use_velocity`` (zero
-    below ``min_speed``), else from positions, the still position as the origin."""
+    below ``min_speed``), else from positions, the still position as the origin.  ``gyro_bias``
+    (3,) rad/s, if given, is taken off the gyro first (block by block: no copy of the gyro)."""
     C = rph_to_dcm(roll, pitch, 0.0)
     i0 = int(np.searchsorted(t, t_start))
-    w_up = gyro[i0:] @ C[2] - geodesy.OMEGA_E * math.sin(lat)
     ts = t[i0:]
-    turned = np.concatenate([[0.0], np.cumsum(0.5 * (w_up[1:] + w_up[:-1]) * np.diff(ts))])
+    w_up = np.empty(ts.shape[0])
+    for lo in range(i0, t.shape[0], BLOCK_ROWS):
+        g = gyro[lo:lo + BLOCK_ROWS]
+        w_up[lo - i0:lo - i0 + g.shape[0]] = (g if gyro_bias is None else g - gyro_bias) @ C[2]
+    w_up -= geodesy.OMEGA_E * math.sin(lat)
+    turned = trapezoid_integral(ts, w_up)
     after = gnss.t > t_still_end
     tg = gnss.t[after]
     if tg.size == 0:
@@ -704,7 +710,8 @@ def _rotated_track(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_start: flo
 def _heading_from_gnss(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_start: float, t_still_end: float,
                        roll: float, pitch: float, lat: float, lon: float, h: float, fix_std: np.ndarray,
                        min_speed: float, use_velocity: bool = True, path_length: float = 150.0,
-                       min_length: float = 30.0, max_window: float = 120.0) -> tuple[float, float, float]:
+                       min_length: float = 30.0, max_window: float = 120.0,
+                       gyro_bias: np.ndarray | None = None) -> tuple[float, float, float]:
     """Heading at ``t_start`` from the GNSS track once moving, referred back with the gyro.
 
     Every GNSS displacement after the still period (from positions, or from GNSS velocity x dt
@@ -713,10 +720,12 @@ def _heading_from_gnss(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_start:
     by that angle makes them all point along the start heading, and their sum (the first
     ``path_length`` metres of driving) gives it with the noise of a ``path_length`` chord, whatever
     the turns.  With positions, the start point is the mean of the still-period fixes.
-    ``use_velocity`` chooses GNSS velocity (when present) over positions.
+    ``use_velocity`` chooses GNSS velocity (when present) over positions; ``gyro_bias`` (3,) rad/s,
+    if given, is taken off ``gyro``.
     Returns (heading rad, 1-sigma rad, time the summed track ends).
     """
-    tr = _rotated_track(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, min_speed, use_velocity)
+    tr = _rotated_track(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, min_speed, use_velocity,
+                        gyro_bias)
     tg, d, rot, step_noise = tr.tg, tr.d, tr.rot, tr.step_noise
     # rotate each displacement back to the start heading: course + turn (complex N + iE)
     z = (d[:, 1] + 1j * d[:, 0]) * np.exp(1j * rot)
@@ -740,18 +749,19 @@ def _heading_first_motion(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_sta
                           roll: float, pitch: float, lat: float, lon: float, h: float, fix_std: np.ndarray,
                           min_speed: float, bias_std: float, floor: float, use_velocity: bool = True,
                           path_length: float = 60.0, min_length: float = 5.0, max_turn: float = math.radians(90.0),
-                          max_window: float = 60.0) -> tuple[float, float, float]:
+                          max_window: float = 60.0, gyro_bias: np.ndarray | None = None) -> tuple[float, float, float]:
     """Heading at ``t_start`` from the GNSS track of the first motion only.
 
     As :func:`_heading_from_gnss` (displacements rotated back by the turn the gyro measured,
-    ``gyro`` already free of its estimated bias), but the track ends at the first GNSS gap
+    ``gyro`` less ``gyro_bias`` (3,) rad/s, its estimated bias), but the track ends at the first GNSS gap
     (more than 3 nominal intervals), once the vehicle has turned by more than ``max_turn``
     since the start, or after ``path_length`` m.  The 1-sigma adds the bias's share, ``bias_std``
     (rad/s) times the time from the start to the middle of the track, and the floor ``floor``
     (rad: the body's x axis may not point along the motion).
     Returns (heading rad, 1-sigma rad, time the summed track ends).
     """
-    tr = _rotated_track(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, min_speed, use_velocity)
+    tr = _rotated_track(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, min_speed, use_velocity,
+                        gyro_bias)
     tg, dt, d, t_mid, rot = tr.tg, tr.dt, tr.d, tr.t_mid, tr.rot
     moving, step_noise = tr.moving, tr.step_noise
     nominal = float(np.median(np.diff(gnss.t))) if len(gnss) > 1 else 1.0
@@ -764,7 +774,7 @@ def _heading_first_motion(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_sta
         if slow < min_speed:
             return _heading_first_motion(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h, fix_std,
                                          slow, bias_std, floor, use_velocity, path_length, min_length, max_turn,
-                                         max_window)
+                                         max_window, gyro_bias)
     if first.size == 0:
         raise InputError(f"the vehicle never moves faster than {min_speed:.1f} m/s in the GNSS log: cannot find "
                          "the heading; give [init] heading_deg in the config")
@@ -783,7 +793,7 @@ def _heading_first_motion(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_sta
         # too short before a gap or a turn: the whole rotated track (bias removed), whose 1-sigma
         # carries the bias over its whole length
         heading, std, t_end = _heading_from_gnss(t, gyro, gnss, t_start, t_still_end, roll, pitch, lat, lon, h,
-                                                 fix_std, min_speed, use_velocity=use_velocity)
+                                                 fix_std, min_speed, use_velocity=use_velocity, gyro_bias=gyro_bias)
         std = math.sqrt(std ** 2 + (bias_std * 0.5 * (t_end - t_start)) ** 2 + floor ** 2)
         return heading, std, t_end
     heading = float(np.mod(np.angle(total), 2 * math.pi))

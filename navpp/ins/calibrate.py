@@ -158,14 +158,39 @@ class Calibration:
         return out
 
 
+#: Rows per block of the block-wise passes over the IMU: a few MB of temporaries whatever the
+#: log's length.
+BLOCK_ROWS = 1 << 16
+
+
+def trapezoid_integral(t: np.ndarray | float, w: np.ndarray) -> np.ndarray:
+    """The trapezoidal integral of the rate ``w`` (N,) at the stamps ``t`` (N,) s (or at a
+    constant step ``t`` s) from 0 at the first, (N,): ``concatenate([[0], cumsum(0.5 * (w[1:] +
+    w[:-1]) * diff(t))])`` to the bit, block by block (the running sum carried from block to
+    block, in the same order); ``[0]`` for N = 0, as that concatenation gives."""
+    n = w.shape[0]
+    theta = np.empty(max(n, 1))
+    theta[0] = 0.0
+    for lo in range(1, n, BLOCK_ROWS):
+        hi = min(lo + BLOCK_ROWS, n)
+        dt = t if isinstance(t, float) else t[lo:hi] - t[lo - 1:hi - 1]
+        inc = 0.5 * (w[lo:hi] + w[lo - 1:hi - 1]) * dt
+        if lo > 1:          # the carry first: the same sequence of additions as one cumsum
+            inc[0] = theta[lo - 1] + inc[0]
+        np.cumsum(inc, out=theta[lo:hi])
+    return theta
+
+
 def sample_period(t: np.ndarray) -> float:
     """The IMU's sample period, s: the mean interval without the gaps (intervals over 5 times
     the median), so that a jittery polled stream gets its real rate, not its commonest interval."""
     if t.shape[0] < 2:
         return 1.0
+    med = float(np.median(np.diff(t), overwrite_input=True))
     d = np.diff(t)
-    med = float(np.median(d))
-    d = d[d <= 5.0 * med]
+    keep = d <= 5.0 * med
+    if not keep.all():      # else the same mean without a copy
+        d = d[keep]
     return float(d.mean()) if d.size else med
 
 

@@ -24,7 +24,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import interpolate, optimize, special
+from scipy import interpolate, linalg, optimize, special
+
+from .calibrate import BLOCK_ROWS, trapezoid_integral
 
 __all__ = [
     "ClockOffset",
@@ -160,33 +162,43 @@ def find_stale_rows(
     StaleRows
     """
     t = np.asarray(t, dtype=float)
-    vals = np.concatenate([np.asarray(gyro, dtype=float).reshape(-1, 3),
-                           np.asarray(accel, dtype=float).reshape(-1, 3)], axis=1)
+    gyro, accel = np.asarray(gyro), np.asarray(accel)
     n = t.shape[0]
-    if vals.shape[0] != n:
-        raise ValueError(f"find_stale_rows: t has {n} rows, gyro/accel {vals.shape[0]}")
+    if gyro.shape[0] != n or accel.shape[0] != n:
+        raise ValueError(f"find_stale_rows: t has {n} rows, gyro/accel {gyro.shape[0]}/{accel.shape[0]}")
     nan = float("nan")
     if n < 3:
         mask = np.zeros(n, dtype=bool)
         return StaleRows(mask, 0, 0.0, _rate(t), _median_rate(t), 0, 0.0, nan, False,
                          f"only {n} rows: nothing to judge")
 
-    # bitwise comparison: -0.0 vs +0.0 and NaN payloads count as different / equal by bits
-    bits = vals.view(np.int64) if vals.flags.c_contiguous else np.ascontiguousarray(vals).view(np.int64)
-    same_ch = bits[1:] == bits[:-1]                     # (N-1, 6)
-    rep = same_ch.all(axis=1)                           # (N-1,)
-    repeats = np.concatenate([[False], rep])            # (N,) row k repeats row k-1
-    k_obs = int(rep.sum())
-
-    # 1. excess over chance, window by window: each window's channel rates from per-window counts
-    # (the same figures as _channel_rates over its rows), the chance once per distinct rates
-    expected = 0.0
-    fresh = ~rep
-    global_q = _channel_rates(same_ch[fresh])
+    # bitwise comparison: -0.0 vs +0.0 and NaN payloads count as different / equal by bits;
+    # block by block (whole windows each): per window its fresh rows and their per-channel repeats
+    repeats = np.zeros(n, dtype=bool)                   # (N,) row k repeats row k-1
+    rep = repeats[1:]                                   # (N-1,) view
     starts = np.arange(0, n - 1, window_rows)
     sizes = np.diff(np.append(starts, n - 1))
-    n_fresh = np.add.reduceat(fresh.astype(np.int64), starts)
-    n_same = np.add.reduceat((same_ch & fresh[:, None]).astype(np.int64), starts, axis=0)
+    n_fresh = np.empty(starts.shape[0], dtype=np.int64)
+    n_same = np.empty((starts.shape[0], 6), dtype=np.int64)
+    block = max(1, _BLOCK_ROWS // window_rows) * window_rows
+    for lo in range(0, n - 1, block):
+        hi = min(lo + block, n - 1)
+        same_ch = np.concatenate([_bits(x[lo:hi + 1]) for x in (gyro, accel)], axis=1)     # (B+1, 6)
+        same_ch = same_ch[1:] == same_ch[:-1]                                               # (B, 6)
+        same_ch.all(axis=1, out=rep[lo:hi])
+        fresh = ~rep[lo:hi]
+        win = slice(lo // window_rows, lo // window_rows + -(-(hi - lo) // window_rows))
+        local = starts[win] - lo
+        n_fresh[win] = np.add.reduceat(fresh.astype(np.int64), local)
+        n_same[win] = np.add.reduceat((same_ch & fresh[:, None]).astype(np.int64), local, axis=0)
+    k_obs = int(np.count_nonzero(rep))
+
+    # 1. excess over chance, window by window: each window's channel rates from its counts (each
+    # channel's repeat rate over the window's fresh rows), the chance once per distinct rates;
+    # the global rates from the sums of the counts
+    expected = 0.0
+    n_fresh_all = int(n_fresh.sum())
+    global_q = n_same.sum(axis=0) / n_fresh_all if n_fresh_all else np.zeros(6)
     chance: dict[bytes, float] = {}
     for w in range(starts.shape[0]):
         if sizes[w] < window_rows // 2 and w > 0:       # a short tail joins the global rates
@@ -225,7 +237,7 @@ def find_stale_rows(
         confident, reason = False, "not stale, ambiguous: " + msg
 
     mask = repeats if stale else np.zeros(n, dtype=bool)
-    kept = t[~mask]
+    kept = t[~mask] if stale else t
     count = int(mask.sum())
     return StaleRows(mask=mask, count=count, fraction=count / n, fresh_rate_hz=_rate(kept),
                      fresh_median_rate_hz=_median_rate(kept), n_repeats=k_obs,
@@ -233,12 +245,10 @@ def find_stale_rows(
                      confident=bool(confident), reason=reason)
 
 
-def _channel_rates(same: np.ndarray) -> np.ndarray:
-    """Per-channel repeat rate of the rows ``same`` (R, C) bool; 0 for R = 0."""
-    if same.shape[0] == 0:
-        return np.zeros(same.shape[1])
-    rates: np.ndarray = same.mean(axis=0)
-    return rates
+def _bits(x: np.ndarray) -> np.ndarray:
+    """The rows ``x`` (R, 3) as float64, their bits as int64 (R, 3)."""
+    bits: np.ndarray = np.ascontiguousarray(x, dtype=float).reshape(-1, 3).view(np.int64)
+    return bits
 
 
 def _rate(t: np.ndarray) -> float:
@@ -250,7 +260,7 @@ def _rate(t: np.ndarray) -> float:
 def _median_rate(t: np.ndarray) -> float:
     if t.shape[0] < 2:
         return float("nan")
-    return float(1.0 / np.median(np.diff(t)))
+    return float(1.0 / np.median(np.diff(t), overwrite_input=True))
 
 
 def fresh_count_dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_s: float = 1.0) -> float:
@@ -265,9 +275,14 @@ def fresh_count_dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_
     edges = np.arange(t[0], t[-1], window_s)
     if edges.shape[0] < 7:                      # >= 5 complete windows once the ends are cut
         return float("nan")
-    idx = np.searchsorted(edges, t, side="right") - 1
-    rows = np.bincount(idx, minlength=edges.shape[0])[1:-1]     # drop the partial ends
-    fresh = np.bincount(idx, weights=(~repeats).astype(float), minlength=edges.shape[0])[1:-1]
+    # the rows and fresh rows per window, counted block by block (exact sums of 1s)
+    rows = np.zeros(edges.shape[0], dtype=np.int64)
+    fresh = np.zeros(edges.shape[0])
+    for lo in range(0, t.shape[0], _BLOCK_ROWS):
+        idx = np.searchsorted(edges, t[lo:lo + _BLOCK_ROWS], side="right") - 1
+        rows += np.bincount(idx, minlength=edges.shape[0])
+        fresh += np.bincount(idx, weights=~repeats[lo:lo + _BLOCK_ROWS], minlength=edges.shape[0])
+    rows, fresh = rows[1:-1], fresh[1:-1]       # drop the partial ends
     binom = float(np.mean(rows * f * (1.0 - f)))
     if binom < 2.0:
         return float("nan")
@@ -565,24 +580,85 @@ def _failed(reason: str, n_used: int = 0) -> ClockOffset:
 AngleAt = Callable[[np.ndarray], np.ndarray]
 
 
+#: Rows per block of the block-wise passes over the IMU (spline evaluations, stale-row
+#: comparison): a few MB of temporaries whatever the log's length.
+_BLOCK_ROWS = BLOCK_ROWS
+
+
+def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
+    """``scipy.interpolate.CubicSpline(x, y, extrapolate=False)`` (not-a-knot ends) for (N,) float
+    ``x`` (strictly increasing) and ``y``, to the bit, with a third of its temporaries: the same
+    tridiagonal solve (LAPACK ``gtsv``, as ``solve_banded`` calls it), then the coefficients block
+    by block; the polynomial keeps ``x`` itself (not a copy).  Fewer than 4 points: CubicSpline."""
+    n = x.shape[0]
+    spline: AngleAt
+    if n < 4:
+        spline = interpolate.CubicSpline(x, y, extrapolate=False)
+        return spline
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
+        raise ValueError("_spline: x and y must be finite")
+    dx = np.diff(x)
+    if not np.all(dx > 0):
+        raise ValueError("_spline: x must be strictly increasing")
+    slope = np.diff(y)
+    slope /= dx
+    ab = np.zeros((3, n))                   # the banded matrix: upper, main, lower diagonal
+    ab[1, 1:-1] = 2 * (dx[:-1] + dx[1:])
+    ab[0, 2:] = dx[:-1]
+    ab[-1, :-2] = dx[1:]
+    b = np.empty((n, 1))
+    for lo in range(1, n - 1, BLOCK_ROWS):
+        hi = min(lo + BLOCK_ROWS, n - 1)
+        b[lo:hi, 0] = 3 * (dx[lo:hi] * slope[lo - 1:hi - 1] + dx[lo - 1:hi - 1] * slope[lo:hi])
+    ab[1, 0] = dx[1]
+    ab[0, 1] = d = x[2] - x[0]
+    b[0] = ((dx[0] + 2 * d) * dx[1] * slope[0] + dx[0] ** 2 * slope[1]) / d
+    ab[1, -1] = dx[-2]
+    ab[-1, -2] = d = x[-1] - x[-3]
+    b[-1] = (dx[-1] ** 2 * slope[-2] + (2 * d + dx[-1]) * dx[-2] * slope[-1]) / d
+    gtsv, = linalg.get_lapack_funcs(("gtsv",), (ab, b))
+    sol, info = gtsv(ab[2, :-1], ab[1, :], ab[0, 1:], b, True, True, True, True)[3:]   # (N, 1), int
+    if info != 0:
+        raise ValueError(f"_spline: the tridiagonal solve failed (info {info})")
+    del ab
+    sd = sol[:, 0]                          # the first derivatives at x
+    c = np.empty((4, n - 1))
+    for lo in range(0, n - 1, BLOCK_ROWS):
+        hi = min(lo + BLOCK_ROWS, n - 1)
+        h, m = dx[lo:hi], slope[lo:hi]
+        t = (sd[lo:hi] + sd[lo + 1:hi + 1] - 2 * m) / h
+        c[0, lo:hi] = t / h
+        c[1, lo:hi] = (m - sd[lo:hi]) / h - t
+        c[2, lo:hi] = sd[lo:hi]
+        c[3, lo:hi] = y[lo:hi]
+    spline = interpolate.PPoly(c, x, extrapolate=False)
+    return spline
+
+
 def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[AngleAt, float, float]:
     """The integral of the vertical rate ``w`` (rad/s at ``t_imu``) as a C2 interpolant, after a
     centred moving average over ``smooth_s`` s (0: none), with the span (s) it covers.
 
     A C2 interpolant: with linear interpolation the lag search's cost has kinks at every lag
-    that aligns the GNSS stamps with IMU stamps, and the minimum sticks to them."""
-    theta = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t_imu))])
-    theta_at = interpolate.CubicSpline(t_imu, theta, extrapolate=False)
+    that aligns the GNSS stamps with IMU stamps, and the minimum sticks to them.  The moving
+    average is evaluated block by block and the raw integral's spline freed before the smoothed
+    one is built: the peak is one spline's construction."""
+    theta_at = _spline(t_imu, trapezoid_integral(t_imu, w))
     t_lo, t_hi = float(t_imu[0]), float(t_imu[-1])
     if smooth_s > 0.0 and t_hi - t_lo > 4.0 * smooth_s:
         # the centred moving average, on a uniform grid at the IMU's median step; its integral
-        step = float(np.median(np.diff(t_imu)))
+        step = float(np.median(np.diff(t_imu), overwrite_input=True))
         grid = np.arange(t_lo + 0.5 * smooth_s, t_hi - 0.5 * smooth_s, step)
-        lo = np.clip(grid - 0.5 * smooth_s, t_lo, t_hi)
-        hi = np.clip(grid + 0.5 * smooth_s, t_lo, t_hi)
-        ws = (theta_at(hi) - theta_at(lo)) / (hi - lo)
-        phi = np.concatenate([[0.0], np.cumsum(0.5 * (ws[1:] + ws[:-1]) * step)])
-        theta_at = interpolate.CubicSpline(grid, phi, extrapolate=False)
+        ws = np.empty(grid.shape[0])
+        for k in range(0, grid.shape[0], _BLOCK_ROWS):
+            g = grid[k:k + _BLOCK_ROWS]
+            lo = np.clip(g - 0.5 * smooth_s, t_lo, t_hi)
+            hi = np.clip(g + 0.5 * smooth_s, t_lo, t_hi)
+            ws[k:k + g.shape[0]] = (theta_at(hi) - theta_at(lo)) / (hi - lo)
+        del theta_at
+        phi = trapezoid_integral(step, ws)
+        del ws
+        theta_at = _spline(grid, phi)
         t_lo, t_hi = float(grid[0]), float(grid[-1])
     return theta_at, t_lo, t_hi
 
@@ -758,7 +834,7 @@ def yaw_scale_from_track(t_imu: np.ndarray, gyro_z_up: np.ndarray, t_gnss: np.nd
     if t_g.shape[0] < 4 or t_imu.shape[0] < 4:
         return YawScale(nan, nan, 0.0, 0)
     sig = np.broadcast_to(np.nan_to_num(np.asarray(std_h_m, dtype=float), nan=0.0), t_g.shape)
-    theta = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t_imu))])
+    theta = trapezoid_integral(t_imu, w)
     dt_med = float(np.median(np.diff(t_g)))
     gap = np.concatenate([[0], np.cumsum(np.diff(t_g) > 3.0 * dt_med)])   # gap count up to each epoch
     starts = []

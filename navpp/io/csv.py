@@ -183,7 +183,7 @@ def _read_imu(imu_path: Path, gyro_scale: float, accel_scale: float, warnings: l
         t_imu, rates = imu.col("t"), None
         imu_lines = imu.lines
     _check_rate(imu, t_imu, "an IMU", 1.0, 100_000.0)
-    rate = 1.0 / float(np.median(np.diff(t_imu)))
+    rate = 1.0 / float(np.median(np.diff(t_imu), overwrite_input=True))
     if rate < 50.0:
         warnings.append(f"{imu.path.name}: IMU rate {rate:.1f} Hz is low for strapdown navigation "
                         "(100-200 Hz expected); processed anyway")
@@ -899,7 +899,7 @@ def _check_rate(table: _Table, t: np.ndarray, what: str, low: float, high: float
     """A median sample interval far outside ``[1/high, 1/low]`` s means ``t`` is not in seconds."""
     if t.shape[0] < 2:
         return
-    dt = float(np.median(np.diff(t)))
+    dt = float(np.median(np.diff(t), overwrite_input=True))
     if dt <= 0:
         return
     rate = 1.0 / dt

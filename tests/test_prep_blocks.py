@@ -1,0 +1,78 @@
+"""The prepare phase's block-wise passes give the bits of the whole-array forms they replace
+(issue 21): the trapezoidal angle integral, the cubic spline of the clock-offset search and the
+stale-row counts, across block edges."""
+
+import numpy as np
+import pytest
+from scipy import interpolate
+
+from navpp.ins import calibrate, timing_estimates
+
+
+@pytest.fixture(autouse=True)
+def small_blocks(monkeypatch):
+    """Blocks of 64 rows: the tests cross many block edges with small arrays."""
+    monkeypatch.setattr(calibrate, "BLOCK_ROWS", 64)
+    monkeypatch.setattr(timing_estimates, "BLOCK_ROWS", 64)
+    monkeypatch.setattr(timing_estimates, "_BLOCK_ROWS", 64)
+
+
+def _stamps(n: int, seed: int = 0) -> np.ndarray:
+    """(n,) s, a jittery 125 Hz stream."""
+    return np.cumsum(0.008 + 0.001 * np.random.default_rng(seed).random(n))
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 64, 65, 66, 129, 1000])
+def test_trapezoid_integral_bits(n):
+    t = _stamps(n)
+    w = np.random.default_rng(1).standard_normal(n)
+    whole = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t))])
+    assert whole.tobytes() == calibrate.trapezoid_integral(t, w).tobytes()
+    if n:
+        uniform = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * 0.008)])
+        assert uniform.tobytes() == calibrate.trapezoid_integral(0.008, w).tobytes()
+
+
+@pytest.mark.parametrize("n", [3, 4, 5, 65, 66, 130, 1000])
+def test_spline_is_cubic_spline(n):
+    t = _stamps(n, 2)
+    y = np.cumsum(np.random.default_rng(3).standard_normal(n))
+    ref = interpolate.CubicSpline(t, y, extrapolate=False)
+    got = timing_estimates._spline(t, y)
+    assert ref.c.tobytes() == got.c.tobytes()
+    assert ref.x.tobytes() == got.x.tobytes()
+    q = np.linspace(t[0] - 1.0, t[-1] + 1.0, 257)
+    assert np.array_equal(ref(q), got(q), equal_nan=True)
+
+
+def test_spline_refuses_unordered_stamps():
+    t = _stamps(10)
+    t[5] = t[4]
+    with pytest.raises(ValueError, match="strictly increasing"):
+        timing_estimates._spline(t, np.zeros(10))
+
+
+def test_stale_rows_across_blocks():
+    """Stale copies at a random 20 % of the rows, windows of 50 rows over blocks of 64 // 50 * 50:
+    the flags are the repeats, the chance figures those of the whole-array counts."""
+    rng = np.random.default_rng(4)
+    n = 2000
+    t = _stamps(n, 5)
+    gyro, accel = np.round(rng.standard_normal((n, 3)), 2), np.round(rng.standard_normal((n, 3)), 2)
+    for i in np.nonzero(rng.random(n) < 0.2)[0][1:]:
+        gyro[i], accel[i] = gyro[i - 1], accel[i - 1]
+    res = timing_estimates.find_stale_rows(t, gyro, accel, window_rows=50)
+    six = np.concatenate([gyro, accel], axis=1)
+    repeats = np.concatenate([[False], np.all(six[1:] == six[:-1], axis=1)])
+    assert res.n_repeats == int(repeats.sum())
+    assert np.array_equal(res.mask, repeats)
+    # the expected count from whole-array per-window rates (windows of the N - 1 row pairs)
+    same = six[1:] == six[:-1]
+    fresh = ~repeats[1:]
+    q_all = same[fresh].mean(axis=0)
+    expected = 0.0
+    for a in range(0, n - 1, 50):
+        f = fresh[a:a + 50]
+        q = same[a:a + 50][f].mean(axis=0) if f.sum() >= 20 else q_all
+        expected += min(50, n - 1 - a) * timing_estimates._chance_all_repeat(q)
+    assert res.expected_by_chance == pytest.approx(expected, rel=1e-12)
