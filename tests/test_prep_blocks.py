@@ -14,7 +14,6 @@ def small_blocks(monkeypatch):
     """Blocks of 64 rows: the tests cross many block edges with small arrays."""
     monkeypatch.setattr(calibrate, "BLOCK_ROWS", 64)
     monkeypatch.setattr(timing_estimates, "BLOCK_ROWS", 64)
-    monkeypatch.setattr(timing_estimates, "_BLOCK_ROWS", 64)
 
 
 def _stamps(n: int, seed: int = 0) -> np.ndarray:

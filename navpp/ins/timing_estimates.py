@@ -180,7 +180,7 @@ def find_stale_rows(
     sizes = np.diff(np.append(starts, n - 1))
     n_fresh = np.empty(starts.shape[0], dtype=np.int64)
     n_same = np.empty((starts.shape[0], 6), dtype=np.int64)
-    block = max(1, _BLOCK_ROWS // window_rows) * window_rows
+    block = max(1, BLOCK_ROWS // window_rows) * window_rows
     for lo in range(0, n - 1, block):
         hi = min(lo + block, n - 1)
         same_ch = np.concatenate([_bits(x[lo:hi + 1]) for x in (gyro, accel)], axis=1)     # (B+1, 6)
@@ -278,10 +278,10 @@ def fresh_count_dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_
     # the rows and fresh rows per window, counted block by block (exact sums of 1s)
     rows = np.zeros(edges.shape[0], dtype=np.int64)
     fresh = np.zeros(edges.shape[0])
-    for lo in range(0, t.shape[0], _BLOCK_ROWS):
-        idx = np.searchsorted(edges, t[lo:lo + _BLOCK_ROWS], side="right") - 1
+    for lo in range(0, t.shape[0], BLOCK_ROWS):
+        idx = np.searchsorted(edges, t[lo:lo + BLOCK_ROWS], side="right") - 1
         rows += np.bincount(idx, minlength=edges.shape[0])
-        fresh += np.bincount(idx, weights=~repeats[lo:lo + _BLOCK_ROWS], minlength=edges.shape[0])
+        fresh += np.bincount(idx, weights=~repeats[lo:lo + BLOCK_ROWS], minlength=edges.shape[0])
     rows, fresh = rows[1:-1], fresh[1:-1]       # drop the partial ends
     binom = float(np.mean(rows * f * (1.0 - f)))
     if binom < 2.0:
@@ -580,11 +580,6 @@ def _failed(reason: str, n_used: int = 0) -> ClockOffset:
 AngleAt = Callable[[np.ndarray], np.ndarray]
 
 
-#: Rows per block of the block-wise passes over the IMU (spline evaluations, stale-row
-#: comparison): a few MB of temporaries whatever the log's length.
-_BLOCK_ROWS = BLOCK_ROWS
-
-
 def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
     """``scipy.interpolate.CubicSpline(x, y, extrapolate=False)`` (not-a-knot ends) for (N,) float
     ``x`` (strictly increasing) and ``y``, to the bit, with a third of its temporaries: the same
@@ -650,8 +645,8 @@ def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[Angl
         step = float(np.median(np.diff(t_imu), overwrite_input=True))
         grid = np.arange(t_lo + 0.5 * smooth_s, t_hi - 0.5 * smooth_s, step)
         ws = np.empty(grid.shape[0])
-        for k in range(0, grid.shape[0], _BLOCK_ROWS):
-            g = grid[k:k + _BLOCK_ROWS]
+        for k in range(0, grid.shape[0], BLOCK_ROWS):
+            g = grid[k:k + BLOCK_ROWS]
             lo = np.clip(g - 0.5 * smooth_s, t_lo, t_hi)
             hi = np.clip(g + 0.5 * smooth_s, t_lo, t_hi)
             ws[k:k + g.shape[0]] = (theta_at(hi) - theta_at(lo)) / (hi - lo)
