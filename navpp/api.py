@@ -45,7 +45,6 @@ __all__ = ["CONFIG_IN_LOG_DIR", "FORMAT_FILES", "FORWARD_OUTPUTS", "OUTPUT_FILES
            "simulate_log", "smoothing_metrics", "write_outputs"]
 
 
-
 def __getattr__(name: str) -> Any:
     """:func:`navpp.outages.apply_outages`, importable from here, imported on first use (with
     numpy: ``import navpp.api`` itself loads none of the numerical modules)."""

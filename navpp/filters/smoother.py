@@ -244,7 +244,7 @@ class ForwardStore:
         last = self._prev
         if last is not None:
             i = self._row()
-            self._last["M"][i] = 0.5 * (last.P_post + last.P_post.T)[np.triu_indices(self.n_err)]
+            _close_step(last.P_post, last.P_post, last.D, True, self._last["M"][i])    # M = P+, packed
             self._write(i, last)
             self._prev = None
 
