@@ -1,8 +1,13 @@
 """Timing diagnostics of a log: stale IMU rows and the IMU-to-GNSS clock offset.
 
-Pure numpy/scipy functions, no I/O and no configuration: the caller passes arrays (as held
-by :class:`navpp.recording.ImuData` / :class:`navpp.recording.GnssData`) and decides what to
-do with the answers.
+Pure functions, no I/O and no configuration: the caller passes arrays (as held by
+:class:`navpp.recording.ImuData` / :class:`navpp.recording.GnssData`) and decides what to do
+with the answers.  numpy, and of scipy only what a run loads anyway (:mod:`scipy.linalg`'s
+tridiagonal solve: numba's kernels import scipy.linalg) or needs rarely (``scipy.special`` when
+rows repeat, ``scipy.interpolate`` for a spline of fewer than 4 points): the spline's
+evaluation (:class:`Cubic`) and the bounded lag refinement (:func:`minimize_bounded`) are
+scipy's to the bit without importing scipy.interpolate and scipy.optimize (0.3 s and more of
+every run's start).
 
 Conventions: times are float seconds (any common origin, e.g. relative to the log's first
 IMU stamp); body frame FLU, navigation frame ENU; gyro in rad/s, specific force in m/s^2.
@@ -24,7 +29,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import interpolate, linalg, optimize, special
 
 from .calibrate import BLOCK_ROWS, trapezoid_integral
 
@@ -210,8 +214,12 @@ def find_stale_rows(
             chance[key] = _chance_all_repeat(q)
         expected += int(sizes[w]) * chance[key]
     # P(Poisson(expected) >= k_obs): special.pdtrc is what stats.poisson.sf evaluates, without
-    # importing scipy.stats (about 0.4 s of every run's start)
-    p_tail = float(special.pdtrc(k_obs - 1, expected)) if k_obs > 0 else 1.0
+    # importing scipy.stats; scipy.special itself (0.3 s) only when a row repeats
+    p_tail = 1.0
+    if k_obs > 0:
+        from scipy import special
+
+        p_tail = float(special.pdtrc(k_obs - 1, expected))
     excess = k_obs > 0 and k_obs > excess_factor * expected and p_tail < alpha
 
     # 2. polling signature: the fresh count per 1-s window
@@ -588,6 +596,8 @@ def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
     n = x.shape[0]
     spline: AngleAt
     if n < 4:
+        from scipy import interpolate
+
         spline = interpolate.CubicSpline(x, y, extrapolate=False)
         return spline
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
@@ -611,6 +621,8 @@ def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
     ab[1, -1] = dx[-2]
     ab[-1, -2] = d = x[-1] - x[-3]
     b[-1] = (dx[-1] ** 2 * slope[-2] + (2 * d + dx[-1]) * dx[-2] * slope[-1]) / d
+    from scipy import linalg
+
     gtsv, = linalg.get_lapack_funcs(("gtsv",), (ab, b))
     sol, info = gtsv(ab[2, :-1], ab[1, :], ab[0, 1:], b, True, True, True, True)[3:]   # (N, 1), int
     if info != 0:
@@ -626,8 +638,38 @@ def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
         c[1, lo:hi] = (m - sd[lo:hi]) / h - t
         c[2, lo:hi] = sd[lo:hi]
         c[3, lo:hi] = y[lo:hi]
-    spline = interpolate.PPoly(c, x, extrapolate=False)
-    return spline
+    return Cubic(c, x)
+
+
+class Cubic:
+    """A piecewise cubic over the breakpoints ``x`` (N,) s, strictly increasing, with the
+    coefficients ``c`` (4, N - 1) of ``(t - x[i])**3 .. (t - x[i])**0`` on ``[x[i], x[i + 1])``
+    (the last interval closed): ``scipy.interpolate.PPoly(c, x, extrapolate=False)``, its
+    values to the bit (NaN outside ``[x[0], x[-1]]``), without importing scipy.interpolate."""
+
+    def __init__(self, c: np.ndarray, x: np.ndarray) -> None:
+        self.c = c
+        self.x = x
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        """The values at the times ``t`` (any shape), evaluated as scipy's ``evaluate_poly1``
+        does: ``c3 + c2 s + c1 (s s) + c0 ((s s) s)`` summed in that order, ``s = t - x[i]``,
+        ``i`` the interval holding ``t``."""
+        t = np.asarray(t, dtype=float)
+        x, c = self.x, self.c
+        i = np.searchsorted(x, t, side="right")
+        i -= 1
+        np.clip(i, 0, x.shape[0] - 2, out=i)          # t == x[-1]: the last interval
+        s = t - x[i]
+        z = s * s
+        out: np.ndarray = c[3, i]
+        out += 0.0                                    # scipy's sum starts at +0.0
+        out += c[2, i] * s
+        out += c[1, i] * z
+        z *= s
+        out += c[0, i] * z
+        out[~((t >= x[0]) & (t <= x[-1]))] = np.nan
+        return out
 
 
 def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[AngleAt, float, float]:
@@ -725,11 +767,81 @@ class _LagFit:
         costs = np.array([self.neg_corr(d, sel) for d in lags])
         i = int(np.argmin(costs))
         lo, hi = lags[max(i - 1, 0)], lags[min(i + 1, lags.shape[0] - 1)]
-        res = optimize.minimize_scalar(lambda d: self.neg_corr(d, sel), bounds=(lo, hi), method="bounded",
-                                       options={"xatol": 1e-5})
-        d, c = (float(res.x), float(res.fun)) if res.fun <= costs[i] else (float(lags[i]), float(costs[i]))
+        x, fx = minimize_bounded(lambda d: self.neg_corr(d, sel), lo, hi, xatol=1e-5)
+        d, c = (float(x), float(fx)) if fx <= costs[i] else (float(lags[i]), float(costs[i]))
         edge = i == 0 or i == lags.shape[0] - 1
         return d, -c, edge
+
+
+def minimize_bounded(f: Callable[[float], float], lo: float, hi: float, *, xatol: float = 1e-5,
+                     maxiter: int = 500) -> tuple[float, float]:
+    """(x, f(x)) minimising ``f`` on ``[lo, hi]``: Brent's bounded search (golden sections and
+    parabolic steps), ``scipy.optimize.minimize_scalar(f, bounds=(lo, hi), method="bounded",
+    options={"xatol": xatol, "maxiter": maxiter})`` step for step, so the same bits, without
+    importing scipy.optimize."""
+    sqrt_eps = math.sqrt(2.2e-16)
+    golden_mean = 0.5 * (3.0 - math.sqrt(5.0))
+    a, b = lo, hi
+    fulc = a + golden_mean * (b - a)
+    nfc, xf = fulc, fulc
+    rat = e = 0.0
+    x = xf
+    fx = f(x)
+    num = 1
+    ffulc = fnfc = fx
+    xm = 0.5 * (a + b)
+    tol1 = sqrt_eps * np.abs(xf) + xatol / 3.0
+    tol2 = 2.0 * tol1
+    while np.abs(xf - xm) > (tol2 - 0.5 * (b - a)):
+        golden = True
+        if np.abs(e) > tol1:                    # a parabola through the three best points
+            golden = False
+            r = (xf - nfc) * (fx - ffulc)
+            q = (xf - fulc) * (fx - fnfc)
+            p = (xf - fulc) * q - (xf - nfc) * r
+            q = 2.0 * (q - r)
+            if q > 0.0:
+                p = -p
+            q = np.abs(q)
+            r = e
+            e = rat
+            if (np.abs(p) < np.abs(0.5 * q * r)) and (p > q * (a - xf)) and (p < q * (b - xf)):
+                rat = (p + 0.0) / q
+                x = xf + rat
+                if ((x - a) < tol2) or ((b - x) < tol2):
+                    rat = tol1 * (np.sign(xm - xf) + ((xm - xf) == 0))
+            else:
+                golden = True
+        if golden:                              # a golden-section step
+            e = a - xf if xf >= xm else b - xf
+            rat = golden_mean * e
+        x = xf + (np.sign(rat) + (rat == 0)) * np.maximum(np.abs(rat), tol1)
+        fu = f(x)
+        num += 1
+        if fu <= fx:
+            if x >= xf:
+                a = xf
+            else:
+                b = xf
+            fulc, ffulc = nfc, fnfc
+            nfc, fnfc = xf, fx
+            xf, fx = x, fu
+        else:
+            if x < xf:
+                a = x
+            else:
+                b = x
+            if (fu <= fnfc) or (nfc == xf):
+                fulc, ffulc = nfc, fnfc
+                nfc, fnfc = x, fu
+            elif (fu <= ffulc) or (fulc == xf) or (fulc == nfc):     # noqa: SIM109  (== as scipy: no NaN by identity)
+                fulc, ffulc = x, fu
+        xm = 0.5 * (a + b)
+        tol1 = sqrt_eps * np.abs(xf) + xatol / 3.0
+        tol2 = 2.0 * tol1
+        if num >= maxiter:
+            break
+    return xf, fx
 
 
 _MIN_SAMPLES = 40
