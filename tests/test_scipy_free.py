@@ -23,15 +23,20 @@ def test_quantiles_as_the_callers_ask(dof, p):
     assert chi2.chdtri(3, p) == float(special.chdtri(3, p))
 
 
-@pytest.mark.parametrize("seed", range(20))
+@pytest.mark.parametrize("seed", range(30))
 def test_cubic_is_ppoly(seed):
-    """Random not-a-knot splines (jittery stamps, values over six decades) at points inside,
-    outside, on the breakpoints and their neighbours, and NaN."""
+    """Random not-a-knot splines (jittery stamps, or an even grid far from 0 found by its offset,
+    values over six decades) at points inside, outside, on the breakpoints and their neighbours,
+    and NaN."""
     rng = np.random.default_rng(seed)
     n = int(rng.integers(4, 3000))
-    t = np.cumsum(0.008 + 0.001 * rng.random(n)) + 100.0 * rng.normal()
+    uniform = seed % 3 == 2
+    if uniform:
+        t = np.arange(1.7e9 + rng.random(), 1.7e9 + 1.0 + n * 0.008, 0.008)[:n]
+    else:
+        t = np.cumsum(0.008 + 0.001 * rng.random(n)) + 100.0 * rng.normal()
     y = np.cumsum(rng.standard_normal(n)) * 10.0 ** rng.uniform(-3, 3)
-    got = timing_estimates._spline(t, y)
+    got = timing_estimates._spline(t, y, uniform)
     ref = interpolate.PPoly(got.c, got.x, extrapolate=False)
     q = np.concatenate([np.linspace(t[0] - 0.5, t[-1] + 0.5, 2001), t, rng.uniform(t[0], t[-1], 2000),
                         [np.nan, np.nextafter(t[0], np.inf), np.nextafter(t[-1], -np.inf)]])
