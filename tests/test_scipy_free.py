@@ -25,18 +25,20 @@ def test_quantiles_as_the_callers_ask(dof, p):
 
 @pytest.mark.parametrize("seed", range(30))
 def test_cubic_is_ppoly(seed):
-    """Random not-a-knot splines (jittery stamps, or an even grid far from 0 found by its offset,
+    """Random not-a-knot splines (jittery stamps, stamps with gaps, an even grid far from 0;
     values over six decades) at points inside, outside, on the breakpoints and their neighbours,
-    and NaN."""
+    and NaN: the intervals found from the offsets are the binary search's."""
     rng = np.random.default_rng(seed)
     n = int(rng.integers(4, 3000))
-    uniform = seed % 3 == 2
-    if uniform:
+    if seed % 3 == 2:
         t = np.arange(1.7e9 + rng.random(), 1.7e9 + 1.0 + n * 0.008, 0.008)[:n]
     else:
-        t = np.cumsum(0.008 + 0.001 * rng.random(n)) + 100.0 * rng.normal()
+        dt = 0.008 + 0.001 * rng.random(n)
+        if seed % 3 == 1:
+            dt[rng.integers(0, n, 3)] += 10.0 ** rng.uniform(-1, 2, 3)     # gaps of 0.1 to 100 s
+        t = np.cumsum(dt) + 100.0 * rng.normal()
     y = np.cumsum(rng.standard_normal(n)) * 10.0 ** rng.uniform(-3, 3)
-    got = timing_estimates._spline(t, y, uniform)
+    got = timing_estimates._spline(t, y)
     ref = interpolate.PPoly(got.c, got.x, extrapolate=False)
     q = np.concatenate([np.linspace(t[0] - 0.5, t[-1] + 0.5, 2001), t, rng.uniform(t[0], t[-1], 2000),
                         [np.nan, np.nextafter(t[0], np.inf), np.nextafter(t[-1], -np.inf)]])

@@ -589,12 +589,11 @@ def _failed(reason: str, n_used: int = 0) -> ClockOffset:
 AngleAt = Callable[[np.ndarray], np.ndarray]
 
 
-def _spline(x: np.ndarray, y: np.ndarray, uniform: bool = False) -> AngleAt:
+def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
     """``scipy.interpolate.CubicSpline(x, y, extrapolate=False)`` (not-a-knot ends) for (N,) float
     ``x`` (strictly increasing) and ``y``, to the bit, with a third of its temporaries: the same
     tridiagonal solve (LAPACK ``gtsv``, as ``solve_banded`` calls it), then the coefficients block
-    by block; the polynomial keeps ``x`` itself (not a copy).  Fewer than 4 points: CubicSpline.
-    ``uniform``: ``x`` is evenly spaced (:class:`Cubic` finds intervals faster)."""
+    by block; the polynomial keeps ``x`` itself (not a copy).  Fewer than 4 points: CubicSpline."""
     n = x.shape[0]
     spline: AngleAt
     if n < 4:
@@ -640,51 +639,55 @@ def _spline(x: np.ndarray, y: np.ndarray, uniform: bool = False) -> AngleAt:
         c[1, lo:hi] = (m - sd[lo:hi]) / h - t
         c[2, lo:hi] = sd[lo:hi]
         c[3, lo:hi] = y[lo:hi]
-    return Cubic(c, x, uniform)
+    return Cubic(c, x)
 
 
 class Cubic:
     """A piecewise cubic over the breakpoints ``x`` (N,) s, strictly increasing, with the
     coefficients ``c`` (4, N - 1) of ``(t - x[i])**3 .. (t - x[i])**0`` on ``[x[i], x[i + 1])``
     (the last interval closed): ``scipy.interpolate.PPoly(c, x, extrapolate=False)``, its
-    values to the bit (NaN outside ``[x[0], x[-1]]``), without importing scipy.interpolate.
-    ``uniform``: the breakpoints are (about) evenly spaced, e.g. from ``np.arange``; the
-    interval of a time is then found from its offset and checked against its neighbours (the
-    same interval as a binary search, in a fraction of its time)."""
+    values to the bit (NaN outside ``[x[0], x[-1]]``), without importing scipy.interpolate."""
 
-    def __init__(self, c: np.ndarray, x: np.ndarray, uniform: bool = False) -> None:
+    #: steps of one interval from the first guess before the binary search takes over
+    STEPS = 3
+
+    def __init__(self, c: np.ndarray, x: np.ndarray) -> None:
         self.c = c
         self.x = x
-        self.uniform = uniform
 
     def interval(self, t: np.ndarray) -> np.ndarray:
         """The interval ``i`` (as ``t``, intp) with ``x[i] <= t < x[i + 1]``, clipped to
-        ``[0, N - 2]`` (so ``t == x[-1]`` is in the last one; NaN anywhere)."""
+        ``[0, N - 2]`` (so ``t == x[-1]`` is in the last one; NaN anywhere): a binary search's
+        answer.  First guessed from ``t``'s offset at the mean breakpoint spacing and stepped
+        towards it (a grid, an IMU's stamps: there in a step or two); the times still off after
+        :attr:`STEPS` steps (after a gap in the stamps) are searched."""
         x = self.x
         last = x.shape[0] - 2
-        i: np.ndarray
-        if not self.uniform:
-            i = np.searchsorted(x, t, side="right")
-            i -= 1
-            np.clip(i, 0, last, out=i)
-            return i
-        span = (x[-1] - x[0]) / (last + 1)
-        guess = np.nan_to_num((t - x[0]) / span, nan=0.0)
-        np.clip(guess, 0, last, out=guess)
-        i = guess.astype(np.intp)
-        while True:                  # steps of one interval towards x[i] <= t < x[i + 1]
+        guess = (t - x[0]) * ((last + 1) / (x[-1] - x[0]))
+        np.fmax(guess, 0.0, out=guess)                 # NaN -> 0
+        np.fmin(guess, last, out=guess)
+        i: np.ndarray = guess.astype(np.intp)
+        for _ in range(self.STEPS):
             down = (t < x[i]) & (i > 0)
             up = (t >= x[i + 1]) & (i < last)
             if not (down.any() or up.any()):
                 return i
             i -= down
             i += up
+        off = ((t < x[i]) & (i > 0)) | ((t >= x[i + 1]) & (i < last))
+        if off.any():
+            found = np.searchsorted(x, t[off], side="right")
+            found -= 1
+            i[off] = np.clip(found, 0, last)
+        return i
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
         """The values at the times ``t`` (an array, any shape), evaluated as scipy's
         ``evaluate_poly1`` does: ``c3 + c2 s + c1 (s s) + c0 ((s s) s)`` summed in that order,
         ``s = t - x[i]``, ``i`` the interval holding ``t``."""
         t = np.asarray(t, dtype=float)
+        if t.ndim == 0:
+            return self(t[None]).reshape(())
         x, c = self.x, self.c
         i = self.interval(t)
         s = t - x[i]
@@ -722,7 +725,7 @@ def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[Angl
         del theta_at
         phi = trapezoid_integral(step, ws)
         del ws
-        theta_at = _spline(grid, phi, uniform=True)
+        theta_at = _spline(grid, phi)
         t_lo, t_hi = float(grid[0]), float(grid[-1])
     return theta_at, t_lo, t_hi
 
@@ -994,8 +997,9 @@ def yaw_scale_from_track(t_imu: np.ndarray, gyro_z_up: np.ndarray, t_gnss: np.nd
     starts = []
     i = 0
     m = t_g.shape[0]
+    ends = np.searchsorted(t_g, t_g + window_s - 1e-9).tolist()        # each epoch's chord end
     while i < m - 1:
-        j = int(np.searchsorted(t_g, t_g[i] + window_s - 1e-9))
+        j = ends[i]
         if j >= m:
             break
         starts.append((i, j))
