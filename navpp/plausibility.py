@@ -48,7 +48,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.special import chdtri
+
+from .chi2 import chdtri
 
 #: The highest speed the solution may show per ``[vehicle] type``, m/s: a road car's top speed
 #: is below 150 m/s (540 km/h); with no vehicle model the speed of sound (no platform navpp's

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.special import chdtri
 
+from ..chi2 import chdtri
 from ..config import Config
 from ..findings import Finding
 from ..ins.gnss_error import Correlation, GnssErrorSettings

@@ -69,8 +69,8 @@ from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy.special import chdtri
 
+from ..chi2 import chdtri
 from .adaptation import Adaptation, Predictor
 from .base import register
 from .linalg import symmetrise

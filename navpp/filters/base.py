@@ -24,8 +24,8 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
-from scipy.special import chdtri
 
+from ..chi2 import chdtri
 from ..errors import ConfigError, FilterDivergedError
 from .adaptation import Adaptation, Predictor
 from .linalg import all_finite, innovation_gain, joseph_correction, sigma_posterior, symmetrise

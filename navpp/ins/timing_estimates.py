@@ -1,8 +1,13 @@
 """Timing diagnostics of a log: stale IMU rows and the IMU-to-GNSS clock offset.
 
-Pure numpy/scipy functions, no I/O and no configuration: the caller passes arrays (as held
-by :class:`navpp.recording.ImuData` / :class:`navpp.recording.GnssData`) and decides what to
-do with the answers.
+Pure functions, no I/O and no configuration: the caller passes arrays (as held by
+:class:`navpp.recording.ImuData` / :class:`navpp.recording.GnssData`) and decides what to do
+with the answers.  numpy, and of scipy only what a run loads anyway (:mod:`scipy.linalg`'s
+tridiagonal solve: numba's kernels import scipy.linalg) or needs rarely (``scipy.special`` when
+rows repeat, ``scipy.interpolate`` for a spline of fewer than 4 points): the spline's
+evaluation (:class:`Cubic`) and the bounded lag refinement (:func:`minimize_bounded`) are
+scipy's to the bit without importing scipy.interpolate and scipy.optimize (0.3 s and more of
+every run's start).
 
 Conventions: times are float seconds (any common origin, e.g. relative to the log's first
 IMU stamp); body frame FLU, navigation frame ENU; gyro in rad/s, specific force in m/s^2.
@@ -22,9 +27,9 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
-from scipy import interpolate, linalg, optimize, special
 
 from .calibrate import BLOCK_ROWS, trapezoid_integral
 
@@ -210,8 +215,12 @@ def find_stale_rows(
             chance[key] = _chance_all_repeat(q)
         expected += int(sizes[w]) * chance[key]
     # P(Poisson(expected) >= k_obs): special.pdtrc is what stats.poisson.sf evaluates, without
-    # importing scipy.stats (about 0.4 s of every run's start)
-    p_tail = float(special.pdtrc(k_obs - 1, expected)) if k_obs > 0 else 1.0
+    # importing scipy.stats; scipy.special itself (0.3 s) only when a row repeats
+    p_tail = 1.0
+    if k_obs > 0:
+        from scipy import special
+
+        p_tail = float(special.pdtrc(k_obs - 1, expected))
     excess = k_obs > 0 and k_obs > excess_factor * expected and p_tail < alpha
 
     # 2. polling signature: the fresh count per 1-s window
@@ -540,7 +549,7 @@ def estimate_clock_offset(
     # lags some jackknife looks at (within max_lag_s / 2 of its centre) are evaluated
     grid = np.arange(-max_lag_s, max_lag_s + 0.5 * _JACK_STEP_S, _JACK_STEP_S)
     grid = grid[np.any(np.abs(grid[:, None] - np.array([offset, lag_1, lag_2])) <= 0.5 * max_lag_s, axis=1)]
-    table = np.stack([fit.gyro_mean(d) for d in grid]) if grid.size else np.empty((0, n))     # (L, n)
+    table = fit.gyro_means(grid)                                            # (L, n)
     sigma = _jackknife_sigma(grid, table, r, offset, np.ones(n, bool), n_blocks, max_lag_s)
     sig_12 = math.hypot(_jackknife_sigma(grid, table, r, lag_1, half, n_blocks, max_lag_s),
                         _jackknife_sigma(grid, table, r, lag_2, ~half, n_blocks, max_lag_s))
@@ -588,6 +597,8 @@ def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
     n = x.shape[0]
     spline: AngleAt
     if n < 4:
+        from scipy import interpolate
+
         spline = interpolate.CubicSpline(x, y, extrapolate=False)
         return spline
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
@@ -611,6 +622,8 @@ def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
     ab[1, -1] = dx[-2]
     ab[-1, -2] = d = x[-1] - x[-3]
     b[-1] = (dx[-1] ** 2 * slope[-2] + (2 * d + dx[-1]) * dx[-2] * slope[-1]) / d
+    from scipy import linalg
+
     gtsv, = linalg.get_lapack_funcs(("gtsv",), (ab, b))
     sol, info = gtsv(ab[2, :-1], ab[1, :], ab[0, 1:], b, True, True, True, True)[3:]   # (N, 1), int
     if info != 0:
@@ -626,8 +639,67 @@ def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
         c[1, lo:hi] = (m - sd[lo:hi]) / h - t
         c[2, lo:hi] = sd[lo:hi]
         c[3, lo:hi] = y[lo:hi]
-    spline = interpolate.PPoly(c, x, extrapolate=False)
-    return spline
+    return Cubic(c, x)
+
+
+class Cubic:
+    """A piecewise cubic over the breakpoints ``x`` (N,) s, strictly increasing, with the
+    coefficients ``c`` (4, N - 1) of ``(t - x[i])**3 .. (t - x[i])**0`` on ``[x[i], x[i + 1])``
+    (the last interval closed): ``scipy.interpolate.PPoly(c, x, extrapolate=False)``, its
+    values to the bit (NaN outside ``[x[0], x[-1]]``), without importing scipy.interpolate."""
+
+    #: steps of one interval from the first guess before the binary search takes over
+    STEPS = 3
+
+    def __init__(self, c: np.ndarray, x: np.ndarray) -> None:
+        self.c = c
+        self.x = x
+
+    def interval(self, t: np.ndarray) -> np.ndarray:
+        """The interval ``i`` (as ``t``, intp) with ``x[i] <= t < x[i + 1]``, clipped to
+        ``[0, N - 2]`` (so ``t == x[-1]`` is in the last one; NaN anywhere): a binary search's
+        answer.  First guessed from ``t``'s offset at the mean breakpoint spacing and stepped
+        towards it (a grid, an IMU's stamps: there in a step or two); the times still off after
+        :attr:`STEPS` steps (after a gap in the stamps) are searched."""
+        x = self.x
+        last = x.shape[0] - 2
+        guess = (t - x[0]) * ((last + 1) / (x[-1] - x[0]))
+        np.fmax(guess, 0.0, out=guess)                 # NaN -> 0
+        np.fmin(guess, last, out=guess)
+        i: np.ndarray = guess.astype(np.intp)
+        for _ in range(self.STEPS):
+            down = (t < x[i]) & (i > 0)
+            up = (t >= x[i + 1]) & (i < last)
+            if not (down.any() or up.any()):
+                return i
+            i -= down
+            i += up
+        off = ((t < x[i]) & (i > 0)) | ((t >= x[i + 1]) & (i < last))
+        if off.any():
+            found = np.searchsorted(x, t[off], side="right")
+            found -= 1
+            i[off] = np.clip(found, 0, last)
+        return i
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        """The values at the times ``t`` (an array, any shape), evaluated as scipy's
+        ``evaluate_poly1`` does: ``c3 + c2 s + c1 (s s) + c0 ((s s) s)`` summed in that order,
+        ``s = t - x[i]``, ``i`` the interval holding ``t``."""
+        t = np.asarray(t, dtype=float)
+        if t.ndim == 0:
+            return self(t[None]).reshape(())
+        x, c = self.x, self.c
+        i = self.interval(t)
+        s = t - x[i]
+        z = s * s
+        out: np.ndarray = c[3, i]
+        out += 0.0                                    # scipy's sum starts at +0.0
+        out += c[2, i] * s
+        out += c[1, i] * z
+        z *= s
+        out += c[0, i] * z
+        out[~((t >= x[0]) & (t <= x[-1]))] = np.nan
+        return out
 
 
 def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[AngleAt, float, float]:
@@ -710,26 +782,116 @@ class _LagFit:
         mean: np.ndarray = (self.theta_at(bb + dt) - self.theta_at(aa + dt)) / (bb - aa)
         return mean
 
+    def gyro_means(self, lags: np.ndarray) -> np.ndarray:
+        """:meth:`gyro_mean` of every baseline at each of ``lags`` (L,) s: (L, n) rad/s, the
+        same bits, evaluated for as many lags at a time as a block holds."""
+        n = self.r.shape[0]
+        out = np.empty((lags.shape[0], n))
+        step = max(1, BLOCK_ROWS // max(n, 1))
+        for lo in range(0, lags.shape[0], step):
+            d = lags[lo:lo + step, None]
+            out[lo:lo + step] = (self.theta_at(self.b + d) - self.theta_at(self.a + d)) / (self.b - self.a)
+        return out
+
+    @cached_property
+    def coarse(self) -> np.ndarray:
+        """:meth:`gyro_means` at the grid ``lags``, (L, n) rad/s: every :meth:`best_lag` starts from it."""
+        return self.gyro_means(self.lags)
+
     def neg_corr(self, dt: float, sel: slice | np.ndarray = slice(None)) -> float:
         """Minus the correlation of the course rates with the gyro means at lag ``dt``."""
-        g = self.gyro_mean(dt, sel)
-        rr = self.r[sel]
-        gs, rs = g - g.mean(), rr - rr.mean()
-        den = np.sqrt(np.dot(gs, gs) * np.dot(rs, rs))
-        return -float(np.dot(gs, rs) / den) if den > 0 else 0.0
+        return _neg_corr(self.gyro_mean(dt, sel), self.r[sel])
 
     def best_lag(self, sel: slice | np.ndarray = slice(None)) -> tuple[float, float, bool]:
         """(lag s, correlation, at the grid's edge) maximising the correlation over the samples
         ``sel``: the grid's best point refined between its neighbours (bounded minimisation)."""
         lags = self.lags
-        costs = np.array([self.neg_corr(d, sel) for d in lags])
+        rr = self.r[sel]
+        costs = np.array([_neg_corr(g[sel], rr) for g in self.coarse])
         i = int(np.argmin(costs))
         lo, hi = lags[max(i - 1, 0)], lags[min(i + 1, lags.shape[0] - 1)]
-        res = optimize.minimize_scalar(lambda d: self.neg_corr(d, sel), bounds=(lo, hi), method="bounded",
-                                       options={"xatol": 1e-5})
-        d, c = (float(res.x), float(res.fun)) if res.fun <= costs[i] else (float(lags[i]), float(costs[i]))
+        x, fx = minimize_bounded(lambda d: self.neg_corr(d, sel), lo, hi, xatol=1e-5)
+        d, c = (float(x), float(fx)) if fx <= costs[i] else (float(lags[i]), float(costs[i]))
         edge = i == 0 or i == lags.shape[0] - 1
         return d, -c, edge
+
+
+def _neg_corr(g: np.ndarray, r: np.ndarray) -> float:
+    """Minus the correlation of the course rates ``r`` (n,) with the gyro means ``g`` (n,)."""
+    gs, rs = g - g.mean(), r - r.mean()
+    den = np.sqrt(np.dot(gs, gs) * np.dot(rs, rs))
+    return -float(np.dot(gs, rs) / den) if den > 0 else 0.0
+
+
+def minimize_bounded(f: Callable[[float], float], lo: float, hi: float, *, xatol: float = 1e-5,
+                     maxiter: int = 500) -> tuple[float, float]:
+    """(x, f(x)) minimising ``f`` on ``[lo, hi]``: Brent's bounded search (golden sections and
+    parabolic steps), ``scipy.optimize.minimize_scalar(f, bounds=(lo, hi), method="bounded",
+    options={"xatol": xatol, "maxiter": maxiter})`` step for step, so the same bits, without
+    importing scipy.optimize."""
+    sqrt_eps = math.sqrt(2.2e-16)
+    golden_mean = 0.5 * (3.0 - math.sqrt(5.0))
+    a, b = lo, hi
+    fulc = a + golden_mean * (b - a)
+    nfc, xf = fulc, fulc
+    rat = e = 0.0
+    x = xf
+    fx = f(x)
+    num = 1
+    ffulc = fnfc = fx
+    xm = 0.5 * (a + b)
+    tol1 = sqrt_eps * np.abs(xf) + xatol / 3.0
+    tol2 = 2.0 * tol1
+    while np.abs(xf - xm) > (tol2 - 0.5 * (b - a)):
+        golden = True
+        if np.abs(e) > tol1:                    # a parabola through the three best points
+            golden = False
+            r = (xf - nfc) * (fx - ffulc)
+            q = (xf - fulc) * (fx - fnfc)
+            p = (xf - fulc) * q - (xf - nfc) * r
+            q = 2.0 * (q - r)
+            if q > 0.0:
+                p = -p
+            q = np.abs(q)
+            r = e
+            e = rat
+            if (np.abs(p) < np.abs(0.5 * q * r)) and (p > q * (a - xf)) and (p < q * (b - xf)):
+                rat = (p + 0.0) / q
+                x = xf + rat
+                if ((x - a) < tol2) or ((b - x) < tol2):
+                    rat = tol1 * (np.sign(xm - xf) + ((xm - xf) == 0))
+            else:
+                golden = True
+        if golden:                              # a golden-section step
+            e = a - xf if xf >= xm else b - xf
+            rat = golden_mean * e
+        x = xf + (np.sign(rat) + (rat == 0)) * np.maximum(np.abs(rat), tol1)
+        fu = f(x)
+        num += 1
+        if fu <= fx:
+            if x >= xf:
+                a = xf
+            else:
+                b = xf
+            fulc, ffulc = nfc, fnfc
+            nfc, fnfc = xf, fx
+            xf, fx = x, fu
+        else:
+            if x < xf:
+                a = x
+            else:
+                b = x
+            if (fu <= fnfc) or (nfc == xf):
+                fulc, ffulc = nfc, fnfc
+                nfc, fnfc = x, fu
+            elif (fu <= ffulc) or (fulc == xf) or (fulc == nfc):     # noqa: SIM109  (== as scipy: no NaN by identity)
+                fulc, ffulc = x, fu
+        xm = 0.5 * (a + b)
+        tol1 = sqrt_eps * np.abs(xf) + xatol / 3.0
+        tol2 = 2.0 * tol1
+        if num >= maxiter:
+            break
+    return xf, fx
 
 
 _MIN_SAMPLES = 40
@@ -835,8 +997,9 @@ def yaw_scale_from_track(t_imu: np.ndarray, gyro_z_up: np.ndarray, t_gnss: np.nd
     starts = []
     i = 0
     m = t_g.shape[0]
+    ends = np.searchsorted(t_g, t_g + window_s - 1e-9).tolist()        # each epoch's chord end
     while i < m - 1:
-        j = int(np.searchsorted(t_g, t_g[i] + window_s - 1e-9))
+        j = ends[i]
         if j >= m:
             break
         starts.append((i, j))

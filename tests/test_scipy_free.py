@@ -1,0 +1,62 @@
+"""What replaces scipy on a run's default path gives scipy's bits (issue 21, point 3): the
+chi-square quantiles of the gates (:mod:`navpp.chi2`), the clock-offset search's spline
+evaluation (:class:`~navpp.ins.timing_estimates.Cubic`) and its bounded lag refinement
+(:func:`~navpp.ins.timing_estimates.minimize_bounded`)."""
+
+import numpy as np
+import pytest
+from scipy import interpolate, optimize, special
+
+from navpp import chi2
+from navpp.ins import timing_estimates
+
+
+@pytest.mark.parametrize(("dof", "tail"), sorted(chi2.UPPER_QUANTILES))
+def test_table_quantiles_are_scipys(dof, tail):
+    assert chi2.chdtri(dof, tail) == float(special.chdtri(dof, tail))
+
+
+@pytest.mark.parametrize(("dof", "p"), [(3, 0.9999), (1, 0.9999), (6, 0.999), (2, 0.95), (7, 0.9999), (3, 0.5)])
+def test_quantiles_as_the_callers_ask(dof, p):
+    """The callers' ``1.0 - p`` (table or not) and the 3-dof lower quantile of the checks."""
+    assert chi2.chdtri(dof, 1.0 - p) == float(special.chdtri(dof, 1.0 - p))
+    assert chi2.chdtri(3, p) == float(special.chdtri(3, p))
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_cubic_is_ppoly(seed):
+    """Random not-a-knot splines (jittery stamps, stamps with gaps, an even grid far from 0;
+    values over six decades) at points inside, outside, on the breakpoints and their neighbours,
+    and NaN: the intervals found from the offsets are the binary search's."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(4, 3000))
+    if seed % 3 == 2:
+        t = np.arange(1.7e9 + rng.random(), 1.7e9 + 1.0 + n * 0.008, 0.008)[:n]
+    else:
+        dt = 0.008 + 0.001 * rng.random(n)
+        if seed % 3 == 1:
+            dt[rng.integers(0, n, 3)] += 10.0 ** rng.uniform(-1, 2, 3)     # gaps of 0.1 to 100 s
+        t = np.cumsum(dt) + 100.0 * rng.normal()
+    y = np.cumsum(rng.standard_normal(n)) * 10.0 ** rng.uniform(-3, 3)
+    got = timing_estimates._spline(t, y)
+    ref = interpolate.PPoly(got.c, got.x, extrapolate=False)
+    q = np.concatenate([np.linspace(t[0] - 0.5, t[-1] + 0.5, 2001), t, rng.uniform(t[0], t[-1], 2000),
+                        [np.nan, np.nextafter(t[0], np.inf), np.nextafter(t[-1], -np.inf)]])
+    assert ref(q).tobytes() == got(q).tobytes()
+    assert ref(q[:100].reshape(10, 10)).tobytes() == got(q[:100].reshape(10, 10)).tobytes()
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_minimize_bounded_is_scipys(seed):
+    """Smooth, kinked and flat-stepped costs, tolerances from 1e-8 to 1e-3: the same x and f(x)."""
+    rng = np.random.default_rng(seed)
+    c0, w = rng.normal(), 10.0 ** rng.uniform(-3, 1)
+    costs = [lambda d: (d - c0) ** 2, lambda d: -np.cos((d - c0) / w),
+             lambda d: abs(d - c0) ** 1.5 + 0.1 * np.sin(20.0 * d), lambda d: float(np.floor(d * 7.0) % 3)]
+    f = costs[seed % 4]
+    lo = np.float64(c0 + rng.normal() * w)
+    hi = lo + np.float64(abs(rng.normal()) * 3.0 * w + 1e-4)
+    xatol = float(rng.choice([1e-8, 1e-5, 1e-3]))
+    ref = optimize.minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": xatol})
+    x, fx = timing_estimates.minimize_bounded(f, lo, hi, xatol=xatol)
+    assert (float(x), float(fx)) == (float(ref.x), float(ref.fun))
