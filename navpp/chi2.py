@@ -4,7 +4,7 @@
 import); the gates and checks of a default run need a few quantiles only, at the default gate
 probability (``[gnss] gate_probability = 0.9999``) and the AUKF's detection probability (0.999).
 :func:`chdtri` returns those from :data:`UPPER_QUANTILES`, scipy's own values to the bit
-(tests/test_chi2.py compares them), and asks scipy for any other.
+(tests/test_scipy_free.py compares them), and asks scipy for any other.
 """
 
 from __future__ import annotations
