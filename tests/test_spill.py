@@ -185,3 +185,18 @@ def test_plausibility_and_metrics_windows_give_the_whole_arrays_findings(spill_d
         br = metrics._Bracket.of(t, t_ref)
         assert np.array_equal(br.linear(_spilled_copy(y)), br.linear(y))
     assert np.array_equal(br.angle_deg(_spilled_copy(low)), br.angle_deg(low))
+
+
+def test_resampling_a_spilled_solution_gives_the_same_bits(spill_dir):
+    rng = np.random.default_rng(5)
+    n = 5_500
+    cols = {"lat_deg": 45 + rng.normal(0, 1e-4, n), "lon_deg": 7 + rng.normal(0, 1e-4, n),
+            "alt": rng.normal(300, 1, n), "vel_enu": rng.normal(0, 5, (n, 3)),
+            "rph_deg": rng.uniform(0, 360, (n, 3)), "std_enu": rng.uniform(0, 2, (n, 3)).astype(np.float32),
+            "std_att": rng.uniform(0, 1, (n, 3)).astype(np.float32),
+            "std_vel_enu": rng.uniform(0, 1, (n, 3)).astype(np.float32), "rate_body": rng.normal(0, 0.1, (n, 3))}
+    t = np.arange(n) * 0.008
+    kept = Solution(t=t, t0_ns=1_700_000_000_003_000_000, **cols)
+    spilled = Solution(t=t, t0_ns=kept.t0_ns, **{k: _spilled_copy(v) for k, v in cols.items()})
+    a, b = api.resample_solution(kept, 10.0), api.resample_solution(spilled, 10.0)
+    assert all(np.array_equal(v, _arrays(b)[k]) for k, v in _arrays(a).items())
