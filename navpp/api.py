@@ -192,6 +192,7 @@ def resample_solution(sol: Solution, rate_hz: float) -> Solution:
 
     from .metrics import interpolate_solution
     from .recording import Solution
+    from .spill import release
 
     rate_hz = check_output_rate(rate_hz, "output rate")
     period = 1.0 / rate_hz
@@ -204,13 +205,17 @@ def resample_solution(sol: Solution, rate_hz: float) -> Solution:
         raise ConfigError(f"output rate {rate_hz:g} Hz: no output epoch falls within the solution's "
                           f"{sol.t[-1] - sol.t[0]:.3f} s span; use a higher rate")
     it = interpolate_solution(sol, t)
-    std = np.column_stack([np.interp(t, sol.t, sol.std_enu[:, i]) for i in range(3)])
 
     def interp3(a: np.ndarray | None) -> np.ndarray | None:
-        return None if a is None else np.column_stack([np.interp(t, sol.t, a[:, i]) for i in range(3)])
+        """``a`` (N, 3) at ``t``; a spilled ``a``'s pages released after (:mod:`navpp.spill`)."""
+        if a is None:
+            return None
+        out = np.column_stack([np.interp(t, sol.t, a[:, i]) for i in range(3)])
+        release([a], 0, a.shape[0])
+        return out
 
     return Solution(t=t, lat_deg=it["lat_deg"], lon_deg=it["lon_deg"], alt=it["alt"], vel_enu=it["vel_enu"],
-                    rph_deg=it["rph_deg"], std_enu=std, t0_ns=sol.t0_ns, std_att=interp3(sol.std_att),
+                    rph_deg=it["rph_deg"], std_enu=interp3(sol.std_enu), t0_ns=sol.t0_ns, std_att=interp3(sol.std_att),
                     std_vel_enu=interp3(sol.std_vel_enu), rate_body=interp3(sol.rate_body))
 
 

@@ -26,7 +26,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from navpp import geodesy
+from navpp import geodesy, spill
 from navpp.errors import InputError
 from navpp.ins.attitude import rph_deg_to_dcm
 from navpp.recording import GnssData, ReferenceData, Solution
@@ -120,16 +120,28 @@ class _Bracket(NamedTuple):
         w = np.clip((t - t_src[i0]) / np.where(span > 0, span, 1.0), 0.0, 1.0)
         return cls(i0, i1, w)
 
+    def pair(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``y[i0]``, ``y[i1]`` as float: indexed first, converted after (no full-length copy); a
+        spilled ``y`` (:mod:`navpp.spill`) in windows of :data:`~navpp.spill.WINDOW_ROWS` times,
+        its rows released behind each."""
+        y = np.asarray(y)
+        if not spill.spilled(y):
+            return y[self.i0].astype(float), y[self.i1].astype(float)
+        a, b = np.empty((self.i0.shape[0], *y.shape[1:])), np.empty((self.i0.shape[0], *y.shape[1:]))
+        for s in range(0, self.i0.shape[0], spill.WINDOW_ROWS):
+            i0, i1 = self.i0[s:s + spill.WINDOW_ROWS], self.i1[s:s + spill.WINDOW_ROWS]
+            a[s:s + i0.shape[0]], b[s:s + i0.shape[0]] = y[i0], y[i1]
+            spill.release([y], int(i0.min()), int(i1.max()) + 1)
+        return a, b
+
     def linear(self, y: np.ndarray) -> np.ndarray:
-        y = np.asarray(y)                     # index first, convert after: no full-length copy
-        a, b = y[self.i0].astype(float), y[self.i1].astype(float)
-        w = self.w if y.ndim == 1 else self.w[:, None]
+        a, b = self.pair(y)
+        w = self.w if a.ndim == 1 else self.w[:, None]
         return a + w * (b - a)
 
     def angle_deg(self, y: np.ndarray) -> np.ndarray:
         """Angles (deg) along the shorter arc between the two samples (crossing 0/360 or +-180)."""
-        y = np.asarray(y)
-        a, b = y[self.i0].astype(float), y[self.i1].astype(float)
+        a, b = self.pair(y)
         return a + self.w * wrap_deg(b - a)
 
 

@@ -50,6 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from .chi2 import chdtri
+from .spill import windows
 
 #: The highest speed the solution may show per ``[vehicle] type``, m/s: a road car's top speed
 #: is below 150 m/s (540 km/h); with no vehicle model the speed of sound (no platform navpp's
@@ -344,32 +345,45 @@ def solution_findings(name: str, vehicle_type: str, t: np.ndarray, alt: np.ndarr
     warnings' business, not this check's); speed within
     the vehicle type's :data:`MAX_SPEED_MPS`.  t (N,) s; alt (N,) m; vel_enu (N, 3) m/s;
     std_enu (N, 3) m; fix_alt, fix_std_u (M,) m.  ``fatal`` False: findings are warnings
-    (``[gnss] max_rejected_fraction = 1``: write anyway)."""
+    (``[gnss] max_rejected_fraction = 1``: write anyway).  In windows of rows
+    (:func:`navpp.spill.windows`: a spilled solution's rows leave memory behind the pass), with
+    the findings and figures of the whole arrays."""
     if t.shape[0] == 0 or fix_alt.shape[0] == 0:
         return []
-    bad = ~(np.isfinite(alt) & np.isfinite(std_enu).all(axis=1))
-    if bad.any():
-        i = int(np.argmax(bad))
-        return [Verdict(fatal, f"{name} diverged: its solution is not finite from t = {float(t[i]):.3f} s")]
     k = math.sqrt(gate_quantiles(gate_probability)[2])
     su = float(np.max(fix_std_u)) if np.all(np.isfinite(fix_std_u)) else 0.0
     band = float(np.max(fix_alt)) - float(np.min(fix_alt))
     margin = band + k * su + ALTITUDE_FLOOR_M
     lo, hi = float(np.min(fix_alt)) - margin, float(np.max(fix_alt)) + margin
-    slack = k * std_enu[:, 2]
-    out_alt = (alt < lo - slack) | (alt > hi + slack)
-    if out_alt.any():
-        i = int(np.argmax(out_alt))
-        j = int(np.argmax(np.abs(alt - 0.5 * (lo + hi))))
-        return [Verdict(fatal, f"{name} diverged: its altitude leaves the fixes' {lo:.0f} .. {hi:.0f} m at "
-                              f"t = {float(t[i]):.1f} s (reaching {float(alt[j]):.4g} m)")]
     vmax = MAX_SPEED_MPS.get(vehicle_type, MAX_SPEED_MPS["none"])
-    speed2 = np.einsum("ij,ij->i", vel_enu, vel_enu)
-    fast = speed2 > vmax * vmax
-    if fast.any():
-        i = int(np.argmax(fast))
-        j = int(np.argmax(speed2))
+    first_alt = first_fast = far = fastest = -1      # first row out of the band / too fast; argmax rows
+    far_v = fast_v = -1.0
+    for a, b in windows(t.shape[0], alt, vel_enu, std_enu):
+        alt_w, std_w, vel_w = alt[a:b], std_enu[a:b], vel_enu[a:b]
+        bad = ~(np.isfinite(alt_w) & np.isfinite(std_w).all(axis=1))
+        if bad.any():
+            i = a + int(np.argmax(bad))
+            return [Verdict(fatal, f"{name} diverged: its solution is not finite from t = {float(t[i]):.3f} s")]
+        slack = k * std_w[:, 2]
+        out_alt = (alt_w < lo - slack) | (alt_w > hi + slack)
+        if first_alt < 0 and out_alt.any():
+            first_alt = a + int(np.argmax(out_alt))
+        off = np.abs(alt_w - 0.5 * (lo + hi))
+        j = int(np.argmax(off))
+        if off[j] > far_v:                      # the first maximum, as over the whole
+            far, far_v = a + j, float(off[j])
+        speed2 = np.einsum("ij,ij->i", vel_w, vel_w)
+        fast = speed2 > vmax * vmax
+        if first_fast < 0 and fast.any():
+            first_fast = a + int(np.argmax(fast))
+        j = int(np.argmax(speed2))              # the first NaN, else the first maximum, as over the whole
+        if fastest < 0 or (not math.isnan(fast_v) and (math.isnan(speed2[j]) or speed2[j] > fast_v)):
+            fastest, fast_v = a + j, float(speed2[j])
+    if first_alt >= 0:
+        return [Verdict(fatal, f"{name} diverged: its altitude leaves the fixes' {lo:.0f} .. {hi:.0f} m at "
+                              f"t = {float(t[first_alt]):.1f} s (reaching {float(alt[far]):.4g} m)")]
+    if first_fast >= 0:
         return [Verdict(fatal, f"{name} diverged: its speed exceeds {vmax:.0f} m/s (the most a [vehicle] type = "
-                              f"\"{vehicle_type}\" goes) at t = {float(t[i]):.1f} s, reaching "
-                              f"{math.sqrt(float(speed2[j])):.4g} m/s")]
+                              f"\"{vehicle_type}\" goes) at t = {float(t[first_fast]):.1f} s, reaching "
+                              f"{math.sqrt(fast_v):.4g} m/s")]
     return []

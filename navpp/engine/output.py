@@ -2,7 +2,9 @@
 velocity, attitude), its body rate, the smoothed run.
 
 The recorded path rows are ``(q_nb, vel_enu, lat, lon, h)`` (quaternion body FLU -> nav ENU,
-m/s, rad, rad, m); :func:`solution_from_path` converts them in place to degrees.
+m/s, rad, rad, m); :func:`solution_from_path` converts them in place to degrees.  A path on a
+spill file (:mod:`navpp.spill`) gives its outputs on spill files too, and every pass here
+goes over it window by window, releasing the rows behind it.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import time
 import numpy as np
 from numba import njit
 
+from .. import spill
 from ..filters.protocols import SmoothableModel
 from ..filters.smoother import ForwardStore, rts_smooth
 from ..geodesy import OMEGA_E
@@ -55,13 +58,14 @@ def smoothed_run(store: ForwardStore, model: SmoothableModel, t_out: np.ndarray,
     t_start = time.perf_counter()
     mb = store.nbytes / 1e6
     sm = rts_smooth(store, model)
-    spath = path.copy()
-    apply_node_corrections(spath, t_out, sm.t, sm.x, sm.x_post, sm.x_ref)
+    spath = spill.copy_rows(path)
+    for a, b in spill.windows(len(spath), spath):      # row by row: a window's rows are the same bits
+        apply_node_corrections(spath[a:b], t_out[a:b], sm.t, sm.x, sm.x_post, sm.x_ref)
     var = sm.var
     std = {}
     for name, block in (("pos", POS), ("vel", VEL), ("att", ATT)):
         v = np.ascontiguousarray(var[:, block])
-        std[name] = interpolated_std(t_out, sm.t[0], v[0], sm.t[1:], v[1:], v[1:])
+        std[name] = interpolated_std_rows(t_out, sm.t[0], v[0], sm.t[1:], v[1:], v[1:], like=spath)
     xs = sm.x[epoch_node]
     rate = None
     if gyro is not None:
@@ -73,6 +77,18 @@ def smoothed_run(store: ForwardStore, model: SmoothableModel, t_out: np.ndarray,
                          bstd[:, BA].copy())
     return SmoothedRun(solution, biases, time.perf_counter() - t_start, int(sm.t.shape[0]),
                        int(sm.breaks + sm.repaired), mb)
+
+
+def interpolated_std_rows(t: np.ndarray, t0: float, var0: np.ndarray, tg: np.ndarray, var_prior: np.ndarray,
+                          var_post: np.ndarray, *, like: np.ndarray) -> np.ndarray:
+    """:func:`interpolated_std` (N, 3) float32, spilled like the path ``like`` (then computed
+    window by window: a window's rows are the same bits, ``t`` increasing)."""
+    if not spill.spilled(like):
+        return interpolated_std(t, t0, var0, tg, var_prior, var_post)
+    out = spill.like(like, t.shape[0], (3,), np.float32)
+    for a, b in spill.windows(t.shape[0], out):
+        out[a:b] = interpolated_std(t[a:b], t0, var0, tg, var_prior, var_post)
+    return out
 
 
 @njit(cache=True)
@@ -132,11 +148,13 @@ def body_rate(t: np.ndarray, path: np.ndarray, gyro: np.ndarray, bias_t: np.ndar
     before each time (``bias_t`` (M,) s, ``bias_gyro`` (M, 3)), ``bias0`` before the first fix;
     the attitude ``C_nb``, velocity and position from the recorded ``path`` rows (N, 10: q_nb,
     vel_enu, lat rad, lon rad, h m; read before :func:`solution_from_path` converts them).
-    One compiled pass (:func:`_body_rate_into`): the result is the only IMU-rate array made."""
-    out = np.empty((path.shape[0], 3))
-    _body_rate_into(out, np.asarray(t, dtype=float), path, np.asarray(gyro, dtype=float),
-                    np.asarray(bias_t, dtype=float), np.asarray(bias_gyro, dtype=float),
-                    np.asarray(bias0, dtype=float))
+    One compiled pass (:func:`_body_rate_into`): the result is the only IMU-rate array made
+    (spilled like ``path``, and then made window by window)."""
+    out = spill.like(path, path.shape[0], (3,), np.float64)
+    t, gyro = np.asarray(t, dtype=float), np.asarray(gyro, dtype=float)
+    bias_t, bias_gyro, bias0 = (np.asarray(a, dtype=float) for a in (bias_t, bias_gyro, bias0))
+    for a, b in spill.windows(path.shape[0], path, out):
+        _body_rate_into(out[a:b], t[a:b], path[a:b], gyro[a:b], bias_t, bias_gyro, bias0)
     return out
 
 
@@ -169,7 +187,8 @@ def solution_from_path(t: np.ndarray, path: np.ndarray, std_enu: np.ndarray, t0_
     """Recorded rows (N, 10: q_nb, vel_enu, lat, lon, h) -> :class:`Solution`, converting ``path``
     IN PLACE: the solution's arrays are views of it, so an hour at 125 Hz costs no second copy.
     ``std_att`` (rad), ``std_vel_enu`` (m/s), ``rate_body`` (rad/s): see :class:`Solution`."""
-    path_to_output_columns(path)
+    for a, b in spill.windows(path.shape[0], path):
+        path_to_output_columns(path[a:b])
     return Solution(t=np.asarray(t, dtype=float), lat_deg=path[:, 7], lon_deg=path[:, 8], alt=path[:, 9],
                     vel_enu=path[:, 4:7], rph_deg=path[:, 0:3], std_enu=std_enu, t0_ns=t0_ns, std_att=std_att,
                     std_vel_enu=std_vel_enu, rate_body=rate_body)

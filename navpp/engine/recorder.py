@@ -20,6 +20,7 @@ from ..filters.base import GaussianState, Prediction, Update
 from ..filters.smoother import DEFAULT_BUDGET_BYTES, ForwardStore
 from ..ins.model import ATT, BA, BG, POS, VEL
 from ..ins.strapdown import NOMINAL_BA, NOMINAL_BG, PATH_SIZE
+from ..spill import full_rows, release_before
 from .loop import EpochOutcome
 from .results import BiasHistory, Diagnostics
 from .schedule import Epoch, GnssFixes
@@ -40,10 +41,19 @@ assert (NOMINAL_BG.stop, BG.stop) == (NOMINAL_BA.start, BA.start)
 ProgressFn = Callable[[float], None]   # called with the fraction done, 0..1
 
 
-def new_path(n_samples: int) -> np.ndarray:
+#: bytes per IMU sample of a run's output: the (N, PATH_SIZE) float64 path, the float32 position,
+#: velocity and attitude 1-sigma (N, 3) each, the float64 body rate (N, 3)
+OUTPUT_ROW_BYTES = PATH_SIZE * 8 + 3 * 3 * 4 + 3 * 8
+
+
+def new_path(n_samples: int, budget_bytes: int | None = None) -> np.ndarray:
     """The IMU-rate nominal path of a run: (N, PATH_SIZE) rows ``(q_nb, vel_enu, lat, lon, h)``,
-    NaN until written (:class:`~navpp.ins.model.InsModel` writes it while propagating)."""
-    return np.full((n_samples, PATH_SIZE), np.nan)
+    NaN until written (:class:`~navpp.ins.model.InsModel` writes it while propagating); on a
+    spill file (:mod:`navpp.spill`, and the output arrays made from it with it) when the
+    run's IMU-rate output, :data:`OUTPUT_ROW_BYTES` per sample, exceeds
+    ``budget_bytes`` (``[output] memory``; None: never)."""
+    spill = budget_bytes is not None and n_samples * OUTPUT_ROW_BYTES > budget_bytes
+    return full_rows(n_samples, (PATH_SIZE,), np.nan, spill)
 
 
 class RunRecorder:
@@ -145,6 +155,7 @@ class RunRecorder:
             self.store.updated(outcome.prior_used, state, outcome.reset)
         if outcome.applied and epoch.sample >= 0:
             self.path[epoch.sample] = state.x[:self.n_path]     # the epoch's own sample shows the posterior
+        release_before(self.path, epoch.sample)      # rows before the epoch are final
         self.knot(state, outcome.prior)
         k = epoch.fix
         if k >= 0:

@@ -45,7 +45,7 @@ from .gnss_error import (
 from .loop import run_epochs
 from .measurements import RunMeasurements, recovery_reopening
 from .mounting import first_pass_filter, vehicle_mounting
-from .output import body_rate, compile_seconds, interpolated_std, smoothed_run, solution_from_path
+from .output import body_rate, compile_seconds, interpolated_std_rows, smoothed_run, solution_from_path
 from .prepare import (
     alignment_settings,
     averaged_start,
@@ -229,7 +229,7 @@ def prepared(recording: Recording, config: Config, cov_step_s: float, log: Journ
     log.notes += cal_notes
     log.warnings += cal_warnings
     profile = cal.profile if (cal is not None and config.auto.noise) else None
-    path = new_path(imu.t.shape[0])
+    path = new_path(imu.t.shape[0], config.output.memory)
     model = InsModel(imu.t, gyro, accel, noise_model(config, noise), cov_step_s=cov_step_s, path=path,
                      profile=profile)
     try:
@@ -381,9 +381,9 @@ def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared,
         smoothed = smoothed_output(recorder, prep.model if fmodel is None else fmodel, t_out, path, fixes.t,
                                    recording.t0_ns, gyro)
     kt, k_prior, k_post = recorder.knot_arrays_all()
-    std_out = {name: interpolated_std(t_out, kt[0], np.ascontiguousarray(k_post[0, j:j + 3]), kt[1:],
-                                      np.ascontiguousarray(k_prior[1:, j:j + 3]),
-                                      np.ascontiguousarray(k_post[1:, j:j + 3]))
+    std_out = {name: interpolated_std_rows(t_out, kt[0], np.ascontiguousarray(k_post[0, j:j + 3]), kt[1:],
+                                           np.ascontiguousarray(k_prior[1:, j:j + 3]),
+                                           np.ascontiguousarray(k_post[1:, j:j + 3]), like=path)
                for name, j in (("att", 0), ("vel", 3), ("pos", 6))}      # the KNOT layout of the recorder
     rate = body_rate(t_out, path, gyro, fixes.t, recorder.bias[:, :3], al.x[NOMINAL_BG])
     solution = solution_from_path(t_out, path, std_out["pos"], recording.t0_ns, std_att=std_out["att"],

@@ -28,6 +28,7 @@ from typing import IO, Any
 import numpy as np
 
 from navpp.recording import Solution
+from navpp.spill import release
 
 __all__ = [
     "TRAJECTORY_COLUMNS",
@@ -330,6 +331,7 @@ def write_trajectory_csv(path: str | os.PathLike[str], sol: Solution, *, t0_s: f
             fields += [_field_from_values(np.asarray(c)[start:stop], d)
                        for c, d in zip(columns, TRAJECTORY_DECIMALS[1:])]
             f.write(_layout(fields, stop - start).data)
+            release(columns, start, stop)      # the rows written leave memory (a spilled solution)
 
     atomic_write(path, write, mode="wb")
 

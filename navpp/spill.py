@@ -1,0 +1,143 @@
+"""IMU-rate output arrays that do not stay in memory: beyond the run's memory budget
+(``[output] memory``, ``--memory``) the path, the output 1-sigma and the body rate live in a
+file-backed mapping whose pages each sequential pass releases behind itself.
+
+The file is a temporary file in ``$TMPDIR`` (Python's :func:`tempfile.gettempdir`, as the
+smoother's :class:`~navpp.filters.smoother.ForwardStore` spills), unlinked at once (on Linux it
+never has a name): it disappears when the last array on it is freed, on an error or Ctrl-C too.
+A tmpfs ``/tmp`` is RAM: point ``TMPDIR`` at a disk directory for the spill to save memory.
+The mapping is ``MAP_SHARED``, so releasing pages (``madvise(MADV_DONTNEED)``) keeps their data
+in the file (the page cache writes it back) and a later access reads it again: a release is a
+hint about memory, never a change of the values, and a pass that touches a released row again
+gets the same bits.  Arrays not on a mapping (the budget not exceeded) are left alone by every
+function here, so the callers need no second path.
+"""
+
+from __future__ import annotations
+
+import mmap
+import tempfile
+import weakref
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+#: rows per window of a sequential pass over a spilled array (64 Ki: 5 MB of the (N, 10) path)
+WINDOW_ROWS = 1 << 16
+
+
+@dataclass
+class _Mapping:
+    """One spill file's mapping: the ``mmap`` (held here until its array is freed), the address
+    of its first byte in this process, its size in bytes, and the bytes from its start that
+    :func:`release_before` has released."""
+
+    mm: mmap.mmap
+    address: int
+    size: int
+    released: int = 0
+
+
+#: the live mappings by ``id`` of their ``mmap`` (an entry goes when the mapping's array is freed)
+_MAPPINGS: dict[int, _Mapping] = {}
+
+
+def empty_rows(n_rows: int, row_shape: tuple[int, ...], dtype: Any, spill: bool) -> np.ndarray:
+    """An uninitialised (n_rows, *row_shape) array: in memory, or with ``spill`` on a mapping of
+    an unlinked temporary file in ``$TMPDIR`` (see the module docstring)."""
+    shape = (int(n_rows), *row_shape)
+    dt = np.dtype(dtype)
+    nbytes = int(np.prod(shape, dtype=np.int64)) * dt.itemsize
+    if not spill or nbytes == 0:
+        return np.empty(shape, dt)
+    with tempfile.TemporaryFile(prefix="navpp-output-") as f:   # the mapping keeps the file alive
+        f.truncate(nbytes)
+        mm = mmap.mmap(f.fileno(), nbytes, flags=mmap.MAP_SHARED, prot=mmap.PROT_READ | mmap.PROT_WRITE)
+    root = np.frombuffer(mm, np.uint8)            # every view's base: its end frees the entry
+    _MAPPINGS[id(mm)] = _Mapping(mm, root.ctypes.data, nbytes)
+    weakref.finalize(root, _MAPPINGS.pop, id(mm), None)
+    out: np.ndarray = root.view(dt).reshape(shape)
+    return out
+
+
+def like(rows: np.ndarray, n_rows: int, row_shape: tuple[int, ...], dtype: Any) -> np.ndarray:
+    """:func:`empty_rows` spilled if and only if ``rows`` is (the outputs of a pass follow its input)."""
+    return empty_rows(n_rows, row_shape, dtype, spilled(rows))
+
+
+def _mapping(a: np.ndarray) -> _Mapping | None:
+    """The mapping ``a`` (or the array it is a view of) lives on; None: it is in memory."""
+    base: Any = a
+    while isinstance(base, np.ndarray):
+        base = base.base
+    if isinstance(base, memoryview):           # np.frombuffer's base: a view of the mmap
+        base = base.obj
+    m = _MAPPINGS.get(id(base)) if isinstance(base, mmap.mmap) else None
+    return m if m is not None and m.mm is base else None
+
+
+def spilled(a: np.ndarray | None) -> bool:
+    """Whether ``a`` lives on a spill mapping."""
+    return a is not None and _mapping(a) is not None
+
+
+def release(arrays: Iterable[np.ndarray | None], start: int, stop: int) -> None:
+    """Release the pages of rows ``start:stop`` of each spilled array in ``arrays`` (views of a
+    spilled array included; the others are skipped): the pages holding the rows' bytes leave
+    the process's memory and their data stays in the file (a page the rows share with a
+    neighbour goes too: the neighbour's next access reads it back)."""
+    for a in arrays:
+        m = None if a is None or stop <= start else _mapping(a)
+        if m is None:
+            continue
+        assert a is not None
+        first = a.__array_interface__["data"][0] - m.address + start * a.strides[0]
+        end = min(first + (stop - start) * a.strides[0], m.size)
+        first = max(first, 0) // mmap.PAGESIZE * mmap.PAGESIZE
+        end = -(-end // mmap.PAGESIZE) * mmap.PAGESIZE
+        if end > first:
+            m.mm.madvise(mmap.MADV_DONTNEED, first, end - first)
+
+
+def release_before(a: np.ndarray, row: int) -> None:
+    """Release the rows of a spilled ``a`` before ``row`` once they make a window's worth of bytes
+    more than the last release (cheap to call per GNSS epoch from a loop writing ``a`` in order)."""
+    m = _mapping(a)
+    if m is None or row * a.strides[0] - m.released < WINDOW_ROWS * a.strides[0]:
+        return
+    end = (a.__array_interface__["data"][0] - m.address + row * a.strides[0]) // mmap.PAGESIZE * mmap.PAGESIZE
+    if end > m.released:
+        m.mm.madvise(mmap.MADV_DONTNEED, m.released, end - m.released)
+        m.released = end
+
+
+def windows(n_rows: int, *arrays: np.ndarray | None) -> Iterator[tuple[int, int]]:
+    """``(start, stop)`` windows of :data:`WINDOW_ROWS` rows over ``n_rows`` rows, one window for an
+    array in memory; after each window the rows of the spilled ``arrays`` are released."""
+    step = WINDOW_ROWS if any(spilled(a) for a in arrays) else max(n_rows, 1)
+    for start in range(0, n_rows, step):
+        stop = min(n_rows, start + step)
+        yield start, stop
+        release(arrays, start, stop)
+
+
+def full_rows(n_rows: int, row_shape: tuple[int, ...], value: float, spill: bool) -> np.ndarray:
+    """:func:`empty_rows` (float64) filled with ``value``, window by window when spilled."""
+    out = empty_rows(n_rows, row_shape, np.float64, spill)
+    for a, b in windows(n_rows, out):
+        out[a:b] = value
+    return out
+
+
+def copy_rows(rows: np.ndarray) -> np.ndarray:
+    """A copy of ``rows``, spilled like it, copied window by window."""
+    out = like(rows, rows.shape[0], rows.shape[1:], rows.dtype)
+    for a, b in windows(rows.shape[0], rows, out):
+        out[a:b] = rows[a:b]
+    return out
+
+
+__all__ = ["WINDOW_ROWS", "copy_rows", "empty_rows", "full_rows", "like", "release", "release_before", "spilled",
+           "windows"]

@@ -1,0 +1,202 @@
+"""Issue 21 point 1: the IMU-rate output beyond ``[output] memory`` on an unlinked temporary
+file whose pages each pass releases behind itself (:mod:`navpp.spill`): the same bits as in
+memory, the pages out of the process, and the file gone afterwards, after an error too."""
+
+from __future__ import annotations
+
+import gc
+import tempfile
+from dataclasses import fields, replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from navpp import api, spill
+from navpp.engine import output
+from navpp.engine.recorder import OUTPUT_ROW_BYTES, new_path
+from navpp.recording import Solution
+
+DRIVE = Path(__file__).resolve().parents[1] / "sample_data" / "drive"
+
+
+@pytest.fixture
+def spill_dir(tmp_path, monkeypatch):
+    """The spill files' directory (``$TMPDIR``) for the test, and small windows (several per array)."""
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    monkeypatch.setattr(spill, "WINDOW_ROWS", 1000)
+    return tmp_path
+
+
+def _mapped(directory: Path) -> list[str]:
+    """This process's mappings of files in ``directory`` (unlinked ones included)."""
+    with open("/proc/self/maps", encoding="ascii", errors="replace") as f:
+        return [line for line in f if str(directory) in line]
+
+
+def _rss_kb(a: np.ndarray) -> int:
+    """Resident kB of the mapping ``a`` lives on (/proc/self/smaps)."""
+    start = spill._mapping(a).address
+    with open("/proc/self/smaps", encoding="ascii", errors="replace") as f:
+        inside = False
+        for line in f:
+            if "-" in line.split(" ", 1)[0] and not line.startswith(("Rss", "Size")):
+                lo = int(line.split("-", 1)[0], 16)
+                inside = lo == start
+            elif inside and line.startswith("Rss:"):
+                return int(line.split()[1])
+    raise AssertionError("mapping not found")
+
+
+def test_spilled_rows_keep_their_values_after_release(spill_dir):
+    a = spill.empty_rows(100_000, (10,), np.float64, spill=True)
+    assert spill.spilled(a) and spill.spilled(a[5:, 7]) and not spill.spilled(np.empty(3))
+    assert len(_mapped(spill_dir)) == 1 and not list(spill_dir.iterdir())    # unlinked at once
+    values = np.arange(a.size, dtype=float).reshape(a.shape)
+    a[:] = values
+    assert _rss_kb(a) >= a.nbytes // 1024 - 4
+    spill.release([a[:, 3]], 0, a.shape[0])                 # a column view releases its rows
+    assert _rss_kb(a) <= 8
+    assert np.array_equal(a, values)                         # read back from the file
+    del a
+    gc.collect()
+    assert not _mapped(spill_dir)
+
+
+def test_release_before_follows_a_writer_by_windows(spill_dir):
+    a = spill.full_rows(50_000, (10,), np.nan, spill=True)
+    assert _rss_kb(a) <= 8 and np.isnan(a).all()           # filled window by window
+    spill.release([a], 0, a.shape[0])
+    for i in range(a.shape[0]):
+        a[i] = i
+        spill.release_before(a, i)
+    assert _rss_kb(a) <= (spill.WINDOW_ROWS * 80) // 1024 + 8
+    assert np.array_equal(a[:, 0], np.arange(a.shape[0], dtype=float))
+
+
+def test_new_path_spills_beyond_the_budget(spill_dir):
+    assert not spill.spilled(new_path(1000))
+    assert not spill.spilled(new_path(1000, 1000 * OUTPUT_ROW_BYTES))
+    p = new_path(1000, 1000 * OUTPUT_ROW_BYTES - 1)
+    assert spill.spilled(p) and p.shape == (1000, 10) and np.isnan(p).all()
+
+
+def test_output_steps_give_the_same_bits_spilled(spill_dir):
+    rng = np.random.default_rng(3)
+    n = 5_500
+    t = np.sort(rng.uniform(0, 100, n))
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    rows = np.column_stack([q, rng.normal(0, 20, (n, 3)), np.radians(rng.uniform(-80, 80, n)),
+                            np.radians(rng.uniform(-180, 180, n)), rng.normal(300, 50, n)])
+    kept = new_path(n, 1)
+    kept[:] = rows
+    assert spill.spilled(kept)
+    tg = np.sort(rng.uniform(0, 100, 40))
+    var_prior, var_post = rng.uniform(1, 4, (40, 3)), rng.uniform(0.1, 1, (40, 3))
+    std = output.interpolated_std_rows(t, -1.0, np.ones(3), tg, var_prior, var_post, like=kept)
+    assert spill.spilled(std)
+    assert np.array_equal(std, output.interpolated_std(t, -1.0, np.ones(3), tg, var_prior, var_post))
+    gyro, bg = rng.normal(0, 0.1, (n, 3)), rng.normal(0, 1e-3, (40, 3))
+    rate = output.body_rate(t, kept, gyro, tg, bg, np.zeros(3))
+    assert spill.spilled(rate) and np.array_equal(rate, output.body_rate(t, rows, gyro, tg, bg, np.zeros(3)))
+    a = output.solution_from_path(t, kept, std, 0)
+    b = output.solution_from_path(t, rows.copy(), std, 0)
+    assert np.array_equal(a.rph_deg, b.rph_deg, equal_nan=True) and np.array_equal(a.lat_deg, b.lat_deg)
+
+
+def _arrays(sol: Solution) -> dict[str, np.ndarray]:
+    return {f.name: np.array(getattr(sol, f.name)) for f in fields(sol)
+            if isinstance(getattr(sol, f.name), np.ndarray)}
+
+
+@pytest.mark.parametrize("smooth", [False, True])
+def test_a_spilled_run_writes_the_same_bytes(spill_dir, tmp_path_factory, smooth):
+    cfg = api.resolve_config(DRIVE, None)
+    outs = {}
+    for budget in (1 << 30, 1):
+        out = tmp_path_factory.mktemp(f"out{budget}")
+        res = api.process(DRIVE, config=replace(cfg, output=replace(cfg.output, memory=budget)), out_dir=out,
+                          write=True, smooth=smooth)
+        assert spill.spilled(res.run.solution.lat_deg) == (budget == 1)
+        outs[budget] = (out, _arrays(res.solution))
+        del res
+    gc.collect()
+    assert not _mapped(spill_dir) and not list(spill_dir.iterdir())
+    (d0, a0), (d1, a1) = outs[1 << 30], outs[1]
+    assert a0.keys() == a1.keys() and all(np.array_equal(a0[k], a1[k], equal_nan=True) for k in a0)
+    for f in ("trajectory.csv", "trajectory_forward.csv") if smooth else ("trajectory.csv",):
+        assert (d0 / f).read_bytes() == (d1 / f).read_bytes()
+
+
+def test_the_spill_file_goes_on_an_interrupt(spill_dir):
+    from navpp import engine
+
+    cfg = api.resolve_config(DRIVE, None)
+    cfg = replace(cfg, output=replace(cfg.output, memory=1))
+    rec = api.read_log(DRIVE, cfg)
+    seen = []
+
+    def interrupt(done: float) -> None:
+        if done > 0.5:
+            seen.append(len(_mapped(spill_dir)))
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        engine.run(rec, cfg, api.make_filter("ekf", cfg), progress=interrupt)
+    gc.collect()
+    assert seen == [1] and not _mapped(spill_dir) and not list(spill_dir.iterdir())
+
+
+def _spilled_copy(a: np.ndarray) -> np.ndarray:
+    out = spill.empty_rows(a.shape[0], a.shape[1:], a.dtype, spill=True)
+    out[:] = a
+    return out
+
+
+def test_plausibility_and_metrics_windows_give_the_whole_arrays_findings(spill_dir):
+    from navpp import metrics
+    from navpp import plausibility as pl
+
+    n = 5_500
+    t = np.arange(n) * 0.01
+    alt = np.full(n, 300.0)
+    vel = np.zeros((n, 3))
+    vel[:, 0] = 20.0
+    std = np.ones((n, 3), np.float32)
+    fix_alt, fix_su = np.full(10, 300.0), np.full(10, 2.5)
+    low, fast, nan_vel, bad = alt.copy(), vel.copy(), vel.copy(), std.copy()
+    low[2500:] = -15865.0
+    low[4200] = -20000.0                         # the farthest, in a later window
+    fast[1700:, 1] = 3e5
+    fast[3300, 1] = 4e5
+    nan_vel[1200, 0] = np.nan
+    bad[4100, 2] = np.inf
+    for a, v, s in ((alt, vel, std), (low, vel, std), (alt, fast, std), (alt, nan_vel, std), (alt, fast, bad)):
+        for vehicle in ("car", "none"):
+            whole = pl.solution_findings("ekf", vehicle, t, a, v, s, fix_alt, fix_su, 0.9999)
+            windowed = pl.solution_findings("ekf", vehicle, t, _spilled_copy(a), _spilled_copy(v), _spilled_copy(s),
+                                            fix_alt, fix_su, 0.9999)
+            assert windowed == whole
+    (f,) = pl.solution_findings("ekf", "car", t, low, vel, std, fix_alt, fix_su, 0.9999)
+    assert "reaching -2e+04 m" in f.headline
+    t_ref = np.linspace(-1.0, t[-1] + 1.0, 3001)
+    for y in (low, fast, std):
+        br = metrics._Bracket.of(t, t_ref)
+        assert np.array_equal(br.linear(_spilled_copy(y)), br.linear(y))
+    assert np.array_equal(br.angle_deg(_spilled_copy(low)), br.angle_deg(low))
+
+
+def test_resampling_a_spilled_solution_gives_the_same_bits(spill_dir):
+    rng = np.random.default_rng(5)
+    n = 5_500
+    cols = {"lat_deg": 45 + rng.normal(0, 1e-4, n), "lon_deg": 7 + rng.normal(0, 1e-4, n),
+            "alt": rng.normal(300, 1, n), "vel_enu": rng.normal(0, 5, (n, 3)),
+            "rph_deg": rng.uniform(0, 360, (n, 3)), "std_enu": rng.uniform(0, 2, (n, 3)).astype(np.float32),
+            "std_att": rng.uniform(0, 1, (n, 3)).astype(np.float32),
+            "std_vel_enu": rng.uniform(0, 1, (n, 3)).astype(np.float32), "rate_body": rng.normal(0, 0.1, (n, 3))}
+    t = np.arange(n) * 0.008
+    kept = Solution(t=t, t0_ns=1_700_000_000_003_000_000, **cols)
+    spilled = Solution(t=t, t0_ns=kept.t0_ns, **{k: _spilled_copy(v) for k, v in cols.items()})
+    a, b = api.resample_solution(kept, 10.0), api.resample_solution(spilled, 10.0)
+    assert all(np.array_equal(v, _arrays(b)[k]) for k, v in _arrays(a).items())
