@@ -413,9 +413,9 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         smoothed 1-sigma), ``trajectory_forward.csv`` (with ``csv``) and the MCAP's
         ``/navpp/forward/*`` topics the forward one, and the metrics show both.  Overrides
         ``[output] smooth``; None uses it (default off).
-    memory : memory the smoother's stored forward run may hold before it spills to a temporary
-        file, bytes or text (``"500MB"``, ``"1GB"``, ``"2G"``); overrides ``[output] memory``
-        (default 1 GB); None uses it.
+    memory : memory the smoother's stored forward run and the IMU-rate output may each hold
+        before they spill to a temporary file in ``$TMPDIR``, bytes or text (``"500MB"``, ``"1GB"``,
+        ``"2G"``); overrides ``[output] memory`` (default 128 MB); None uses it.
     plot : also write the run's figures beside the outputs (:mod:`navpp.plots`: the error per
         axis with its +-3-sigma band, the trajectory, the adaptive noise, an HTML overview map);
         ignored with ``write=False``.

@@ -227,9 +227,9 @@ def process(
         "the metrics show both.  "
         "[default: [output] smooth, else off]", show_default=False)] = None,
     memory: Annotated[str | None, typer.Option(
-        "--memory", metavar="SIZE", help="Memory the smoother's stored forward run may hold (500MB, 1GB, 2G; "
-        "binary units); beyond it the stored blocks go to a temporary file, deleted at the end.  "
-        "[default: [output] memory, else 1GB]", show_default=False)] = None,
+        "--memory", metavar="SIZE", help="Memory the smoother's stored forward run and the IMU-rate output may each "
+        "hold (500MB, 1GB, 2G; binary units); beyond it they go to a temporary file in $TMPDIR, deleted at the end.  "
+        "[default: [output] memory, else 128MB]", show_default=False)] = None,
     plot: Annotated[bool, typer.Option(
         "--plot", help="Also write figures beside the outputs: <log>_<filter>_errors.png (error per axis with the "
                        "±3σ band, outages, rejected fixes; without a reference <log>_<filter>_innovations.png), "
@@ -317,8 +317,8 @@ def compare(
         "--smooth", help="Also smooth every run backwards (Rauch-Tung-Striebel): a second row per filter, "
                          "<filter>+rts, beside the forward one.")] = False,
     memory: Annotated[str | None, typer.Option(
-        "--memory", metavar="SIZE", help="Memory each run's smoother store may hold (500MB, 1GB, 2G; binary "
-        "units); beyond it the stored blocks go to a temporary file.  [default: [output] memory, else 1GB]",
+        "--memory", metavar="SIZE", help="Memory each run's smoother store and IMU-rate output may each hold (500MB, 1GB, "
+        "2G; binary units); beyond it they go to a temporary file in $TMPDIR.  [default: [output] memory, else 128MB]",
         show_default=False)] = None,
     executor: Annotated[str, typer.Option(
         "--executor", help="Where the runs go: local (this machine, --jobs processes) or dask (a Dask cluster: "

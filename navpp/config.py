@@ -693,17 +693,20 @@ class OutputConfig:
         the written trajectory is the smoothed one, the forward one is kept beside it
         (``trajectory_forward.csv``, ``trajectory_forward.tum``, the MCAP's forward topics, by
         the formats written) and the metrics show both; ``--smooth`` turns it on.
-    memory : int bytes, > 0, default 1 GiB; TOML may give ``"500MB"``, ``"1GB"``, ``"2G"``
-        (:func:`parse_memory`).  Memory the smoother's stored forward run may hold; beyond
-        it the stored blocks go to a temporary file (deleted at the end) and are read back by
-        the backward pass (:class:`navpp.filters.smoother.ForwardStore`); ``--memory``
-        overrides it.
+    memory : int bytes, > 0, default 128 MiB; TOML may give ``"500MB"``, ``"1GB"``, ``"2G"``
+        (:func:`parse_memory`).  Memory each of a run's long stores may hold: the smoother's
+        stored forward run (beyond it the stored blocks go to a temporary file, deleted at the
+        end, and are read back by the backward pass: :class:`navpp.filters.smoother.ForwardStore`)
+        and the IMU-rate output, 140 bytes per IMU sample (beyond it the path, its 1-sigma and
+        body rate live on a mapped temporary file whose pages every pass releases behind it:
+        :mod:`navpp.spill`).  Both are in ``$TMPDIR`` and give the same bits as in memory;
+        ``--memory`` overrides it.
     """
 
     rate_hz: float | None = None
     formats: tuple[str, ...] = ("csv",)
     smooth: bool = False
-    memory: int = 1 << 30
+    memory: int = 128 << 20
 
     def __post_init__(self) -> None:
         _fix_optional_float(self, "output", "rate_hz", minimum=0.0, strict_min=True)

@@ -179,8 +179,8 @@ def compare(logs: Sequence[str | Path], filters: Sequence[str], *, config: str |
         rows, the forward filter's (``runtime_s`` its own time) and ``"<filter>+rts"`` (the
         smoothed solution; ``runtime_s`` forward plus smoothing), side by side in the summary,
         the report and its plots.
-    memory : memory each run's smoother store may hold before it spills to a temporary file
-        (``"500MB"``, ``"1GB"``, bytes); overrides ``[output] memory``; None uses it.
+    memory : memory each run's smoother store and IMU-rate output may each hold before they spill
+        to a temporary file (``"500MB"``, ``"1GB"``, bytes); overrides ``[output] memory``; None uses it.
     time_limit_s : the watchdog: a run (reading its log included) that takes longer than this
         many seconds per 100,000 IMU samples (at least :data:`WATCHDOG_MIN_S`) is stopped and
         becomes a failed row naming the log; the other runs go on.  0 turns it off.  Local runs

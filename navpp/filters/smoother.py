@@ -52,7 +52,7 @@ from .states import GaussianState, Prediction
 #: nodes per block of the store: the unit in which it grows, spills and is smoothed
 BLOCK_NODES = 4096
 #: bytes of blocks the store keeps in memory before it spills full ones to a temporary file
-DEFAULT_BUDGET_BYTES = 1 << 30
+DEFAULT_BUDGET_BYTES = 128 << 20
 
 
 @dataclass
