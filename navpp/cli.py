@@ -317,8 +317,9 @@ def compare(
         "--smooth", help="Also smooth every run backwards (Rauch-Tung-Striebel): a second row per filter, "
                          "<filter>+rts, beside the forward one.")] = False,
     memory: Annotated[str | None, typer.Option(
-        "--memory", metavar="SIZE", help="Memory each run's smoother store and IMU-rate output may each hold (500MB, 1GB, "
-        "2G; binary units); beyond it they go to a temporary file in $TMPDIR.  [default: [output] memory, else 128MB]",
+        "--memory", metavar="SIZE", help="Memory each run's smoother store and IMU-rate output may each hold "
+        "(500MB, 1GB, 2G; binary units); beyond it they go to a temporary file in $TMPDIR.  "
+        "[default: [output] memory, else 128MB]",
         show_default=False)] = None,
     executor: Annotated[str, typer.Option(
         "--executor", help="Where the runs go: local (this machine, --jobs processes) or dask (a Dask cluster: "
