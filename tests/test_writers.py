@@ -172,7 +172,7 @@ def test_trajectory_csv_failure_keeps_previous_file(tmp_path, monkeypatch):
     def broken(*args, **kwargs):
         raise MemoryError("simulated")
 
-    monkeypatch.setattr(w, "_layout", broken)
+    monkeypatch.setattr(w, "_block_text", broken)
     with pytest.raises(MemoryError):
         write_trajectory_csv(path, _random_solution(10), t0_s=0.0)
     assert os.listdir(tmp_path) == ["trajectory.csv"]

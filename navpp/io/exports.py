@@ -303,6 +303,8 @@ def _write_tum_rows(path: str | os.PathLike[str], sol: Solution, anchor: frames.
     ]
     text_header = ("\n".join(header) + "\n").encode("utf-8")
     n = len(sol)
+    decimals = (6, *[_POSITION_DECIMALS] * 3, *[_QUATERNION_DECIMALS] * 4)
+    formatter = writers._block_formatter(decimals, t0_s, sep=b" ")
 
     def write(f: IO[bytes]) -> None:
         f.write(text_header)
@@ -315,10 +317,8 @@ def _write_tum_rows(path: str | os.PathLike[str], sol: Solution, anchor: frames.
             else:
                 q = np.zeros((stop - start, 4))
                 q[:, 3] = 1.0
-            fields = [writers._time_field(part.t, t0_s)]
-            fields += [writers._field_from_values(xyz[:, i], _POSITION_DECIMALS) for i in range(3)]
-            fields += [writers._field_from_values(q[:, i], _QUATERNION_DECIMALS) for i in range(4)]
-            f.write(writers._layout(fields, stop - start).tobytes().replace(b",", b" "))
+            block = [np.asarray(part.t), *xyz.T, *q.T]
+            f.write(writers._block_text(formatter, block, decimals, t0_s, sep=b" "))
 
     writers.atomic_write(path, write, mode="wb")
 

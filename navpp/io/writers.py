@@ -5,11 +5,12 @@ target directory, are flushed to disk, and the temporary file is renamed over th
 when complete, so a failed or interrupted run never leaves a half-written file that looks
 finished.
 
-``trajectory.csv`` is formatted by a vectorised fixed-point formatter (:func:`format_fixed_columns`)
-rather than ``pandas.to_csv`` or ``numpy.savetxt``, which format value by value (README, "Speed",
-has the times).  Its text is identical to Python's ``format(x, ".Nf")`` for every
-value (correct rounding of the exact binary value, ties to even, ``"nan"``, ``"inf"``,
-``"-inf"``, and ``"-0.0000"`` for negative values that round to zero, as C's ``printf`` and
+``trajectory.csv`` is formatted block by block by a compiled fixed-point formatter
+(:mod:`navpp.io.csvformat`; a block holding a value too large for it by the vectorised exact
+formatter here, :func:`_layout`) rather than ``pandas.to_csv`` or ``numpy.savetxt``, which format
+value by value (README, "Speed", has the times).  Both write the text of Python's
+``format(x, ".Nf")`` for every value (correct rounding of the exact binary value, ties to even,
+``"nan"``, ``"inf"``, ``"-inf"``, and ``"-0.0000"`` for negative values that round to zero, as C's ``printf`` and
 pandas also write them).  The one exception is the ``t`` column, which is computed more
 precisely than ``format(t0_s + t, ".6f")`` would (see :func:`write_trajectory_csv`).
 """
@@ -222,11 +223,11 @@ def _special_text(v: np.ndarray, decimals: int) -> np.ndarray:
 _DIGITS = np.frombuffer(b"0123456789", dtype=np.uint8)
 
 
-def _layout(fields: Sequence[_Field], n: int) -> np.ndarray:
+def _layout(fields: Sequence[_Field], n: int, sep: bytes = b",") -> np.ndarray:
     """Lay the fields out in a zero-padded (n, width) byte buffer and squeeze out the padding.
 
-    Each field is ``[sign][integer digits, right-aligned]['.'][fraction][',' or '\\n']``;
-    unused positions stay 0 and are dropped, so the result is the CSV text of the n rows.
+    Each field is ``[sign][integer digits, right-aligned]['.'][fraction][sep or '\\n']``;
+    unused positions stay 0 and are dropped, so the result is the text of the n rows.
     """
     total = sum(f.width for f in fields)
     buf = np.zeros((n, total), dtype=np.uint8)
@@ -253,7 +254,7 @@ def _layout(fields: Sequence[_Field], n: int) -> np.ndarray:
             k = f.special_text.dtype.itemsize
             buf[f.special_rows, c0:c0 + f.width - 1] = 0
             buf[f.special_rows, c0:c0 + k] = f.special_text.view(np.uint8).reshape(-1, k)
-        buf[:, c0 + f.width - 1] = ord("\n") if j == len(fields) - 1 else ord(",")
+        buf[:, c0 + f.width - 1] = ord("\n") if j == len(fields) - 1 else ord(sep)
         c0 += f.width
     return buf[buf != 0]
 
@@ -262,17 +263,37 @@ def format_fixed_columns(columns: Sequence[np.ndarray], decimals: Sequence[int])
     """CSV text (no header) of equal-length float columns with fixed decimals per column.
 
     Every value is written exactly as ``format(v, f".{d}f")`` writes it (see the module
-    docstring); rows end with ``"\\n"``.  Vectorised: no Python loop over rows.
+    docstring); rows end with ``"\\n"``.  Compiled (:mod:`navpp.io.csvformat`), block by block.
     """
     if len(columns) != len(decimals) or not columns:
         raise ValueError("format_fixed_columns needs one decimals entry per column")
-    n = int(np.shape(columns[0])[0])
-    parts: list[bytes] = []
-    for start in range(0, n, _CHUNK_ROWS):
-        stop = min(n, start + _CHUNK_ROWS)
-        fields = [_field_from_values(np.asarray(c)[start:stop], d) for c, d in zip(columns, decimals)]
-        parts.append(_layout(fields, stop - start).tobytes())
-    return b"".join(parts)
+    columns = [np.asarray(c) for c in columns]
+    formatter = _block_formatter(decimals, None)
+    n = int(columns[0].shape[0])
+    return b"".join(bytes(_block_text(formatter, [c[start:start + _CHUNK_ROWS] for c in columns], decimals, None))
+                    for start in range(0, n, _CHUNK_ROWS))
+
+
+def _block_formatter(decimals: Sequence[int], t0_s: float | None, sep: bytes = b",") -> Any:
+    """The compiled formatter of rows of these columns (:class:`navpp.io.csvformat.BlockFormatter`;
+    imported here, so that importing the writers does not load numba)."""
+    from .csvformat import BlockFormatter
+
+    return BlockFormatter(decimals, t0_s=t0_s, sep=sep)
+
+
+def _block_text(formatter: Any, block: Sequence[np.ndarray], decimals: Sequence[int], t0_s: float | None,
+                sep: bytes = b",") -> memoryview:
+    """Text of one block of rows: the compiled formatter's, or, for a block holding a value too
+    large for it (``|x| * 10**d >= 2**52``), the vectorised exact formatter's (the same text).
+    ``t0_s`` given: ``block[0]`` is time relative to it (:func:`_time_field`)."""
+    text = formatter.rows(block)
+    if text is not None:
+        return text
+    n = int(block[0].shape[0])
+    fields = [_time_field(block[0], t0_s)] if t0_s is not None else []
+    fields += [_field_from_values(c, d) for c, d in zip(block[len(fields):], decimals[len(fields):])]
+    return _layout(fields, n, sep).data
 
 
 def _time_field(t_rel: np.ndarray, t0_s: float) -> _Field:
@@ -318,18 +339,16 @@ def write_trajectory_csv(path: str | os.PathLike[str], sol: Solution, *, t0_s: f
     vel = np.asarray(sol.vel_enu).reshape(n, 3)
     rph = np.asarray(sol.rph_deg).reshape(n, 3)
     std = np.asarray(sol.std_enu).reshape(n, 3)
-    columns = [sol.lat_deg, sol.lon_deg, sol.alt, vel[:, 0], vel[:, 1], vel[:, 2],
-               rph[:, 0], rph[:, 1], rph[:, 2], std[:, 0], std[:, 1], std[:, 2]]
+    columns = [np.asarray(c) for c in (sol.t, sol.lat_deg, sol.lon_deg, sol.alt, vel[:, 0], vel[:, 1], vel[:, 2],
+                                       rph[:, 0], rph[:, 1], rph[:, 2], std[:, 0], std[:, 1], std[:, 2])]
     header = (",".join(TRAJECTORY_COLUMNS) + "\n").encode("ascii")
+    formatter = _block_formatter(TRAJECTORY_DECIMALS, t0_s)
 
     def write(f: IO[bytes]) -> None:
         f.write(header)
         for start in range(0, n, _CHUNK_ROWS):
-            stop = min(n, start + _CHUNK_ROWS)
-            fields = [_time_field(np.asarray(sol.t)[start:stop], t0_s)]
-            fields += [_field_from_values(np.asarray(c)[start:stop], d)
-                       for c, d in zip(columns, TRAJECTORY_DECIMALS[1:])]
-            f.write(_layout(fields, stop - start).data)
+            block = [c[start:start + _CHUNK_ROWS] for c in columns]
+            f.write(_block_text(formatter, block, TRAJECTORY_DECIMALS, t0_s))
 
     atomic_write(path, write, mode="wb")
 
@@ -396,16 +415,16 @@ def write_diagnostics_csv(path: str | os.PathLike[str], diag: Any, *, t0_s: floa
     ``t`` in seconds on the log's time base (``t0_s + diag.t``).  Written atomically."""
     names, cols, decimals = diagnostics_columns(diag)
     header = (",".join(["t", *names]) + "\n").encode("ascii")
-    t = np.asarray(diag.t, dtype=np.float64)
-    n = t.shape[0]
+    columns = [np.asarray(diag.t, dtype=np.float64), *cols]
+    decimals = [6, *decimals]
+    n = columns[0].shape[0]
+    formatter = _block_formatter(decimals, t0_s)
 
     def write(f: IO[bytes]) -> None:
         f.write(header)
         for start in range(0, n, _CHUNK_ROWS):
-            stop = min(n, start + _CHUNK_ROWS)
-            fields = [_time_field(t[start:stop], t0_s)]
-            fields += [_field_from_values(c[start:stop], d) for c, d in zip(cols, decimals)]
-            f.write(_layout(fields, stop - start).data)
+            block = [c[start:start + _CHUNK_ROWS] for c in columns]
+            f.write(_block_text(formatter, block, decimals, t0_s))
 
     atomic_write(path, write, mode="wb")
 
