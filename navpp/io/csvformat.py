@@ -29,7 +29,7 @@ __all__ = ["BlockFormatter"]
 
 _MAX_DECIMALS = 18  # 10**18 < 2**63
 _INT_DIGITS = 19  # digits of the largest int64 magnitude written (the time column, < 1e12 s in us)
-_POWERS = np.array([10 ** i for i in range(_INT_DIGITS)], dtype=np.int64)
+_POWERS = np.array([10 ** i for i in range(_INT_DIGITS)], dtype=np.uint64)
 _PAIRS = np.frombuffer("".join(f"{i:02d}" for i in range(100)).encode("ascii"), dtype=np.uint8)
 
 
@@ -39,29 +39,37 @@ _product_error = njit(cache=True)(_exact_product_error)
 
 @njit(cache=True)
 def _put_text(out, pos, text):
-    for i in range(text.shape[0]):
-        out[pos + i] = text[i]
-    return pos + text.shape[0]
+    """``text`` into ``out`` from ``pos`` (uint64); returns the position after it."""
+    for c in text:
+        out[pos] = c
+        pos += np.uint64(1)
+    return pos
 
 
 @njit(cache=True)
 def _format_block(values, n, decimals, scales, offsets, sum_sign, out, sep,
                   nan_text, inf_text, neg_inf_text):
-    """Rows ``0..n-1`` of ``values`` (rows, k) float64 as text into ``out`` (uint8); returns the
-    number of bytes written, or -1 when a finite value has ``|x| * 10**d >= 2**52``.
+    """Columns ``0..n-1`` of ``values`` ((k, capacity) float64: row j holds the values of text
+    column j) as n lines of text into ``out`` (uint8); returns the number of bytes written, or -1
+    when a finite value has ``|x| * 10**d >= 2**52``.
 
-    Column j gets ``decimals[j]`` decimals (``scales[j] = 10.0**decimals[j]``); ``offsets[j]``
-    (units of ``10**-decimals[j]``) is added to the rounded value, and with ``sum_sign[j]`` the
-    sign written is the sum's (``total < 0``), else ``x``'s sign bit.  Cells are separated by
-    ``sep`` and rows end with ``"\\n"``; ``out`` must hold ``n * sum(23 + decimals)`` bytes.
+    Text column j gets ``decimals[j]`` (uint64) decimals (``scales[j] = 10.0**decimals[j]``);
+    ``offsets[j]`` (units of ``10**-decimals[j]``) is added to the rounded value, and with
+    ``sum_sign[j]`` the sign written is the sum's (``total < 0``), else ``x``'s sign bit.  Cells
+    are separated by ``sep`` and rows end with ``"\\n"``; ``out`` must hold
+    ``n * sum(23 + decimals)`` bytes.  Positions and digits are unsigned (uint64), which spares
+    the compiled code the checks and corrections of negative indices and floor division.
     """
-    k = values.shape[1]
+    k = values.shape[0]
     pairs = _PAIRS
     powers = _POWERS
-    pos = 0
+    zero, one, two, ten, hundred = np.uint64(0), np.uint64(1), np.uint64(2), np.uint64(10), np.uint64(100)
+    char0 = np.uint64(48)  # '0'
+    max_digits = np.uint64(_INT_DIGITS)
+    pos = zero
     for i in range(n):
         for j in range(k):
-            x = values[i, j]
+            x = values[j, i]
             if math.isnan(x):
                 pos = _put_text(out, pos, nan_text)
             elif math.isinf(x):
@@ -72,6 +80,7 @@ def _format_block(values, n, decimals, scales, offsets, sum_sign, out, sep,
                 if not abs(p) < _FAST_LIMIT:
                     return -1
                 low = np.floor(p)
+                # rint(p), ties to even, for |p| < 2**52
                 r = (p + _FAST_LIMIT) - _FAST_LIMIT if p >= 0.0 else (p - _FAST_LIMIT) + _FAST_LIMIT
                 if p - low == 0.5:
                     err = _product_error(x, scale, p)
@@ -81,45 +90,45 @@ def _format_block(values, n, decimals, scales, offsets, sum_sign, out, sep,
                         r = low
                 total = np.int64(r) + offsets[j]
                 neg = total < 0 if sum_sign[j] else math.copysign(1.0, x) < 0.0
-                m = -total if total < 0 else total
+                m = np.uint64(-total if total < 0 else total)
                 d = decimals[j]
-                n_digits = d + 1  # written: at least one integer digit
-                while n_digits < _INT_DIGITS and m >= powers[n_digits]:
-                    n_digits += 1
-                end = pos + (1 if neg else 0) + n_digits + (1 if d > 0 else 0)
-                # right to left, digit k of n_digits at a time: one alone when d is odd, then in
-                # pairs, which then never straddle the '.' (written when k reaches d)
+                n_digits = d + one  # written: at least one integer digit
+                while n_digits < max_digits and m >= powers[n_digits]:
+                    n_digits += one
+                end = pos + n_digits + (one if neg else zero) + (one if d > zero else zero)
+                # right to left, ``done`` digits of n_digits written: one alone when d is odd,
+                # then pairs, which then never straddle the '.' (written when done reaches d)
                 q = end
-                done = 0
-                if d & 1:
-                    m10 = m // 10
-                    out[q - 1] = 48 + (m - m10 * 10)
+                done = zero
+                if d & one:
+                    m10 = m // ten
+                    q -= one
+                    out[q] = char0 + (m - m10 * ten)
                     m = m10
-                    q -= 1
-                    done = 1
-                    if d == 1:
-                        out[q - 1] = 46  # '.'
-                        q -= 1
-                while n_digits - done >= 2:
-                    m100 = m // 100
-                    two = 2 * (m - m100 * 100)
+                    done = one
+                    if d == one:
+                        q -= one
+                        out[q] = 46  # '.'
+                while n_digits - done >= two:
+                    m100 = m // hundred
+                    pair = two * (m - m100 * hundred)
                     m = m100
-                    out[q - 2] = pairs[two]
-                    out[q - 1] = pairs[two + 1]
-                    q -= 2
-                    done += 2
+                    q -= two
+                    out[q] = pairs[pair]
+                    out[q + one] = pairs[pair + one]
+                    done += two
                     if done == d:
-                        out[q - 1] = 46  # '.'
-                        q -= 1
+                        q -= one
+                        out[q] = 46  # '.'
                 if n_digits > done:
-                    out[q - 1] = 48 + m
-                    q -= 1
+                    q -= one
+                    out[q] = char0 + m
                 if neg:
-                    out[q - 1] = 45  # '-'
+                    out[q - one] = 45  # '-'
                 pos = end
             out[pos] = sep if j < k - 1 else 10
-            pos += 1
-    return pos
+            pos += one
+    return np.int64(pos)
 
 
 _NAN = np.frombuffer(b"nan", dtype=np.uint8)
@@ -143,7 +152,7 @@ class BlockFormatter:
             raise ValueError(f"decimals must be 0..{_MAX_DECIMALS}, one per column, got {list(decimals)}")
         if t0_s is not None and decimals[0] != 6:
             raise ValueError("the time column is written with 6 decimals")
-        self.decimals = np.asarray(decimals, dtype=np.int64)
+        self.decimals = np.asarray(decimals, dtype=np.uint64)
         self.scales = np.array([10.0 ** d for d in decimals])
         self.offsets = np.zeros(len(decimals), dtype=np.int64)
         self.sum_sign = np.zeros(len(decimals), dtype=np.bool_)
@@ -154,9 +163,9 @@ class BlockFormatter:
             self.offsets[0] = t0_int * 1_000_000
             self.sum_sign[0] = True
         self.timed = t0_s is not None
-        self.sep = ord(sep)
-        self.row_bytes = int(np.sum(self.decimals + 4 + _INT_DIGITS))  # sign, digits, '.', sep
-        self.values = np.empty((0, len(decimals)))
+        self.sep = np.uint8(ord(sep))
+        self.row_bytes = sum(decimals) + len(decimals) * (4 + _INT_DIGITS)  # sign, digits, ".", sep
+        self.values = np.empty((len(decimals), 0))
         self.out = np.empty(0, dtype=np.uint8)
 
     def rows(self, columns: Sequence[np.ndarray]) -> memoryview | None:
@@ -164,14 +173,13 @@ class BlockFormatter:
         dtype, widened to float64 as they are copied in), or None when a finite value is too large
         for the kernel (``|x| * 10**d >= 2**52``).  The view is valid until the next call."""
         n = int(np.shape(columns[0])[0])
-        if n > self.values.shape[0]:
-            self.values = np.empty((n, len(self.decimals)))
+        if n > self.values.shape[1]:
+            self.values = np.empty((len(self.decimals), n))
             self.out = np.empty(n * self.row_bytes, dtype=np.uint8)
-        block = self.values[:n]
         for j, c in enumerate(columns):
-            block[:, j] = c
+            self.values[j, :n] = c
         if self.timed:
-            block[:, 0] += self.t_frac
+            self.values[0, :n] += self.t_frac
         size = _format_block(self.values, n, self.decimals, self.scales, self.offsets, self.sum_sign,
                              self.out, self.sep, _NAN, _INF, _NEG_INF)
         return None if size < 0 else memoryview(self.out)[:size]
