@@ -143,8 +143,10 @@ def _finite_rows(solution: Solution, with_attitude: bool) -> np.ndarray:
     return np.flatnonzero(ok)
 
 
-def _subset(solution: Solution, rows: np.ndarray) -> Solution:
-    if rows.size == len(solution):
+def _subset(solution: Solution, rows: np.ndarray | slice) -> Solution:
+    """The solution at ``rows``: an index array (copies; the solution itself when it takes every
+    row) or a slice (views)."""
+    if isinstance(rows, np.ndarray) and rows.size == len(solution):
         return solution
     return Solution(t=solution.t[rows], lat_deg=solution.lat_deg[rows], lon_deg=solution.lon_deg[rows],
                     alt=solution.alt[rows], vel_enu=np.asarray(solution.vel_enu)[rows],
@@ -310,7 +312,7 @@ def _write_tum_rows(path: str | os.PathLike[str], sol: Solution, anchor: frames.
         f.write(text_header)
         for start in range(0, n, writers._CHUNK_ROWS):
             stop = min(n, start + writers._CHUNK_ROWS)
-            part = _subset(sol, np.arange(start, stop))
+            part = _subset(sol, slice(start, stop))
             xyz = anchor.enu(part.lat_deg, part.lon_deg, part.alt)
             if attitude:
                 q = frames.quat_xyzw(frames.body_to_map(part, anchor))
