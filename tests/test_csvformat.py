@@ -1,5 +1,5 @@
 """The compiled row formatter (navpp.io.csvformat) writes Python's ``format(x, ".Nf")`` text, and
-the same bytes as the vectorised exact formatter of navpp.io.writers it stands in for."""
+the same bytes as the vectorised exact path it leaves the values beyond 2**52 / 10**d to."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from navpp.io import writers
+from navpp.io import csvformat, writers
 from navpp.io.csvformat import BlockFormatter
 
 SPECIAL = [0.0, -0.0, np.nan, -np.nan, np.inf, -np.inf, 5e-324, -5e-324, 1e-300, -1e-300,
@@ -75,7 +75,7 @@ def test_too_large_values_are_left_to_the_exact_path():
 
 @pytest.mark.parametrize("t0_s", [0.0, 1_700_000_000.123456789, 1_600_000_000.5, -12.75, 999_999_999_999.0])
 def test_time_column_is_the_exact_paths(t0_s):
-    """``t0_s + t`` to the microsecond: the same text as writers._time_field, negative times that
+    """``t0_s + t`` to the microsecond: the same text as the exact path (_time_field), negative times that
     round to zero written 0.000000, nan as nan."""
     rng = np.random.default_rng(int(abs(t0_s)) % 1000)
     n = 100_000
@@ -84,7 +84,7 @@ def test_time_column_is_the_exact_paths(t0_s):
     y = rng.normal(0, 1, n)
     got = BlockFormatter([6, 4], t0_s=t0_s).rows([t, y])
     assert got is not None
-    want = writers._layout([writers._time_field(t, t0_s), writers._field_from_values(y, 4)], n).tobytes()
+    want = csvformat._layout([csvformat._time_field(t, t0_s), csvformat._field_from_values(y, 4)], n).tobytes()
     assert bytes(got) == want
 
 
@@ -92,8 +92,10 @@ def test_the_time_columns_large_values_fall_back(tmp_path):
     formatter = BlockFormatter([6], t0_s=1.7e9)
     t = np.array([0.5, 1e10])          # 1e16 us: beyond the kernel
     assert formatter.rows([t]) is None
-    text = writers._block_text(formatter, [t], [6], 1.7e9)
-    assert bytes(text) == writers._layout([writers._time_field(t, 1.7e9)], 2).tobytes()
+    assert bytes(formatter.text([t])) == csvformat._layout([csvformat._time_field(t, 1.7e9)], 2).tobytes()
+    spaced = BlockFormatter([6, 4], t0_s=1.7e9, sep=b" ")
+    assert bytes(spaced.text([t, np.array([1e300, 2.0])])) == b"1700000000.500000 " + format(1e300, ".4f").encode() + \
+        b"\n11700000000.000000 2.0000\n"
 
 
 def test_buffers_are_reused_and_grow():

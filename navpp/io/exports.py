@@ -80,6 +80,7 @@ import numpy as np
 from .. import timebase
 from ..recording import Recording, Solution
 from . import frames, writers
+from .csvformat import BlockFormatter
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -306,7 +307,7 @@ def _write_tum_rows(path: str | os.PathLike[str], sol: Solution, anchor: frames.
     text_header = ("\n".join(header) + "\n").encode("utf-8")
     n = len(sol)
     decimals = (6, *[_POSITION_DECIMALS] * 3, *[_QUATERNION_DECIMALS] * 4)
-    formatter = writers._block_formatter(decimals, t0_s, sep=b" ")
+    formatter = BlockFormatter(decimals, t0_s=t0_s, sep=b" ")
 
     def write(f: IO[bytes]) -> None:
         f.write(text_header)
@@ -320,7 +321,7 @@ def _write_tum_rows(path: str | os.PathLike[str], sol: Solution, anchor: frames.
                 q = np.zeros((stop - start, 4))
                 q[:, 3] = 1.0
             block = [np.asarray(part.t), *xyz.T, *q.T]
-            f.write(writers._block_text(formatter, block, decimals, t0_s, sep=b" "))
+            f.write(formatter.text(block))
 
     writers.atomic_write(path, write, mode="wb")
 
