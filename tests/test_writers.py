@@ -164,7 +164,7 @@ def test_atomic_write_replaces_and_keeps_no_temp(tmp_path):
 
 
 def test_trajectory_csv_failure_keeps_previous_file(tmp_path, monkeypatch):
-    import navpp.io.writers as w
+    from navpp.io.csvformat import BlockFormatter
 
     path = tmp_path / "trajectory.csv"
     path.write_text("finished earlier\n")
@@ -172,7 +172,7 @@ def test_trajectory_csv_failure_keeps_previous_file(tmp_path, monkeypatch):
     def broken(*args, **kwargs):
         raise MemoryError("simulated")
 
-    monkeypatch.setattr(w, "_layout", broken)
+    monkeypatch.setattr(BlockFormatter, "text", broken)
     with pytest.raises(MemoryError):
         write_trajectory_csv(path, _random_solution(10), t0_s=0.0)
     assert os.listdir(tmp_path) == ["trajectory.csv"]

@@ -80,6 +80,7 @@ import numpy as np
 from .. import timebase
 from ..recording import Recording, Solution
 from . import frames, writers
+from .csvformat import BlockFormatter
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -143,8 +144,10 @@ def _finite_rows(solution: Solution, with_attitude: bool) -> np.ndarray:
     return np.flatnonzero(ok)
 
 
-def _subset(solution: Solution, rows: np.ndarray) -> Solution:
-    if rows.size == len(solution):
+def _subset(solution: Solution, rows: np.ndarray | slice) -> Solution:
+    """The solution at ``rows``: an index array (copies; the solution itself when it takes every
+    row) or a slice (views)."""
+    if isinstance(rows, np.ndarray) and rows.size == len(solution):
         return solution
     return Solution(t=solution.t[rows], lat_deg=solution.lat_deg[rows], lon_deg=solution.lon_deg[rows],
                     alt=solution.alt[rows], vel_enu=np.asarray(solution.vel_enu)[rows],
@@ -303,22 +306,22 @@ def _write_tum_rows(path: str | os.PathLike[str], sol: Solution, anchor: frames.
     ]
     text_header = ("\n".join(header) + "\n").encode("utf-8")
     n = len(sol)
+    decimals = (6, *[_POSITION_DECIMALS] * 3, *[_QUATERNION_DECIMALS] * 4)
+    formatter = BlockFormatter(decimals, t0_s=t0_s, sep=b" ")
 
     def write(f: IO[bytes]) -> None:
         f.write(text_header)
         for start in range(0, n, writers._CHUNK_ROWS):
             stop = min(n, start + writers._CHUNK_ROWS)
-            part = _subset(sol, np.arange(start, stop))
+            part = _subset(sol, slice(start, stop))
             xyz = anchor.enu(part.lat_deg, part.lon_deg, part.alt)
             if attitude:
                 q = frames.quat_xyzw(frames.body_to_map(part, anchor))
             else:
                 q = np.zeros((stop - start, 4))
                 q[:, 3] = 1.0
-            fields = [writers._time_field(part.t, t0_s)]
-            fields += [writers._field_from_values(xyz[:, i], _POSITION_DECIMALS) for i in range(3)]
-            fields += [writers._field_from_values(q[:, i], _QUATERNION_DECIMALS) for i in range(4)]
-            f.write(writers._layout(fields, stop - start).tobytes().replace(b",", b" "))
+            block = [np.asarray(part.t), *xyz.T, *q.T]
+            f.write(formatter.text(block))
 
     writers.atomic_write(path, write, mode="wb")
 

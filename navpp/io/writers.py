@@ -5,13 +5,14 @@ target directory, are flushed to disk, and the temporary file is renamed over th
 when complete, so a failed or interrupted run never leaves a half-written file that looks
 finished.
 
-``trajectory.csv`` is formatted by a vectorised fixed-point formatter (:func:`format_fixed_columns`)
-rather than ``pandas.to_csv`` or ``numpy.savetxt``, which format value by value (README, "Speed",
-has the times).  Its text is identical to Python's ``format(x, ".Nf")`` for every
-value (correct rounding of the exact binary value, ties to even, ``"nan"``, ``"inf"``,
-``"-inf"``, and ``"-0.0000"`` for negative values that round to zero, as C's ``printf`` and
-pandas also write them).  The one exception is the ``t`` column, which is computed more
-precisely than ``format(t0_s + t, ".6f")`` would (see :func:`write_trajectory_csv`).
+``trajectory.csv`` is formatted block by block by a compiled fixed-point formatter
+(:mod:`navpp.io.csvformat`, with a vectorised exact path for values too large for it) rather
+than ``pandas.to_csv`` or ``numpy.savetxt``, which format value by value (README, "Speed", has
+the times).  Its text is identical to Python's ``format(x, ".Nf")`` for every value (correct
+rounding of the exact binary value, ties to even, ``"nan"``, ``"inf"``, ``"-inf"``, and
+``"-0.0000"`` for negative values that round to zero, as C's ``printf`` and pandas also write
+them).  The one exception is the ``t`` column, which is computed more precisely than
+``format(t0_s + t, ".6f")`` would (see :func:`write_trajectory_csv`).
 """
 
 from __future__ import annotations
@@ -23,12 +24,15 @@ import os
 import tempfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
 from navpp.recording import Solution
 from navpp.spill import release
+
+if TYPE_CHECKING:
+    from .csvformat import BlockFormatter
 
 __all__ = [
     "TRAJECTORY_COLUMNS",
@@ -50,8 +54,6 @@ TRAJECTORY_COLUMNS: tuple[str, ...] = (
 TRAJECTORY_DECIMALS: tuple[int, ...] = (6, 9, 9, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4)
 
 _CHUNK_ROWS = 16_384  # rows formatted per pass: bounds memory to a few MB whatever the length
-_FAST_LIMIT = 2.0 ** 52  # |x * 10**d| below this: every half-integer is a double, int64 is exact
-_SPLIT = 134217729.0  # 2**27 + 1, Veltkamp splitting constant
 
 
 # --------------------------------------------------------------------------- atomic write
@@ -130,167 +132,27 @@ def _fsync_directory(directory: Path) -> None:
 # --------------------------------------------------------------------------- fixed-point formatting
 
 
-def _product_error(a: np.ndarray, b: float, p: np.ndarray) -> np.ndarray:
-    """Exact rounding error ``a*b - p`` of the double product ``p = fl(a*b)`` (Dekker's TwoProduct)."""
-    c = _SPLIT * a
-    ah = c - (c - a)
-    al = a - ah
-    cb = _SPLIT * b
-    bh = cb - (cb - b)
-    bl = b - bh
-    return ((ah * bh - p) + ah * bl + al * bh) + al * bl
+def _block_formatter(decimals: Sequence[int], t0_s: float | None) -> BlockFormatter:
+    """The formatter of rows of these columns (:class:`navpp.io.csvformat.BlockFormatter`),
+    imported here so that importing the writers does not load numba."""
+    from .csvformat import BlockFormatter
 
-
-def _round_scaled(x: np.ndarray, decimals: int) -> tuple[np.ndarray, np.ndarray]:
-    """``round(x * 10**decimals)`` of the exact binary value, ties to even, as int64.
-
-    Returns ``(r, fast)``: ``fast`` marks the finite values with ``|x| * 10**decimals < 2**52``;
-    ``r`` is the correctly rounded scaled value there and 0 elsewhere.
-
-    ``p = fl(x * 10**d)`` can differ from the exact product, but rounding is monotonic and every
-    half-integer below 2**52 is a double, so ``rint(p)`` is the correct answer unless ``p`` lands
-    exactly on a half-integer; there the sign of the exact product error decides.
-    """
-    scale = 10.0 ** decimals
-    with np.errstate(invalid="ignore", over="ignore"):
-        p = x * scale
-        fast = np.abs(p) < _FAST_LIMIT
-    p = np.where(fast, p, 0.0)
-    r = np.rint(p)
-    tie = (p - np.floor(p)) == 0.5
-    if tie.any():
-        idx = np.flatnonzero(tie)
-        err = _product_error(x[idx], scale, p[idx])
-        low = np.floor(p[idx])
-        r[idx] = np.where(err > 0.0, low + 1.0, np.where(err < 0.0, low, r[idx]))
-    return r.astype(np.int64), fast
-
-
-def _n_digits(v: int) -> int:
-    return max(1, len(str(int(v))))
-
-
-class _Field:
-    """One column of one chunk, ready to be laid out: magnitude, sign and special strings."""
-
-    def __init__(self, mag: np.ndarray, neg: np.ndarray, decimals: int,
-                 special_rows: np.ndarray, special_text: np.ndarray) -> None:
-        self.mag = mag  # (n,) int64 >= 0, scaled by 10**decimals (0 on special rows)
-        self.neg = neg  # (n,) bool, write a minus sign
-        self.decimals = decimals
-        self.special_rows = special_rows  # (k,) int rows written as text instead
-        self.special_text = special_text  # (k,) bytes ("S") array
-        int_part_max = int(mag.max()) // 10 ** decimals if mag.size else 0
-        self.n_digits = _n_digits(int_part_max)  # integer digits of the largest number
-        self.n_int = self.n_digits  # integer positions of the slot (wider if a text is longer)
-        frac_width = decimals + 1 if decimals else 0
-        if special_rows.size:
-            longest = special_text.dtype.itemsize
-            self.n_int = max(self.n_int, longest - 1 - frac_width)
-        #: bytes in the row buffer: sign, integer digits, '.', fraction, separator
-        self.width = 1 + self.n_int + frac_width + 1
-
-
-def _field_from_values(x: np.ndarray, decimals: int) -> _Field:
-    """Fixed-point field of ``x`` identical to ``format(v, f'.{decimals}f')`` per value."""
-    x = np.asarray(x, dtype=np.float64)
-    r, fast = _round_scaled(x, decimals)
-    neg = np.signbit(x) & fast
-    rows = np.flatnonzero(~fast)
-    return _Field(np.abs(r), neg, decimals, rows, _special_text(x[rows], decimals))
-
-
-def _special_text(v: np.ndarray, decimals: int) -> np.ndarray:
-    """Text of values the fast path does not cover: nan, +-inf and |v| >= 2**52 / 10**decimals."""
-    if v.size == 0:
-        return np.empty(0, dtype="S1")
-    finite = np.isfinite(v)
-    longest = 4
-    texts: dict[int, bytes] = {}
-    for i in np.flatnonzero(finite):  # enormous finite values only: rare
-        s = format(float(v[i]), f".{decimals}f").encode("ascii")
-        texts[int(i)] = s
-        longest = max(longest, len(s))
-    out = np.empty(v.shape[0], dtype=f"S{longest}")
-    out[np.isnan(v)] = b"nan"
-    out[np.isposinf(v)] = b"inf"
-    out[np.isneginf(v)] = b"-inf"
-    for k, s in texts.items():
-        out[k] = s
-    return out
-
-
-_DIGITS = np.frombuffer(b"0123456789", dtype=np.uint8)
-
-
-def _layout(fields: Sequence[_Field], n: int) -> np.ndarray:
-    """Lay the fields out in a zero-padded (n, width) byte buffer and squeeze out the padding.
-
-    Each field is ``[sign][integer digits, right-aligned]['.'][fraction][',' or '\\n']``;
-    unused positions stay 0 and are dropped, so the result is the CSV text of the n rows.
-    """
-    total = sum(f.width for f in fields)
-    buf = np.zeros((n, total), dtype=np.uint8)
-    c0 = 0
-    for j, f in enumerate(fields):
-        buf[:, c0] = np.where(f.neg, ord("-"), 0).astype(np.uint8)
-        d = f.decimals
-        q = f.mag // 10 ** d
-        frac = f.mag - q * 10 ** d
-        units = c0 + f.n_int  # position of the integer units digit
-        for k in range(f.n_digits):
-            digit = _DIGITS[q % 10]
-            if k == 0:
-                buf[:, units] = digit
-            else:
-                buf[:, units - k] = np.where(q > 0, digit, 0)
-            q //= 10
-        if d:
-            buf[:, units + 1] = ord(".")
-            for k in range(d):
-                buf[:, units + 1 + d - k] = _DIGITS[frac % 10]
-                frac //= 10
-        if f.special_rows.size:
-            k = f.special_text.dtype.itemsize
-            buf[f.special_rows, c0:c0 + f.width - 1] = 0
-            buf[f.special_rows, c0:c0 + k] = f.special_text.view(np.uint8).reshape(-1, k)
-        buf[:, c0 + f.width - 1] = ord("\n") if j == len(fields) - 1 else ord(",")
-        c0 += f.width
-    return buf[buf != 0]
+    return BlockFormatter(decimals, t0_s=t0_s)
 
 
 def format_fixed_columns(columns: Sequence[np.ndarray], decimals: Sequence[int]) -> bytes:
     """CSV text (no header) of equal-length float columns with fixed decimals per column.
 
     Every value is written exactly as ``format(v, f".{d}f")`` writes it (see the module
-    docstring); rows end with ``"\\n"``.  Vectorised: no Python loop over rows.
+    docstring); rows end with ``"\\n"``.  Block by block (:mod:`navpp.io.csvformat`).
     """
     if len(columns) != len(decimals) or not columns:
         raise ValueError("format_fixed_columns needs one decimals entry per column")
-    n = int(np.shape(columns[0])[0])
-    parts: list[bytes] = []
-    for start in range(0, n, _CHUNK_ROWS):
-        stop = min(n, start + _CHUNK_ROWS)
-        fields = [_field_from_values(np.asarray(c)[start:stop], d) for c, d in zip(columns, decimals)]
-        parts.append(_layout(fields, stop - start).tobytes())
-    return b"".join(parts)
-
-
-def _time_field(t_rel: np.ndarray, t0_s: float) -> _Field:
-    """``t0_s + t_rel`` with 6 decimals, without the rounding of the float sum.
-
-    ``t0_s`` is split into whole seconds and a fraction (both exact), the fraction is added to
-    the relative times (small numbers, ~1e-11 s resolution) and the whole seconds are added
-    back as integer microseconds.  Negative values that round to zero are written ``0.000000``.
-    """
-    t0_int = math.floor(t0_s)
-    rel = (t0_s - t0_int) + np.asarray(t_rel, dtype=np.float64)
-    r, fast = _round_scaled(rel, 6)
-    total = r + np.int64(t0_int) * 1_000_000
-    neg = (total < 0) & fast
-    rows = np.flatnonzero(~fast)
-    special = _special_text(t0_int + rel[rows], 6)
-    return _Field(np.where(fast, np.abs(total), 0), neg, 6, rows, special)
+    columns = [np.asarray(c) for c in columns]
+    formatter = _block_formatter(decimals, None)
+    n = int(columns[0].shape[0])
+    return b"".join(bytes(formatter.text([c[start:start + _CHUNK_ROWS] for c in columns]))
+                    for start in range(0, n, _CHUNK_ROWS))
 
 
 def write_trajectory_csv(path: str | os.PathLike[str], sol: Solution, *, t0_s: float) -> None:
@@ -319,18 +181,16 @@ def write_trajectory_csv(path: str | os.PathLike[str], sol: Solution, *, t0_s: f
     vel = np.asarray(sol.vel_enu).reshape(n, 3)
     rph = np.asarray(sol.rph_deg).reshape(n, 3)
     std = np.asarray(sol.std_enu).reshape(n, 3)
-    columns = [sol.lat_deg, sol.lon_deg, sol.alt, vel[:, 0], vel[:, 1], vel[:, 2],
-               rph[:, 0], rph[:, 1], rph[:, 2], std[:, 0], std[:, 1], std[:, 2]]
+    columns = [np.asarray(c) for c in (sol.t, sol.lat_deg, sol.lon_deg, sol.alt, vel[:, 0], vel[:, 1], vel[:, 2],
+                                       rph[:, 0], rph[:, 1], rph[:, 2], std[:, 0], std[:, 1], std[:, 2])]
     header = (",".join(TRAJECTORY_COLUMNS) + "\n").encode("ascii")
+    formatter = _block_formatter(TRAJECTORY_DECIMALS, t0_s)
 
     def write(f: IO[bytes]) -> None:
         f.write(header)
         for start in range(0, n, _CHUNK_ROWS):
             stop = min(n, start + _CHUNK_ROWS)
-            fields = [_time_field(np.asarray(sol.t)[start:stop], t0_s)]
-            fields += [_field_from_values(np.asarray(c)[start:stop], d)
-                       for c, d in zip(columns, TRAJECTORY_DECIMALS[1:])]
-            f.write(_layout(fields, stop - start).data)
+            f.write(formatter.text([c[start:stop] for c in columns]))
             release(columns, start, stop)      # the rows written leave memory (a spilled solution)
 
     atomic_write(path, write, mode="wb")
@@ -398,16 +258,16 @@ def write_diagnostics_csv(path: str | os.PathLike[str], diag: Any, *, t0_s: floa
     ``t`` in seconds on the log's time base (``t0_s + diag.t``).  Written atomically."""
     names, cols, decimals = diagnostics_columns(diag)
     header = (",".join(["t", *names]) + "\n").encode("ascii")
-    t = np.asarray(diag.t, dtype=np.float64)
-    n = t.shape[0]
+    columns = [np.asarray(diag.t, dtype=np.float64), *cols]
+    decimals = [6, *decimals]
+    n = columns[0].shape[0]
+    formatter = _block_formatter(decimals, t0_s)
 
     def write(f: IO[bytes]) -> None:
         f.write(header)
         for start in range(0, n, _CHUNK_ROWS):
-            stop = min(n, start + _CHUNK_ROWS)
-            fields = [_time_field(t[start:stop], t0_s)]
-            fields += [_field_from_values(c[start:stop], d) for c, d in zip(cols, decimals)]
-            f.write(_layout(fields, stop - start).data)
+            block = [c[start:start + _CHUNK_ROWS] for c in columns]
+            f.write(formatter.text(block))
 
     atomic_write(path, write, mode="wb")
 
