@@ -161,6 +161,14 @@ class RunRecorder:
         if self.progress is not None and epoch.index % self.tick == 0:
             self.progress(epoch.index / self.n_epochs)
 
+    def fused_epochs(self, knots: np.ndarray, t: float) -> None:
+        """After a stretch of epochs run by the loop's compiled path (:mod:`navpp.engine.fused`),
+        which wrote the per-fix arrays and the path rows: its knot records (K, 19) (t, prior and
+        posterior variances of :data:`KNOT`, :meth:`knot`'s layout) and the time of its last
+        state ``t`` (s)."""
+        self.knots.frombytes(np.ascontiguousarray(knots).tobytes())
+        self.t = t
+
     # results -------------------------------------------------------------------------------
     @property
     def r_std(self) -> np.ndarray:
