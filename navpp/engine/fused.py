@@ -34,7 +34,7 @@ from ..filters.linalg import (
     propagated_covariance,
 )
 from ..ins.model import InsModel, gnss_innovation, gnss_jacobian, integrate_with_jacobian, plus
-from ..ins.state import DX_ATT, DX_BG, DX_VEL, X_BG
+from ..ins.state import DX_ATT, DX_BG, DX_VEL, NOMINAL_SIZE, X_BG
 from .measurements import RunMeasurements
 from .recorder import KNOT, RunRecorder
 from .schedule import Epoch
@@ -51,6 +51,9 @@ KNOT_START = KNOT.start
 _KNOT_N = KNOT.stop - KNOT.start
 #: doubles per knot record: the time, the prior and the posterior variances
 KNOT_RECORD = 1 + 2 * _KNOT_N
+#: the longest stretch of epochs one kernel call runs when the smoother's store takes its states
+#: (the buffers hold about 5 kB per epoch)
+STORE_STRETCH = 512
 
 
 @compiled
@@ -133,7 +136,8 @@ def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep
                fix_lat: np.ndarray, fix_lon: np.ndarray, fix_alt: np.ndarray, fix_var: np.ndarray,
                lever: np.ndarray, gate: float, nu_out: np.ndarray, nis_out: np.ndarray, accepted_out: np.ndarray,
                forced_out: np.ndarray, s_out: np.ndarray, r_out: np.ndarray, bias_out: np.ndarray,
-               bias_var_out: np.ndarray, knots_out: np.ndarray, imu_t: np.ndarray, gyro: np.ndarray,
+               bias_var_out: np.ndarray, knots_out: np.ndarray, keep: bool, nodes_x: np.ndarray,
+               nodes_P: np.ndarray, imu_t: np.ndarray, gyro: np.ndarray,
                accel: np.ndarray, path: np.ndarray, psd: np.ndarray, has_profile: bool, prof_t: np.ndarray,
                prof_g: np.ndarray, prof_a: np.ndarray, white_g: float, white_a: float, inv_tau_g: float,
                inv_tau_a: float, cov_step_s: float, gaps: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, float, int]:
@@ -144,7 +148,10 @@ def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep
     (-1: none), ``ep_coast``, ``ep_generic`` (an epoch the generic loop must run).  The fixes
     (rad, rad, m) with the variance of their R (M, 3) ENU m^2 and the antenna ``lever`` (body
     FLU, m); the NIS ``gate``.  Writes the recorder's per-fix arrays, ``knots_out`` (rows of
-    :data:`KNOT_RECORD`) and the model's recorded ``path``.  The rest is the model's
+    :data:`KNOT_RECORD`) and the model's recorded ``path``; with ``keep``, each epoch's states
+    for the smoother's store, at row ``i - first``: ``nodes_x`` (L, 2, 16) the propagated
+    nominal and the posterior, ``nodes_P`` (L, 3, 15, 15) the prior, the posterior and the
+    cross-covariance ``P Phi^T`` (a coasting stop's posterior is its prior).  The rest is the model's
     (:meth:`~navpp.ins.model.InsModel.propagation_arrays`): IMU data (``imu_t``, ``gyro``,
     ``accel``), the path, noise (``psd``, the profile, ``inv_tau_*``, ``cov_step_s``) and long
     ``gaps``.
@@ -165,7 +172,11 @@ def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep
         xn = x.copy()
         Phi, Qd = integrate_with_jacobian(xn, imu_t, gyro, accel, t_prev, t1, path, True, psd_i, inv_tau_g,
                                           inv_tau_a, cov_step_s)
-        Pp, _ = propagated_covariance(P, Phi, Qd)
+        Pp, PPhit = propagated_covariance(P, Phi, Qd)
+        if keep:
+            nodes_x[i - first, 0] = xn
+            nodes_P[i - first, 0] = Pp
+            nodes_P[i - first, 2] = PPhit
         if ep_coast[i]:
             _knot_row(knots_out[n_knots], t1, Pp, Pp)
             n_knots += 1
@@ -178,6 +189,9 @@ def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep
         ok, nu, S, R, nis, xp, Pn = _fix_update(xn, Pp, fix_lat[k], fix_lon[k], fix_alt[k], fix_var[k], lever, gate)
         if not ok:
             break
+        if keep:
+            nodes_x[i - first, 1] = xp
+            nodes_P[i - first, 1] = Pn
         nu_out[k] = nu
         nis_out[k] = nis
         accepted_out[k] = True
@@ -234,6 +248,8 @@ class FusedRunner:
         self.fix_var = np.ascontiguousarray(source.r_var, dtype=float)
         self.knots = np.empty((n, KNOT_RECORD))
         self.prop = model.propagation_arrays()
+        self.x_size, self.n_err = NOMINAL_SIZE, model.dim
+        self.no_nodes = (np.empty((0, 2, self.x_size)), np.empty((0, 3, self.n_err, self.n_err)))
 
     def run(self, i: int, state: GaussianState, stop: int) -> tuple[int, GaussianState]:
         """Epochs ``i`` .. at most ``stop - 1`` from ``state``; returns the first epoch not run
@@ -243,13 +259,21 @@ class FusedRunner:
         rec = self.recorder
         if self.report[i:stop].any():
             stop = i + int(np.argmax(self.report[i:stop])) + 1
+        keep = rec.store is not None
+        if keep:            # fresh buffers: the store keeps views of the last nodes
+            stop = min(stop, i + STORE_STRETCH)
+            nodes_x, nodes_P = np.empty((stop - i, 2, self.x_size)), np.empty((stop - i, 3, self.n_err, self.n_err))
+        else:
+            nodes_x, nodes_P = self.no_nodes
         j, x, P, t, n_knots = ekf_epochs(
             state.x, state.P, state.t, self.t, self.fix, self.sample, self.coast, self.generic, i, stop,
             self.fix_lat, self.fix_lon, self.fix_alt, self.fix_var, self.source.lever, self.filt.gate_threshold(3),
             rec.nu, rec.nis, rec.accepted, rec.forced, rec.s_used, rec.r_used, rec.bias, rec.bias_var, self.knots,
-            *self.prop)
+            keep, nodes_x, nodes_P, *self.prop)
         if j == i:
             return i, state
+        if keep:
+            rec.fused_nodes(self.t[i:j], self.fix[i:j], self.coast[i:j], nodes_x, nodes_P)
         rec.fused_epochs(self.knots[:n_knots], t)
         fixes = self.fix[i:j][~self.coast[i:j]]
         if fixes.size:
@@ -265,11 +289,11 @@ def fused_runner(filt: Filter, model: Any, source: Any, recorder: Any, epochs: S
     (:meth:`~navpp.engine.loop.FastPath`, :class:`FusedRunner`), or None when it does not apply:
     not :data:`ENABLED`, not the plain EKF (:func:`plain_ekf`) on the 15-state
     :class:`~navpp.ins.model.InsModel`, or a source or recorder of another kind (or one that
-    carries measurements to another model, smooths or records extra states).  The loop's check
+    carries measurements to another model or records extra states).  The loop's check
     must raise only on the faults of :func:`~navpp.engine.verdict.state_fault` (the kernel
     leaves every state that has one to the generic loop)."""
     if not (ENABLED and type(model) is InsModel and type(source) is RunMeasurements and source.wrap is None
-            and type(recorder) is RunRecorder and recorder.store is None and recorder.extra_values is None
+            and type(recorder) is RunRecorder and recorder.extra_values is None
             and plain_ekf(filt)):
         return None
     return FusedRunner(filt, model, source, recorder, epochs)
