@@ -73,11 +73,14 @@ def _with_imu_gap(rec, t0: float, t1: float):
 def test_consumer_car_drive_is_bit_identical(monkeypatch: pytest.MonkeyPatch, smooth: bool) -> None:
     """Vibration (a noise profile), stale samples, a 15 s GNSS gap (coasting stops), a lever arm,
     a standstill (ZUPT and ZARU epochs, generic) and a long IMU gap (generic): the same bits,
-    forward and smoothed (the kernel's states replayed into the smoother's store)."""
+    forward and smoothed (the kernel's states replayed into the smoother's store), with short
+    stretches (each kernel call's buffers fresh)."""
     rec = simulate(SimulationSpec(duration_s=150.0, realism="consumer-car", lever_arm_m=(0.4, -0.2, 1.1),
                                   seed=3)).recording()
     rec = _with_imu_gap(rec, 100.0, 100.6)
     cfg = config_from_dict({"imu": {"preset": "consumer"}, "gnss": {"lever_arm_m": [0.4, -0.2, 1.1]}}, "test")
+    monkeypatch.setattr(fused, "STRETCH", 50)
+    monkeypatch.setattr(fused, "STORE_STRETCH", 7)
     on, off, ran = _both(rec, cfg, monkeypatch, smooth=smooth)
     assert ran > 200 and (on.smoothed is not None) == smooth
     _same(on, off)

@@ -51,8 +51,9 @@ KNOT_START = KNOT.start
 _KNOT_N = KNOT.stop - KNOT.start
 #: doubles per knot record: the time, the prior and the posterior variances
 KNOT_RECORD = 1 + 2 * _KNOT_N
-#: the longest stretch of epochs one kernel call runs when the smoother's store takes its states
-#: (the buffers hold about 5 kB per epoch)
+#: the longest stretch of epochs one kernel call runs (its knot buffer: 152 bytes per epoch), and
+#: when the smoother's store takes its states (its buffers: about 5 kB more per epoch)
+STRETCH = 4096
 STORE_STRETCH = 512
 
 
@@ -246,7 +247,7 @@ class FusedRunner:
         f = source.fixes
         self.fix_lat, self.fix_lon, self.fix_alt = (np.ascontiguousarray(a, dtype=float) for a in (f.lat, f.lon, f.alt))
         self.fix_var = np.ascontiguousarray(source.r_var, dtype=float)
-        self.knots = np.empty((n, KNOT_RECORD))
+        self.knots = np.empty((min(n, STRETCH), KNOT_RECORD))
         self.prop = model.propagation_arrays()
         self.x_size, self.n_err = NOMINAL_SIZE, model.dim
         self.no_nodes = (np.empty((0, 2, self.x_size)), np.empty((0, 3, self.n_err, self.n_err)))
@@ -260,8 +261,8 @@ class FusedRunner:
         if self.report[i:stop].any():
             stop = i + int(np.argmax(self.report[i:stop])) + 1
         keep = rec.store is not None
+        stop = min(stop, i + (STORE_STRETCH if keep else STRETCH))
         if keep:            # fresh buffers: the store keeps views of the last nodes
-            stop = min(stop, i + STORE_STRETCH)
             nodes_x, nodes_P = np.empty((stop - i, 2, self.x_size)), np.empty((stop - i, 3, self.n_err, self.n_err))
         else:
             nodes_x, nodes_P = self.no_nodes
