@@ -16,6 +16,7 @@ from scenarios import gnss_jump_recording
 from navpp import api, engine
 from navpp.config import config_from_dict
 from navpp.engine import fused
+from navpp.filters.ekf import EKF
 from navpp.simulate import SimulationSpec, simulate
 
 
@@ -105,8 +106,10 @@ def test_gnss_velocity_epochs_stay_generic(monkeypatch: pytest.MonkeyPatch) -> N
 
 
 @pytest.mark.parametrize("name", ["aekf", "ckf"])
-def test_other_filters_take_the_generic_loop(name: str) -> None:
-    """Only the plain EKF runs the compiled path."""
+def test_other_filters_take_the_generic_loop(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Only the plain EKF runs the compiled path; an EKF whose update was replaced does not."""
     cfg = config_from_dict({"imu": {"preset": "automotive"}}, "test")
     assert not fused.plain_ekf(api.make_filter(name, cfg))
     assert fused.plain_ekf(api.make_filter("ekf", cfg))
+    monkeypatch.setattr(EKF, "update", lambda self, state, model, meas: None)
+    assert not fused.plain_ekf(api.make_filter("ekf", cfg))

@@ -25,7 +25,6 @@ from ..filters.adaptation import Adaptation
 from ..filters.base import Filter, GaussianState
 from ..filters.ekf import EKF
 from ..filters.linalg import (
-    all_finite,
     compiled,
     finite_with_positive_variances,
     innovation_gain,
@@ -43,10 +42,12 @@ from .schedule import Epoch
 #: (the tests switch it off to compare with the generic loop).
 ENABLED = True
 
-#: the filter steps the compiled path stands in for: a filter class that overrides none of them
-#: (and runs the no-op adaptation) is the plain EKF
-_EKF_STEPS = ("predict", "update", "time_update", "predict_measurement", "apply_measurement", "_moments",
-              "_correct", "noise_report", "gate_threshold")
+#: the filter steps the compiled path stands in for, as the EKF had them when this module was
+#: imported: a filter class whose steps are these (none overridden or replaced since) and that
+#: runs the no-op adaptation is the plain EKF
+_EKF_STEPS = {name: getattr(EKF, name) for name in ("predict", "update", "time_update", "predict_measurement",
+                                                    "apply_measurement", "accepted", "_moments", "_correct",
+                                                    "noise_report", "gate_threshold")}
 KNOT_START = KNOT.start
 _KNOT_N = KNOT.stop - KNOT.start
 #: doubles per knot record: the time, the prior and the posterior variances
@@ -127,7 +128,7 @@ def _fix_update(x: np.ndarray, P: np.ndarray, lat: float, lon: float, alt: float
         return False, nu, S, R, nis, x, P
     dx, Pn = joseph_correction(P, K, H, R, nu)
     xp = plus(x, dx)
-    ok = all_finite(xp, Pn) and finite_with_positive_variances(xp, Pn)
+    ok = finite_with_positive_variances(xp, Pn)     # all_finite (the filter's own test) too
     return ok, nu, S, R, nis, xp, Pn
 
 
@@ -215,10 +216,10 @@ def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep
 
 def plain_ekf(filt: Filter) -> bool:
     """Whether ``filt`` is the plain EKF: an :class:`~navpp.filters.ekf.EKF` with the no-op
-    adaptation that overrides none of the steps the compiled path stands in for."""
+    adaptation whose steps are the ones the compiled path stands in for (:data:`_EKF_STEPS`)."""
     cls = type(filt)
     return (isinstance(filt, EKF) and type(filt.adapter) is Adaptation
-            and all(getattr(cls, name) is getattr(EKF, name) for name in _EKF_STEPS))
+            and all(getattr(cls, name) is step for name, step in _EKF_STEPS.items()))
 
 
 class FusedRunner:
