@@ -51,7 +51,7 @@ ENV = "NAVPP_JIT"
 GROUPS: dict[str, tuple[tuple[str, str], ...]] = {
     "ins": (("ins/strapdown.py", "integrate"), ("ins/model.py", "integrate_with_jacobian"),
             ("filters/linalg.py", "joseph"), ("filters/linalg.py", "gain_and_nis"),
-            ("engine/output.py", "interpolated_std")),
+            ("engine/output.py", "interpolated_std"), ("engine/fused.py", "ekf_epochs")),
     "ros": (("io/messages.py", "_decode_kernel"),),
     "mcap": (("io/mcap.py", "_scan_kernel"),),
     "csv": (("io/csvparse.py", "_parse_block"),),

@@ -90,23 +90,52 @@ class StateCheck(Protocol):
     def __call__(self, state: GaussianState, t: float) -> None: ...
 
 
+class FastPath(Protocol):
+    """Runs stretches of common epochs faster than the generic loop, with the same result
+    (:class:`navpp.engine.fused.FusedRunner`)."""
+
+    def run(self, i: int, state: GaussianState, stop: int) -> tuple[int, GaussianState]:
+        """Epochs ``i`` .. at most ``stop - 1`` of the run from ``state`` (the state before
+        epoch ``i``); returns the first epoch it did not run (``i``: none) and the state before
+        it."""
+        ...
+
+
 def run_epochs(filt: Filter, model: Any, state: GaussianState, epochs: Iterable[E],
-               source: MeasurementSource[E], recorder: Recorder[E], check: StateCheck | None = None
-               ) -> GaussianState:
+               source: MeasurementSource[E], recorder: Recorder[E], check: StateCheck | None = None,
+               fast: FastPath | None = None) -> GaussianState:
     """Run ``filt`` on ``model`` from ``state`` over ``epochs`` (increasing times, after
     ``state.t``); returns the last state.  ``check`` (when given) sees the state after the time
     update of every measurement epoch and after every update.  A
-    :class:`~navpp.errors.FilterDivergedError` of the filter or the check propagates."""
-    for epoch in epochs:
-        prediction = filt.predict(state, model, (state.t, epoch.t))
-        recorder.predicted(epoch, prediction)
-        state = prediction.state
-        if epoch.coast:
-            continue
-        if check is not None:
-            check(state, epoch.t)
-        state = measure(filt, model, epoch, state, source, recorder, check)
+    :class:`~navpp.errors.FilterDivergedError` of the filter or the check propagates.  ``fast``
+    (built for this run's epochs, a sequence then) runs what it can; each epoch it leaves goes
+    through :func:`epoch_step`."""
+    if fast is None:
+        for epoch in epochs:
+            state = epoch_step(filt, model, epoch, state, source, recorder, check)
+        return state
+    run = epochs if isinstance(epochs, Sequence) else list(epochs)
+    i, n = 0, len(run)
+    while i < n:
+        i, state = fast.run(i, state, n)
+        if i < n:
+            state = epoch_step(filt, model, run[i], state, source, recorder, check)
+            i += 1
     return state
+
+
+def epoch_step(filt: Filter, model: Any, epoch: E, state: GaussianState, source: MeasurementSource[E],
+               recorder: Recorder[E], check: StateCheck | None = None) -> GaussianState:
+    """One epoch of :func:`run_epochs` from ``state``: the time update to ``epoch.t``, then (at a
+    measurement epoch) the state check and :func:`measure`; returns the state after it."""
+    prediction = filt.predict(state, model, (state.t, epoch.t))
+    recorder.predicted(epoch, prediction)
+    state = prediction.state
+    if epoch.coast:
+        return state
+    if check is not None:
+        check(state, epoch.t)
+    return measure(filt, model, epoch, state, source, recorder, check)
 
 
 def measure(filt: Filter, model: Any, epoch: E, prior: GaussianState, source: MeasurementSource[E],

@@ -107,6 +107,8 @@ class RunMeasurements:
         self.fixes, self.gnss, self.lever, self.reopen, self.aiding = fixes, gnss, lever_arm_b, reopen, aiding
         self.wrap = getattr(model, "measurement", None)
         self.r_share = float(r_share)
+        # the diagonal of each fix's R (M, 3) ENU m^2: the white share of its variance
+        self.r_var = fixes.var * self.r_share if fixes.r_scale is None else fixes.var * self.r_share * fixes.r_scale
         self.last_good: float | None = None
         self.recoveries: list[float] = []
         self._rejected_nis: list[float] = []    # NIS of the fixes rejected since the last accepted one
@@ -128,15 +130,26 @@ class RunMeasurements:
         k, f = epoch.fix, self.fixes
         self._drift = (self.reopen is not None and len(self._rejected_nis) >= 4
                        and drifting(np.asarray(self._rejected_nis, dtype=float)))
-        var = f.var[k] * self.r_share if f.r_scale is None else f.var[k] * self.r_share * f.r_scale[k]
         R = np.zeros((3, 3))
-        R.ravel()[::4] = var            # diag(var), ENU m^2, without np.diag's Python wrapper
+        R.ravel()[::4] = self.r_var[k]      # diag, ENU m^2, without np.diag's Python wrapper
         out: list[Any] = [GnssPosition(epoch.t, float(f.lat[k]), float(f.lon[k]), float(f.alt[k]), R, self.lever,
                                        self.reopen if self._drift else None)]
         vmeas = self.aiding.velocity(k, epoch.t)
         if vmeas is not None:
             out.append(vmeas)
         return out
+
+    def velocity_mask(self) -> np.ndarray | None:
+        """Which fixes come with a GNSS velocity measurement (M,) (None: none does)."""
+        return None if self.aiding.vel is None else np.asarray(self.aiding.vel_ok, dtype=bool)
+
+    def fixes_accepted(self, t_last: float, n: int) -> None:
+        """What :meth:`observed` keeps after ``n`` position fixes in a row that passed the gate
+        (the last at ``t_last`` s) and whose epochs had no other measurement (the loop's
+        compiled path, :mod:`navpp.engine.fused`)."""
+        self.aiding.counts.applied["gnss_position"] += n
+        self.last_good = t_last
+        self._rejected_nis = []
 
     def observed(self, epoch: Epoch, meas: Any, update: Update) -> GaussianState:
         inn, state = update.innovation, update.state

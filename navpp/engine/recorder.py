@@ -172,6 +172,30 @@ class RunRecorder:
         if self.progress is not None and epoch.index % self.tick == 0:
             self.progress(epoch.index / self.n_epochs)
 
+    def fused_epochs(self, knots: np.ndarray, t: float) -> None:
+        """After a stretch of epochs run by the loop's compiled path (:mod:`navpp.engine.fused`),
+        which wrote the per-fix arrays and the path rows: its knot records (K, 19) (t, prior and
+        posterior variances of :data:`KNOT`, :meth:`knot`'s layout) and the time of its last
+        state ``t`` (s)."""
+        self.knots.frombytes(np.ascontiguousarray(knots).tobytes())
+        self.t = t
+
+    def fused_nodes(self, t: np.ndarray, fix: np.ndarray, coast: np.ndarray, nodes_x: np.ndarray,
+                    nodes_P: np.ndarray) -> None:
+        """The smoother's nodes of a stretch of epochs run by the loop's compiled path, in order:
+        times ``t`` (L,) s, fix index ``fix`` and ``coast`` (L,) of each epoch, its states as
+        :func:`~navpp.engine.fused.ekf_epochs` keeps them (``nodes_x`` (L, 2, n_x), ``nodes_P``
+        (L, 3, n, n)): what :meth:`predicted` and :meth:`epoch_done` give the store."""
+        store = self.store
+        assert store is not None
+        for e in range(t.shape[0]):
+            tt, x = float(t[e]), nodes_x[e]
+            prior = GaussianState(tt, x[0], nodes_P[e, 0])
+            store.predicted(Prediction(prior, nodes_P[e, 2], x[0]))
+            if not coast[e]:
+                store.updated(prior, GaussianState(tt, x[1], nodes_P[e, 1]), False)
+                self.epoch_node[fix[e]] = store.n - 1
+
     # results -------------------------------------------------------------------------------
     @property
     def r_std(self) -> np.ndarray:

@@ -32,6 +32,7 @@ from ..ins.model import InsModel
 from ..ins.strapdown import NOMINAL_BG
 from ..recording import Recording
 from .checks import alignment_findings, check_data, check_imu_plausible
+from .fused import fused_runner
 from .gnss_error import (
     LikelihoodRecorder,
     correlation_finding,
@@ -297,7 +298,8 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
                              r_share=1.0 if choice is None else 1.0 - choice.share)
     check = DivergenceCheck(recording, config, filt.name, al.t, log, source)
     try:
-        state = run_epochs(filt, fmodel, start, schedule, source, recorder, check)
+        state = run_epochs(filt, fmodel, start, schedule, source, recorder, check,
+                           fused_runner(filt, fmodel, source, recorder, schedule))
         check(state, state.t)
     except RunRefused:
         raise

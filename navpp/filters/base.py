@@ -203,10 +203,14 @@ class Filter:
             self._rejecting_since.setdefault(meas.kind, state.t)
             self.rejected += 1
             return Update(state, innovation, None)
-        self._rejecting_since.pop(meas.kind, None)
+        self.accepted(meas.kind)
         posterior = self._correct(prior, model, pred, K, S, R)
         self.adapter.corrected(prior, raw, innovation, meas)
         return Update(posterior, innovation, prior)
+
+    def accepted(self, kind: str) -> None:
+        """A measurement of ``kind`` passed the gate: its run of rejections (if any) is over."""
+        self._rejecting_since.pop(kind, None)
 
     def _moments(self, state: GaussianState, pred: MeasurementPrediction,
                  R: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from numba import njit
@@ -600,6 +600,20 @@ class InsModel:
         if self.path is None:
             raise ValueError("InsModel.path was released (set to None): the model cannot propagate any more")
         return self.path
+
+    def propagation_arrays(self) -> tuple[Any, ...]:
+        """What :meth:`transition` propagates with, for a compiled caller that runs many
+        intervals (:func:`navpp.engine.fused.ekf_epochs`): IMU ``t`` s, ``gyro`` rad/s, ``accel``
+        m/s^2, the recorded path, the configured psd (15,), whether there is a noise profile,
+        its block edges (s) and white-noise densities (gyro rad/sqrt(s), accel m/s/sqrt(s); empty
+        without one), the configured white psd (gyro, accel), the bias correlation rates (1/s),
+        ``cov_step_s`` and the long gaps (G, 2) s."""
+        p = self.profile
+        prof = (np.ascontiguousarray(p.t, dtype=float), np.ascontiguousarray(p.gyro_arw, dtype=float),
+                np.ascontiguousarray(p.accel_vrw, dtype=float)) if p is not None else (np.zeros(1), np.zeros(0),
+                                                                                        np.zeros(0))
+        return (self.t, self.gyro, self.accel, self._path_out(), self._psd, p is not None, *prof, *self._white_psd,
+                *self._inv_tau, float(self.cov_step_s), np.ascontiguousarray(self.gaps, dtype=float))
 
     # ⊞ / ⊟ -----------------------------------------------------------------------------------
     @staticmethod

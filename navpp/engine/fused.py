@@ -1,0 +1,304 @@
+"""The loop's compiled path for the common epochs of a plain EKF run: many epochs per call.
+
+A run of the plain EKF (:class:`~navpp.filters.ekf.EKF` with the no-op adaptation) on the
+15-state INS (:class:`~navpp.ins.model.InsModel`), with the run's own measurement source and
+recorder (:class:`~navpp.engine.measurements.RunMeasurements`,
+:class:`~navpp.engine.recorder.RunRecorder` without smoothing or extra states), spends most
+of its epochs on one GNSS position fix that passes the gate, or on a coasting stop.  Such
+epochs go through :func:`ekf_epochs`, one compiled call for a stretch of them, which does what
+the generic loop does for them (:func:`navpp.engine.loop.run_epochs`: time update, the state
+check, measurement prediction, gate, gain, Joseph correction, the check again) with the same
+kernels in the same order, so the figures are the same bits, and writes what the recorder would
+write.  Any other epoch, and any epoch whose fix the gate rejects, whose state fails the check
+or whose update fails (the kernel stops before it), goes through the generic loop; so do
+filters, models, sources and recorders of any other kind (:func:`fused_runner` returns None).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from ..filters.adaptation import Adaptation
+from ..filters.base import Filter, GaussianState
+from ..filters.ekf import EKF
+from ..filters.linalg import (
+    compiled,
+    finite_with_positive_variances,
+    innovation_gain,
+    joseph_correction,
+    linear_moments,
+    propagated_covariance,
+)
+from ..ins.model import InsModel, gnss_innovation, gnss_jacobian, integrate_with_jacobian, plus
+from ..ins.state import DX_ATT, DX_BG, DX_VEL, NOMINAL_SIZE, X_BG
+from .measurements import RunMeasurements
+from .recorder import KNOT, RunRecorder
+from .schedule import Epoch
+
+#: Whether :func:`navpp.engine.loop.run_epochs` takes the compiled path where it applies
+#: (the tests switch it off to compare with the generic loop).
+ENABLED = True
+
+#: the filter steps the compiled path stands in for, as the EKF had them when this module was
+#: imported: a filter class whose steps are these (none overridden or replaced since) and that
+#: runs the no-op adaptation is the plain EKF
+_EKF_STEPS = {name: getattr(EKF, name) for name in ("predict", "update", "time_update", "predict_measurement",
+                                                    "apply_measurement", "accepted", "_moments", "_correct",
+                                                    "noise_report", "gate_threshold")}
+KNOT_START = KNOT.start
+_KNOT_N = KNOT.stop - KNOT.start
+#: doubles per knot record: the time, the prior and the posterior variances
+KNOT_RECORD = 1 + 2 * _KNOT_N
+#: the longest stretch of epochs one kernel call runs (its knot buffer: 152 bytes per epoch), and
+#: when the smoother's store takes its states (its buffers: about 5 kB more per epoch)
+STRETCH = 4096
+STORE_STRETCH = 512
+
+
+@compiled
+def _profile_psd(psd: np.ndarray, prof_t: np.ndarray, prof_g: np.ndarray, prof_a: np.ndarray, white_g: float,
+                 white_a: float, t0: float, t1: float) -> np.ndarray:
+    """:meth:`~navpp.ins.model.InsModel.psd_over` with a noise profile (block edges ``prof_t`` s,
+    white-noise densities ``prof_g`` rad/sqrt(s), ``prof_a`` m/s/sqrt(s)), with Python's ``max``
+    semantics: the configured ``psd`` (15,) itself, or a copy with the white noise raised."""
+    k_n = prof_g.shape[0]
+    k0 = min(max(int(np.searchsorted(prof_t, t0, side="right")) - 1, 0), k_n - 1)
+    k1 = min(max(int(np.searchsorted(prof_t, t1, side="left")), k0 + 1), k_n)
+    g, a = prof_g[k0], prof_a[k0]
+    for k in range(k0 + 1, k1):
+        if prof_g[k] > g:
+            g = prof_g[k]
+        if prof_a[k] > a:
+            a = prof_a[k]
+    gg, aa = g * g, a * a
+    if gg <= white_g and aa <= white_a:
+        return psd
+    out = psd.copy()
+    pg = gg if gg > white_g else white_g
+    pa = aa if aa > white_a else white_a
+    for k in range(3):
+        out[DX_ATT + k] = pg
+        out[DX_VEL + k] = pa
+    return out
+
+
+@compiled
+def _gap_inside(gaps: np.ndarray, t0: float, t1: float) -> bool:
+    """Whether a long IMU gap (``gaps`` (G, 2) start, end s, sorted, disjoint) overlaps
+    ``(t0, t1)``: :meth:`~navpp.ins.model.InsModel.gap_noise` is not None there."""
+    if gaps.shape[0] == 0:
+        return False
+    first = int(np.searchsorted(gaps[:, 1], t0, side="right"))
+    last = int(np.searchsorted(gaps[:, 0], t1, side="left"))
+    overlap = False
+    for j in range(first, last):
+        overlap = overlap or min(gaps[j, 1], t1) > max(gaps[j, 0], t0)
+    return overlap
+
+
+@compiled
+def _knot_row(row: np.ndarray, t: float, P_prior: np.ndarray, P_post: np.ndarray) -> None:
+    """One knot record (:data:`KNOT_RECORD`) into ``row``: the time ``t`` s, the variances of
+    :data:`KNOT` before and after (:meth:`~navpp.engine.recorder.RunRecorder.knot`)."""
+    row[0] = t
+    for e in range(_KNOT_N):
+        row[1 + e] = P_prior[KNOT_START + e, KNOT_START + e]
+        row[1 + _KNOT_N + e] = P_post[KNOT_START + e, KNOT_START + e]
+
+
+@compiled
+def _fix_update(x: np.ndarray, P: np.ndarray, lat: float, lon: float, alt: float, var: np.ndarray,
+                lever: np.ndarray, gate: float
+                ) -> tuple[bool, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]:
+    """The generic update of one GNSS position fix (``lat``, ``lon`` rad, ``alt`` m; R's diagonal
+    ``var`` ENU m^2; antenna ``lever`` body FLU m) on the prior (``x``, ``P``) when it passes
+    the gate ``gate`` and leaves a sound state: ``(True, nu, S, R, nis, x+, P+)``; else
+    ``ok`` is False (the generic loop redoes the epoch: rejection, forcing, divergence)."""
+    H = gnss_jacobian(x, lever)
+    PHt, Pzz = linear_moments(P, H)
+    nu = gnss_innovation(x, lat, lon, alt, lever)
+    R = np.zeros((3, 3))
+    for e in range(3):
+        R[e, e] = var[e]
+    S, K, nis, ok = innovation_gain(Pzz, R, PHt, nu)
+    if not ok or not nis <= gate:
+        return False, nu, S, R, nis, x, P
+    dx, Pn = joseph_correction(P, K, H, R, nu)
+    xp = plus(x, dx)
+    ok = finite_with_positive_variances(xp, Pn)     # all_finite (the filter's own test) too
+    return ok, nu, S, R, nis, xp, Pn
+
+
+@compiled
+def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep_fix: np.ndarray,
+               ep_sample: np.ndarray, ep_coast: np.ndarray, ep_generic: np.ndarray, first: int, stop: int,
+               fix_lat: np.ndarray, fix_lon: np.ndarray, fix_alt: np.ndarray, fix_var: np.ndarray,
+               lever: np.ndarray, gate: float, nu_out: np.ndarray, nis_out: np.ndarray, accepted_out: np.ndarray,
+               forced_out: np.ndarray, s_out: np.ndarray, r_out: np.ndarray, bias_out: np.ndarray,
+               bias_var_out: np.ndarray, knots_out: np.ndarray, keep: bool, nodes_x: np.ndarray,
+               nodes_P: np.ndarray, imu_t: np.ndarray, gyro: np.ndarray,
+               accel: np.ndarray, path: np.ndarray, psd: np.ndarray, has_profile: bool, prof_t: np.ndarray,
+               prof_g: np.ndarray, prof_a: np.ndarray, white_g: float, white_a: float, inv_tau_g: float,
+               inv_tau_a: float, cov_step_s: float, gaps: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, float, int]:
+    """The plain EKF over epochs ``first`` .. ``stop - 1`` from the state (``x`` (16,), ``P``
+    (15, 15)) at ``t_prev`` (s), as the generic loop runs them (module docstring).
+
+    Epoch arrays: times ``ep_t`` s, fix index ``ep_fix``, IMU sample at the epoch ``ep_sample``
+    (-1: none), ``ep_coast``, ``ep_generic`` (an epoch the generic loop must run).  The fixes
+    (rad, rad, m) with the variance of their R (M, 3) ENU m^2 and the antenna ``lever`` (body
+    FLU, m); the NIS ``gate``.  Writes the recorder's per-fix arrays, ``knots_out`` (rows of
+    :data:`KNOT_RECORD`) and the model's recorded ``path``; with ``keep``, each epoch's states
+    for the smoother's store, at row ``i - first``: ``nodes_x`` (L, 2, 16) the propagated
+    nominal and the posterior, ``nodes_P`` (L, 3, 15, 15) the prior, the posterior and the
+    cross-covariance ``P Phi^T`` (a coasting stop's posterior is its prior).  The rest is the model's
+    (:meth:`~navpp.ins.model.InsModel.propagation_arrays`): IMU data (``imu_t``, ``gyro``,
+    ``accel``), the path, noise (``psd``, the profile, ``inv_tau_*``, ``cov_step_s``) and long
+    ``gaps``.
+
+    Returns the first epoch not run (``stop``, or an epoch the generic loop must run: marked,
+    crossing a long gap, its fix rejected, its state failing the check or its update failing),
+    the state before it (x, P, t) and the number of knot rows written.
+    """
+    n_knots = 0
+    i = first
+    while i < stop:
+        if ep_generic[i]:
+            break
+        t1 = ep_t[i]
+        if _gap_inside(gaps, t_prev, t1):
+            break
+        psd_i = _profile_psd(psd, prof_t, prof_g, prof_a, white_g, white_a, t_prev, t1) if has_profile else psd
+        xn = x.copy()
+        Phi, Qd = integrate_with_jacobian(xn, imu_t, gyro, accel, t_prev, t1, path, True, psd_i, inv_tau_g,
+                                          inv_tau_a, cov_step_s)
+        Pp, PPhit = propagated_covariance(P, Phi, Qd)
+        if keep:
+            nodes_x[i - first, 0] = xn
+            nodes_P[i - first, 0] = Pp
+            nodes_P[i - first, 2] = PPhit
+        if ep_coast[i]:
+            _knot_row(knots_out[n_knots], t1, Pp, Pp)
+            n_knots += 1
+            x, P, t_prev = xn, Pp, t1
+            i += 1
+            continue
+        if not finite_with_positive_variances(xn, Pp):
+            break
+        k = ep_fix[i]
+        ok, nu, S, R, nis, xp, Pn = _fix_update(xn, Pp, fix_lat[k], fix_lon[k], fix_alt[k], fix_var[k], lever, gate)
+        if not ok:
+            break
+        if keep:
+            nodes_x[i - first, 1] = xp
+            nodes_P[i - first, 1] = Pn
+        nu_out[k] = nu
+        nis_out[k] = nis
+        accepted_out[k] = True
+        forced_out[k] = False
+        s_out[k] = S
+        r_out[k] = R
+        if ep_sample[i] >= 0:
+            row = path[ep_sample[i]]
+            for e in range(row.shape[0]):
+                row[e] = xp[e]
+        _knot_row(knots_out[n_knots], t1, Pp, Pn)
+        n_knots += 1
+        for e in range(6):
+            bias_out[k, e] = xp[X_BG + e]
+            bias_var_out[k, e] = Pn[DX_BG + e, DX_BG + e]
+        x, P, t_prev = xp, Pn, t1
+        i += 1
+    return i, x, P, t_prev, n_knots
+
+
+def plain_ekf(filt: Filter) -> bool:
+    """Whether ``filt`` is the plain EKF: an :class:`~navpp.filters.ekf.EKF` with the no-op
+    adaptation whose steps are the ones the compiled path stands in for (:data:`_EKF_STEPS`)."""
+    cls = type(filt)
+    return (isinstance(filt, EKF) and type(filt.adapter) is Adaptation
+            and all(getattr(cls, name) is step for name, step in _EKF_STEPS.items()))
+
+
+class FusedRunner:
+    """Runs stretches of a run's epochs through :func:`ekf_epochs` and keeps the filter, the
+    source and the recorder as the generic loop would leave them (see :func:`fused_runner`)."""
+
+    def __init__(self, filt: Filter, model: InsModel, source: RunMeasurements, recorder: RunRecorder,
+                 epochs: Sequence[Epoch]) -> None:
+        self.filt, self.source, self.recorder = filt, source, recorder
+        n = len(epochs)
+        self.t = np.fromiter((e.t for e in epochs), float, n)
+        self.fix = np.fromiter((e.fix for e in epochs), np.int64, n)
+        self.sample = np.fromiter((e.sample for e in epochs), np.int64, n)
+        self.coast = np.fromiter((e.coast for e in epochs), bool, n)
+        constraints = np.fromiter((e.constraints for e in epochs), bool, n)
+        index = np.fromiter((e.index for e in epochs), np.int64, n)
+        self.generic = ~self.coast & ((self.fix < 0) | constraints)
+        has_vel = source.velocity_mask()
+        if has_vel is not None:
+            self.generic |= ~self.coast & (self.fix >= 0) & has_vel[np.maximum(self.fix, 0)]
+        # the recorder's progress: stretches end after each epoch it reports
+        self.report = np.zeros(n, bool)
+        if recorder.progress is not None:
+            self.report = ~self.coast & (index % recorder.tick == 0)
+        self.index = index
+        f = source.fixes
+        self.fix_lat, self.fix_lon, self.fix_alt = (np.ascontiguousarray(a, dtype=float) for a in (f.lat, f.lon, f.alt))
+        self.fix_var = np.ascontiguousarray(source.r_var, dtype=float)
+        self.knots = np.empty((min(n, STRETCH), KNOT_RECORD))
+        self.prop = model.propagation_arrays()
+        self.x_size, self.n_err = NOMINAL_SIZE, model.dim
+        self.no_nodes = (np.empty((0, 2, self.x_size)), np.empty((0, 3, self.n_err, self.n_err)))
+
+    def run(self, i: int, state: GaussianState, stop: int) -> tuple[int, GaussianState]:
+        """Epochs ``i`` .. at most ``stop - 1`` from ``state``; returns the first epoch not run
+        and the state before it."""
+        if self.generic[i]:
+            return i, state
+        rec = self.recorder
+        if self.report[i:stop].any():
+            stop = i + int(np.argmax(self.report[i:stop])) + 1
+        keep = rec.store is not None
+        stop = min(stop, i + (STORE_STRETCH if keep else STRETCH))
+        if keep:            # fresh buffers: the store keeps views of the last nodes
+            nodes_x, nodes_P = np.empty((stop - i, 2, self.x_size)), np.empty((stop - i, 3, self.n_err, self.n_err))
+        else:
+            nodes_x, nodes_P = self.no_nodes
+        j, x, P, t, n_knots = ekf_epochs(
+            state.x, state.P, state.t, self.t, self.fix, self.sample, self.coast, self.generic, i, stop,
+            self.fix_lat, self.fix_lon, self.fix_alt, self.fix_var, self.source.lever, self.filt.gate_threshold(3),
+            rec.nu, rec.nis, rec.accepted, rec.forced, rec.s_used, rec.r_used, rec.bias, rec.bias_var, self.knots,
+            keep, nodes_x, nodes_P, *self.prop)
+        if j == i:
+            return i, state
+        if keep:
+            rec.fused_nodes(self.t[i:j], self.fix[i:j], self.coast[i:j], nodes_x, nodes_P)
+        rec.fused_epochs(self.knots[:n_knots], t)
+        fixes = self.fix[i:j][~self.coast[i:j]]
+        if fixes.size:
+            self.source.fixes_accepted(float(self.t[i:j][~self.coast[i:j]][-1]), fixes.size)
+            self.filt.accepted("gnss_position")
+        if self.report[j - 1] and rec.progress is not None:
+            rec.progress(int(self.index[j - 1]) / rec.n_epochs)
+        return j, GaussianState(t, x, P)
+
+
+def fused_runner(filt: Filter, model: Any, source: Any, recorder: Any, epochs: Sequence[Any]) -> FusedRunner | None:
+    """The compiled path's runner for a run over ``epochs``
+    (:meth:`~navpp.engine.loop.FastPath`, :class:`FusedRunner`), or None when it does not apply:
+    not :data:`ENABLED`, not the plain EKF (:func:`plain_ekf`) on the 15-state
+    :class:`~navpp.ins.model.InsModel`, or a source or recorder of another kind (or one that
+    carries measurements to another model or records extra states).  The loop's check
+    must raise only on the faults of :func:`~navpp.engine.verdict.state_fault` (the kernel
+    leaves every state that has one to the generic loop)."""
+    if not (ENABLED and type(model) is InsModel and type(source) is RunMeasurements and source.wrap is None
+            and type(recorder) is RunRecorder and recorder.extra_values is None
+            and plain_ekf(filt)):
+        return None
+    return FusedRunner(filt, model, source, recorder, epochs)
+
+
+__all__ = ["ENABLED", "KNOT_RECORD", "FusedRunner", "ekf_epochs", "fused_runner", "plain_ekf"]
