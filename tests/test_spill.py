@@ -200,3 +200,29 @@ def test_resampling_a_spilled_solution_gives_the_same_bits(spill_dir):
     spilled = Solution(t=t, t0_ns=kept.t0_ns, **{k: _spilled_copy(v) for k, v in cols.items()})
     a, b = api.resample_solution(kept, 10.0), api.resample_solution(spilled, 10.0)
     assert all(np.array_equal(v, _arrays(b)[k]) for k, v in _arrays(a).items())
+
+
+def test_the_compiled_loop_releases_a_spilled_path_behind_it(spill_dir, monkeypatch, tmp_path):
+    """The plain EKF's compiled stretches (:mod:`navpp.engine.fused`) write the path rows
+    themselves: after each stretch the rows before its last epoch leave memory, as after a
+    generic epoch, so the path's resident pages stay near a window and a stretch, far below
+    the whole path (sample drive, ~37,500 rows, 3 MB)."""
+    from navpp.engine import fused
+    from navpp.engine.recorder import RunRecorder
+
+    monkeypatch.setattr(fused, "STRETCH", 40)
+    seen: list[tuple[int, int]] = []
+    plain = RunRecorder.fused_epochs
+
+    def watched(self, knots, t, sample=-1):
+        before = _rss_kb(self.path)
+        plain(self, knots, t, sample)
+        seen.append((before, _rss_kb(self.path)))
+        whole_kb.append(self.path.nbytes // 1024)
+
+    whole_kb: list[int] = []
+    monkeypatch.setattr(RunRecorder, "fused_epochs", watched)
+    api.process(DRIVE, filter_name="ekf", out_dir=tmp_path / "out", memory=1024)
+    assert len(seen) > 20 and whole_kb[-1] > 2500
+    assert sum(after < before for before, after in seen) >= 5      # the stretches release, not only generic epochs
+    assert max(after for _, after in seen) < whole_kb[-1] // 4

@@ -276,7 +276,7 @@ class FusedRunner:
             return i, state
         if keep:
             rec.fused_nodes(self.t[i:j], self.fix[i:j], self.coast[i:j], nodes_x, nodes_P)
-        rec.fused_epochs(self.knots[:n_knots], t)
+        rec.fused_epochs(self.knots[:n_knots], t, int(self.sample[i:j].max()))
         fixes = self.fix[i:j][~self.coast[i:j]]
         if fixes.size:
             self.source.fixes_accepted(float(self.t[i:j][~self.coast[i:j]][-1]), fixes.size)

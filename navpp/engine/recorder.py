@@ -172,13 +172,16 @@ class RunRecorder:
         if self.progress is not None and epoch.index % self.tick == 0:
             self.progress(epoch.index / self.n_epochs)
 
-    def fused_epochs(self, knots: np.ndarray, t: float) -> None:
+    def fused_epochs(self, knots: np.ndarray, t: float, sample: int = -1) -> None:
         """After a stretch of epochs run by the loop's compiled path (:mod:`navpp.engine.fused`),
         which wrote the per-fix arrays and the path rows: its knot records (K, 19) (t, prior and
-        posterior variances of :data:`KNOT`, :meth:`knot`'s layout) and the time of its last
-        state ``t`` (s)."""
+        posterior variances of :data:`KNOT`, :meth:`knot`'s layout), the time of its last
+        state ``t`` (s) and the IMU sample of its last epoch ``sample`` (-1: none), before which
+        the path's rows are final (a spilled path releases them, as :meth:`epoch_done` does)."""
         self.knots.frombytes(np.ascontiguousarray(knots).tobytes())
         self.t = t
+        if sample >= 0:
+            release_before(self.path, sample)
 
     def fused_nodes(self, t: np.ndarray, fix: np.ndarray, coast: np.ndarray, nodes_x: np.ndarray,
                     nodes_P: np.ndarray) -> None:
