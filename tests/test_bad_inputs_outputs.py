@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from badinputs import ROOT, SAMPLE, Case, copy_drive, edit_csv, params, run_case, run_navpp, snapshot
+from badinputs import ROOT, SAMPLE, Case, copy_drive, edit_csv, params, run_case, run_in_process, run_navpp, snapshot
 
 from navpp.jitcache import CompileAnnouncer
 from navpp.outdir import LOCK_NAME, MANIFEST_NAME
@@ -74,7 +74,7 @@ def test_reprocessing_a_log_in_out_keeps_it_and_removes_only_listed_outputs(tmp_
     (out / "metrics.json").write_text('{"filter": "old"}\n')        # an earlier navpp result
     (out / "trajectory.tum").write_text("mine: not listed\n")       # a navpp name, not navpp's file
     (out / MANIFEST_NAME).write_text(json.dumps({"files": ["trajectory.mcap", "metrics.json", "trajectory.kml"]}))
-    code, _, err, _ = run_navpp(["process", str(log), "--out", str(out), "-q"], timeout_s=120)
+    code, _, err, _ = run_in_process(["process", str(log), "--out", str(out), "-q"], tmp_path)
     assert code == 0, err
     assert log.read_bytes() == log_bytes                            # the input survives
     assert (out / "trajectory.tum").read_text() == "mine: not listed\n"
@@ -97,7 +97,7 @@ def test_leftover_staging_of_a_killed_run_is_removed(tmp_path: Path) -> None:
     (out / ".trajectory.csv.abcd1234.tmp").write_text("half")
     (out / ".navpp-runs").mkdir()
     (out / LOCK_NAME).write_text("999999\n")
-    code, _, err, _ = run_navpp(["process", str(log), "--out", str(out), "-q", "--output-rate", "1"], timeout_s=120)
+    code, _, err, _ = run_in_process(["process", str(log), "--out", str(out), "-q", "--output-rate", "1"], tmp_path)
     assert code == 0, err
     assert sorted(p.name for p in out.iterdir()) == [MANIFEST_NAME, ".navpp-runs", "diagnostics.csv", "metrics.json",
                                                      "metrics.md", "trajectory.csv"]

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from badinputs import DRIVE, Case, copy_drive, edit_csv, params, run_case, run_navpp
+from badinputs import DRIVE, Case, copy_drive, edit_csv, params, run_case, run_in_process
 
 IMU_ROWS = 37501       # data rows of sample_data/drive/imu.csv (header = line 1)
 
@@ -177,7 +177,7 @@ FORMS = {
 
 def _outputs(work: Path, log: Path) -> dict[str, object]:
     out = work / "out"
-    code, _, stderr, _ = run_navpp(["process", str(log), "--out", str(out)], timeout_s=180)
+    code, _, stderr, _ = run_in_process(["process", str(log), "--out", str(out)], work)
     assert code == 0, stderr[-2000:]
     metrics = json.loads((out / "metrics.json").read_text())
     for key in ("log", "reference", "runtime_s"):      # the path and the wall time differ, nothing else
@@ -242,8 +242,8 @@ def test_compare_warnings_name_the_log(tmp_path):
     """Two logs with the same file names: each warning says which log it is about."""
     logs = [copy_drive(tmp_path, name) for name in ("a", "b")]
     edit_csv(logs[1] / "imu.csv", lambda ls: [ls[0] + ",temp"] + [line + ",21.5" for line in ls[1:]])
-    code, _, stderr, _ = run_navpp(["compare", *map(str, logs), "--filters", "ekf", "--out", str(tmp_path / "out")],
-                                   timeout_s=300)
+    argv = ["compare", *map(str, logs), "--filters", "ekf", "--out", str(tmp_path / "out")]
+    code, _, stderr, _ = run_in_process(argv, tmp_path)
     assert code == 0, stderr[-2000:]
     warnings = [ln for ln in stderr.splitlines() if "ignoring extra column" in ln]
     assert warnings == [f"warning: {logs[1] / 'imu.csv'}: ignoring extra column(s) 'temp'"], stderr[-2000:]

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from badinputs import DRIVE, Case, copy_drive, edit_csv, params, run_case, run_navpp
+from badinputs import DRIVE, Case, copy_drive, edit_csv, params, run_case, run_in_process, run_navpp
 
 from navpp.recording import lone_stamp
 
@@ -122,8 +122,8 @@ def test_compare_with_a_t0_log_finishes_and_keeps_the_good_log(tmp_path):
     _t0_first_row(tmp_path / "b")
     (tmp_path / "b" / "log").rename(bad)
     out = tmp_path / "out"
-    code, _, stderr, wall = run_navpp(["compare", str(bad), str(DRIVE), "--filters", "ekf", "--out", str(out),
-                                       "--quiet"], timeout_s=120)
+    code, _, stderr, wall = run_in_process(["compare", str(bad), str(DRIVE), "--filters", "ekf", "--out", str(out),
+                                            "--quiet"], tmp_path)
     assert code == 1 and wall < 60.0, stderr
     last = [ln for ln in stderr.splitlines() if ln.strip()][-1]
     assert last.startswith("navpp:") and "1 of 2 runs failed" in last and len(last) < 300, stderr
@@ -226,10 +226,8 @@ def test_an_hour_long_imu_gap_splits_the_run_into_segments_each_aligned_afresh(t
     no row inside the gap, each side as accurate as a log of its own, the metrics skip the gap."""
     import json
 
-    from badinputs import run_navpp
-
     argv = _hour_gap(tmp_path)
-    code, _, err, _ = run_navpp(argv + ["--reference", str(tmp_path / "log" / "reference.csv")])
+    code, _, err, _ = run_in_process(argv + ["--reference", str(tmp_path / "log" / "reference.csv")], tmp_path)
     assert code == 0, err
     assert "IMU gap of 3600 s after t = 149.992 s" in err and "2 segments" in err, err
     traj = np.genfromtxt(tmp_path / "out" / "trajectory.csv", delimiter=",", names=True)

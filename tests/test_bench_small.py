@@ -179,10 +179,11 @@ def _figures(result):
 
 
 def test_same_seed_same_rows_and_runs_independent_of_run_count():
-    a = run_benchmark("paper001-tracking", runs=3, seed=4, filters=("ekf", "rwckf"))
-    b = run_benchmark("paper001-tracking", runs=3, seed=4, filters=("ekf", "rwckf"))
+    # two runs each: the same seed's figures equal, another seed's differ (a third run added 0.9 s CPU)
+    a = run_benchmark("paper001-tracking", runs=2, seed=4, filters=("ekf", "rwckf"))
+    b = run_benchmark("paper001-tracking", runs=2, seed=4, filters=("ekf", "rwckf"))
     assert _figures(a) == _figures(b)
-    c = run_benchmark("paper001-tracking", runs=3, seed=5, filters=("ekf", "rwckf"))
+    c = run_benchmark("paper001-tracking", runs=2, seed=5, filters=("ekf", "rwckf"))
     assert _figures(a) != _figures(c)
     cases2, tracks2 = montecarlo.monte_carlo(turn.turn_case, 2, 9, ("ckf",))
     cases3, tracks3 = montecarlo.monte_carlo(turn.turn_case, 3, 9, ("ckf",))

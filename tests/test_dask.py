@@ -1,6 +1,7 @@
-"""``navpp compare --executor dask`` (issue 9) on a real ``distributed.LocalCluster`` with two
-worker processes.  Oracle: the local executor's rows, which must be equal bit for bit (every
-figure; the run times are measurements and differ)."""
+"""``navpp compare --executor dask`` (issue 9) on a real ``distributed.LocalCluster`` of worker
+processes (two for the full comparison and the local cluster, one for the quicker checks).
+Oracle: the local executor's rows, which must be equal bit for bit (every figure; the run times
+are measurements and differ)."""
 
 from __future__ import annotations
 
@@ -19,13 +20,26 @@ distributed = pytest.importorskip("distributed")
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_data"
 
 
-@pytest.fixture(scope="module")
-def scheduler():
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
+def _cluster(n_workers: int):
+    """The address of a LocalCluster of ``n_workers`` worker processes, closed afterwards."""
+    cluster = distributed.LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                                       dashboard_address=":0")
     try:
         yield cluster.scheduler_address
     finally:
         cluster.close()
+
+
+@pytest.fixture(scope="module")
+def scheduler():
+    """One worker process: each worker imports navpp and loads its kernels (2-3 s of CPU), and
+    the checks that use it need no second one."""
+    yield from _cluster(1)
+
+
+@pytest.fixture(scope="module")
+def scheduler_2():
+    yield from _cluster(2)
 
 
 def _comparable(row) -> str:
@@ -37,14 +51,14 @@ def _comparable(row) -> str:
 
 
 @pytest.mark.slow     # the heaviest default test (two clusters' runs); the default run keeps test_local_cluster_*
-def test_dask_rows_equal_the_local_executors_bit_for_bit(scheduler, sim_log_dir, tmp_path):
+def test_dask_rows_equal_the_local_executors_bit_for_bit(scheduler_2, sim_log_dir, tmp_path):
     broken = tmp_path / "broken"
     broken.mkdir()
     (broken / "gnss.csv").write_text("t,lat,lon,alt\n")            # no imu.csv: a row, not a crash
     logs = [str(sim_log_dir), str(SAMPLES / "drive.mcap"), str(broken)]
     filters = ["ekf", "ckf", "aekf"]
     local = compare(logs, filters, jobs=1, out_dir=tmp_path / "local")
-    remote = compare(logs, filters, executor="dask", scheduler=scheduler, out_dir=tmp_path / "out")
+    remote = compare(logs, filters, executor="dask", scheduler=scheduler_2, out_dir=tmp_path / "out")
     assert [_comparable(r) for r in remote.rows] == [_comparable(r) for r in local.rows]
     assert remote.jobs == 2
     assert [r.ok for r in remote.rows] == [True] * 6 + [False] * 3

@@ -332,6 +332,7 @@ def test_ins_run_matches_the_ckf_and_learns_r():
     assert np.all((ad["q_factor"] >= 0.1) & (ad["q_factor"] <= 10.0))
 
 
+@pytest.mark.slow     # a statistical test: two 300-s consumer-car runs (3-5 s CPU) for a median factor
 def test_ins_q_groups_move_when_the_preset_understates_the_noise():
     """Issue 14's log 1 in simulation: a consumer car whose engine vibration and errors the
     configured noise understates ([auto] noise off: the preset alone).  The CKF then trusts the
