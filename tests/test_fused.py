@@ -113,3 +113,17 @@ def test_other_filters_take_the_generic_loop(name: str, monkeypatch: pytest.Monk
     assert fused.plain_ekf(api.make_filter("ekf", cfg))
     monkeypatch.setattr(EKF, "update", lambda self, state, model, meas: None)
     assert not fused.plain_ekf(api.make_filter("ekf", cfg))
+
+
+def test_interpreted_kernels_take_the_generic_loop(monkeypatch: pytest.MonkeyPatch) -> None:
+    """With the kernels interpreted (``--jit off``) the fused kernel's loops would run as Python,
+    slower than the generic loop's numpy: the path is not taken, and the result is the same."""
+    cfg = config_from_dict({"imu": {"preset": "automotive"}}, "test")
+    rec = simulate(SimulationSpec(duration_s=60.0, seed=5)).recording()
+    on, _, ran = _both(rec, cfg, monkeypatch)
+    assert ran > 0
+    monkeypatch.setattr(fused, "ENABLED", True)
+    monkeypatch.setattr(fused, "interpreted", lambda: True)
+    interp, _, ran_interp = _both(rec, cfg, monkeypatch)
+    assert ran_interp == 0
+    _same(on, interp)
