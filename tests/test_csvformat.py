@@ -65,6 +65,22 @@ def test_several_columns_and_separators():
         assert text == want.encode("ascii")
 
 
+def test_interpreted_kernels_leave_the_text_to_the_exact_path(monkeypatch):
+    """With the kernels interpreted (--jit off) the per-digit kernel would run as Python: the
+    vectorised exact path writes the same text instead, the kernel untouched."""
+    rng = np.random.default_rng(11)
+    cols = [rng.uniform(0, 3600, 5000), rng.uniform(-90, 90, 5000), rng.normal(0, 3, 5000).astype(np.float32)]
+    decimals = [6, 9, 4]
+    compiled = bytes(BlockFormatter(decimals, t0_s=1_700_000_000.25).text(cols))
+
+    def no_kernel(self, columns):
+        raise AssertionError("the kernel ran interpreted")
+
+    monkeypatch.setattr(csvformat, "interpreted", lambda: True)
+    monkeypatch.setattr(BlockFormatter, "rows", no_kernel)
+    assert bytes(BlockFormatter(decimals, t0_s=1_700_000_000.25).text(cols)) == compiled
+
+
 def test_too_large_values_are_left_to_the_exact_path():
     assert BlockFormatter([4]).rows([np.array([1.0, 1e12])]) is None   # 1e16 >= 2**52
     assert BlockFormatter([4]).rows([np.array([1.0, -1e300])]) is None

@@ -117,7 +117,7 @@ def test_other_filters_take_the_generic_loop(name: str, monkeypatch: pytest.Monk
 
 def test_interpreted_kernels_take_the_generic_loop(monkeypatch: pytest.MonkeyPatch) -> None:
     """With the kernels interpreted (``--jit off``) the fused kernel's loops would run as Python,
-    slower than the generic loop's numpy: the path is not taken, and the result is the same."""
+    no faster than the generic loop: the path is not taken, and the result is the same."""
     cfg = config_from_dict({"imu": {"preset": "automotive"}}, "test")
     rec = simulate(SimulationSpec(duration_s=60.0, seed=5)).recording()
     on, _, ran = _both(rec, cfg, monkeypatch)

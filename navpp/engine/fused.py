@@ -290,8 +290,8 @@ class FusedRunner:
 def fused_runner(filt: Filter, model: Any, source: Any, recorder: Any, epochs: Sequence[Any]) -> FusedRunner | None:
     """The compiled path's runner for a run over ``epochs``
     (:meth:`~navpp.engine.loop.FastPath`, :class:`FusedRunner`), or None when it does not apply:
-    not :data:`ENABLED`, kernels interpreted (``--jit off``: the kernel's loops run as Python,
-    slower than the generic path's numpy; sample drive 1.70 s against 1.16 s CPU), not the plain
+    not :data:`ENABLED`, kernels interpreted (``--jit off``: the kernel's loops as Python are no
+    faster than the generic loop, sample drive 5.0-5.4 s against 5.0-5.1 s CPU), not the plain
     EKF (:func:`plain_ekf`) on the 15-state :class:`~navpp.ins.model.InsModel`, or a source or
     recorder of another kind (or one that carries measurements to another model or records
     extra states).  The loop's check

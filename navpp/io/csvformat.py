@@ -24,6 +24,8 @@ from collections.abc import Sequence
 import numpy as np
 from numba import njit
 
+from ..jitmode import interpreted
+
 __all__ = ["BlockFormatter"]
 
 _FAST_LIMIT = 2.0 ** 52  # |x * 10**d| below this: every half-integer is a double, int64 is exact
@@ -325,9 +327,10 @@ class BlockFormatter:
     def text(self, columns: Sequence[np.ndarray]) -> memoryview:
         """The text of the rows of ``columns`` (equal-length 1-D arrays of any float, int or bool
         dtype): the kernel's, or, when a finite value is too large for it (``|x| * 10**d >=
-        2**52``), the exact vectorised path's (:func:`_layout`), which is the same text.  The
-        view is valid until the next call."""
-        text = self.rows(columns)
+        2**52``) or the kernels run interpreted (``--jit off``: its per-digit loop as Python
+        costs ~7 s per 40,000 rows), the exact vectorised path's (:func:`_layout`), which is the
+        same text.  The view is valid until the next call."""
+        text = None if interpreted() else self.rows(columns)
         if text is not None:
             return text
         fields = [_time_field(columns[0], self.t0_s)] if self.t0_s is not None else []
