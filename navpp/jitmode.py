@@ -20,7 +20,7 @@ module is imported (numba reads the flag when a function is decorated):
     the CPU seconds of compiling the missing groups (:data:`COMPILE_S`) against the extra CPU
     seconds of interpreting this job (IMU samples x filters, :data:`INTERPRETED_US`), and take
     the cheaper, charging this job half the compile cost (:data:`COMPILE_SHARE`: compiled
-    kernels serve later runs too).  With an EKF the break-even is near half an hour of 125 Hz
+    kernels serve later runs too).  With an EKF the break-even is near 80 minutes of 125 Hz
     IMU; with a sigma-point filter, about a minute.  The sample counts come from the logs' indexes (MCAP summary, ROS 2
     ``metadata.yaml``, ROS 1 bag index) or, for CSV, from the file size and its first lines.
 
@@ -51,7 +51,8 @@ ENV = "NAVPP_JIT"
 GROUPS: dict[str, tuple[tuple[str, str], ...]] = {
     "ins": (("ins/strapdown.py", "integrate"), ("ins/model.py", "integrate_with_jacobian"),
             ("filters/linalg.py", "joseph"), ("filters/linalg.py", "gain_and_nis"),
-            ("engine/output.py", "interpolated_std"), ("engine/fused.py", "ekf_epochs")),
+            ("engine/output.py", "interpolated_std"), ("engine/fused.py", "ekf_epochs"),
+            ("io/csvformat.py", "_format_block")),
     "ros": (("io/messages.py", "_decode_kernel"),),
     "mcap": (("io/mcap.py", "_scan_kernel"),),
     "csv": (("io/csvparse.py", "_parse_block"),),
@@ -59,8 +60,10 @@ GROUPS: dict[str, tuple[tuple[str, str], ...]] = {
     "vce": (("ins/model.py", "integrate_noise_groups"),),
     "smooth": (("ins/model.py", "rts_means"), ("ins/model.py", "apply_node_corrections")),
 }
-#: CPU seconds to compile each group from an empty cache (2-core EPYC, numba 0.68).
-COMPILE_S = {"ins": 19.0, "ros": 1.5, "mcap": 0.5, "csv": 1.5, "sigma": 9.0, "vce": 10.0, "smooth": 9.0}
+#: CPU seconds to compile each group from an empty cache (2-core EPYC, numba 0.68; "ins": a
+#: cold sample-drive EKF run 50.9 s against 2.3 s warm, less the "csv" group, with the compiled
+#: EKF epoch and the writers' formatter, both added in issue 21).
+COMPILE_S = {"ins": 47.0, "ros": 1.5, "mcap": 0.5, "csv": 1.5, "sigma": 9.0, "vce": 10.0, "smooth": 9.0}
 #: Extra CPU µs per IMU sample when interpreted, per filter (forward run), and per sample
 #: for the smoother's backward pass; per message for decoding a ROS log.
 INTERPRETED_US = {"ekf": 40.0, "aekf": 60.0, "sif": 900.0, "ckf": 950.0, "ukf": 950.0, "aukf": 1000.0,

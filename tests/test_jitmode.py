@@ -28,7 +28,7 @@ def test_decide_takes_the_cheaper_side() -> None:
     """Interpreted when its estimated extra CPU is below the compile cost of the missing groups,
     compiled when every group is cached, when asked, or when a log's size is unknown."""
     small = [(37_500, 39_000, "mcap")]
-    big = [(3_600 * 125, 3_600 * 130, "mcap")]
+    big = [(7_200 * 125, 7_200 * 130, "mcap")]     # 2 h: beyond the EKF break-even (about 80 min)
     missing = ("ins", "ros", "mcap")
     assert not jitmode.decide("auto", small, ["ekf"], False, missing).compiled
     assert jitmode.decide("auto", big, ["ekf"], False, missing).compiled
@@ -49,10 +49,10 @@ def test_decide_takes_the_cheaper_side() -> None:
 
 def test_workers_are_announced() -> None:
     """compare --jobs N: workers compile on their own, so the parent says so before they start."""
-    cold = jitmode.decide("auto", [(450_000, 0, "csv")], ["ekf"], False, ("ins",))
+    cold = jitmode.decide("auto", [(900_000, 0, "csv")], ["ekf"], False, ("ins",))
     assert cold.compiled and cold.missing == ("ins",)
     line = jitmode.workers_note(cold, 2)
-    assert "each of the 2 worker processes first compiles" in line and "about 19 s" in line
+    assert "each of the 2 worker processes first compiles" in line and "about 47 s" in line
     assert jitmode.workers_note(cold, 1) == ""
     assert jitmode.workers_note(jitmode.decide("auto", [(10, 0, "csv")], ["ekf"], False, ()), 4) == ""
 
