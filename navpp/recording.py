@@ -23,6 +23,9 @@ MAX_REORDER_S = 1.0
 #: covariance (:meth:`navpp.ins.model.InsModel.gap_noise`).  Shorter gaps (a few dropped samples) cost nothing
 #: measurable at vehicle dynamics and are integrated silently.
 LONG_GAP_PERIODS = 5.0
+#: Rows per block of the block-wise passes over the IMU (the reader's checks, the calibration,
+#: the timing estimates): a few MB of temporaries whatever the log's length.
+BLOCK_ROWS = 1 << 16
 
 
 def _readonly(*arrays: np.ndarray | None) -> None:
@@ -102,8 +105,6 @@ def lone_stamp(t: np.ndarray, reorder_s: float = MAX_REORDER_S) -> tuple[int, fl
     (k, d) with ``k`` the index in ``t`` and ``d`` how far (s) stamp k lies from its nearest
     neighbour; None when there is no such stamp.  O(N).
     """
-    from .ins.calibrate import BLOCK_ROWS
-
     n = t.shape[0]
     if n < 4:
         return None

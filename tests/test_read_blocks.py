@@ -10,9 +10,8 @@ import numpy as np
 import pytest
 
 from navpp import jitmode
-from navpp.ins.calibrate import BLOCK_ROWS
 from navpp.io.csv import read_csv_log
-from navpp.recording import lone_stamp
+from navpp.recording import BLOCK_ROWS, lone_stamp
 
 
 @pytest.mark.skipif(jitmode.interpreted(), reason="the fast path runs only compiled")

@@ -43,7 +43,7 @@ import numpy as np
 
 from navpp import jitmode
 from navpp.errors import ConfigError, InputError
-from navpp.recording import GnssData, ImuData, OdometryData, Recording, ReferenceData, lone_stamp
+from navpp.recording import BLOCK_ROWS, GnssData, ImuData, OdometryData, Recording, ReferenceData, lone_stamp
 
 __all__ = ["increments_to_rates", "is_csv_log", "read_csv_log", "read_reference_csv"]
 
@@ -492,8 +492,6 @@ def _stamps_ns(table: _Table, header: list[str]) -> np.ndarray:
     d = min(_stamp_decimals(table.path, header), 9)
     if t.size == 0:
         return np.zeros(0, dtype=np.int64)
-    from navpp.ins.calibrate import BLOCK_ROWS
-
     t_max = max(float(np.max(t)), -float(np.min(t)))
     scale = 10.0 ** d
     tolerance = 4.0 * np.finfo(np.float64).eps * t_max * scale
