@@ -23,6 +23,9 @@ MAX_REORDER_S = 1.0
 #: covariance (:meth:`navpp.ins.model.InsModel.gap_noise`).  Shorter gaps (a few dropped samples) cost nothing
 #: measurable at vehicle dynamics and are integrated silently.
 LONG_GAP_PERIODS = 5.0
+#: Rows per block of the block-wise passes over the IMU (the reader's checks, the calibration,
+#: the timing estimates): a few MB of temporaries whatever the log's length.
+BLOCK_ROWS = 1 << 16
 
 
 def _readonly(*arrays: np.ndarray | None) -> None:
@@ -106,26 +109,32 @@ def lone_stamp(t: np.ndarray, reorder_s: float = MAX_REORDER_S) -> tuple[int, fl
     if n < 4:
         return None
     scale = 1e-9 if np.issubdtype(np.asarray(t).dtype, np.integer) else 1.0
-    d = np.diff(np.asarray(t)).astype(float) * scale      # exact int differences before scaling
+    d = np.diff(np.asarray(t)).astype(float, copy=False)      # exact int differences before scaling
+    if scale != 1.0:
+        d *= scale
     pos = d[d > 0]
     if pos.size == 0:
         return None
-    span = LONG_GAP_PERIODS * float(np.median(pos))        # the longest regular step, s
-    regular = (d > 0) & (d <= span)
+    span = LONG_GAP_PERIODS * float(np.median(pos, overwrite_input=True))   # the longest regular step, s
+    del pos
     floor = max(span, reorder_s)
-    # inside: both steps irregular, the neighbours regular with each other, stamp k outside them
-    skip = d[:-1] + d[1:]                                       # t[k+1] - t[k-1], k = 1 .. N-2
-    out = np.maximum(-d[:-1], -d[1:])       # how far t[k] lies before t[k-1] or after t[k+1]
-    bad = (skip > 0) & (skip <= 2.0 * span) & (out > floor)
-    if bad.any():
-        k = int(np.argmax(bad)) + 1
-        return k, float(out[k - 1])
+    # inside: both steps irregular, the neighbours regular with each other, stamp k outside them;
+    # a block of stamps at a time (no full-length temporaries)
+    for lo in range(0, n - 2, BLOCK_ROWS):
+        before, after = d[lo:lo + BLOCK_ROWS], d[lo + 1:lo + 1 + BLOCK_ROWS]
+        before = before[:after.shape[0]]
+        skip = before + after                                   # t[k+1] - t[k-1], k = lo + 1 ..
+        out = np.maximum(-before, -after)       # how far t[k] lies before t[k-1] or after t[k+1]
+        bad = (skip > 0) & (skip <= 2.0 * span) & (out > floor)
+        if bad.any():
+            j = int(np.argmax(bad))
+            return lo + j + 1, float(out[j])
     # the first sample: a step longer than the rest of the stream lasts, the next step regular
     rest0 = float(np.asarray(t[-1] - t[1]).astype(float)) * scale
-    if regular[1] and abs(d[0]) > max(rest0, floor):
+    if 0 < d[1] <= span and abs(d[0]) > max(rest0, floor):
         return 0, abs(float(d[0]))
     rest1 = float(np.asarray(t[-2] - t[0]).astype(float)) * scale
-    if regular[-2] and abs(d[-1]) > max(rest1, floor):
+    if 0 < d[-2] <= span and abs(d[-1]) > max(rest1, floor):
         return n - 1, abs(float(d[-1]))
     return None
 

@@ -26,7 +26,7 @@ def _parse(path: Path, n_fields: int) -> np.ndarray | None:
     from navpp.io.csvparse import parse_columns
 
     got = parse_columns(path, n_fields, list(range(n_fields)))
-    return None if got is None else got[0]
+    return None if got is None else np.array(got[0])
 
 
 def _random_cells(rng: np.random.Generator, n: int) -> list[str]:

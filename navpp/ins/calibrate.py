@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import geodesy
+from ..recording import BLOCK_ROWS as BLOCK_ROWS  # re-exported for .alignment, .timing_estimates
 from .attitude import rpy_to_dcm
 
 if TYPE_CHECKING:
@@ -158,9 +159,6 @@ class Calibration:
         return out
 
 
-#: Rows per block of the block-wise passes over the IMU: a few MB of temporaries whatever the
-#: log's length.
-BLOCK_ROWS = 1 << 16
 
 
 def trapezoid_integral(t: np.ndarray | float, w: np.ndarray) -> np.ndarray:

@@ -34,7 +34,8 @@ from __future__ import annotations
 import csv
 import re
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
+from itertools import islice
 from pathlib import Path
 from typing import BinaryIO, cast
 
@@ -42,7 +43,7 @@ import numpy as np
 
 from navpp import jitmode
 from navpp.errors import ConfigError, InputError
-from navpp.recording import GnssData, ImuData, OdometryData, Recording, ReferenceData, lone_stamp
+from navpp.recording import BLOCK_ROWS, GnssData, ImuData, OdometryData, Recording, ReferenceData, lone_stamp
 
 __all__ = ["increments_to_rates", "is_csv_log", "read_csv_log", "read_reference_csv"]
 
@@ -169,7 +170,7 @@ def _read_imu(imu_path: Path, gyro_scale: float, accel_scale: float, warnings: l
     and last stamp as read (float s, the span the GNSS fixes are checked against)."""
     header = _read_header(imu_path)
     imu_format, imu_cols = _imu_format(imu_path, header)
-    imu = _read_table(imu_path, header, imu_cols, warnings, progress)
+    imu = _read_table(imu_path, header, imu_cols, warnings, progress, (1, 3, 3))
     _check_lone_stamp(imu)
     imu = _check_time(_with_ns(imu, header), warnings)
     if imu_format == "increments":
@@ -200,7 +201,11 @@ def _read_imu(imu_path: Path, gyro_scale: float, accel_scale: float, warnings: l
         gyro = np.ascontiguousarray(rates[:, 0:3] * gyro_scale)
         accel = np.ascontiguousarray(rates[:, 3:6] * accel_scale)
     del imu, rates
-    return ImuData(t=(imu_ns - t0_ns) * 1e-9, gyro=gyro, accel=accel), t0_ns, span
+    # t = (imu_ns - t0_ns) * 1e-9 in the stamps' own memory (the table that held them is gone)
+    np.subtract(imu_ns, t0_ns, out=imu_ns)
+    t = imu_ns.view(np.float64)
+    np.multiply(imu_ns, 1e-9, out=t)
+    return ImuData(t=t, gyro=gyro, accel=accel), t0_ns, span
 
 
 def _read_gnss(gnss_path: Path, t0_ns: int, imu_span: tuple[float, float], time_offset_s: float,
@@ -395,6 +400,9 @@ class _Table:
     data: dict[str, np.ndarray]
     lines: np.ndarray  # (n,) int64, line number in the file (header = 1)
     stamps_ns: np.ndarray | None = None  # (n,) int64, the ``t`` text's exact ns, when the parser gave them
+    # (n, k) C-contiguous arrays the fast parser wrote columns into, by their names (those
+    # columns of ``data`` are views of them)
+    groups: dict[tuple[str, ...], np.ndarray] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -410,7 +418,13 @@ class _Table:
         return np.column_stack([self.data[c] for c in names])
 
     def vectors(self, names: Sequence[str], scale: float = 1.0) -> np.ndarray:
-        """(n, len(names)) C-contiguous array of the columns times ``scale``."""
+        """(n, len(names)) C-contiguous array of the columns times ``scale``: the parser's own
+        array when it wrote them as one group, scaled in place (the table's columns with it)."""
+        group = self.groups.get(tuple(names))
+        if group is not None:
+            if scale != 1.0:
+                np.multiply(group, scale, out=group)
+            return group
         out = np.empty((self.n, len(names)))
         for j, c in enumerate(names):
             np.multiply(self.data[c], scale, out=out[:, j])
@@ -418,8 +432,10 @@ class _Table:
 
     def take(self, keep: np.ndarray) -> _Table:
         """The rows selected by ``keep`` (a boolean mask or indices)."""
-        return _Table(self.path, {k: v[keep] for k, v in self.data.items()}, self.lines[keep],
-                      None if self.stamps_ns is None else self.stamps_ns[keep])
+        groups = {names: g[keep] for names, g in self.groups.items()}
+        grouped = {name: g[:, j] for names, g in groups.items() for j, name in enumerate(names)}
+        return _Table(self.path, {k: grouped[k] if k in grouped else v[keep] for k, v in self.data.items()},
+                      self.lines[keep], None if self.stamps_ns is None else self.stamps_ns[keep], groups)
 
 
 def _check_options(time_base: str, gyro_units: str, accel_units: str) -> tuple[float, float]:
@@ -476,13 +492,18 @@ def _stamps_ns(table: _Table, header: list[str]) -> np.ndarray:
     d = min(_stamp_decimals(table.path, header), 9)
     if t.size == 0:
         return np.zeros(0, dtype=np.int64)
-    t_max = float(np.max(np.abs(t)))
+    t_max = max(float(np.max(t)), -float(np.min(t)))
     scale = 10.0 ** d
-    if t_max * scale < 2.0 ** 51:
-        scaled = t * scale
-        rounded = np.round(scaled)
-        if float(np.max(np.abs(scaled - rounded))) <= 4.0 * np.finfo(np.float64).eps * t_max * scale:
-            return rounded.astype(np.int64) * 10 ** (9 - d)
+    tolerance = 4.0 * np.finfo(np.float64).eps * t_max * scale
+    # a block of rows at a time: the residuals first, then the ns (no full-length temporaries)
+    if t_max * scale < 2.0 ** 51 and all(
+            float(np.max(np.abs(scaled - np.round(scaled)))) <= tolerance
+            for scaled in (t[lo:lo + BLOCK_ROWS] * scale for lo in range(0, t.shape[0], BLOCK_ROWS))):
+        ns = np.empty(t.shape[0], dtype=np.int64)
+        for lo in range(0, t.shape[0], BLOCK_ROWS):
+            np.multiply(np.round(t[lo:lo + BLOCK_ROWS] * scale).astype(np.int64), 10 ** (9 - d),
+                        out=ns[lo:lo + BLOCK_ROWS])
+        return ns
     if table.stamps_ns is not None:     # the exact path's result, from the fast parser
         return table.stamps_ns
     return _stamps_ns_text(table, header)
@@ -678,21 +699,35 @@ _CHUNK_ROWS = 65536
 
 
 def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list[str],
-                progress: Callable[[float], None] | None = None) -> _Table:
+                progress: Callable[[float], None] | None = None, widths: Sequence[int] | None = None) -> _Table:
     """Parse ``wanted`` columns as float64 and check every cell is a finite number.
 
     A plain file goes through the numba kernel of :mod:`navpp.io.csvparse` (same values, no
-    pandas); any other (or when kernels run interpreted) through pandas, whose errors locate
-    the faulty line and cell."""
+    pandas), which writes ``wanted`` split in consecutive groups of ``widths`` (default one
+    each) into arrays the table keeps (:attr:`_Table.groups`); any other file (or when kernels
+    run interpreted) through pandas, whose errors locate the faulty line and cell."""
     # Unnamed columns (trailing commas) are ignored silently: there is nothing to name.
     extra = [name for name in header if name and name not in wanted]
     if extra:
         warnings.append(f"{path.name}: ignoring extra column(s) {_names(extra)}")
     positions = [header.index(c) for c in wanted]
     parsed = None if jitmode.interpreted() else _parse_plain(path, len(header), positions, header.index("t"),
-                                                             progress)
-    block, stamps_ns = parsed if parsed is not None else (_parse_with_pandas(path, header, wanted, positions,
-                                                                              progress), None)
+                                                             progress, widths)
+    if parsed is not None:      # the kernel takes only finite numbers and no blank line: nothing to check
+        values, stamps_ns = parsed
+        names = iter(wanted)
+        data: dict[str, np.ndarray] = {}
+        groups: dict[tuple[str, ...], np.ndarray] = {}
+        for v in values:
+            if v.ndim == 1:
+                data[next(names)] = v
+            else:
+                group = tuple(islice(names, v.shape[1]))
+                groups[group] = v
+                data.update({name: v[:, j] for j, name in enumerate(group)})
+        n = values[0].shape[0]
+        return _Table(path, data, np.arange(2, n + 2, dtype=np.int64), stamps_ns, groups)
+    block = _parse_with_pandas(path, header, wanted, positions, progress)
     finite = np.isfinite(block)
     n = block.shape[1]
     # Blank lines at the end of the file are harmless: drop them.
@@ -713,18 +748,19 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
             what = f"non-finite value {float(value)!r}"
         raise InputError(f"{path}: line {row + 2}, column {wanted[j]!r}: {what}")
     data = {name: block[j] for j, name in enumerate(wanted)}
-    return _Table(path, data, np.arange(2, n + 2, dtype=np.int64), None if stamps_ns is None else stamps_ns[:n])
+    return _Table(path, data, np.arange(2, n + 2, dtype=np.int64))
 
 
 def _parse_plain(path: Path, n_fields: int, positions: list[int], stamp_position: int,
-                 progress: Callable[[float], None] | None) -> tuple[np.ndarray, np.ndarray | None] | None:
-    """(len(positions), n) float64 columns and the exact ns of field ``stamp_position`` (or None)
-    by :func:`navpp.io.csvparse.parse_columns`; None when the file is not plain (then
+                 progress: Callable[[float], None] | None,
+                 widths: Sequence[int] | None) -> tuple[list[np.ndarray], np.ndarray | None] | None:
+    """The float64 columns in groups of ``widths`` and the exact ns of field ``stamp_position``
+    (or None) by :func:`navpp.io.csvparse.parse_columns`; None when the file is not plain (then
     :func:`_parse_with_pandas` reads it and names the fault)."""
     from navpp.io.csvparse import parse_columns
 
     try:
-        return parse_columns(path, n_fields, positions, stamp_position, progress)
+        return parse_columns(path, n_fields, positions, stamp_position, progress, widths)
     except OSError as e:
         raise InputError(f"{path}: cannot read: {e}") from e
 
@@ -930,7 +966,7 @@ def _check_integral(table: _Table, names: Sequence[str]) -> None:
 
 def _with_ns(table: _Table, header: list[str]) -> _Table:
     """``table`` with its stamps as exact integer ns in ``data["t_ns"]`` (see :func:`_stamps_ns`)."""
-    return _Table(table.path, {**table.data, "t_ns": _stamps_ns(table, header)}, table.lines, table.stamps_ns)
+    return replace(table, data={**table.data, "t_ns": _stamps_ns(table, header)}, stamps_ns=None)
 
 
 def _check_lone_stamp(table: _Table) -> None:

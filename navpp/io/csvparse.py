@@ -16,7 +16,7 @@ that also locates and names the fault.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -169,18 +169,20 @@ def _lines_end(buf, n):
 
 
 @njit(cache=True)
-def _parse_block(buf, stop, column_of, stamp_field, out, row0, pow5):
+def _parse_block(buf, stop, target, component, stamp_field, outs, row0, pow5):
     """Parse the lines of ``buf[:stop]`` (each ended by ``\n``, so is the last) into
-    ``out[column_of[field], row0 + row]`` as IEEE bits (``out`` (k, capacity) uint64).
+    ``outs[target[field]][row0 + row, component[field]]`` as IEEE bits (``outs`` a tuple of
+    (capacity, width) uint64 arrays).
 
-    ``column_of`` (n_fields,) int64: the output row of each field, -1 for a field not wanted.
-    Field ``stamp_field`` (if >= 0) is also written to ``out[k - 1]`` as the exact integer
-    nanoseconds its text says (:func:`_exact_ns`).
-    Returns (rows parsed, bytes consumed, status): ``_OK``; ``_FULL`` when ``out`` has no room
+    ``target`` (n_fields,) int64: the output array of each field, -1 for a field not wanted;
+    ``component`` (n_fields,) int64: its column there.  Field ``stamp_field`` (if >= 0) is also
+    written to ``outs[-1][:, 0]`` as the exact integer nanoseconds its text says (:func:`_exact_ns`).
+    Returns (rows parsed, bytes consumed, status): ``_OK``; ``_FULL`` when ``outs`` have no room
     for the next line (consumed stops before it); ``_FALLBACK`` when a line is not in the plain
     form (see the module docstring)."""
-    n_fields = column_of.shape[0]
-    capacity = out.shape[1]
+    n_fields = target.shape[0]
+    capacity = outs[0].shape[0]
+    last = len(outs) - 1
     pos = 0
     row = row0
     while pos < stop:
@@ -188,7 +190,7 @@ def _parse_block(buf, stop, column_of, stamp_field, out, row0, pow5):
             return row - row0, pos, _FULL
         i = pos
         for field in range(n_fields):
-            col = column_of[field]
+            col = target[field]
             if col < 0:                       # a field not wanted: skip it
                 while True:
                     c = buf[i]
@@ -246,9 +248,9 @@ def _parse_block(buf, stop, column_of, stamp_field, out, row0, pow5):
                     bits, ok = _to_bits(w, exp10, n_sig, negative, pow5)
                     if not ok:
                         return row - row0, pos, _FALLBACK
-                out[col, row] = bits
+                outs[col][row, component[field]] = bits
                 if field == stamp_field:
-                    out[out.shape[0] - 1, row] = _exact_ns(w, exp10, negative)
+                    outs[last][row, 0] = _exact_ns(w, exp10, negative)
             if field < n_fields - 1:
                 if buf[i] != 44:
                     return row - row0, pos, _FALLBACK   # too few fields, or not a plain number
@@ -263,17 +265,25 @@ def _parse_block(buf, stop, column_of, stamp_field, out, row0, pow5):
 
 
 def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_position: int | None = None,
-                  progress: Callable[[float], None] | None = None) -> tuple[np.ndarray, np.ndarray | None] | None:
-    """The data rows of CSV file ``path`` (a header line, then rows of ``n_fields`` cells) as a
-    (len(positions), n_rows) float64 array, row ``j`` holding field ``positions[j]``, and, for
-    field ``stamp_position`` (one of ``positions``), the exact integer nanoseconds each cell's
-    text says ((n_rows,) int64, half-even at 1 ns; None if one does not fit int64).  None when
-    the file is not in the plain form the kernel takes (then nothing is known about why).
+                  progress: Callable[[float], None] | None = None, widths: Sequence[int] | None = None,
+                  ) -> tuple[list[np.ndarray], np.ndarray | None] | None:
+    """The data rows of CSV file ``path`` (a header line, then rows of ``n_fields`` cells) as
+    float64 arrays, the fields ``positions`` split in consecutive groups of ``widths`` (default
+    one each): a group of one an (n_rows,) array, a wider one an (n_rows, width) C-contiguous
+    array, so that the caller keeps them as they are (nothing is copied after the parse).  For
+    field ``stamp_position`` (one of ``positions``), also the exact integer nanoseconds each
+    cell's text says ((n_rows,) int64, half-even at 1 ns; None if one does not fit int64).  None
+    when the file is not in the plain form the kernel takes (then nothing is known about why).
     ``progress(fraction)`` follows the bytes read."""
-    column_of = np.full(n_fields, -1, dtype=np.int64)
-    column_of[positions] = np.arange(len(positions))
+    widths = [1] * len(positions) if widths is None else list(widths)
+    target = np.full(n_fields, -1, dtype=np.int64)
+    component = np.zeros(n_fields, dtype=np.int64)
+    starts = np.cumsum([0] + widths)
+    for g, width in enumerate(widths):
+        target[positions[starts[g]:starts[g] + width]] = g
+        component[positions[starts[g]:starts[g] + width]] = np.arange(width)
     stamp_field = -1 if stamp_position is None else stamp_position
-    k = len(positions) + (stamp_position is not None)       # the stamps' ns in the last row
+    shapes = widths + [1] * (stamp_position is not None)     # the stamps' ns in the last array
     size = path.stat().st_size
     buf = np.empty(_BLOCK_BYTES, dtype=np.uint8)
     with open(path, "rb") as fh:
@@ -285,7 +295,8 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
         # room for the rows if they are as long as those of the first 64 KiB, and 5 % more;
         # grown if not (pages never written cost no memory)
         per_row = len(sample) / max(sample.count(b"\n"), 1)
-        out = np.empty((k, int((size - len(header)) / max(per_row, 1.0) * 1.05) + 16), dtype=np.uint64)
+        capacity = int((size - len(header)) / max(per_row, 1.0) * 1.05) + 16
+        outs = tuple(np.empty((capacity, width), dtype=np.uint64) for width in shapes)
         rows = 0
         kept = 0                              # bytes of an incomplete line carried to the next block
         while True:
@@ -299,13 +310,13 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
                 return None                   # no line end in a block: the slow path says why
             consumed = 0
             while True:
-                done, used, status = _parse_block(buf[consumed:stop], stop - consumed, column_of, stamp_field, out,
-                                                  rows, _POW5)
+                done, used, status = _parse_block(buf[consumed:stop], stop - consumed, target, component, stamp_field,
+                                                  outs, rows, _POW5)
                 rows += done
                 consumed += used
                 if status != _FULL:
                     break
-                out = _grown(out, rows, out.shape[1] * 5 // 4 + 1024)
+                outs = tuple(_grown(out, rows, out.shape[0] * 5 // 4 + 1024) for out in outs)
             if status == _FALLBACK:
                 return None
             if progress is not None:
@@ -314,15 +325,16 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
                 break
             kept = n - consumed
             buf[:kept] = buf[consumed:n]
-    values = out[:len(positions), :rows].view(np.float64)
+    values = [out[:rows, 0].view(np.float64) if width == 1 else out[:rows].view(np.float64)
+              for out, width in zip(outs, widths)]
     if stamp_position is None:
         return values, None
-    stamps = out[-1, :rows]
+    stamps = outs[-1][:rows, 0]
     return values, None if bool(np.any(stamps == _NO_NS)) else stamps.view(np.int64)
 
 
 def _grown(out: np.ndarray, rows: int, capacity: int) -> np.ndarray:
-    """``out`` (k, capacity) with its first ``rows`` columns kept and room for ``capacity``."""
-    bigger = np.empty((out.shape[0], capacity), dtype=out.dtype)
-    bigger[:, :rows] = out[:, :rows]
+    """``out`` (capacity, width) with its first ``rows`` rows kept and room for ``capacity``."""
+    bigger = np.empty((capacity, out.shape[1]), dtype=out.dtype)
+    bigger[:rows] = out[:rows]
     return bigger
