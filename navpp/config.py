@@ -699,8 +699,9 @@ class OutputConfig:
         end, and are read back by the backward pass: :class:`navpp.filters.smoother.ForwardStore`)
         and the IMU-rate output, 140 bytes per IMU sample (beyond it the path, its 1-sigma and
         body rate live on a mapped temporary file whose pages every pass releases behind it:
-        :mod:`navpp.spill`).  Both are in ``$TMPDIR`` and give the same bits as in memory;
-        ``--memory`` overrides it.
+        :mod:`navpp.spill`; with ``smooth`` the smoothed copy follows the path's choice, so an
+        output just under the budget holds twice that in memory).  Both are in ``$TMPDIR`` and
+        give the same bits as in memory; ``--memory`` overrides it.
     """
 
     rate_hz: float | None = None

@@ -16,6 +16,7 @@ function here, so the callers need no second path.
 from __future__ import annotations
 
 import mmap
+import os
 import tempfile
 import weakref
 from collections.abc import Iterable, Iterator
@@ -23,6 +24,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from .errors import NavppError
 
 #: rows per window of a sequential pass over a spilled array (64 Ki: 5 MB of the (N, 10) path)
 WINDOW_ROWS = 1 << 16
@@ -53,7 +56,13 @@ def empty_rows(n_rows: int, row_shape: tuple[int, ...], dtype: Any, spill: bool)
     if not spill or nbytes == 0:
         return np.empty(shape, dt)
     with tempfile.TemporaryFile(prefix="navpp-output-") as f:   # the mapping keeps the file alive
-        f.truncate(nbytes)
+        try:    # blocks reserved now: a full disk later would kill the process (SIGBUS), not raise
+            os.posix_fallocate(f.fileno(), 0, nbytes)
+        except OSError as exc:
+            raise NavppError(
+                f"cannot spill {nbytes / 2**20:.0f} MB of IMU-rate output to {tempfile.gettempdir()} "
+                f"({exc.strerror or exc}): free space there, set TMPDIR to a disk with room, or raise "
+                "--memory ([output] memory) to keep it in memory") from None
         mm = mmap.mmap(f.fileno(), nbytes, flags=mmap.MAP_SHARED, prot=mmap.PROT_READ | mmap.PROT_WRITE)
     root = np.frombuffer(mm, np.uint8)            # every view's base: its end frees the entry
     _MAPPINGS[id(mm)] = _Mapping(mm, root.ctypes.data, nbytes)
@@ -105,9 +114,12 @@ def release_before(a: np.ndarray, row: int) -> None:
     """Release the rows of a spilled ``a`` before ``row`` once they make a window's worth of bytes
     more than the last release (cheap to call per GNSS epoch from a loop writing ``a`` in order)."""
     m = _mapping(a)
-    if m is None or row * a.strides[0] - m.released < WINDOW_ROWS * a.strides[0]:
+    if m is None:
         return
-    end = (a.__array_interface__["data"][0] - m.address + row * a.strides[0]) // mmap.PAGESIZE * mmap.PAGESIZE
+    offset = a.__array_interface__["data"][0] - m.address + row * a.strides[0]   # from the mapping's start
+    if offset - m.released < WINDOW_ROWS * a.strides[0]:
+        return
+    end = offset // mmap.PAGESIZE * mmap.PAGESIZE
     if end > m.released:
         m.mm.madvise(mmap.MADV_DONTNEED, m.released, end - m.released)
         m.released = end

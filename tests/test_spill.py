@@ -226,3 +226,33 @@ def test_the_compiled_loop_releases_a_spilled_path_behind_it(spill_dir, monkeypa
     assert len(seen) > 20 and whole_kb[-1] > 2500
     assert sum(after < before for before, after in seen) >= 5      # the stretches release, not only generic epochs
     assert max(after for _, after in seen) < whole_kb[-1] // 4
+
+
+def test_a_spill_that_does_not_fit_is_one_clear_error(spill_dir, monkeypatch):
+    """No room for the spill file: one error naming the size, the place and the remedies, at the
+    allocation (blocks reserved up front), not a SIGBUS at some later write."""
+    from navpp.errors import NavppError
+
+    def full(fd, offset, length):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(spill.os, "posix_fallocate", full)
+    with pytest.raises(NavppError) as err:
+        spill.empty_rows(200_000, (10,), np.float64, spill=True)
+    msg = str(err.value)
+    assert "15 MB" in msg and str(spill_dir) in msg and "No space left" in msg
+    assert "TMPDIR" in msg and "--memory" in msg and "\n" not in msg
+    assert not _mapped(spill_dir) and not list(spill_dir.iterdir())
+
+
+def test_release_before_counts_from_the_mapping_for_a_view(spill_dir):
+    """A view that starts inside the mapping (the path after the alignment's rows): its rows are
+    released by their place in the mapping, a window behind the writer, never ahead of it."""
+    a = spill.full_rows(50_000, (10,), 0.0, spill=True)
+    view = a[7_000:]
+    for i in range(view.shape[0]):
+        view[i] = i
+        spill.release_before(view, i)
+        if i % 5000 == 0:
+            assert _rss_kb(a) <= 2 * (spill.WINDOW_ROWS * 80) // 1024 + 8
+    assert np.array_equal(view[:, 0], np.arange(view.shape[0], dtype=float))

@@ -239,7 +239,7 @@ class FusedRunner:
         index = np.fromiter((e.index for e in epochs), np.int64, n)
         self.generic = ~self.coast & ((self.fix < 0) | constraints)
         has_vel = source.velocity_mask()
-        if has_vel is not None:
+        if has_vel is not None and has_vel.size:
             self.generic |= ~self.coast & (self.fix >= 0) & has_vel[np.maximum(self.fix, 0)]
         # the recorder's progress: stretches end after each epoch it reports
         self.report = np.zeros(n, bool)

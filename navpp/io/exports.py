@@ -79,6 +79,7 @@ import numpy as np
 
 from .. import timebase
 from ..recording import Recording, Solution
+from ..spill import release
 from . import frames, writers
 from .csvformat import BlockFormatter
 
@@ -322,6 +323,7 @@ def _write_tum_rows(path: str | os.PathLike[str], sol: Solution, anchor: frames.
                 q[:, 3] = 1.0
             block = [np.asarray(part.t), *xyz.T, *q.T]
             f.write(formatter.text(block))
+            release([sol.t, sol.lat_deg, sol.lon_deg, sol.alt, sol.rph_deg], start, stop)   # a spilled solution
 
     writers.atomic_write(path, write, mode="wb")
 
