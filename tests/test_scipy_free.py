@@ -1,11 +1,10 @@
 """What replaces scipy on a run's default path gives scipy's bits (issue 21, point 3): the
 chi-square quantiles of the gates (:mod:`navpp.chi2`), the clock-offset search's spline
-evaluation (:class:`~navpp.ins.timing_estimates.Cubic`) and its bounded lag refinement
-(:func:`~navpp.ins.timing_estimates.minimize_bounded`)."""
+evaluation (:class:`~navpp.ins.timing_estimates.Cubic`)."""
 
 import numpy as np
 import pytest
-from scipy import interpolate, optimize, special
+from scipy import interpolate, special
 
 from navpp import chi2
 from navpp.ins import timing_estimates
@@ -44,19 +43,3 @@ def test_cubic_is_ppoly(seed):
                         [np.nan, np.nextafter(t[0], np.inf), np.nextafter(t[-1], -np.inf)]])
     assert ref(q).tobytes() == got(q).tobytes()
     assert ref(q[:100].reshape(10, 10)).tobytes() == got(q[:100].reshape(10, 10)).tobytes()
-
-
-@pytest.mark.parametrize("seed", range(40))
-def test_minimize_bounded_is_scipys(seed):
-    """Smooth, kinked and flat-stepped costs, tolerances from 1e-8 to 1e-3: the same x and f(x)."""
-    rng = np.random.default_rng(seed)
-    c0, w = rng.normal(), 10.0 ** rng.uniform(-3, 1)
-    costs = [lambda d: (d - c0) ** 2, lambda d: -np.cos((d - c0) / w),
-             lambda d: abs(d - c0) ** 1.5 + 0.1 * np.sin(20.0 * d), lambda d: float(np.floor(d * 7.0) % 3)]
-    f = costs[seed % 4]
-    lo = np.float64(c0 + rng.normal() * w)
-    hi = lo + np.float64(abs(rng.normal()) * 3.0 * w + 1e-4)
-    xatol = float(rng.choice([1e-8, 1e-5, 1e-3]))
-    ref = optimize.minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": xatol})
-    x, fx = timing_estimates.minimize_bounded(f, lo, hi, xatol=xatol)
-    assert (float(x), float(fx)) == (float(ref.x), float(ref.fun))

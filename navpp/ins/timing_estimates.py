@@ -5,9 +5,9 @@ Pure functions, no I/O and no configuration: the caller passes arrays (as held b
 with the answers.  numpy, and of scipy only what a run loads anyway (:mod:`scipy.linalg`'s
 tridiagonal solve: numba's kernels import scipy.linalg) or needs rarely (``scipy.special`` when
 rows repeat, ``scipy.interpolate`` for a spline of fewer than 4 points): the spline's
-evaluation (:class:`Cubic`) and the bounded lag refinement (:func:`minimize_bounded`) are
-scipy's to the bit without importing scipy.interpolate and scipy.optimize (0.3 s and more of
-every run's start).
+evaluation (:class:`Cubic`) is scipy's to the bit without importing scipy.interpolate (0.3 s
+and more of every run's start); the bounded lag refinement is scipy.optimize's
+``minimize_scalar``, imported when the search runs (it loads scipy.special too: about 0.25 s).
 
 Conventions: times are float seconds (any common origin, e.g. relative to the log's first
 IMU stamp); body frame FLU, navigation frame ENU; gyro in rad/s, specific force in m/s^2.
@@ -810,7 +810,11 @@ class _LagFit:
         costs = np.array([_neg_corr(g[sel], rr) for g in self.coarse])
         i = int(np.argmin(costs))
         lo, hi = lags[max(i - 1, 0)], lags[min(i + 1, lags.shape[0] - 1)]
-        x, fx = minimize_bounded(lambda d: self.neg_corr(d, sel), lo, hi, xatol=1e-5)
+        from scipy.optimize import minimize_scalar  # (with scipy.special: ~0.25 s of start-up, once)
+
+        res = minimize_scalar(lambda d: self.neg_corr(d, sel), bounds=(lo, hi), method="bounded",
+                              options={"xatol": 1e-5})
+        x, fx = res.x, res.fun
         d, c = (float(x), float(fx)) if fx <= costs[i] else (float(lags[i]), float(costs[i]))
         edge = i == 0 or i == lags.shape[0] - 1
         return d, -c, edge
@@ -821,77 +825,6 @@ def _neg_corr(g: np.ndarray, r: np.ndarray) -> float:
     gs, rs = g - g.mean(), r - r.mean()
     den = np.sqrt(np.dot(gs, gs) * np.dot(rs, rs))
     return -float(np.dot(gs, rs) / den) if den > 0 else 0.0
-
-
-def minimize_bounded(f: Callable[[float], float], lo: float, hi: float, *, xatol: float = 1e-5,
-                     maxiter: int = 500) -> tuple[float, float]:
-    """(x, f(x)) minimising ``f`` on ``[lo, hi]``: Brent's bounded search (golden sections and
-    parabolic steps), ``scipy.optimize.minimize_scalar(f, bounds=(lo, hi), method="bounded",
-    options={"xatol": xatol, "maxiter": maxiter})`` step for step, so the same bits, without
-    importing scipy.optimize."""
-    sqrt_eps = math.sqrt(2.2e-16)
-    golden_mean = 0.5 * (3.0 - math.sqrt(5.0))
-    a, b = lo, hi
-    fulc = a + golden_mean * (b - a)
-    nfc, xf = fulc, fulc
-    rat = e = 0.0
-    x = xf
-    fx = f(x)
-    num = 1
-    ffulc = fnfc = fx
-    xm = 0.5 * (a + b)
-    tol1 = sqrt_eps * np.abs(xf) + xatol / 3.0
-    tol2 = 2.0 * tol1
-    while np.abs(xf - xm) > (tol2 - 0.5 * (b - a)):
-        golden = True
-        if np.abs(e) > tol1:                    # a parabola through the three best points
-            golden = False
-            r = (xf - nfc) * (fx - ffulc)
-            q = (xf - fulc) * (fx - fnfc)
-            p = (xf - fulc) * q - (xf - nfc) * r
-            q = 2.0 * (q - r)
-            if q > 0.0:
-                p = -p
-            q = np.abs(q)
-            r = e
-            e = rat
-            if (np.abs(p) < np.abs(0.5 * q * r)) and (p > q * (a - xf)) and (p < q * (b - xf)):
-                rat = (p + 0.0) / q
-                x = xf + rat
-                if ((x - a) < tol2) or ((b - x) < tol2):
-                    rat = tol1 * (np.sign(xm - xf) + ((xm - xf) == 0))
-            else:
-                golden = True
-        if golden:                              # a golden-section step
-            e = a - xf if xf >= xm else b - xf
-            rat = golden_mean * e
-        x = xf + (np.sign(rat) + (rat == 0)) * np.maximum(np.abs(rat), tol1)
-        fu = f(x)
-        num += 1
-        if fu <= fx:
-            if x >= xf:
-                a = xf
-            else:
-                b = xf
-            fulc, ffulc = nfc, fnfc
-            nfc, fnfc = xf, fx
-            xf, fx = x, fu
-        else:
-            if x < xf:
-                a = x
-            else:
-                b = x
-            if (fu <= fnfc) or (nfc == xf):
-                fulc, ffulc = nfc, fnfc
-                nfc, fnfc = x, fu
-            elif (fu <= ffulc) or (fulc == xf) or (fulc == nfc):     # noqa: SIM109  (== as scipy: no NaN by identity)
-                fulc, ffulc = x, fu
-        xm = 0.5 * (a + b)
-        tol1 = sqrt_eps * np.abs(xf) + xatol / 3.0
-        tol2 = 2.0 * tol1
-        if num >= maxiter:
-            break
-    return xf, fx
 
 
 _MIN_SAMPLES = 40
