@@ -719,8 +719,7 @@ def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solu
     ``compared``: the (full-rate) solution the metrics were computed on; its span picks the rows
     of ``reference.tum``.  ``notes``: the writers append their lines for the run's notes there
     (:func:`embed_note`)."""
-    from .io import exports, writers
-    from .io.foxglove import LAYOUT_FILE, write_layout
+    from .io import writers
 
     cfg = Config() if cfg is None else cfg
     t0_s = rec.t0_ns * 1e-9
@@ -736,6 +735,9 @@ def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solu
         outputs.append(("metrics.json", lambda p: writers.write_metrics_json(p, metrics)))
         outputs.append(("metrics.md", lambda p: writers.write_metrics_md(p, metrics)))
     named = {"filter_name": filter_name, "log": str(log)}
+    if any(fmt in ("tum", "geojson", "kml") for fmt in formats):
+        # with xml.sax (and urllib): imported only for the formats it writes
+        from .io import exports
     for fmt in formats:
         if fmt == "tum":
             outputs.append((FORMAT_FILES[fmt], lambda p: exports.write_tum(p, sol_out, rec, **named)))
@@ -754,6 +756,8 @@ def _outputs(formats: Sequence[str], *, log: Path, rec: Recording, sol_out: Solu
             outputs.append((FORMAT_FILES[fmt], lambda p: exports.write_kml(p, sol_out, rec, metrics=metrics,
                                                                           **named)))
         elif fmt == "mcap":
+            from .io.foxglove import LAYOUT_FILE, write_layout
+
             mounting = (result.calibration or {}).get("gross_mounting_rpy_deg", cfg.imu.mounting_rpy_deg)
             rate_hz = rec.imu.rate_hz
             rate_noise = cfg.imu.noise().gyro_arw * math.sqrt(rate_hz) if math.isfinite(rate_hz) else 0.0

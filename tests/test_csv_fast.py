@@ -69,6 +69,62 @@ def test_every_value_is_the_double_python_reads(tmp_path: Path) -> None:
     assert got.tobytes() == np.ascontiguousarray(want).tobytes()
 
 
+def test_significands_of_every_bit_length_round_as_python(tmp_path: Path) -> None:
+    """Digit strings whose integer value has 1..64 bits (2^k - 1, 2^k, 2^k + 1 within 19
+    digits), with exponents across the normal range: the normalising shift of every length."""
+    rng = np.random.default_rng(64)
+    cells = []
+    for k in range(64):
+        for w in (2**k - 1, 2**k, 2**k + 1):
+            if 0 < w < 10**19:
+                exp = int(rng.integers(-300, 290))
+                cells += [f"{w}", f"{w}e{exp}", f"-{w}E{-abs(exp) // 2}", f"0.{w}"]
+    cells = cells[: len(cells) // 4 * 4]
+    path = tmp_path / "bits.csv"
+    path.write_text("a,b,c,d\n" + "".join(",".join(cells[k:k + 4]) + "\n" for k in range(0, len(cells), 4)))
+    got = _parse(path, 4)
+    want = np.array([float(c) for c in cells]).reshape(-1, 4).T
+    assert got is not None and got.tobytes() == np.ascontiguousarray(want).tobytes()
+
+
+@pytest.mark.parametrize("end", ["\n", "\r\n", ""])
+def test_lines_across_the_mapped_windows(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, end: str) -> None:
+    """Windows far smaller than the file, so that lines straddle every window edge at every
+    offset (the windows start on page boundaries, the lines anywhere); with and without an
+    end on the last line: every row, in order."""
+    from navpp.io import csvparse
+
+    monkeypatch.setattr(csvparse, "_BLOCK_BYTES", 3 * 4096 + 17)
+    values = np.arange(20_000) * 0.001 - 7.0
+    lines = [f"{k},{float(v)!r},{'x' * (k % 37)}" for k, v in enumerate(values)]
+    path = tmp_path / "f.csv"
+    path.write_text("t,v,note\n" + "\n".join(lines) + end, newline="")
+    if end == "\r\n":
+        path.write_bytes(path.read_bytes().replace(b"\n", b"\r\n"))
+    got = csvparse.parse_columns(path, 3, [0, 1], 0)
+    assert got is not None
+    assert np.array_equal(got[0][0], np.arange(20_000, dtype=float))
+    assert got[0][1].tobytes() == values.tobytes()
+    assert got[1] is not None and np.array_equal(got[1], np.arange(20_000) * 1_000_000_000)
+
+
+def test_a_line_longer_than_a_window_or_a_pipe_goes_to_pandas(tmp_path: Path,
+                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    from navpp.io import csvparse
+
+    monkeypatch.setattr(csvparse, "_BLOCK_BYTES", 2 * 4096)
+    path = tmp_path / "f.csv"
+    path.write_text("a,b\n1,2\n3," + "0" * 10_000 + "4\n5,6\n")
+    assert csvparse.parse_columns(path, 2, [0]) is None
+    fifo = tmp_path / "pipe.csv"
+    os.mkfifo(fifo)
+    writer = subprocess.Popen([sys.executable, "-c", f"open({str(fifo)!r}, 'w').write('a,b\\n1,2\\n')"])
+    try:
+        assert csvparse.parse_columns(fifo, 2, [0, 1]) is None
+    finally:
+        writer.wait(timeout=30)
+
+
 @pytest.mark.parametrize("text", [
     "1,2\n3,4\n",                 # plain
     "1,2\r\n3,4\r\n",             # CRLF

@@ -1,5 +1,5 @@
 """Fast path of the CSV reader: the numeric columns of a plain comma-separated file, parsed by
-a numba kernel (:func:`_parse_block`) a block of the file at a time, without pandas.
+a numba kernel (:func:`_parse_block`) a mapped window of the file at a time, without pandas.
 
 The kernel takes only the plain form every logger writes: each data line ``n_fields`` cells
 separated by ``,``, ended by ``\\n`` or ``\\r\\n`` (the last one may lack it); a wanted cell is
@@ -16,16 +16,20 @@ that also locates and names the fault.
 
 from __future__ import annotations
 
+import mmap
+import os
+import stat
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 from numba import njit
+from numba.cpython.unsafe.numbers import leading_zeros
 
 __all__ = ["parse_columns"]
 
 _BLOCK_BYTES = 1 << 22
-"""Bytes read per call of the kernel (4 MiB): the file is never held whole."""
+"""Bytes of the file mapped per call of the kernel (4 MiB): the file is never held whole."""
 
 _OK, _FALLBACK, _FULL = 0, 1, 2     # kernel status: block done; not the plain form; output full
 
@@ -73,19 +77,15 @@ def _mul128(a, b):
 
 
 @njit(cache=True, inline="always")
-def _to_bits(w, q, n_digits, negative, pow5):
-    """IEEE-754 bits (uint64) of the double nearest ``w * 10^q`` (``w`` uint64 > 0 of
-    ``n_digits`` <= 19 digits), or 0 with ``ok`` False when the result would be subnormal or
-    overflow."""
+def _to_bits(w, q, negative, pow5):
+    """IEEE-754 bits (uint64) of the double nearest ``w * 10^q`` (``w`` uint64 > 0 of at most 19
+    digits), or 0 with ``ok`` False when the result would be subnormal or overflow."""
     one = np.uint64(1)
     sign = np.uint64(1) << np.uint64(63) if negative else np.uint64(0)
     if q < _SMALLEST_POWER or q > _LARGEST_POWER:
         return np.uint64(0), False
-    lz = 63 - (n_digits * 3322) // 1000     # 10^(n-1) <= w < 2^(3.3222 n): lz or a little more
+    lz = np.int64(leading_zeros(w))         # w shifted so that its top bit is bit 63
     w <<= np.uint64(lz)
-    while w < (one << np.uint64(63)):
-        w <<= one
-        lz += 1
     index = 2 * (q - _SMALLEST_POWER)
     hi, lo = _mul128(w, pow5[index])
     mask = np.uint64(0x1FF)                   # the bits below the 55 the rounding needs
@@ -161,17 +161,9 @@ def _exact_ns(w, q, negative):
 
 
 @njit(cache=True)
-def _lines_end(buf, n):
-    """Index after the last ``\n`` in ``buf[:n]`` (0: none)."""
-    while n > 0 and buf[n - 1] != 10:
-        n -= 1
-    return n
-
-
-@njit(cache=True)
-def _parse_block(buf, stop, target, component, stamp_field, outs, row0, pow5):
-    """Parse the lines of ``buf[:stop]`` (each ended by ``\n``, so is the last) into
-    ``outs[target[field]][row0 + row, component[field]]`` as IEEE bits (``outs`` a tuple of
+def _parse_block(buf, target, component, stamp_field, outs, row0, pow5):
+    """Parse the whole lines of ``buf`` (those up to its last ``\n``; the bytes after it are left)
+    into ``outs[target[field]][row0 + row, component[field]]`` as IEEE bits (``outs`` a tuple of
     (capacity, width) uint64 arrays).
 
     ``target`` (n_fields,) int64: the output array of each field, -1 for a field not wanted;
@@ -180,6 +172,9 @@ def _parse_block(buf, stop, target, component, stamp_field, outs, row0, pow5):
     Returns (rows parsed, bytes consumed, status): ``_OK``; ``_FULL`` when ``outs`` have no room
     for the next line (consumed stops before it); ``_FALLBACK`` when a line is not in the plain
     form (see the module docstring)."""
+    stop = buf.shape[0]
+    while stop > 0 and buf[stop - 1] != 10:
+        stop -= 1
     n_fields = target.shape[0]
     capacity = outs[0].shape[0]
     last = len(outs) - 1
@@ -245,7 +240,7 @@ def _parse_block(buf, stop, target, component, stamp_field, outs, row0, pow5):
                 if w == 0:
                     bits = np.uint64(1) << np.uint64(63) if negative else np.uint64(0)
                 else:
-                    bits, ok = _to_bits(w, exp10, n_sig, negative, pow5)
+                    bits, ok = _to_bits(w, exp10, negative, pow5)
                     if not ok:
                         return row - row0, pos, _FALLBACK
                 outs[col][row, component[field]] = bits
@@ -284,53 +279,69 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
         component[positions[starts[g]:starts[g] + width]] = np.arange(width)
     stamp_field = -1 if stamp_position is None else stamp_position
     shapes = widths + [1] * (stamp_position is not None)     # the stamps' ns in the last array
-    size = path.stat().st_size
-    buf = np.empty(_BLOCK_BYTES, dtype=np.uint8)
     with open(path, "rb") as fh:
+        info = os.fstat(fh.fileno())
+        if not stat.S_ISREG(info.st_mode):
+            return None                       # a pipe or device cannot be mapped: the slow path reads it
+        size = info.st_size
         header = fh.readline(_BLOCK_BYTES)
         if not header.endswith(b"\n") or b'"' in header:
             return None
         sample = fh.read(1 << 16)
-        fh.seek(len(header))
         # room for the rows if they are as long as those of the first 64 KiB, and 5 % more;
         # grown if not (pages never written cost no memory)
         per_row = len(sample) / max(sample.count(b"\n"), 1)
         capacity = int((size - len(header)) / max(per_row, 1.0) * 1.05) + 16
         outs = tuple(np.empty((capacity, width), dtype=np.uint64) for width in shapes)
         rows = 0
-        kept = 0                              # bytes of an incomplete line carried to the next block
-        while True:
-            n = kept + fh.readinto(buf[kept:].data)
-            final = n < buf.shape[0]
-            if final and n and buf[n - 1] != 10:
-                buf[n] = 10                   # the last line's missing end
-                n += 1
-            stop = n if final else _lines_end(buf, n)
-            if stop == 0:
-                return None                   # no line end in a block: the slow path says why
-            consumed = 0
-            while True:
-                done, used, status = _parse_block(buf[consumed:stop], stop - consumed, target, component, stamp_field,
-                                                  outs, rows, _POW5)
-                rows += done
-                consumed += used
-                if status != _FULL:
-                    break
-                outs = tuple(_grown(out, rows, out.shape[0] * 5 // 4 + 1024) for out in outs)
+        start = len(header)                   # file offset of the first line not parsed yet
+        while start < size:
+            # the file's pages are parsed where they are (no copy), a window of _BLOCK_BYTES at a time
+            base = start - start % mmap.ALLOCATIONGRANULARITY
+            length = min(base + _BLOCK_BYTES, size) - base
+            with mmap.mmap(fh.fileno(), length, access=mmap.ACCESS_READ, offset=base) as window:
+                view = np.frombuffer(window, dtype=np.uint8)
+                done, outs, status = _parse_lines(view[start - base:], target, component, stamp_field, outs, rows)
+                del view                      # no reference into the window once it closes
+            rows += done[0]
+            start += done[1]
             if status == _FALLBACK:
                 return None
+            if base + length == size and start < size:
+                fh.seek(start)                # the last line lacks its end: parse a copy that has one
+                tail = np.frombuffer(fh.read() + b"\n", dtype=np.uint8)
+                done, outs, status = _parse_lines(tail, target, component, stamp_field, outs, rows)
+                rows += done[0]
+                start = size
+                if status == _FALLBACK or done[1] < tail.shape[0]:
+                    return None
+            elif done[1] == 0:
+                return None                   # no line end in a window: the slow path says why
             if progress is not None:
-                progress(min(fh.tell() / max(size, 1), 1.0))
-            if final:
-                break
-            kept = n - consumed
-            buf[:kept] = buf[consumed:n]
+                progress(min(start / max(size, 1), 1.0))
+        if rows == 0:
+            return None                       # no data line: the slow path says so
     values = [out[:rows, 0].view(np.float64) if width == 1 else out[:rows].view(np.float64)
               for out, width in zip(outs, widths)]
     if stamp_position is None:
         return values, None
     stamps = outs[-1][:rows, 0]
     return values, None if bool(np.any(stamps == _NO_NS)) else stamps.view(np.int64)
+
+
+def _parse_lines(buf: np.ndarray, target: np.ndarray, component: np.ndarray, stamp_field: int,
+                 outs: tuple[np.ndarray, ...], rows: int) -> tuple[tuple[int, int], tuple[np.ndarray, ...], int]:
+    """The whole lines of ``buf`` (uint8) parsed into ``outs`` from row ``rows`` on by
+    :func:`_parse_block`, the outputs grown as often as they fill: ((rows parsed, bytes consumed),
+    the outputs, status ``_OK`` or ``_FALLBACK``)."""
+    done = used = 0
+    while True:
+        n, u, status = _parse_block(buf[used:], target, component, stamp_field, outs, rows + done, _POW5)
+        done += n
+        used += u
+        if status != _FULL:
+            return (done, used), outs, status
+        outs = tuple(_grown(out, rows + done, out.shape[0] * 5 // 4 + 1024) for out in outs)
 
 
 def _grown(out: np.ndarray, rows: int, capacity: int) -> np.ndarray:
