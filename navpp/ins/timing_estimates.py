@@ -591,9 +591,12 @@ AngleAt = Callable[[np.ndarray], np.ndarray]
 
 def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
     """``scipy.interpolate.CubicSpline(x, y, extrapolate=False)`` (not-a-knot ends) for (N,) float
-    ``x`` (strictly increasing) and ``y``, to the bit, with a third of its temporaries: the same
-    tridiagonal solve (LAPACK ``gtsv``, as ``solve_banded`` calls it), then the coefficients block
-    by block; the polynomial keeps ``x`` itself (not a copy).  Fewer than 4 points: CubicSpline."""
+    ``x`` (strictly increasing) and ``y``, its values to the bit: the same tridiagonal solve for
+    the first derivatives at ``x`` (LAPACK ``gtsv``, as ``solve_banded`` calls it), its diagonals
+    and right-hand side filled block by block; the interpolant (:class:`Cubic`) keeps ``x`` and
+    ``y`` themselves (not copies) and the derivatives, and forms the coefficients of the intervals
+    it evaluates.  The peak is ``y``, the three diagonals and the right-hand side (5 N floats).
+    Fewer than 4 points: CubicSpline."""
     n = x.shape[0]
     spline: AngleAt
     if n < 4:
@@ -603,57 +606,56 @@ def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
         return spline
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
         raise ValueError("_spline: x and y must be finite")
-    dx = np.diff(x)
-    if not np.all(dx > 0):
+    if not np.all(np.diff(x) > 0):
         raise ValueError("_spline: x must be strictly increasing")
-    slope = np.diff(y)
-    slope /= dx
-    ab = np.zeros((3, n))                   # the banded matrix: upper, main, lower diagonal
-    ab[1, 1:-1] = 2 * (dx[:-1] + dx[1:])
-    ab[0, 2:] = dx[:-1]
-    ab[-1, :-2] = dx[1:]
-    b = np.empty((n, 1))
+    # row k (0 < k < N - 1): dx[k] d[k-1] + 2 (dx[k-1] + dx[k]) d[k] + dx[k-1] d[k+1] = 3 (dx[k] slope[k-1]
+    # + dx[k-1] slope[k]), dx and slope the intervals' widths and chord slopes, taken per block
+    lower, main, upper = np.empty(n - 1), np.empty(n), np.empty(n - 1)
+    rhs = np.empty((n, 1))
     for lo in range(1, n - 1, BLOCK_ROWS):
         hi = min(lo + BLOCK_ROWS, n - 1)
-        b[lo:hi, 0] = 3 * (dx[lo:hi] * slope[lo - 1:hi - 1] + dx[lo - 1:hi - 1] * slope[lo:hi])
-    ab[1, 0] = dx[1]
-    ab[0, 1] = d = x[2] - x[0]
-    b[0] = ((dx[0] + 2 * d) * dx[1] * slope[0] + dx[0] ** 2 * slope[1]) / d
-    ab[1, -1] = dx[-2]
-    ab[-1, -2] = d = x[-1] - x[-3]
-    b[-1] = (dx[-1] ** 2 * slope[-2] + (2 * d + dx[-1]) * dx[-2] * slope[-1]) / d
+        h = x[lo:hi + 1] - x[lo - 1:hi]                 # dx[lo - 1:hi]
+        m = y[lo:hi + 1] - y[lo - 1:hi]
+        m /= h                                          # slope[lo - 1:hi]
+        main[lo:hi] = 2 * (h[:-1] + h[1:])
+        upper[lo:hi] = h[:-1]
+        lower[lo - 1:hi - 1] = h[1:]
+        rhs[lo:hi, 0] = 3 * (h[1:] * m[:-1] + h[:-1] * m[1:])
+    # not-a-knot: the third derivative continuous across x[1] and x[N-2]
+    h0, h1, g1, g0 = x[1] - x[0], x[2] - x[1], x[-2] - x[-3], x[-1] - x[-2]
+    s0, s1 = (y[1] - y[0]) / h0, (y[2] - y[1]) / h1
+    r1, r0 = (y[-2] - y[-3]) / g1, (y[-1] - y[-2]) / g0
+    main[0] = h1
+    upper[0] = d = x[2] - x[0]
+    rhs[0] = ((h0 + 2 * d) * h1 * s0 + h0 ** 2 * s1) / d
+    main[-1] = g1
+    lower[-1] = d = x[-1] - x[-3]
+    rhs[-1] = (g0 ** 2 * r1 + (2 * d + g0) * g1 * r0) / d
     from scipy import linalg
 
-    gtsv, = linalg.get_lapack_funcs(("gtsv",), (ab, b))
-    sol, info = gtsv(ab[2, :-1], ab[1, :], ab[0, 1:], b, True, True, True, True)[3:]   # (N, 1), int
+    gtsv, = linalg.get_lapack_funcs(("gtsv",), (main, rhs))
+    sol, info = gtsv(lower, main, upper, rhs, True, True, True, True)[3:]     # (N, 1), int
     if info != 0:
         raise ValueError(f"_spline: the tridiagonal solve failed (info {info})")
-    del ab
-    sd = sol[:, 0]                          # the first derivatives at x
-    c = np.empty((4, n - 1))
-    for lo in range(0, n - 1, BLOCK_ROWS):
-        hi = min(lo + BLOCK_ROWS, n - 1)
-        h, m = dx[lo:hi], slope[lo:hi]
-        t = (sd[lo:hi] + sd[lo + 1:hi + 1] - 2 * m) / h
-        c[0, lo:hi] = t / h
-        c[1, lo:hi] = (m - sd[lo:hi]) / h - t
-        c[2, lo:hi] = sd[lo:hi]
-        c[3, lo:hi] = y[lo:hi]
-    return Cubic(c, x)
+    del lower, main, upper
+    return Cubic(x, y, sol[:, 0])
 
 
 class Cubic:
-    """A piecewise cubic over the breakpoints ``x`` (N,) s, strictly increasing, with the
-    coefficients ``c`` (4, N - 1) of ``(t - x[i])**3 .. (t - x[i])**0`` on ``[x[i], x[i + 1])``
-    (the last interval closed): ``scipy.interpolate.PPoly(c, x, extrapolate=False)``, its
-    values to the bit (NaN outside ``[x[0], x[-1]]``), without importing scipy.interpolate."""
+    """The piecewise cubic Hermite interpolant over the breakpoints ``x`` (N,) s, strictly
+    increasing, of the values ``y`` (N,) and first derivatives ``d`` (N,) at them (the last
+    interval closed): ``scipy.interpolate.PPoly`` of the coefficients CubicSpline forms from
+    them, its values to the bit (NaN outside ``[x[0], x[-1]]``), without importing
+    scipy.interpolate and without an (4, N - 1) coefficient array: each evaluation forms the
+    coefficients of the intervals it needs with the same operations."""
 
     #: steps of one interval from the first guess before the binary search takes over
     STEPS = 3
 
-    def __init__(self, c: np.ndarray, x: np.ndarray) -> None:
-        self.c = c
+    def __init__(self, x: np.ndarray, y: np.ndarray, d: np.ndarray) -> None:
         self.x = x
+        self.y = y
+        self.d = d
 
     def interval(self, t: np.ndarray) -> np.ndarray:
         """The interval ``i`` (as ``t``, intp) with ``x[i] <= t < x[i + 1]``, clipped to
@@ -684,20 +686,37 @@ class Cubic:
     def __call__(self, t: np.ndarray) -> np.ndarray:
         """The values at the times ``t`` (an array, any shape), evaluated as scipy's
         ``evaluate_poly1`` does: ``c3 + c2 s + c1 (s s) + c0 ((s s) s)`` summed in that order,
-        ``s = t - x[i]``, ``i`` the interval holding ``t``."""
+        ``s = t - x[i]``, ``i`` the interval holding ``t``, with CubicSpline's coefficients of
+        that interval: ``c3 = y[i]``, ``c2 = d[i]``, ``c1 = (m - d[i]) / h - q``, ``c0 = q / h``,
+        ``h`` its width, ``m`` its chord slope, ``q = (d[i] + d[i + 1] - 2 m) / h``."""
         t = np.asarray(t, dtype=float)
         if t.ndim == 0:
             return self(t[None]).reshape(())
-        x, c = self.x, self.c
+        x, y, d = self.x, self.y, self.d
         i = self.interval(t)
+        j = i + 1
         s = t - x[i]
+        h = x[j] - x[i]
+        m = y[j] - y[i]
+        m /= h
+        d0 = d[i]
+        q = d0 + d[j]
+        q -= 2 * m
+        q /= h
+        m -= d0
+        m /= h
+        m -= q                                        # c1
+        q /= h                                        # c0
         z = s * s
-        out: np.ndarray = c[3, i]
+        out: np.ndarray = y[i]
         out += 0.0                                    # scipy's sum starts at +0.0
-        out += c[2, i] * s
-        out += c[1, i] * z
+        d0 *= s
+        out += d0
+        m *= z
+        out += m
         z *= s
-        out += c[0, i] * z
+        q *= z
+        out += q
         out[~((t >= x[0]) & (t <= x[-1]))] = np.nan
         return out
 
