@@ -6,8 +6,8 @@ with the answers.  numpy, and of scipy only what a run loads anyway (:mod:`scipy
 tridiagonal solve: numba's kernels import scipy.linalg) or needs rarely (``scipy.special`` when
 rows repeat, ``scipy.interpolate`` for a spline of fewer than 4 points): the spline's
 evaluation (:class:`Cubic`) is scipy's to the bit without importing scipy.interpolate (0.3 s
-and more of every run's start); the bounded lag refinement is scipy.optimize's
-``minimize_scalar``, imported when the search runs (it loads scipy.special too: about 0.25 s).
+and more of every run's start); the bounded lag refinement is a golden-section search
+(:func:`_golden_section_min`), not scipy.optimize (which loads scipy.special too: about 0.4 s).
 
 Conventions: times are float seconds (any common origin, e.g. relative to the log's first
 IMU stamp); body frame FLU, navigation frame ENU; gyro in rad/s, specific force in m/s^2.
@@ -829,14 +829,40 @@ class _LagFit:
         costs = np.array([_neg_corr(g[sel], rr) for g in self.coarse])
         i = int(np.argmin(costs))
         lo, hi = lags[max(i - 1, 0)], lags[min(i + 1, lags.shape[0] - 1)]
-        from scipy.optimize import minimize_scalar  # (with scipy.special: ~0.25 s of start-up, once)
-
-        res = minimize_scalar(lambda d: self.neg_corr(d, sel), bounds=(lo, hi), method="bounded",
-                              options={"xatol": 1e-5})
-        x, fx = res.x, res.fun
-        d, c = (float(x), float(fx)) if fx <= costs[i] else (float(lags[i]), float(costs[i]))
+        x, fx = _golden_section_min(lambda d: self.neg_corr(d, sel), float(lo), float(hi), LAG_TOL_S)
+        d, c = (x, fx) if fx <= costs[i] else (float(lags[i]), float(costs[i]))
         edge = i == 0 or i == lags.shape[0] - 1
         return d, -c, edge
+
+
+#: The lag refinement's tolerance, s: far below any lag's 1-sigma (a few ms on a good log).
+LAG_TOL_S = 1e-5
+#: The golden ratio's reciprocal, (sqrt(5) - 1) / 2: the share of a bracket its inner points keep.
+_GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
+
+
+def _golden_section_min(f: Callable[[float], float], lo: float, hi: float, tol: float) -> tuple[float, float]:
+    """(x, f(x)): the smallest value of ``f`` found on ``[lo, hi]`` by golden-section search, the
+    bracket narrowed until it is at most ``tol`` wide (for an ``f`` with one minimum on the
+    interval, ``x`` is within ``tol`` of it; at an end when ``f`` is monotonic there).
+
+    Two inner points split the bracket in the golden ratio; the side beyond the worse of them
+    cannot hold the minimum and goes, and the better one is an inner point of the narrower
+    bracket, so each step costs one evaluation and keeps 0.618 of the width: about
+    ``log(tol / (hi - lo)) / log(0.618)`` evaluations (20 for a 0.1 s bracket to 10 us)."""
+    a, b = lo, hi
+    x1, x2 = b - _GOLDEN * (b - a), a + _GOLDEN * (b - a)
+    f1, f2 = f(x1), f(x2)
+    while b - a > tol:
+        if f1 <= f2:        # the minimum is left of x2
+            b, x2, f2 = x2, x1, f1
+            x1 = b - _GOLDEN * (b - a)
+            f1 = f(x1)
+        else:               # ... right of x1
+            a, x1, f1 = x1, x2, f2
+            x2 = a + _GOLDEN * (b - a)
+            f2 = f(x2)
+    return (x1, f1) if f1 <= f2 else (x2, f2)
 
 
 def _neg_corr(g: np.ndarray, r: np.ndarray) -> float:
