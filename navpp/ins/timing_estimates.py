@@ -591,12 +591,11 @@ AngleAt = Callable[[np.ndarray], np.ndarray]
 
 def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
     """``scipy.interpolate.CubicSpline(x, y, extrapolate=False)`` (not-a-knot ends) for (N,) float
-    ``x`` (strictly increasing) and ``y``, its values to the bit: the same tridiagonal solve for
-    the first derivatives at ``x`` (LAPACK ``gtsv``, as ``solve_banded`` calls it), its diagonals
-    and right-hand side filled block by block; the interpolant (:class:`Cubic`) keeps ``x`` and
-    ``y`` themselves (not copies) and the derivatives, and forms the coefficients of the intervals
-    it evaluates.  The peak is ``y``, the three diagonals and the right-hand side (5 N floats).
-    Fewer than 4 points: CubicSpline."""
+    ``x`` (strictly increasing) and ``y``, its values to the bit: the first derivatives at ``x``
+    from the same tridiagonal system and solver (LAPACK ``gtsv``, as ``solve_banded`` calls it),
+    solved a block of :data:`BLOCK_ROWS` rows at a time (:func:`_spline_derivatives`); the
+    interpolant (:class:`Cubic`) keeps ``x`` and ``y`` themselves (not copies) and the derivatives,
+    and forms the coefficients of the intervals it evaluates.  Fewer than 4 points: CubicSpline."""
     n = x.shape[0]
     spline: AngleAt
     if n < 4:
@@ -608,37 +607,71 @@ def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
         raise ValueError("_spline: x and y must be finite")
     if not np.all(np.diff(x) > 0):
         raise ValueError("_spline: x must be strictly increasing")
-    # row k (0 < k < N - 1): dx[k] d[k-1] + 2 (dx[k-1] + dx[k]) d[k] + dx[k-1] d[k+1] = 3 (dx[k] slope[k-1]
-    # + dx[k-1] slope[k]), dx and slope the intervals' widths and chord slopes, taken per block
-    lower, main, upper = np.empty(n - 1), np.empty(n), np.empty(n - 1)
-    rhs = np.empty((n, 1))
-    for lo in range(1, n - 1, BLOCK_ROWS):
-        hi = min(lo + BLOCK_ROWS, n - 1)
-        h = x[lo:hi + 1] - x[lo - 1:hi]                 # dx[lo - 1:hi]
-        m = y[lo:hi + 1] - y[lo - 1:hi]
-        m /= h                                          # slope[lo - 1:hi]
-        main[lo:hi] = 2 * (h[:-1] + h[1:])
-        upper[lo:hi] = h[:-1]
-        lower[lo - 1:hi - 1] = h[1:]
-        rhs[lo:hi, 0] = 3 * (h[1:] * m[:-1] + h[:-1] * m[1:])
-    # not-a-knot: the third derivative continuous across x[1] and x[N-2]
-    h0, h1, g1, g0 = x[1] - x[0], x[2] - x[1], x[-2] - x[-3], x[-1] - x[-2]
-    s0, s1 = (y[1] - y[0]) / h0, (y[2] - y[1]) / h1
-    r1, r0 = (y[-2] - y[-3]) / g1, (y[-1] - y[-2]) / g0
-    main[0] = h1
-    upper[0] = d = x[2] - x[0]
-    rhs[0] = ((h0 + 2 * d) * h1 * s0 + h0 ** 2 * s1) / d
-    main[-1] = g1
-    lower[-1] = d = x[-1] - x[-3]
-    rhs[-1] = (g0 ** 2 * r1 + (2 * d + g0) * g1 * r0) / d
+    return Cubic(x, y, _spline_derivatives(x, y))
+
+
+#: Rows solved on either side of a block of the spline's system and dropped: a row's influence
+#: on its neighbours shrinks at least twofold per row (the system is diagonally dominant by a
+#: factor of 2), so 2**-128 of a derivative, far below its last bit, reaches across them.
+SPLINE_MARGIN_ROWS = 128
+
+
+def _spline_derivatives(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The first derivatives (N,) at ``x`` (N >= 4, strictly increasing) of the not-a-knot cubic
+    spline through ``y``, block by block: each block's rows solved with
+    :data:`SPLINE_MARGIN_ROWS` more on either side (the rows beyond left out), the margins
+    dropped.  The margins' solves start and end elsewhere than the whole system's, but what that
+    changes dies out across them: the derivatives are the whole solve's (checked to the bit in
+    tests/test_prep_blocks.py), without its IMU-length diagonals and right-hand side."""
     from scipy import linalg
 
-    gtsv, = linalg.get_lapack_funcs(("gtsv",), (main, rhs))
-    sol, info = gtsv(lower, main, upper, rhs, True, True, True, True)[3:]     # (N, 1), int
-    if info != 0:
-        raise ValueError(f"_spline: the tridiagonal solve failed (info {info})")
-    del lower, main, upper
-    return Cubic(x, y, sol[:, 0])
+    n = x.shape[0]
+    d = np.empty(n)
+    gtsv = None
+    for lo in range(0, n, BLOCK_ROWS):
+        hi = min(lo + BLOCK_ROWS, n)
+        a, b = max(lo - SPLINE_MARGIN_ROWS, 0), min(hi + SPLINE_MARGIN_ROWS, n)
+        lower, main, upper, rhs = _spline_rows(x, y, a, b)
+        if gtsv is None:
+            gtsv, = linalg.get_lapack_funcs(("gtsv",), (main, rhs))
+        sol, info = gtsv(lower, main, upper, rhs, True, True, True, True)[3:]     # (b - a, 1), int
+        if info != 0:
+            raise ValueError(f"_spline: the tridiagonal solve failed (info {info})")
+        d[lo:hi] = sol[lo - a:hi - a, 0]
+    return d
+
+
+def _spline_rows(x: np.ndarray, y: np.ndarray, a: int, b: int) -> tuple[np.ndarray, ...]:
+    """Rows ``a .. b - 1`` of the not-a-knot spline's system for the first derivatives ``d`` at
+    ``x`` (N,) through ``y`` (N,), as ``gtsv`` takes them: (lower (b-a-1), main (b-a), upper
+    (b-a-1), right-hand side (b-a, 1)); their couplings to rows outside are left out.  Row k
+    (0 < k < N - 1): ``dx[k] d[k-1] + 2 (dx[k-1] + dx[k]) d[k] + dx[k-1] d[k+1] = 3 (dx[k]
+    slope[k-1] + dx[k-1] slope[k])``, ``dx`` and ``slope`` the intervals' widths and chord slopes;
+    rows 0 and N - 1: the third derivative continuous across x[1] and x[N-2]."""
+    n = x.shape[0]
+    lower, main, upper = np.empty(b - a - 1), np.empty(b - a), np.empty(b - a - 1)
+    rhs = np.empty((b - a, 1))
+    lo, hi = max(a, 1), min(b, n - 1)               # the inner rows
+    h = x[lo:hi + 1] - x[lo - 1:hi]                 # dx[lo - 1:hi]
+    m = y[lo:hi + 1] - y[lo - 1:hi]
+    m /= h                                          # slope[lo - 1:hi]
+    main[lo - a:hi - a] = 2 * (h[:-1] + h[1:])
+    rhs[lo - a:hi - a, 0] = 3 * (h[1:] * m[:-1] + h[:-1] * m[1:])
+    top = min(hi, b - 1)                            # inner rows with an upper coupling inside
+    upper[lo - a:top - a] = h[:top - lo]
+    first = max(lo, a + 1)                          # ... with a lower coupling inside
+    lower[first - a - 1:hi - a - 1] = h[first - lo + 1:]
+    if a == 0:
+        h0, h1 = x[1] - x[0], x[2] - x[1]
+        main[0] = h1
+        upper[0] = w = x[2] - x[0]
+        rhs[0] = ((h0 + 2 * w) * h1 * ((y[1] - y[0]) / h0) + h0 ** 2 * ((y[2] - y[1]) / h1)) / w
+    if b == n:
+        g1, g0 = x[-2] - x[-3], x[-1] - x[-2]
+        main[-1] = g1
+        lower[-1] = w = x[-1] - x[-3]
+        rhs[-1] = (g0 ** 2 * ((y[-2] - y[-3]) / g1) + (2 * w + g0) * g1 * ((y[-1] - y[-2]) / g0)) / w
+    return lower, main, upper, rhs
 
 
 class Cubic:
@@ -728,7 +761,8 @@ def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[Angl
     A C2 interpolant: with linear interpolation the lag search's cost has kinks at every lag
     that aligns the GNSS stamps with IMU stamps, and the minimum sticks to them.  The moving
     average is evaluated block by block and the raw integral's spline freed before the smoothed
-    one is built: the peak is one spline's construction."""
+    one is built: the peak is while the average is formed, four IMU-length arrays (the raw
+    spline's angle and derivatives, the grid, the average)."""
     theta_at = _spline(t_imu, trapezoid_integral(t_imu, w))
     t_lo, t_hi = float(t_imu[0]), float(t_imu[-1])
     if smooth_s > 0.0 and t_hi - t_lo > 4.0 * smooth_s:
