@@ -32,6 +32,34 @@ def test_trapezoid_integral_bits(n):
         assert uniform.tobytes() == calibrate.trapezoid_integral(0.008, w).tobytes()
 
 
+@pytest.mark.parametrize("n", [2, 3, 64, 65, 66, 129, 1000])
+def test_trapezoid_integral_at_bits(n):
+    """The integral at query times (inside, on stamps and block edges, outside, NaN), the rate
+    given block by block: np.interp of the whole integral, to the bit."""
+    t = _stamps(n, 6)
+    w = np.random.default_rng(7).standard_normal(n)
+    q = np.concatenate([t, t[:-1] + 0.3 * np.diff(t), [t[0] - 1.0, t[-1] + 1.0, np.nan],
+                        np.random.default_rng(8).uniform(t[0] - 0.1, t[-1] + 0.1, 200)])
+    whole = np.interp(q, t, calibrate.trapezoid_integral(t, w))
+    got = calibrate.trapezoid_integral_at(t, lambda lo, hi: w[lo:hi], n, q)
+    assert whole.tobytes() == got.tobytes()
+
+
+def test_yaw_scale_with_the_gyro_and_its_up():
+    """The rate about ``up`` taken block by block gives the figures of ``gyro @ up`` passed whole."""
+    rng = np.random.default_rng(9)
+    t = np.arange(0.0, 120.0, 0.008)
+    rate = 0.3 * np.sin(t / 5.0)
+    up = np.array([0.05, -0.03, 1.0]) / np.linalg.norm([0.05, -0.03, 1.0])
+    gyro = rng.standard_normal((t.shape[0], 3)) * 0.01 + rate[:, None] * up
+    tg = np.arange(0.5, 119.5, 0.2)
+    heading = np.interp(tg, t, np.cumsum(rate) * 0.008)
+    east, north = np.cumsum(2.0 * np.cos(heading)), np.cumsum(2.0 * np.sin(heading))
+    ref = timing_estimates.yaw_scale_from_track(t, gyro @ up, tg, east, north)
+    assert timing_estimates.yaw_scale_from_track(t, gyro, tg, east, north, up=up) == ref
+    assert ref.n_pairs > 5
+
+
 @pytest.mark.parametrize("n", [3, 4, 5, 65, 66, 130, 1000])
 def test_spline_is_cubic_spline(n):
     t = _stamps(n, 2)

@@ -31,7 +31,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .calibrate import BLOCK_ROWS, trapezoid_integral
+from .calibrate import BLOCK_ROWS, trapezoid_integral, trapezoid_integral_at
 
 __all__ = [
     "ClockOffset",
@@ -978,7 +978,8 @@ class YawScale:
 
 def yaw_scale_from_track(t_imu: np.ndarray, gyro_z_up: np.ndarray, t_gnss: np.ndarray,
                          east_m: np.ndarray, north_m: np.ndarray, std_h_m: np.ndarray | float = 0.0,
-                         *, window_s: float = 4.0, min_chord_m: float = 5.0) -> YawScale:
+                         *, window_s: float = 4.0, min_chord_m: float = 5.0, up: np.ndarray | None = None
+                         ) -> YawScale:
     """How the gyro's turns compare with the GNSS track's.
 
     The track is cut into consecutive, non-overlapping chords of about ``window_s`` (from one
@@ -994,16 +995,19 @@ def yaw_scale_from_track(t_imu: np.ndarray, gyro_z_up: np.ndarray, t_gnss: np.nd
     t_imu : (N,) s, increasing; gyro_z_up : (N,) rad/s about the local vertical (up, CCW).
     t_gnss : (M,) s, increasing, the same time base; east_m, north_m : (M,) m, local ENU.
     std_h_m : scalar or (M,) m, horizontal 1-sigma per fix (0: unknown, ``min_chord_m`` rules).
+    up : (3,) unit vector: ``gyro_z_up`` is then the (N, 3) gyro, rad/s, and its rate about ``up``
+        is taken block by block (no IMU-length copy), as ``gyro_z_up @ up`` gives it.
     """
     nan = float("nan")
     t_imu = np.asarray(t_imu, dtype=float)
-    w = np.asarray(gyro_z_up, dtype=float)
+    gyro = np.asarray(gyro_z_up, dtype=float)
+    rate: Callable[[int, int], np.ndarray] = ((lambda lo, hi: gyro[lo:hi]) if up is None
+                                              else (lambda lo, hi: gyro[lo:hi] @ up))
     t_g = np.asarray(t_gnss, dtype=float)
     e, nn = np.asarray(east_m, dtype=float), np.asarray(north_m, dtype=float)
     if t_g.shape[0] < 4 or t_imu.shape[0] < 4:
         return YawScale(nan, nan, 0.0, 0)
     sig = np.broadcast_to(np.nan_to_num(np.asarray(std_h_m, dtype=float), nan=0.0), t_g.shape)
-    theta = trapezoid_integral(t_imu, w)
     dt_med = float(np.median(np.diff(t_g)))
     gap = np.concatenate([[0], np.cumsum(np.diff(t_g) > 3.0 * dt_med)])   # gap count up to each epoch
     starts = []
@@ -1030,7 +1034,7 @@ def yaw_scale_from_track(t_imu: np.ndarray, gyro_z_up: np.ndarray, t_gnss: np.nd
     mids_a, courses_a, ok_a = np.array(mids), np.array(courses), np.array(ok)
     pair = ok_a[1:] & ok_a[:-1] & (mids_a[:-1] >= t_imu[0]) & (mids_a[1:] <= t_imu[-1])
     y = np.angle(np.exp(1j * np.diff(courses_a)))[pair]
-    th = np.interp(mids_a, t_imu, theta)
+    th = trapezoid_integral_at(t_imu, rate, t_imu.shape[0], mids_a)
     x = np.diff(th)[pair]
     n = int(y.shape[0])
     if n < 5:
