@@ -188,7 +188,7 @@ def check_gyro_scale(recording: Recording, config: Config, up_s: np.ndarray, enu
 
     imu, gnss, source = recording.imu, recording.gnss, recording.source
     std_h = np.hypot(gnss.std_enu[:, 0], gnss.std_enu[:, 1]) / math.sqrt(2.0) if gnss.std_enu is not None else 0.0
-    est = yaw_scale_from_track(imu.t, imu.gyro @ up_s, gnss.t, enu[:, 0], enu[:, 1], std_h)
+    est = yaw_scale_from_track(imu.t, imu.gyro, gnss.t, enu[:, 0], enu[:, 1], std_h, up=up_s)
     lo, hi = GYRO_SCALE_BOUNDS
     if (math.isfinite(est.scale) and -hi <= est.scale <= -lo and est.correlation <= -GYRO_SCALE_CORRELATION
             and est.gnss_turn_deg >= GYRO_SCALE_TURN_DEG):

@@ -27,7 +27,7 @@ from ..errors import InputError
 from ..findings import Finding
 from .aids.standstill import quiet_blocks
 from .attitude import dcm_to_quat, rph_to_dcm
-from .calibrate import BLOCK_ROWS, MOVING_K, gnss_scatter_h, gnss_speed_at, spans, trapezoid_integral
+from .calibrate import MOVING_K, gnss_scatter_h, gnss_speed_at, spans, trapezoid_integral_at
 from .state import (
     ATT,
     BA,
@@ -673,16 +673,21 @@ def _rotated_track(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_start: flo
 
     Displacements come from GNSS velocity x dt when the log has it and ``use_velocity`` (zero
     below ``min_speed``), else from positions, the still position as the origin.  ``gyro_bias``
-    (3,) rad/s, if given, is taken off the gyro first (block by block: no copy of the gyro)."""
+    (3,) rad/s, if given, is taken off the gyro first.  The gyro's vertical rate and its integral
+    are formed block by block (:func:`~navpp.ins.calibrate.trapezoid_integral_at`): neither is
+    held whole."""
     C = rph_to_dcm(roll, pitch, 0.0)
     i0 = int(np.searchsorted(t, t_start))
     ts = t[i0:]
-    w_up = np.empty(ts.shape[0])
-    for lo in range(i0, t.shape[0], BLOCK_ROWS):
-        g = gyro[lo:lo + BLOCK_ROWS]
-        w_up[lo - i0:lo - i0 + g.shape[0]] = (g if gyro_bias is None else g - gyro_bias) @ C[2]
-    w_up -= geodesy.OMEGA_E * math.sin(lat)
-    turned = trapezoid_integral(ts, w_up)
+    earth = geodesy.OMEGA_E * math.sin(lat)
+
+    def w_up(lo: int, hi: int) -> np.ndarray:
+        """The gyro's rate about the levelled vertical less the earth's, rad/s, rows lo:hi of ``ts``."""
+        g = gyro[i0 + lo:i0 + hi]
+        w: np.ndarray = (g if gyro_bias is None else g - gyro_bias) @ C[2]
+        w -= earth
+        return w
+
     after = gnss.t > t_still_end
     tg = gnss.t[after]
     if tg.size == 0:
@@ -704,7 +709,7 @@ def _rotated_track(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_start: flo
         t_mid = 0.5 * (prev + tg)
         step_noise = None
         moving = np.hypot(d[:, 0], d[:, 1]) > min_speed * dt
-    return _Track(tg, dt, d, t_mid, np.interp(t_mid, ts, turned), moving, step_noise)
+    return _Track(tg, dt, d, t_mid, trapezoid_integral_at(ts, w_up, ts.shape[0], t_mid), moving, step_noise)
 
 
 def _heading_from_gnss(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_start: float, t_still_end: float,

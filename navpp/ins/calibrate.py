@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import TYPE_CHECKING
@@ -164,19 +165,61 @@ class Calibration:
 def trapezoid_integral(t: np.ndarray | float, w: np.ndarray) -> np.ndarray:
     """The trapezoidal integral of the rate ``w`` (N,) at the stamps ``t`` (N,) s (or at a
     constant step ``t`` s) from 0 at the first, (N,): ``concatenate([[0], cumsum(0.5 * (w[1:] +
-    w[:-1]) * diff(t))])`` to the bit, block by block (the running sum carried from block to
-    block, in the same order); ``[0]`` for N = 0, as that concatenation gives."""
+    w[:-1]) * diff(t))])`` to the bit, block by block (:func:`trapezoid_blocks`); ``[0]`` for
+    N = 0, as that concatenation gives."""
     n = w.shape[0]
     theta = np.empty(max(n, 1))
     theta[0] = 0.0
-    for lo in range(1, n, BLOCK_ROWS):
-        hi = min(lo + BLOCK_ROWS, n)
-        dt = t if isinstance(t, float) else t[lo:hi] - t[lo - 1:hi - 1]
-        inc = 0.5 * (w[lo:hi] + w[lo - 1:hi - 1]) * dt
-        if lo > 1:          # the carry first: the same sequence of additions as one cumsum
-            inc[0] = theta[lo - 1] + inc[0]
-        np.cumsum(inc, out=theta[lo:hi])
+    for lo, _, part in trapezoid_blocks(t, lambda lo, hi: w[lo:hi], n):
+        theta[lo:lo + part.shape[0]] = part
     return theta
+
+
+def trapezoid_blocks(t: np.ndarray | float, rate: Callable[[int, int], np.ndarray], n: int
+                     ) -> Iterator[tuple[int, np.ndarray | float, np.ndarray]]:
+    """:func:`trapezoid_integral` of a rate given block by block, ``rate(lo, hi)`` its rows
+    ``lo:hi`` (hi - lo,), rad/s, at the stamps ``t`` (N,) s (or a constant step ``t`` s), ``n``
+    rows: yields for each block of :data:`BLOCK_ROWS` rows ``(lo, stamps, theta)``, ``theta``
+    the integral's rows ``lo:lo + len(theta)`` (the same bits: the running sum carried from block
+    to block, in the same order, as one cumsum adds) and ``stamps`` the stamps from the row before
+    ``lo`` (from ``lo`` in the first block) to the block's last (``t`` itself for a constant
+    step).  Neither the rate nor the integral is held whole."""
+    w_last = theta_last = 0.0
+    for lo in range(0, n, BLOCK_ROWS):
+        hi = min(lo + BLOCK_ROWS, n)
+        w = rate(lo, hi)
+        first = lo == 0
+        ww = w if first else np.concatenate([[w_last], w])
+        stamps = t if isinstance(t, float) else t[max(lo - 1, 0):hi]
+        inc = 0.5 * (ww[1:] + ww[:-1]) * (stamps if isinstance(stamps, float) else stamps[1:] - stamps[:-1])
+        theta = np.empty(hi - lo)
+        if first:
+            theta[0] = 0.0
+            np.cumsum(inc, out=theta[1:])
+        else:           # the carry first: the same sequence of additions as one cumsum
+            inc[0] = theta_last + inc[0]
+            np.cumsum(inc, out=theta)
+        yield lo, stamps, theta
+        w_last, theta_last = w[-1], theta[-1]
+
+
+def trapezoid_integral_at(t: np.ndarray, rate: Callable[[int, int], np.ndarray], n: int,
+                          tq: np.ndarray) -> np.ndarray:
+    """``np.interp(tq, t, trapezoid_integral(t, w))`` to the bit, the rate ``w`` given block by
+    block as :func:`trapezoid_blocks` takes it (``t`` (N,) s, ``n`` = N >= 2): the integral, rad,
+    at the times ``tq`` (K,) s (the first or last value beyond the stamps, NaN at NaN) without an
+    N-long rate or integral."""
+    out = np.full(tq.shape, np.nan)
+    last = 0.0
+    for lo, stamps, theta in trapezoid_blocks(t, rate, n):
+        assert not isinstance(stamps, float)
+        fp = theta if lo == 0 else np.concatenate([[last], theta])
+        inside = (tq >= stamps[0]) & (tq <= stamps[-1])
+        out[inside] = np.interp(tq[inside], stamps, fp)
+        last = theta[-1]
+    out[tq < t[0]] = 0.0
+    out[tq > t[n - 1]] = last
+    return out
 
 
 def sample_period(t: np.ndarray) -> float:

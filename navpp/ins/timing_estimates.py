@@ -6,8 +6,8 @@ with the answers.  numpy, and of scipy only what a run loads anyway (:mod:`scipy
 tridiagonal solve: numba's kernels import scipy.linalg) or needs rarely (``scipy.special`` when
 rows repeat, ``scipy.interpolate`` for a spline of fewer than 4 points): the spline's
 evaluation (:class:`Cubic`) is scipy's to the bit without importing scipy.interpolate (0.3 s
-and more of every run's start); the bounded lag refinement is scipy.optimize's
-``minimize_scalar``, imported when the search runs (it loads scipy.special too: about 0.25 s).
+and more of every run's start); the bounded lag refinement is a golden-section search
+(:func:`_golden_section_min`), not scipy.optimize (which loads scipy.special too: about 0.4 s).
 
 Conventions: times are float seconds (any common origin, e.g. relative to the log's first
 IMU stamp); body frame FLU, navigation frame ENU; gyro in rad/s, specific force in m/s^2.
@@ -31,7 +31,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .calibrate import BLOCK_ROWS, trapezoid_integral
+from .calibrate import BLOCK_ROWS, trapezoid_integral, trapezoid_integral_at
 
 __all__ = [
     "ClockOffset",
@@ -591,9 +591,11 @@ AngleAt = Callable[[np.ndarray], np.ndarray]
 
 def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
     """``scipy.interpolate.CubicSpline(x, y, extrapolate=False)`` (not-a-knot ends) for (N,) float
-    ``x`` (strictly increasing) and ``y``, to the bit, with a third of its temporaries: the same
-    tridiagonal solve (LAPACK ``gtsv``, as ``solve_banded`` calls it), then the coefficients block
-    by block; the polynomial keeps ``x`` itself (not a copy).  Fewer than 4 points: CubicSpline."""
+    ``x`` (strictly increasing) and ``y``, its values to the bit: the first derivatives at ``x``
+    from the same tridiagonal system and solver (LAPACK ``gtsv``, as ``solve_banded`` calls it),
+    solved a block of :data:`BLOCK_ROWS` rows at a time (:func:`_spline_derivatives`); the
+    interpolant (:class:`Cubic`) keeps ``x`` and ``y`` themselves (not copies) and the derivatives,
+    and forms the coefficients of the intervals it evaluates.  Fewer than 4 points: CubicSpline."""
     n = x.shape[0]
     spline: AngleAt
     if n < 4:
@@ -603,57 +605,90 @@ def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
         return spline
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
         raise ValueError("_spline: x and y must be finite")
-    dx = np.diff(x)
-    if not np.all(dx > 0):
+    if not np.all(np.diff(x) > 0):
         raise ValueError("_spline: x must be strictly increasing")
-    slope = np.diff(y)
-    slope /= dx
-    ab = np.zeros((3, n))                   # the banded matrix: upper, main, lower diagonal
-    ab[1, 1:-1] = 2 * (dx[:-1] + dx[1:])
-    ab[0, 2:] = dx[:-1]
-    ab[-1, :-2] = dx[1:]
-    b = np.empty((n, 1))
-    for lo in range(1, n - 1, BLOCK_ROWS):
-        hi = min(lo + BLOCK_ROWS, n - 1)
-        b[lo:hi, 0] = 3 * (dx[lo:hi] * slope[lo - 1:hi - 1] + dx[lo - 1:hi - 1] * slope[lo:hi])
-    ab[1, 0] = dx[1]
-    ab[0, 1] = d = x[2] - x[0]
-    b[0] = ((dx[0] + 2 * d) * dx[1] * slope[0] + dx[0] ** 2 * slope[1]) / d
-    ab[1, -1] = dx[-2]
-    ab[-1, -2] = d = x[-1] - x[-3]
-    b[-1] = (dx[-1] ** 2 * slope[-2] + (2 * d + dx[-1]) * dx[-2] * slope[-1]) / d
+    return Cubic(x, y, _spline_derivatives(x, y))
+
+
+#: Rows solved on either side of a block of the spline's system and dropped: a row's influence
+#: on its neighbours shrinks at least twofold per row (the system is diagonally dominant by a
+#: factor of 2), so 2**-128 of a derivative, far below its last bit, reaches across them.
+SPLINE_MARGIN_ROWS = 128
+
+
+def _spline_derivatives(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The first derivatives (N,) at ``x`` (N >= 4, strictly increasing) of the not-a-knot cubic
+    spline through ``y``, block by block: each block's rows solved with
+    :data:`SPLINE_MARGIN_ROWS` more on either side (the rows beyond left out), the margins
+    dropped.  The margins' solves start and end elsewhere than the whole system's, but what that
+    changes dies out across them: the derivatives are the whole solve's (checked to the bit in
+    tests/test_prep_blocks.py), without its IMU-length diagonals and right-hand side."""
     from scipy import linalg
 
-    gtsv, = linalg.get_lapack_funcs(("gtsv",), (ab, b))
-    sol, info = gtsv(ab[2, :-1], ab[1, :], ab[0, 1:], b, True, True, True, True)[3:]   # (N, 1), int
-    if info != 0:
-        raise ValueError(f"_spline: the tridiagonal solve failed (info {info})")
-    del ab
-    sd = sol[:, 0]                          # the first derivatives at x
-    c = np.empty((4, n - 1))
-    for lo in range(0, n - 1, BLOCK_ROWS):
-        hi = min(lo + BLOCK_ROWS, n - 1)
-        h, m = dx[lo:hi], slope[lo:hi]
-        t = (sd[lo:hi] + sd[lo + 1:hi + 1] - 2 * m) / h
-        c[0, lo:hi] = t / h
-        c[1, lo:hi] = (m - sd[lo:hi]) / h - t
-        c[2, lo:hi] = sd[lo:hi]
-        c[3, lo:hi] = y[lo:hi]
-    return Cubic(c, x)
+    n = x.shape[0]
+    d = np.empty(n)
+    gtsv = None
+    for lo in range(0, n, BLOCK_ROWS):
+        hi = min(lo + BLOCK_ROWS, n)
+        a, b = max(lo - SPLINE_MARGIN_ROWS, 0), min(hi + SPLINE_MARGIN_ROWS, n)
+        lower, main, upper, rhs = _spline_rows(x, y, a, b)
+        if gtsv is None:
+            gtsv, = linalg.get_lapack_funcs(("gtsv",), (main, rhs))
+        sol, info = gtsv(lower, main, upper, rhs, True, True, True, True)[3:]     # (b - a, 1), int
+        if info != 0:
+            raise ValueError(f"_spline: the tridiagonal solve failed (info {info})")
+        d[lo:hi] = sol[lo - a:hi - a, 0]
+    return d
+
+
+def _spline_rows(x: np.ndarray, y: np.ndarray, a: int, b: int) -> tuple[np.ndarray, ...]:
+    """Rows ``a .. b - 1`` of the not-a-knot spline's system for the first derivatives ``d`` at
+    ``x`` (N,) through ``y`` (N,), as ``gtsv`` takes them: (lower (b-a-1), main (b-a), upper
+    (b-a-1), right-hand side (b-a, 1)); their couplings to rows outside are left out.  Row k
+    (0 < k < N - 1): ``dx[k] d[k-1] + 2 (dx[k-1] + dx[k]) d[k] + dx[k-1] d[k+1] = 3 (dx[k]
+    slope[k-1] + dx[k-1] slope[k])``, ``dx`` and ``slope`` the intervals' widths and chord slopes;
+    rows 0 and N - 1: the third derivative continuous across x[1] and x[N-2]."""
+    n = x.shape[0]
+    lower, main, upper = np.empty(b - a - 1), np.empty(b - a), np.empty(b - a - 1)
+    rhs = np.empty((b - a, 1))
+    lo, hi = max(a, 1), min(b, n - 1)               # the inner rows
+    h = x[lo:hi + 1] - x[lo - 1:hi]                 # dx[lo - 1:hi]
+    m = y[lo:hi + 1] - y[lo - 1:hi]
+    m /= h                                          # slope[lo - 1:hi]
+    main[lo - a:hi - a] = 2 * (h[:-1] + h[1:])
+    rhs[lo - a:hi - a, 0] = 3 * (h[1:] * m[:-1] + h[:-1] * m[1:])
+    top = min(hi, b - 1)                            # inner rows with an upper coupling inside
+    upper[lo - a:top - a] = h[:top - lo]
+    first = max(lo, a + 1)                          # ... with a lower coupling inside
+    lower[first - a - 1:hi - a - 1] = h[first - lo + 1:]
+    if a == 0:
+        h0, h1 = x[1] - x[0], x[2] - x[1]
+        main[0] = h1
+        upper[0] = w = x[2] - x[0]
+        rhs[0] = ((h0 + 2 * w) * h1 * ((y[1] - y[0]) / h0) + h0 ** 2 * ((y[2] - y[1]) / h1)) / w
+    if b == n:
+        g1, g0 = x[-2] - x[-3], x[-1] - x[-2]
+        main[-1] = g1
+        lower[-1] = w = x[-1] - x[-3]
+        rhs[-1] = (g0 ** 2 * ((y[-2] - y[-3]) / g1) + (2 * w + g0) * g1 * ((y[-1] - y[-2]) / g0)) / w
+    return lower, main, upper, rhs
 
 
 class Cubic:
-    """A piecewise cubic over the breakpoints ``x`` (N,) s, strictly increasing, with the
-    coefficients ``c`` (4, N - 1) of ``(t - x[i])**3 .. (t - x[i])**0`` on ``[x[i], x[i + 1])``
-    (the last interval closed): ``scipy.interpolate.PPoly(c, x, extrapolate=False)``, its
-    values to the bit (NaN outside ``[x[0], x[-1]]``), without importing scipy.interpolate."""
+    """The piecewise cubic Hermite interpolant over the breakpoints ``x`` (N,) s, strictly
+    increasing, of the values ``y`` (N,) and first derivatives ``d`` (N,) at them (the last
+    interval closed): ``scipy.interpolate.PPoly`` of the coefficients CubicSpline forms from
+    them, its values to the bit (NaN outside ``[x[0], x[-1]]``), without importing
+    scipy.interpolate and without an (4, N - 1) coefficient array: each evaluation forms the
+    coefficients of the intervals it needs with the same operations."""
 
     #: steps of one interval from the first guess before the binary search takes over
     STEPS = 3
 
-    def __init__(self, c: np.ndarray, x: np.ndarray) -> None:
-        self.c = c
+    def __init__(self, x: np.ndarray, y: np.ndarray, d: np.ndarray) -> None:
         self.x = x
+        self.y = y
+        self.d = d
 
     def interval(self, t: np.ndarray) -> np.ndarray:
         """The interval ``i`` (as ``t``, intp) with ``x[i] <= t < x[i + 1]``, clipped to
@@ -684,20 +719,37 @@ class Cubic:
     def __call__(self, t: np.ndarray) -> np.ndarray:
         """The values at the times ``t`` (an array, any shape), evaluated as scipy's
         ``evaluate_poly1`` does: ``c3 + c2 s + c1 (s s) + c0 ((s s) s)`` summed in that order,
-        ``s = t - x[i]``, ``i`` the interval holding ``t``."""
+        ``s = t - x[i]``, ``i`` the interval holding ``t``, with CubicSpline's coefficients of
+        that interval: ``c3 = y[i]``, ``c2 = d[i]``, ``c1 = (m - d[i]) / h - q``, ``c0 = q / h``,
+        ``h`` its width, ``m`` its chord slope, ``q = (d[i] + d[i + 1] - 2 m) / h``."""
         t = np.asarray(t, dtype=float)
         if t.ndim == 0:
             return self(t[None]).reshape(())
-        x, c = self.x, self.c
+        x, y, d = self.x, self.y, self.d
         i = self.interval(t)
+        j = i + 1
         s = t - x[i]
+        h = x[j] - x[i]
+        m = y[j] - y[i]
+        m /= h
+        d0 = d[i]
+        q = d0 + d[j]
+        q -= 2 * m
+        q /= h
+        m -= d0
+        m /= h
+        m -= q                                        # c1
+        q /= h                                        # c0
         z = s * s
-        out: np.ndarray = c[3, i]
+        out: np.ndarray = y[i]
         out += 0.0                                    # scipy's sum starts at +0.0
-        out += c[2, i] * s
-        out += c[1, i] * z
+        d0 *= s
+        out += d0
+        m *= z
+        out += m
         z *= s
-        out += c[0, i] * z
+        q *= z
+        out += q
         out[~((t >= x[0]) & (t <= x[-1]))] = np.nan
         return out
 
@@ -709,7 +761,8 @@ def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[Angl
     A C2 interpolant: with linear interpolation the lag search's cost has kinks at every lag
     that aligns the GNSS stamps with IMU stamps, and the minimum sticks to them.  The moving
     average is evaluated block by block and the raw integral's spline freed before the smoothed
-    one is built: the peak is one spline's construction."""
+    one is built: the peak is while the average is formed, four IMU-length arrays (the raw
+    spline's angle and derivatives, the grid, the average)."""
     theta_at = _spline(t_imu, trapezoid_integral(t_imu, w))
     t_lo, t_hi = float(t_imu[0]), float(t_imu[-1])
     if smooth_s > 0.0 and t_hi - t_lo > 4.0 * smooth_s:
@@ -810,14 +863,40 @@ class _LagFit:
         costs = np.array([_neg_corr(g[sel], rr) for g in self.coarse])
         i = int(np.argmin(costs))
         lo, hi = lags[max(i - 1, 0)], lags[min(i + 1, lags.shape[0] - 1)]
-        from scipy.optimize import minimize_scalar  # (with scipy.special: ~0.25 s of start-up, once)
-
-        res = minimize_scalar(lambda d: self.neg_corr(d, sel), bounds=(lo, hi), method="bounded",
-                              options={"xatol": 1e-5})
-        x, fx = res.x, res.fun
-        d, c = (float(x), float(fx)) if fx <= costs[i] else (float(lags[i]), float(costs[i]))
+        x, fx = _golden_section_min(lambda d: self.neg_corr(d, sel), float(lo), float(hi), LAG_TOL_S)
+        d, c = (x, fx) if fx <= costs[i] else (float(lags[i]), float(costs[i]))
         edge = i == 0 or i == lags.shape[0] - 1
         return d, -c, edge
+
+
+#: The lag refinement's tolerance, s: far below any lag's 1-sigma (a few ms on a good log).
+LAG_TOL_S = 1e-5
+#: The golden ratio's reciprocal, (sqrt(5) - 1) / 2: the share of a bracket its inner points keep.
+_GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
+
+
+def _golden_section_min(f: Callable[[float], float], lo: float, hi: float, tol: float) -> tuple[float, float]:
+    """(x, f(x)): the smallest value of ``f`` found on ``[lo, hi]`` by golden-section search, the
+    bracket narrowed until it is at most ``tol`` wide (for an ``f`` with one minimum on the
+    interval, ``x`` is within ``tol`` of it; at an end when ``f`` is monotonic there).
+
+    Two inner points split the bracket in the golden ratio; the side beyond the worse of them
+    cannot hold the minimum and goes, and the better one is an inner point of the narrower
+    bracket, so each step costs one evaluation and keeps 0.618 of the width: about
+    ``log(tol / (hi - lo)) / log(0.618)`` evaluations (20 for a 0.1 s bracket to 10 us)."""
+    a, b = lo, hi
+    x1, x2 = b - _GOLDEN * (b - a), a + _GOLDEN * (b - a)
+    f1, f2 = f(x1), f(x2)
+    while b - a > tol:
+        if f1 <= f2:        # the minimum is left of x2
+            b, x2, f2 = x2, x1, f1
+            x1 = b - _GOLDEN * (b - a)
+            f1 = f(x1)
+        else:               # ... right of x1
+            a, x1, f1 = x1, x2, f2
+            x2 = a + _GOLDEN * (b - a)
+            f2 = f(x2)
+    return (x1, f1) if f1 <= f2 else (x2, f2)
 
 
 def _neg_corr(g: np.ndarray, r: np.ndarray) -> float:
@@ -899,7 +978,8 @@ class YawScale:
 
 def yaw_scale_from_track(t_imu: np.ndarray, gyro_z_up: np.ndarray, t_gnss: np.ndarray,
                          east_m: np.ndarray, north_m: np.ndarray, std_h_m: np.ndarray | float = 0.0,
-                         *, window_s: float = 4.0, min_chord_m: float = 5.0) -> YawScale:
+                         *, window_s: float = 4.0, min_chord_m: float = 5.0, up: np.ndarray | None = None
+                         ) -> YawScale:
     """How the gyro's turns compare with the GNSS track's.
 
     The track is cut into consecutive, non-overlapping chords of about ``window_s`` (from one
@@ -915,16 +995,19 @@ def yaw_scale_from_track(t_imu: np.ndarray, gyro_z_up: np.ndarray, t_gnss: np.nd
     t_imu : (N,) s, increasing; gyro_z_up : (N,) rad/s about the local vertical (up, CCW).
     t_gnss : (M,) s, increasing, the same time base; east_m, north_m : (M,) m, local ENU.
     std_h_m : scalar or (M,) m, horizontal 1-sigma per fix (0: unknown, ``min_chord_m`` rules).
+    up : (3,) unit vector: ``gyro_z_up`` is then the (N, 3) gyro, rad/s, and its rate about ``up``
+        is taken block by block (no IMU-length copy), as ``gyro_z_up @ up`` gives it.
     """
     nan = float("nan")
     t_imu = np.asarray(t_imu, dtype=float)
-    w = np.asarray(gyro_z_up, dtype=float)
+    gyro = np.asarray(gyro_z_up, dtype=float)
+    rate: Callable[[int, int], np.ndarray] = ((lambda lo, hi: gyro[lo:hi]) if up is None
+                                              else (lambda lo, hi: gyro[lo:hi] @ up))
     t_g = np.asarray(t_gnss, dtype=float)
     e, nn = np.asarray(east_m, dtype=float), np.asarray(north_m, dtype=float)
     if t_g.shape[0] < 4 or t_imu.shape[0] < 4:
         return YawScale(nan, nan, 0.0, 0)
     sig = np.broadcast_to(np.nan_to_num(np.asarray(std_h_m, dtype=float), nan=0.0), t_g.shape)
-    theta = trapezoid_integral(t_imu, w)
     dt_med = float(np.median(np.diff(t_g)))
     gap = np.concatenate([[0], np.cumsum(np.diff(t_g) > 3.0 * dt_med)])   # gap count up to each epoch
     starts = []
@@ -951,7 +1034,7 @@ def yaw_scale_from_track(t_imu: np.ndarray, gyro_z_up: np.ndarray, t_gnss: np.nd
     mids_a, courses_a, ok_a = np.array(mids), np.array(courses), np.array(ok)
     pair = ok_a[1:] & ok_a[:-1] & (mids_a[:-1] >= t_imu[0]) & (mids_a[1:] <= t_imu[-1])
     y = np.angle(np.exp(1j * np.diff(courses_a)))[pair]
-    th = np.interp(mids_a, t_imu, theta)
+    th = trapezoid_integral_at(t_imu, rate, t_imu.shape[0], mids_a)
     x = np.diff(th)[pair]
     n = int(y.shape[0])
     if n < 5:
