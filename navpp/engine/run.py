@@ -286,7 +286,7 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     aiding = new_aiding()
     imu_t = recording.imu.t
     schedule = epochs(al.t, float(imu_t[-1]), *aiding.schedule(al.t, float(imu_t[-1]), fixes.t), imu_t)
-    n_epochs = sum(not e.coast for e in schedule) if progress is not None else 1
+    n_epochs = int(np.count_nonzero(~schedule.coast)) if progress is not None else 1
     reopen = recovery_reopening(config, al.P)
     lever = np.asarray(config.gnss.lever_arm_m, dtype=float)
     more = (scale_block(config.odometry.scale_sigma, config.odometry.scale_walk_per_sqrt_h),) \
