@@ -224,7 +224,7 @@ def _read_imu(imu_path: Path, gyro_scale: float, accel_scale: float, warnings: l
 def _released(table: _Table) -> None:
     """The pages of ``table``'s spilled columns out of memory (:func:`navpp.spill.release`), after
     a pass over them: the next pass reads them back from the spill file."""
-    spill.release([*table.data.values(), *table.groups.values(), table.stamps_ns], 0, table.n)
+    spill.release([*table.data.values(), *table.groups.values(), table.stamps_ns, table.lines], 0, table.n)
 
 
 def _read_gnss(gnss_path: Path, t0_ns: int, imu_span: tuple[float, float], time_offset_s: float,
@@ -748,7 +748,10 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
                 groups[group] = v
                 data.update({name: v[:, j] for j, name in enumerate(group)})
         n = values[0].shape[0]
-        return _Table(path, data, np.arange(2, n + 2, dtype=np.int64), stamps_ns, groups)
+        lines = spill.like(values[0], n, (), np.int64)        # on the spill file with the values
+        for a, b in spill.windows(n, lines):
+            lines[a:b] = np.arange(a + 2, b + 2, dtype=np.int64)
+        return _Table(path, data, lines, stamps_ns, groups)
     block = _parse_with_pandas(path, header, wanted, positions, progress)
     finite = np.isfinite(block)
     n = block.shape[1]
