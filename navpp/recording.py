@@ -45,6 +45,11 @@ class ImuData:
     gyro : (N, 3) float, rad/s, angular rate of the body w.r.t. inertial space, body FLU,
         sampled at ``t``.
     accel : (N, 3) float, m/s^2, specific force, body FLU, sampled at ``t``.
+
+    A CSV log's samples beyond ``[output] memory`` live on a spill file (:mod:`navpp.spill`,
+    written by the reader as it parses): the same values, but a pass over the whole log should
+    release the pages behind it (:func:`navpp.spill.windows`, :class:`navpp.spill.Behind`) or
+    after it (:func:`navpp.spill.release_all`), else every page it touched stays resident.
     """
 
     t: np.ndarray
