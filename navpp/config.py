@@ -700,8 +700,11 @@ class OutputConfig:
         and the IMU-rate output, 140 bytes per IMU sample (beyond it the path, its 1-sigma and
         body rate live on a mapped temporary file whose pages every pass releases behind it:
         :mod:`navpp.spill`; with ``smooth`` the smoothed copy follows the path's choice, so an
-        output just under the budget holds twice that in memory).  Both are in ``$TMPDIR`` and
-        give the same bits as in memory; ``--memory`` overrides it.
+        output just under the budget holds twice that in memory), and the IMU samples of a CSV
+        log, 64 bytes per sample as parsed (beyond it they are written to a mapped temporary
+        file as the reader parses them, and the run's passes over the IMU release their pages
+        behind them).  All are in ``$TMPDIR`` and give the same bits as in memory; ``--memory``
+        overrides it.
     """
 
     rate_hz: float | None = None

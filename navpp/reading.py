@@ -76,7 +76,8 @@ def read_log(log: str | Path, config: Config, *, reference: str | Path | None = 
         csv_ref = reference if reference is not None and not _is_tum(reference) else None
         rec = csv_io.read_csv_log(where, reference=csv_ref, time_base=config.time.base,
                                   gyro_units=config.imu.gyro_units, accel_units=config.imu.accel_units,
-                                  time_offset_s=config.gnss.time_offset_s, progress=progress)
+                                  time_offset_s=config.gnss.time_offset_s, progress=progress,
+                                  memory=config.output.memory)
         if no_odometry and rec.odometry is not None:
             rec = replace(rec, odometry=None)
         if reference is None and rec.reference is not None:

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
+from .spill import windows
 
 #: A stamp may step back by at most this much (s) and still be taken for a reordered message
 #: (sorted into place); a larger step back is a clock jump or a concatenated log: an error.
@@ -44,6 +45,11 @@ class ImuData:
     gyro : (N, 3) float, rad/s, angular rate of the body w.r.t. inertial space, body FLU,
         sampled at ``t``.
     accel : (N, 3) float, m/s^2, specific force, body FLU, sampled at ``t``.
+
+    A CSV log's samples beyond ``[output] memory`` live on a spill file (:mod:`navpp.spill`,
+    written by the reader as it parses): the same values, but a pass over the whole log should
+    release the pages behind it (:func:`navpp.spill.windows`, :class:`navpp.spill.Behind`) or
+    after it (:func:`navpp.spill.release_all`), else every page it touched stays resident.
     """
 
     t: np.ndarray
@@ -57,10 +63,10 @@ class ImuData:
                 f"ImuData shapes: t {self.t.shape}, gyro {self.gyro.shape}, accel {self.accel.shape}; "
                 "expected (N,), (N, 3), (N, 3)"
             )
-        if n > 1:
-            bad = ~(np.diff(self.t) > 0.0)          # also catches NaN stamps
+        for a, b in windows(n - 1, self.t):          # a spilled t a window at a time
+            bad = ~(np.diff(self.t[a:b + 1]) > 0.0)          # also catches NaN stamps
             if bad.any():
-                k = int(np.argmax(bad))
+                k = a + int(np.argmax(bad))
                 raise ValueError(f"ImuData.t must be strictly increasing: t[{k + 1}] = {float(self.t[k + 1])!r} "
                                  f"after t[{k}] = {float(self.t[k])!r} (readers sort and drop duplicates)")
         _readonly(self.t, self.gyro, self.accel)

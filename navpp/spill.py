@@ -1,6 +1,7 @@
-"""IMU-rate output arrays that do not stay in memory: beyond the run's memory budget
-(``[output] memory``, ``--memory``) the path, the output 1-sigma and the body rate live in a
-file-backed mapping whose pages each sequential pass releases behind itself.
+"""IMU-rate arrays that do not stay in memory: beyond the run's memory budget (``[output] memory``,
+``--memory``) the IMU samples as read (:mod:`navpp.io.csv` writes them there block by block), the
+path, the output 1-sigma and the body rate live in a file-backed mapping whose pages each
+sequential pass releases behind itself (:func:`windows`, :class:`Behind`).
 
 The file is a temporary file in ``$TMPDIR`` (Python's :func:`tempfile.gettempdir`, as the
 smoother's :class:`~navpp.filters.smoother.ForwardStore` spills), unlinked at once (on Linux it
@@ -15,6 +16,7 @@ function here, so the callers need no second path.
 
 from __future__ import annotations
 
+import math
 import mmap
 import os
 import tempfile
@@ -29,6 +31,9 @@ from .errors import NavppError
 
 #: rows per window of a sequential pass over a spilled array (64 Ki: 5 MB of the (N, 10) path)
 WINDOW_ROWS = 1 << 16
+#: bytes around a faulting page that Linux maps from the page cache with it (``fault_around_bytes``,
+#: 64 KiB by default): :func:`release` releases them before the rows too
+FAULT_AROUND = 1 << 16
 
 
 @dataclass
@@ -47,9 +52,11 @@ class _Mapping:
 _MAPPINGS: dict[int, _Mapping] = {}
 
 
-def empty_rows(n_rows: int, row_shape: tuple[int, ...], dtype: Any, spill: bool) -> np.ndarray:
+def empty_rows(n_rows: int, row_shape: tuple[int, ...], dtype: Any, spill: bool,
+               what: str = "IMU-rate output") -> np.ndarray:
     """An uninitialised (n_rows, *row_shape) array: in memory, or with ``spill`` on a mapping of
-    an unlinked temporary file in ``$TMPDIR`` (see the module docstring)."""
+    an unlinked temporary file in ``$TMPDIR`` (see the module docstring); ``what`` names the
+    array in the error of a spill that does not fit."""
     shape = (int(n_rows), *row_shape)
     dt = np.dtype(dtype)
     nbytes = int(np.prod(shape, dtype=np.int64)) * dt.itemsize
@@ -60,7 +67,7 @@ def empty_rows(n_rows: int, row_shape: tuple[int, ...], dtype: Any, spill: bool)
             os.posix_fallocate(f.fileno(), 0, nbytes)
         except OSError as exc:
             raise NavppError(
-                f"cannot spill {nbytes / 2**20:.0f} MB of IMU-rate output to {tempfile.gettempdir()} "
+                f"cannot spill {nbytes / 2**20:.0f} MB of {what} to {tempfile.gettempdir()} "
                 f"({exc.strerror or exc}): free space there, set TMPDIR to a disk with room, or raise "
                 "--memory ([output] memory) to keep it in memory") from None
         mm = mmap.mmap(f.fileno(), nbytes, flags=mmap.MAP_SHARED, prot=mmap.PROT_READ | mmap.PROT_WRITE)
@@ -96,7 +103,9 @@ def release(arrays: Iterable[np.ndarray | None], start: int, stop: int) -> None:
     """Release the pages of rows ``start:stop`` of each spilled array in ``arrays`` (views of a
     spilled array included; the others are skipped): the pages holding the rows' bytes leave
     the process's memory and their data stays in the file (a page the rows share with a
-    neighbour goes too: the neighbour's next access reads it back)."""
+    neighbour goes too: the neighbour's next access reads it back).  The :data:`FAULT_AROUND`
+    bytes before the rows go too: a read of the rows' first page maps the cached pages around it
+    again, those before it included, and a pass releasing window by window would leave them."""
     for a in arrays:
         m = None if a is None or stop <= start else _mapping(a)
         if m is None:
@@ -104,10 +113,18 @@ def release(arrays: Iterable[np.ndarray | None], start: int, stop: int) -> None:
         assert a is not None
         first = a.__array_interface__["data"][0] - m.address + start * a.strides[0]
         end = min(first + (stop - start) * a.strides[0], m.size)
-        first = max(first, 0) // mmap.PAGESIZE * mmap.PAGESIZE
+        first = max(first - FAULT_AROUND, 0) // mmap.PAGESIZE * mmap.PAGESIZE
         end = -(-end // mmap.PAGESIZE) * mmap.PAGESIZE
         if end > first:
             m.mm.madvise(mmap.MADV_DONTNEED, first, end - first)
+
+
+def release_all(*arrays: np.ndarray | None) -> None:
+    """Release every row of each spilled array in ``arrays`` (after a pass over them, so that
+    the pages it touched do not stay resident: the next pass reads them back)."""
+    for a in arrays:
+        if a is not None and a.ndim:
+            release((a,), 0, a.shape[0])
 
 
 def release_before(a: np.ndarray, row: int) -> None:
@@ -135,6 +152,40 @@ def windows(n_rows: int, *arrays: np.ndarray | None) -> Iterator[tuple[int, int]
         release(arrays, start, stop)
 
 
+class Behind:
+    """Releases the rows of spilled arrays that a pass in time order has left behind: ``t`` (N,)
+    the rows' stamps (s, increasing; released too), ``arrays`` sampled at them (the IMU's gyro
+    and accel).  ``behind(t_s)`` releases the rows stamped before ``t_s`` once they make
+    :data:`WINDOW_ROWS` more than the last release (cheap to call per epoch).  A pass that
+    starts again before the last release (another run over the same samples) releases from
+    where it starts.  Nothing spilled: a call costs nothing."""
+
+    def __init__(self, t: np.ndarray | None, *arrays: np.ndarray | None) -> None:
+        self.t = t
+        self.arrays = [a for a in (t, *arrays) if spilled(a)]
+        self.row = 0            # the rows before it are released
+        self._mark()
+
+    def _mark(self) -> None:
+        """The stamps (s) of row ``self.row`` and of the row a window after it: between them a
+        call has nothing to do."""
+        n = 0 if self.t is None or not self.arrays else self.t.shape[0]
+        self.t_row = float(self.t[min(self.row, n - 1)]) if n else math.inf
+        self.t_next = float(self.t[self.row + WINDOW_ROWS]) if self.row + WINDOW_ROWS < n else math.inf
+
+    def __call__(self, t_s: float) -> None:
+        if self.t_row <= t_s < self.t_next or not self.arrays:
+            return
+        assert self.t is not None
+        row = int(np.searchsorted(self.t, t_s))
+        if row < self.row:
+            self.row = row
+        elif row - self.row >= WINDOW_ROWS:
+            release(self.arrays, self.row, row)
+            self.row = row
+        self._mark()
+
+
 def full_rows(n_rows: int, row_shape: tuple[int, ...], value: float, spill: bool) -> np.ndarray:
     """:func:`empty_rows` (float64) filled with ``value``, window by window when spilled."""
     out = empty_rows(n_rows, row_shape, np.float64, spill)
@@ -151,5 +202,5 @@ def copy_rows(rows: np.ndarray) -> np.ndarray:
     return out
 
 
-__all__ = ["WINDOW_ROWS", "copy_rows", "empty_rows", "full_rows", "like", "release", "release_before", "spilled",
-           "windows"]
+__all__ = ["WINDOW_ROWS", "Behind", "copy_rows", "empty_rows", "full_rows", "like", "release", "release_all",
+           "release_before", "spilled", "windows"]

@@ -135,6 +135,7 @@ def test_the_spill_file_goes_on_an_interrupt(spill_dir):
     cfg = api.resolve_config(DRIVE, None)
     cfg = replace(cfg, output=replace(cfg.output, memory=1))
     rec = api.read_log(DRIVE, cfg)
+    assert len(_mapped(spill_dir)) == 3                     # the IMU's t, gyro and accel, spilled as read
     seen = []
 
     def interrupt(done: float) -> None:
@@ -144,8 +145,9 @@ def test_the_spill_file_goes_on_an_interrupt(spill_dir):
 
     with pytest.raises(KeyboardInterrupt):
         engine.run(rec, cfg, api.make_filter("ekf", cfg), progress=interrupt)
+    del rec
     gc.collect()
-    assert seen == [1] and not _mapped(spill_dir) and not list(spill_dir.iterdir())
+    assert seen == [4] and not _mapped(spill_dir) and not list(spill_dir.iterdir())
 
 
 def _spilled_copy(a: np.ndarray) -> np.ndarray:
@@ -256,3 +258,72 @@ def test_release_before_counts_from_the_mapping_for_a_view(spill_dir):
         if i % 5000 == 0:
             assert _rss_kb(a) <= 2 * (spill.WINDOW_ROWS * 80) // 1024 + 8
     assert np.array_equal(view[:, 0], np.arange(view.shape[0], dtype=float))
+
+
+def test_the_imu_is_read_onto_the_spill_file_with_the_same_bits(spill_dir):
+    """Beyond ``memory`` the CSV reader parses the IMU onto spill files (t, gyro, accel) and
+    releases each block behind it and each check's pages after it: the same bits as a read in
+    memory, and almost nothing of them resident afterwards."""
+    from navpp.io.csv import read_csv_log
+
+    kept = read_csv_log(DRIVE)
+    spilled_rec = read_csv_log(DRIVE, memory=1)
+    imu0, imu1 = kept.imu, spilled_rec.imu
+    assert not spill.spilled(imu0.gyro) and all(spill.spilled(a) for a in (imu1.t, imu1.gyro, imu1.accel))
+    assert len(_mapped(spill_dir)) == 3
+    assert all(_rss_kb(a) <= 16 for a in (imu1.t, imu1.gyro, imu1.accel))    # released after the last pass
+    assert spilled_rec.t0_ns == kept.t0_ns and spilled_rec.warnings == kept.warnings
+    assert all(a.dtype == b.dtype and np.array_equal(a, b)
+               for a, b in ((imu0.t, imu1.t), (imu0.gyro, imu1.gyro), (imu0.accel, imu1.accel)))
+    assert np.array_equal(kept.gnss.t, spilled_rec.gnss.t) and not spill.spilled(spilled_rec.gnss.t)
+    del spilled_rec, imu1
+    gc.collect()
+    assert not _mapped(spill_dir)
+
+
+def test_a_spilled_parse_that_outgrows_its_guess_keeps_every_row(spill_dir, tmp_path):
+    """The parser sizes its arrays from the first 64 KiB's rows; longer rows later make it grow
+    them, on the spill file too, rows kept and the same bits as in memory."""
+    from navpp.io.csvparse import parse_columns
+
+    rng = np.random.default_rng(3)
+    n = 40_000
+    t = 1_700_000_000.0 + np.arange(n) * 0.008
+    v = rng.normal(0.0, 1.0, (n, 3))
+    lines = ["t,a,b,c"]
+    for k in range(n):                              # short rows first, then long ones: the guess is short
+        fmt = "{:.3f},{:.2f},{:.2f},{:.2f}" if k < 2000 else "{:.3f},{!r},{!r},{!r}"
+        lines.append(fmt.format(float(t[k]), *map(float, v[k])))
+    path = tmp_path / "grow.csv"
+    path.write_text("\n".join(lines) + "\n")
+    kept = parse_columns(path, 4, [0, 1, 2, 3], 0, None, [1, 3])
+    spilled = parse_columns(path, 4, [0, 1, 2, 3], 0, None, [1, 3], budget_bytes=1)
+    assert kept is not None and spilled is not None
+    assert spill.spilled(spilled[0][1]) and spilled[0][1].shape == (n, 3)
+    for a, b in zip(kept[0], spilled[0]):
+        assert np.array_equal(a, b)
+    assert np.array_equal(kept[1], spilled[1])
+
+
+def test_behind_releases_what_a_pass_in_time_order_has_passed(spill_dir):
+    """:class:`navpp.spill.Behind` (the filter loop's): rows stamped before the pass's time
+    leave memory a window at a time; a pass that starts again releases from its start; the
+    values never change; arrays in memory are left alone."""
+    n = 20_000
+    t = spill.empty_rows(n, (), np.float64, spill=True)
+    gyro = spill.empty_rows(n, (3,), np.float64, spill=True)
+    t[:] = np.arange(n) * 0.008
+    gyro[:] = np.arange(3 * n, dtype=float).reshape(n, 3)
+    behind = spill.Behind(t, gyro, np.zeros((n, 3)))
+    assert len(behind.arrays) == 2
+    before = _rss_kb(gyro)
+    for t_s in np.arange(0.0, float(t[-1]), 0.2):
+        behind(float(t_s))
+    assert _rss_kb(gyro) <= before - 3 * 8 * (n - 2 * spill.WINDOW_ROWS) // 1024
+    assert behind.row >= n - 2 * spill.WINDOW_ROWS
+    behind(0.1)                                     # another pass from the start
+    assert behind.row == 13
+    assert np.array_equal(gyro, np.arange(3 * n, dtype=float).reshape(n, 3))
+    idle = spill.Behind(np.arange(10.0), np.zeros((10, 3)))
+    idle(5.0)
+    assert idle.arrays == [] and idle.row == 0

@@ -37,7 +37,7 @@ from ..ins.state import DX_ATT, DX_BG, DX_VEL, NOMINAL_SIZE, X_BG
 from ..jitmode import interpreted
 from .measurements import RunMeasurements
 from .recorder import KNOT, RunRecorder
-from .schedule import Epoch
+from .schedule import Epoch, Schedule
 
 #: Whether :func:`navpp.engine.loop.run_epochs` takes the compiled path where it applies
 #: (the tests switch it off to compare with the generic loop).
@@ -231,12 +231,7 @@ class FusedRunner:
                  epochs: Sequence[Epoch]) -> None:
         self.filt, self.source, self.recorder = filt, source, recorder
         n = len(epochs)
-        self.t = np.fromiter((e.t for e in epochs), float, n)
-        self.fix = np.fromiter((e.fix for e in epochs), np.int64, n)
-        self.sample = np.fromiter((e.sample for e in epochs), np.int64, n)
-        self.coast = np.fromiter((e.coast for e in epochs), bool, n)
-        constraints = np.fromiter((e.constraints for e in epochs), bool, n)
-        index = np.fromiter((e.index for e in epochs), np.int64, n)
+        self.t, index, self.fix, self.sample, constraints, self.coast = Schedule.columns(epochs)
         self.generic = ~self.coast & ((self.fix < 0) | constraints)
         has_vel = source.velocity_mask()
         if has_vel is not None and has_vel.size:

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
 from ..filters.base import Filter, GaussianState, Prediction, Update
+from ..spill import Behind
 
 
 class EpochLike(Protocol):
@@ -109,10 +110,14 @@ def run_epochs(filt: Filter, model: Any, state: GaussianState, epochs: Iterable[
     update of every measurement epoch and after every update.  A
     :class:`~navpp.errors.FilterDivergedError` of the filter or the check propagates.  ``fast``
     (built for this run's epochs, a sequence then) runs what it can; each epoch it leaves goes
-    through :func:`epoch_step`."""
+    through :func:`epoch_step`.  The spilled IMU rows the run has passed leave memory
+    (:class:`~navpp.spill.Behind`)."""
+    ins = getattr(model, "ins", model)          # the INS under an augmented model
+    behind = Behind(getattr(ins, "t", None), getattr(ins, "gyro", None), getattr(ins, "accel", None))
     if fast is None:
         for epoch in epochs:
             state = epoch_step(filt, model, epoch, state, source, recorder, check)
+            behind(state.t)
         return state
     run = epochs if isinstance(epochs, Sequence) else list(epochs)
     i, n = 0, len(run)
@@ -121,6 +126,7 @@ def run_epochs(filt: Filter, model: Any, state: GaussianState, epochs: Iterable[
         if i < n:
             state = epoch_step(filt, model, run[i], state, source, recorder, check)
             i += 1
+        behind(state.t)
     return state
 
 

@@ -30,7 +30,8 @@ from ..ins.augmented import AugmentedInsModel, StateBlock
 from ..ins.gnss_error import Correlation, GnssErrorModel, GnssErrorSettings, innovation_correlation
 from ..ins.model import InsModel
 from ..ins.strapdown import NOMINAL_BG
-from ..recording import Recording
+from ..recording import ImuData, Recording
+from ..spill import release_all
 from .checks import alignment_findings, check_data, check_imu_plausible
 from .fused import fused_runner
 from .gnss_error import (
@@ -212,15 +213,19 @@ def _run_logged(recording: Recording, config: Config, filt: Filter, progress: Pr
 
 
 def prepared(recording: Recording, config: Config, cov_step_s: float, log: Journal) -> Prepared:
-    """Check the data, fix its timing, rotate and calibrate the IMU, build the model, align."""
+    """Check the data, fix its timing, rotate and calibrate the IMU, build the model, align.
+    After each pass over the IMU its spilled pages are released (:func:`released_imu`)."""
     check_gnss_jumps(recording, config.vehicle.type, config.gnss.default_std_m, config.gnss.reanchor_after_s,
                      config.gnss.std_scale)
     log.warnings += check_imu_plausible(recording)
+    released_imu(recording.imu)
     calibration: dict = {}
     recording, t_notes, t_warnings = timing_fixes(recording, config, calibration)
+    released_imu(recording.imu)
     log.notes += t_notes
     log.warnings += t_warnings
     log.warnings += check_data(recording, config)
+    released_imu(recording.imu)
     imu, gnss = recording.imu, recording.gnss
     gyro, accel = imu.gyro, imu.accel
     if any(a != 0.0 for a in config.imu.mounting_rpy_deg):
@@ -229,10 +234,12 @@ def prepared(recording: Recording, config: Config, cov_step_s: float, log: Journ
     gyro, accel, noise, cal, cal_notes, cal_warnings = calibrated(recording, config, gyro, accel, calibration)
     log.notes += cal_notes
     log.warnings += cal_warnings
+    released_imu(imu, gyro, accel)
     profile = cal.profile if (cal is not None and config.auto.noise) else None
     path = new_path(imu.t.shape[0], config.output.memory)
     model = InsModel(imu.t, gyro, accel, noise_model(config, noise), cov_step_s=cov_step_s, path=path,
                      profile=profile)
+    released_imu(imu)
     try:
         al = align(model.t, model.gyro, model.accel, with_prior_std(gnss, config),
                    alignment_settings(config, noise, cal))
@@ -245,7 +252,15 @@ def prepared(recording: Recording, config: Config, cov_step_s: float, log: Journ
             raise InputError(both if len(both) < 285 else f"{recording.source}: {suspect}") from None
         raise InputError(f"{recording.source}: {exc}") from None
     log.notes[:0] = list(al.lines)          # for an error's context; the result carries them apart
+    released_imu(imu, model.gyro, model.accel)
     return Prepared(recording, model, path, cal, calibration, al, gnss_fixes(recording, config, al.t))
+
+
+def released_imu(imu: ImuData, *arrays: np.ndarray) -> None:
+    """The pages of the IMU's spilled arrays (``imu``'s and the calibrated ``arrays``) out of
+    memory after a pass over them (:func:`navpp.spill.release_all`): a pass that reads the
+    whole log touches every page, and they would otherwise stay resident until the run ends."""
+    release_all(imu.t, imu.gyro, imu.accel, *arrays)
 
 
 def processed(recording: Recording, config: Config, filt: Filter, progress: ProgressFn | None,
@@ -257,6 +272,7 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     n_al = len(al.lines)
     log.notes += fixes.notes
     mounting, m_notes, m_warnings = vehicle_mounting(recording, config, cov_step_s, run_one)
+    released_imu(recording.imu, model.gyro, model.accel)
     log.notes += m_notes
     log.warnings += m_warnings
     cal = prep.cal
@@ -270,13 +286,14 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     aiding = new_aiding()
     imu_t = recording.imu.t
     schedule = epochs(al.t, float(imu_t[-1]), *aiding.schedule(al.t, float(imu_t[-1]), fixes.t), imu_t)
-    n_epochs = sum(not e.coast for e in schedule) if progress is not None else 1
+    n_epochs = int(np.count_nonzero(~schedule.coast)) if progress is not None else 1
     reopen = recovery_reopening(config, al.P)
     lever = np.asarray(config.gnss.lever_arm_m, dtype=float)
     more = (scale_block(config.odometry.scale_sigma, config.odometry.scale_walk_per_sqrt_h),) \
         if aiding.odo is not None else ()
     score = estimation_scorer(config, model, recording, al, fixes, new_aiding, reopen, lever, more)
     choice = gnss_error_choice(config, fixes, score)
+    released_imu(recording.imu, model.gyro, model.accel)
     fmodel: InsModel | AugmentedInsModel = model
     fixes = start_fixes(fixes, al)      # a still start shares its averaged fixes with the filter
     start = GaussianState(al.t, al.x, start_covariance(al))
@@ -305,6 +322,7 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
         raise
     except FilterDivergedError as exc:
         raise check.diverged(recorder.t, exc.why or str(exc)) from None
+    released_imu(recording.imu, model.gyro, model.accel)
     if progress is not None:
         progress(1.0)
     result = finished(recording, config, filt, prep, recorder, source, smooth, log, fmodel)
@@ -388,6 +406,7 @@ def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared,
                                            np.ascontiguousarray(k_post[1:, j:j + 3]), like=path)
                for name, j in (("att", 0), ("vel", 3), ("pos", 6))}      # the KNOT layout of the recorder
     rate = body_rate(t_out, path, gyro, fixes.t, recorder.bias[:, :3], al.x[NOMINAL_BG])
+    released_imu(recording.imu, prep.model.gyro, prep.model.accel)
     solution = solution_from_path(t_out, path, std_out["pos"], recording.t0_ns, std_att=std_out["att"],
                                   std_vel_enu=std_out["vel"], rate_body=rate)
     diag = recorder.diagnostics(fixes.t, filt.noise_report_labels())

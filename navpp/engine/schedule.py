@@ -8,7 +8,9 @@ smoother have a node at least every :data:`KNOT_S`.
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
+from typing import overload
 
 import numpy as np
 
@@ -123,30 +125,95 @@ class Epoch:
 def coast_stops(t_from: float, t_to: float, knot_s: float = KNOT_S) -> list[Epoch]:
     """Coasting stops from ``t_from`` towards ``t_to`` (s): one every ``knot_s`` while more than
     ``1.5 knot_s`` remain."""
+    return [Epoch(t, coast=True) for t in _coast_times(t_from, t_to, knot_s)]
+
+
+def _coast_times(t_from: float, t_to: float, knot_s: float) -> list[float]:
+    """The times (s) of :func:`coast_stops`."""
     out = []
     while t_to - t_from > 1.5 * knot_s:
         t_from = t_from + knot_s
-        out.append(Epoch(t_from, coast=True))
+        out.append(t_from)
     return out
 
 
+class Schedule(Sequence[Epoch]):
+    """A run's epochs (what :func:`epochs` returns) as columns, 22 bytes per stop where a list of
+    :class:`Epoch` objects holds about 230 (a float and three ints boxed each): ``t`` (n,)
+    float64 s, ``index``, ``fix``, ``sample`` (n,) int32 and ``constraints``, ``coast`` (n,)
+    bool, the fields of :class:`Epoch`.  An item (or each item of an iteration) is made as an
+    :class:`Epoch` when asked for; a slice is a Schedule."""
+
+    #: stops made into Epochs at a time by an iteration
+    BLOCK = 4096
+
+    def __init__(self, t: np.ndarray, index: np.ndarray, fix: np.ndarray, constraints: np.ndarray,
+                 sample: np.ndarray, coast: np.ndarray) -> None:
+        self.t, self.index, self.fix, self.constraints, self.sample, self.coast = (
+            t, index, fix, constraints, sample, coast)
+
+    def _columns(self) -> tuple[np.ndarray, ...]:
+        return self.t, self.index, self.fix, self.constraints, self.sample, self.coast
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @overload
+    def __getitem__(self, k: int) -> Epoch: ...
+
+    @overload
+    def __getitem__(self, k: slice) -> Schedule: ...
+
+    def __getitem__(self, k: int | slice) -> Epoch | Schedule:
+        if isinstance(k, slice):
+            return Schedule(*(c[k] for c in self._columns()))
+        return Epoch(float(self.t[k]), int(self.index[k]), int(self.fix[k]), bool(self.constraints[k]),
+                     int(self.sample[k]), bool(self.coast[k]))
+
+    @staticmethod
+    def columns(stops: Sequence[Epoch]) -> tuple[np.ndarray, ...]:
+        """``t`` (float64), ``index``, ``fix``, ``sample`` (int64), ``constraints`` and ``coast``
+        (bool) of ``stops``: a Schedule's own columns (converted), else read from each Epoch."""
+        if isinstance(stops, Schedule):
+            return (stops.t, stops.index.astype(np.int64), stops.fix.astype(np.int64),
+                    stops.sample.astype(np.int64), stops.constraints, stops.coast)
+        n = len(stops)
+        return (np.fromiter((e.t for e in stops), float, n), np.fromiter((e.index for e in stops), np.int64, n),
+                np.fromiter((e.fix for e in stops), np.int64, n), np.fromiter((e.sample for e in stops), np.int64, n),
+                np.fromiter((e.constraints for e in stops), bool, n), np.fromiter((e.coast for e in stops), bool, n))
+
+    def __iter__(self) -> Iterator[Epoch]:
+        for lo in range(0, len(self), self.BLOCK):
+            for row in zip(*(c[lo:lo + self.BLOCK].tolist() for c in self._columns())):
+                yield Epoch(*row)
+
+
 def epochs(t_start: float, t_end: float, times: np.ndarray, fix: np.ndarray, constraints: np.ndarray,
-           imu_t: np.ndarray, knot_s: float = KNOT_S) -> list[Epoch]:
+           imu_t: np.ndarray, knot_s: float = KNOT_S) -> Schedule:
     """The run's stops from the start state at ``t_start`` to the last IMU stamp ``t_end`` (s):
     the measurement epochs (``times``, their fix index and constraint flag, as
     :meth:`navpp.aiding.Aiding.schedule` gives them) with coasting stops between them and after
     the last (a final stop at ``t_end`` when the last one is earlier).  ``imu_t`` are the IMU
     stamps (s), to find the sample at each epoch."""
+    times = np.asarray(times, dtype=float)
+    n = times.shape[0]
     idx = np.minimum(np.searchsorted(imu_t, times), imu_t.shape[0] - 1)
     sample = np.where(imu_t[idx] == times, idx, -1)
-    out: list[Epoch] = []
-    t_prev = t_start
-    for e in range(times.shape[0]):
-        t_e = float(times[e])
-        out += coast_stops(t_prev, t_e, knot_s)
-        out.append(Epoch(t_e, e, int(fix[e]), bool(constraints[e]), int(sample[e])))
-        t_prev = t_e
-    out += coast_stops(t_prev, t_end, knot_s)
-    if (out[-1].t if out else t_start) < t_end:
-        out.append(Epoch(t_end, coast=True))
+    t_prev = np.concatenate(([t_start], times[:-1])) if n else np.zeros(0)
+    gaps = np.nonzero(times - t_prev > 1.5 * knot_s)[0]         # the epochs with coasting stops before them
+    before = [_coast_times(float(t_prev[e]), float(times[e]), knot_s) for e in gaps]
+    counts = np.zeros(n, np.int64)
+    counts[gaps] = [len(c) for c in before]
+    at = np.arange(n) + np.cumsum(counts)                         # each measurement epoch's row
+    tail = _coast_times(float(times[-1]) if n else t_start, t_end, knot_s)
+    if (tail[-1] if tail else float(times[-1]) if n else t_start) < t_end:
+        tail.append(t_end)
+    total = n + int(counts.sum()) + len(tail)
+    out = Schedule(np.empty(total), np.full(total, -1, np.int32), np.full(total, -1, np.int32),
+                   np.zeros(total, bool), np.full(total, -1, np.int32), np.ones(total, bool))
+    out.t[at], out.index[at], out.fix[at], out.sample[at] = times, np.arange(n), fix, sample
+    out.constraints[at], out.coast[at] = constraints, False
+    for e, stops in zip(gaps, before):
+        out.t[at[e] - len(stops):at[e]] = stops
+    out.t[total - len(tail):] = tail
     return out

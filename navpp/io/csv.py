@@ -41,7 +41,7 @@ from typing import BinaryIO, cast
 
 import numpy as np
 
-from navpp import jitmode
+from navpp import jitmode, spill
 from navpp.errors import ConfigError, InputError
 from navpp.recording import BLOCK_ROWS, GnssData, ImuData, OdometryData, Recording, ReferenceData, lone_stamp
 
@@ -99,6 +99,7 @@ def read_csv_log(
     accel_units: str = "m/s^2",
     time_offset_s: float = 0.0,
     progress: Callable[[float], None] | None = None,
+    memory: int | None = None,
 ) -> Recording:
     """Read and validate a CSV log directory (``progress(fraction)`` follows imu.csv's bytes).
 
@@ -113,6 +114,8 @@ def read_csv_log(
     accel_units : ``"m/s^2"`` or ``"g"`` (for increments: m/s or g*s).
     time_offset_s : s, added to every GNSS stamp (receiver latency correction); not to the
         odometry, which is on the IMU's clock.
+    memory : bytes, ``[output] memory``: IMU samples (as parsed, then as kept) holding more go
+        to a spill file (:mod:`navpp.spill`) as they are read; None: they stay in memory.
 
     Returns
     -------
@@ -140,7 +143,8 @@ def read_csv_log(
             f"{log_dir}: not a directory; a CSV log is a directory holding {IMU_FILE} and {GNSS_FILE}"
         )
     warnings: list[str] = []
-    imu_data, t0_ns, imu_span = _read_imu(log_dir / IMU_FILE, gyro_scale, accel_scale, warnings, progress)
+    imu_data, t0_ns, imu_span = _read_imu(log_dir / IMU_FILE, gyro_scale, accel_scale, warnings, progress,
+                                         memory)
     gnss_data = _read_gnss(log_dir / GNSS_FILE, t0_ns, imu_span, time_offset_s, warnings)
     odo_data = None
     if (log_dir / ODOMETRY_FILE).exists():
@@ -164,15 +168,22 @@ def read_csv_log(
 
 
 def _read_imu(imu_path: Path, gyro_scale: float, accel_scale: float, warnings: list[str],
-              progress: Callable[[float], None] | None) -> tuple[ImuData, int, tuple[float, float]]:
+              progress: Callable[[float], None] | None,
+              memory: int | None = None) -> tuple[ImuData, int, tuple[float, float]]:
     """``imu.csv`` (rates or increments) as :class:`ImuData` in rad/s and m/s^2, its ``t``
     relative to the first kept stamp; that stamp (int ns on the log's time base) and the first
-    and last stamp as read (float s, the span the GNSS fixes are checked against)."""
+    and last stamp as read (float s, the span the GNSS fixes are checked against).  Beyond
+    ``memory`` bytes (None: never) the samples live on a spill file, each check's pages released
+    after it."""
     header = _read_header(imu_path)
     imu_format, imu_cols = _imu_format(imu_path, header)
-    imu = _read_table(imu_path, header, imu_cols, warnings, progress, (1, 3, 3))
+    imu = _read_table(imu_path, header, imu_cols, warnings, progress, (1, 3, 3), memory)
     _check_lone_stamp(imu)
-    imu = _check_time(_with_ns(imu, header), warnings)
+    _released(imu)
+    imu = _with_ns(imu, header)
+    _released(imu)
+    imu = _check_time(imu, warnings)
+    _released(imu)
     if imu_format == "increments":
         if imu.n < 3:
             raise _need_more(imu, "at least 3 rows are needed for IMU increments (the first row is dropped)")
@@ -189,6 +200,7 @@ def _read_imu(imu_path: Path, gyro_scale: float, accel_scale: float, warnings: l
         warnings.append(f"{imu.path.name}: IMU rate {rate:.1f} Hz is low for strapdown navigation "
                         "(100-200 Hz expected); processed anyway")
     _gap_warning(imu.path.name, t_imu, imu_lines, warnings)
+    _released(imu)
     span = (float(t_imu[0]), float(t_imu[-1]))
     imu_ns = imu.data["t_ns"]
     if imu_format == "increments":
@@ -202,10 +214,17 @@ def _read_imu(imu_path: Path, gyro_scale: float, accel_scale: float, warnings: l
         accel = np.ascontiguousarray(rates[:, 3:6] * accel_scale)
     del imu, rates
     # t = (imu_ns - t0_ns) * 1e-9 in the stamps' own memory (the table that held them is gone)
-    np.subtract(imu_ns, t0_ns, out=imu_ns)
     t = imu_ns.view(np.float64)
-    np.multiply(imu_ns, 1e-9, out=t)
+    for a, b in spill.windows(imu_ns.shape[0], imu_ns):
+        np.subtract(imu_ns[a:b], t0_ns, out=imu_ns[a:b])
+        np.multiply(imu_ns[a:b], 1e-9, out=t[a:b])
     return ImuData(t=t, gyro=gyro, accel=accel), t0_ns, span
+
+
+def _released(table: _Table) -> None:
+    """The pages of ``table``'s spilled columns out of memory (:func:`navpp.spill.release`), after
+    a pass over them: the next pass reads them back from the spill file."""
+    spill.release([*table.data.values(), *table.groups.values(), table.stamps_ns, table.lines], 0, table.n)
 
 
 def _read_gnss(gnss_path: Path, t0_ns: int, imu_span: tuple[float, float], time_offset_s: float,
@@ -499,10 +518,11 @@ def _stamps_ns(table: _Table, header: list[str]) -> np.ndarray:
     if t_max * scale < 2.0 ** 51 and all(
             float(np.max(np.abs(scaled - np.round(scaled)))) <= tolerance
             for scaled in (t[lo:lo + BLOCK_ROWS] * scale for lo in range(0, t.shape[0], BLOCK_ROWS))):
-        ns = np.empty(t.shape[0], dtype=np.int64)
+        ns = spill.like(t, t.shape[0], (), np.int64)
         for lo in range(0, t.shape[0], BLOCK_ROWS):
             np.multiply(np.round(t[lo:lo + BLOCK_ROWS] * scale).astype(np.int64), 10 ** (9 - d),
                         out=ns[lo:lo + BLOCK_ROWS])
+            spill.release((t, ns), lo, lo + BLOCK_ROWS)
         return ns
     if table.stamps_ns is not None:     # the exact path's result, from the fast parser
         return table.stamps_ns
@@ -699,20 +719,22 @@ _CHUNK_ROWS = 65536
 
 
 def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list[str],
-                progress: Callable[[float], None] | None = None, widths: Sequence[int] | None = None) -> _Table:
+                progress: Callable[[float], None] | None = None, widths: Sequence[int] | None = None,
+                memory: int | None = None) -> _Table:
     """Parse ``wanted`` columns as float64 and check every cell is a finite number.
 
     A plain file goes through the numba kernel of :mod:`navpp.io.csvparse` (same values, no
     pandas), which writes ``wanted`` split in consecutive groups of ``widths`` (default one
     each) into arrays the table keeps (:attr:`_Table.groups`); any other file (or when kernels
-    run interpreted) through pandas, whose errors locate the faulty line and cell."""
+    run interpreted) through pandas, whose errors locate the faulty line and cell.  The kernel's
+    arrays go to a spill file beyond ``memory`` bytes (None: never; pandas's stay in memory)."""
     # Unnamed columns (trailing commas) are ignored silently: there is nothing to name.
     extra = [name for name in header if name and name not in wanted]
     if extra:
         warnings.append(f"{path.name}: ignoring extra column(s) {_names(extra)}")
     positions = [header.index(c) for c in wanted]
     parsed = None if jitmode.interpreted() else _parse_plain(path, len(header), positions, header.index("t"),
-                                                             progress, widths)
+                                                             progress, widths, memory)
     if parsed is not None:      # the kernel takes only finite numbers and no blank line: nothing to check
         values, stamps_ns = parsed
         names = iter(wanted)
@@ -726,7 +748,10 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
                 groups[group] = v
                 data.update({name: v[:, j] for j, name in enumerate(group)})
         n = values[0].shape[0]
-        return _Table(path, data, np.arange(2, n + 2, dtype=np.int64), stamps_ns, groups)
+        lines = spill.like(values[0], n, (), np.int64)        # on the spill file with the values
+        for a, b in spill.windows(n, lines):
+            lines[a:b] = np.arange(a + 2, b + 2, dtype=np.int64)
+        return _Table(path, data, lines, stamps_ns, groups)
     block = _parse_with_pandas(path, header, wanted, positions, progress)
     finite = np.isfinite(block)
     n = block.shape[1]
@@ -752,15 +777,15 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
 
 
 def _parse_plain(path: Path, n_fields: int, positions: list[int], stamp_position: int,
-                 progress: Callable[[float], None] | None,
-                 widths: Sequence[int] | None) -> tuple[list[np.ndarray], np.ndarray | None] | None:
+                 progress: Callable[[float], None] | None, widths: Sequence[int] | None,
+                 memory: int | None = None) -> tuple[list[np.ndarray], np.ndarray | None] | None:
     """The float64 columns in groups of ``widths`` and the exact ns of field ``stamp_position``
-    (or None) by :func:`navpp.io.csvparse.parse_columns`; None when the file is not plain (then
-    :func:`_parse_with_pandas` reads it and names the fault)."""
+    (or None) by :func:`navpp.io.csvparse.parse_columns` (spilled beyond ``memory`` bytes); None
+    when the file is not plain (then :func:`_parse_with_pandas` reads it and names the fault)."""
     from navpp.io.csvparse import parse_columns
 
     try:
-        return parse_columns(path, n_fields, positions, stamp_position, progress, widths)
+        return parse_columns(path, n_fields, positions, stamp_position, progress, widths, memory)
     except OSError as e:
         raise InputError(f"{path}: cannot read: {e}") from e
 

@@ -26,6 +26,8 @@ import numpy as np
 from numba import njit
 from numba.cpython.unsafe.numbers import leading_zeros
 
+from navpp.spill import empty_rows, release, spilled, windows
+
 __all__ = ["parse_columns"]
 
 _BLOCK_BYTES = 1 << 22
@@ -261,7 +263,7 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5):
 
 def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_position: int | None = None,
                   progress: Callable[[float], None] | None = None, widths: Sequence[int] | None = None,
-                  ) -> tuple[list[np.ndarray], np.ndarray | None] | None:
+                  budget_bytes: int | None = None) -> tuple[list[np.ndarray], np.ndarray | None] | None:
     """The data rows of CSV file ``path`` (a header line, then rows of ``n_fields`` cells) as
     float64 arrays, the fields ``positions`` split in consecutive groups of ``widths`` (default
     one each): a group of one an (n_rows,) array, a wider one an (n_rows, width) C-contiguous
@@ -269,7 +271,9 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
     field ``stamp_position`` (one of ``positions``), also the exact integer nanoseconds each
     cell's text says ((n_rows,) int64, half-even at 1 ns; None if one does not fit int64).  None
     when the file is not in the plain form the kernel takes (then nothing is known about why).
-    ``progress(fraction)`` follows the bytes read."""
+    ``progress(fraction)`` follows the bytes read.  When the arrays would hold more than
+    ``budget_bytes`` (None: never) they are made on a spill file (:mod:`navpp.spill`) and each
+    window's rows are released once parsed, so the file's values never stay in memory whole."""
     widths = [1] * len(positions) if widths is None else list(widths)
     target = np.full(n_fields, -1, dtype=np.int64)
     component = np.zeros(n_fields, dtype=np.int64)
@@ -292,7 +296,9 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
         # grown if not (pages never written cost no memory)
         per_row = len(sample) / max(sample.count(b"\n"), 1)
         capacity = int((size - len(header)) / max(per_row, 1.0) * 1.05) + 16
-        outs = tuple(np.empty((capacity, width), dtype=np.uint64) for width in shapes)
+        spill = budget_bytes is not None and capacity * sum(shapes) * 8 > budget_bytes
+        what = f"the values of {path.name}"
+        outs = tuple(empty_rows(capacity, (width,), np.uint64, spill, what) for width in shapes)
         rows = 0
         start = len(header)                   # file offset of the first line not parsed yet
         while start < size:
@@ -303,6 +309,7 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
                 view = np.frombuffer(window, dtype=np.uint8)
                 done, outs, status = _parse_lines(view[start - base:], target, component, stamp_field, outs, rows)
                 del view                      # no reference into the window once it closes
+            release(outs, rows, rows + done[0])
             rows += done[0]
             start += done[1]
             if status == _FALLBACK:
@@ -326,7 +333,8 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
     if stamp_position is None:
         return values, None
     stamps = outs[-1][:rows, 0]
-    return values, None if bool(np.any(stamps == _NO_NS)) else stamps.view(np.int64)
+    missing = any(bool(np.any(stamps[a:b] == _NO_NS)) for a, b in windows(rows, stamps))
+    return values, None if missing else stamps.view(np.int64)
 
 
 def _parse_lines(buf: np.ndarray, target: np.ndarray, component: np.ndarray, stamp_field: int,
@@ -345,7 +353,9 @@ def _parse_lines(buf: np.ndarray, target: np.ndarray, component: np.ndarray, sta
 
 
 def _grown(out: np.ndarray, rows: int, capacity: int) -> np.ndarray:
-    """``out`` (capacity, width) with its first ``rows`` rows kept and room for ``capacity``."""
-    bigger = np.empty((capacity, out.shape[1]), dtype=out.dtype)
-    bigger[:rows] = out[:rows]
+    """``out`` (capacity, width) with its first ``rows`` rows kept and room for ``capacity``
+    (spilled like ``out``, copied a window at a time)."""
+    bigger = empty_rows(capacity, (out.shape[1],), out.dtype, spilled(out), "the parsed CSV values")
+    for a, b in windows(rows, out, bigger):
+        bigger[a:b] = out[a:b]
     return bigger
