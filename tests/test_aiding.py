@@ -263,7 +263,8 @@ def test_counts_in_metrics_diagnostics_and_cli(tmp_path, drive):
     from mcap_ros2.decoder import DecoderFactory
 
     with open(tmp_path / "o" / "trajectory.mcap", "rb") as f:
-        msg = next(m for _, ch, _, m in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages()
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        msg = next(m for _, ch, _, m in reader.iter_decoded_messages(topics=["/navpp/diagnostics"])
                    if ch.topic == "/navpp/diagnostics")
     assert list(msg.names[:5]) == ["nu_ve", "nu_vn", "nu_vu", "nis_vel", "vel_accepted"]
 

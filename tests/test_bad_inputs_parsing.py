@@ -10,6 +10,7 @@ read exactly, exact duplicate rows are named as such, and ``compare`` names the 
 from __future__ import annotations
 
 import json
+import shutil
 from decimal import Decimal
 from pathlib import Path
 
@@ -238,9 +239,10 @@ def test_duplicate_rows_are_named_not_called_coarse_stamps(tmp_path):
     np.testing.assert_array_equal(rec.imu.gyro, plain.imu.gyro)
 
 
-def test_compare_warnings_name_the_log(tmp_path):
-    """Two logs with the same file names: each warning says which log it is about."""
-    logs = [copy_drive(tmp_path, name) for name in ("a", "b")]
+def test_compare_warnings_name_the_log(sim_log_dir, tmp_path):
+    """Two logs with the same file names (copies of the 120-s session log): each warning says
+    which log it is about."""
+    logs = [Path(shutil.copytree(sim_log_dir, tmp_path / name)) for name in ("a", "b")]
     edit_csv(logs[1] / "imu.csv", lambda ls: [ls[0] + ",temp"] + [line + ",21.5" for line in ls[1:]])
     argv = ["compare", *map(str, logs), "--filters", "ekf", "--out", str(tmp_path / "out")]
     code, _, stderr, _ = run_in_process(argv, tmp_path)

@@ -254,7 +254,7 @@ def test_sample_logs_embed_every_topic_once(name, tmp_path):
         assert [m["log"] for m in got[topic]] == [m["log"] for m in items], topic
         if name != "drive.bag":
             assert [m["data"] for m in got[topic]] == [m["data"] for m in items], topic
-    tree = _tree(out)                      # the bundled logs use one frame per topic: their first message's
+    tree = _tree(got)                      # the bundled logs use one frame per topic: their first message's
     for topic in want:
         msg = _humble().deserialize_cdr(got[topic][0]["data"], got[topic][0]["schema"])
         assert _reaches_map(msg.header.frame_id, tree), (topic, msg.header.frame_id)
@@ -339,9 +339,9 @@ def test_ros1_encoded_mcap_channels_are_converted(ros1_mcap, tmp_path):
 # --------------------------------------------------------------------------- the tf tree
 
 
-def _tree(path: Path) -> dict[str, tuple[str, object]]:
-    """child frame -> (parent frame, transform) of /tf_static and the first /tf, decoded by rosbags."""
-    raw = _raw(path)
+def _tree(raw: dict[str, list[dict]]) -> dict[str, tuple[str, object]]:
+    """child frame -> (parent frame, transform) of /tf_static and the first /tf of an MCAP file's
+    messages as :func:`_raw` read them, decoded by rosbags."""
     tree = {}
     for topic in ("/tf_static", "/tf"):
         msg = _humble().deserialize_cdr(raw[topic][0]["data"], "tf2_msgs/msg/TFMessage")
@@ -371,10 +371,11 @@ def test_every_embedded_frame_resolves_to_map(inputs, sim_rec, ros1_mcap, kind, 
         log = inputs[kind]
     out = tmp_path / "trajectory.mcap"
     _embed(log, out)
-    tree = _tree(out)
+    got = _raw(out)
+    tree = _tree(got)
     frames_seen = set()
     ts = _humble()
-    for topic, items in _raw(out).items():
+    for topic, items in got.items():
         fields = ts.fielddefs[items[0]["schema"]][1] if items[0]["schema"] in ts.fielddefs else []
         if topic in NAVPP_TOPICS or not any(name == "header" for name, _ in fields):
             continue

@@ -318,7 +318,14 @@ def correlated_log():
     return simulate(spec).recording()
 
 
-def test_the_model_removes_the_correlation_and_makes_sigma_honest(correlated_log):
+@pytest.fixture(scope="module")
+def white_ekf(correlated_log):
+    """The EKF on the correlated drive with its GNSS errors taken as white: the oracle of the runs
+    that must fall back to it, run once (read-only for the tests)."""
+    return _run(correlated_log, "ekf", {"error_model": "white"})
+
+
+def test_the_model_removes_the_correlation_and_makes_sigma_honest(correlated_log, white_ekf):
     """One short correlated drive, the simulator's tau and share given: the Gauss-Markov run's
     error/sigma within 0.6-1.5 (white: far above), its innovations no longer correlated, its
     diagnostics carry the GNSS error states; the sigma-point filter agrees with the EKF.
@@ -329,7 +336,7 @@ def test_the_model_removes_the_correlation_and_makes_sigma_honest(correlated_log
     Here only a gross miss either way; :func:`test_smoothed_sigma_is_honest_over_correlated_drives`
     (slow) checks the mean over seeds."""
     rec = correlated_log
-    white = _run(rec, "ekf", {"error_model": "white"})
+    white = white_ekf
     gm_cfg = {"error_model": "gauss-markov", "corr_time_s": 60.0, "correlated_share": 0.8}
     gm = _run(rec, "ekf", gm_cfg, smooth=True)
     h_w, z_w = _err_over_sigma(white.solution, rec.reference)
@@ -374,7 +381,7 @@ def test_auto_leaves_a_white_log_alone():
     assert auto.calibration["gnss_innovation_correlation"]["rho"] < 0.1
 
 
-def test_auto_keeps_the_white_run_when_the_model_explains_the_fixes_worse(correlated_log, monkeypatch):
+def test_auto_keeps_the_white_run_when_the_model_explains_the_fixes_worse(correlated_log, white_ekf, monkeypatch):
     """The repeat's innovation score decides: made worse than the white run's (the oracle: the
     white run itself), the white run is returned with a warning that says so."""
     import importlib
@@ -385,13 +392,12 @@ def test_auto_keeps_the_white_run_when_the_model_explains_the_fixes_worse(correl
     cfg = {"corr_time_s": 60.0, "correlated_share": 0.8}
     kept = _run(correlated_log, "ekf", cfg)
     assert not scores
-    white = _run(correlated_log, "ekf", {**cfg, "error_model": "white"})
-    np.testing.assert_array_equal(kept.solution.lat_deg, white.solution.lat_deg)
+    np.testing.assert_array_equal(kept.solution.lat_deg, white_ekf.solution.lat_deg)
     assert "gnss_error" not in kept.calibration
     assert any(getattr(w, "code", "") == "gnss-errors-correlated" and "white run is kept" in w for w in kept.warnings)
 
 
-def test_auto_does_not_add_the_states_to_a_filter_with_a_random_mean(correlated_log, monkeypatch):
+def test_auto_does_not_add_the_states_to_a_filter_with_a_random_mean(correlated_log, white_ekf, monkeypatch):
     """A filter whose update moves the mean randomly (RWCKF's flag, set here on the EKF so the
     white EKF run is the oracle) keeps the white model under "auto", with a warning that says why;
     RWCKF itself carries the flag."""
@@ -401,8 +407,7 @@ def test_auto_does_not_add_the_states_to_a_filter_with_a_random_mean(correlated_
     assert get_filter("rwckf").random_mean and not get_filter("ckf").random_mean
     monkeypatch.setattr(EKF, "random_mean", True)
     res = _run(correlated_log, "ekf", {})
-    white = _run(correlated_log, "ekf", {"error_model": "white"})
-    np.testing.assert_array_equal(res.solution.lat_deg, white.solution.lat_deg)
+    np.testing.assert_array_equal(res.solution.lat_deg, white_ekf.solution.lat_deg)
     assert any("random amounts" in w for w in res.warnings)
 
 
