@@ -360,7 +360,9 @@ class _StandstillInputs:
         at = np.flatnonzero(cons)
         imu_t = aiding.t
         sample = np.clip(np.searchsorted(imu_t, t[at]), 0, imu_t.shape[0] - 1)
-        self.run[at] = aiding._run_id[sample]
+        run_id = aiding._run_id
+        assert run_id is not None           # ZUPT or ZARU is on (standstill_only)
+        self.run[at] = run_id[sample]
         self.cons[at] = aiding.still[sample]
         at = at[self.cons[at]]
         if not aiding.zaru:
@@ -380,6 +382,11 @@ class _StandstillInputs:
                     meas = ZeroRate.at(te, aiding.gyro[lo:hi].mean(axis=0), te - t_prev, arw, aiding.zaru_floor)
                     self.zaru_ok[e], self.zaru_z[e], self.zaru_var[e] = True, meas.z, meas.R[0, 0]
             t_prev = te
+
+    def arguments(self) -> tuple[Any, ...]:
+        """:func:`ekf_epochs`'s still-epoch arguments, ``ep_cons`` (:attr:`cons`) on."""
+        return (self.cons, self.run, self.zupt_var, self.zaru_ok, self.zaru_z, self.zaru_var, self.max_speed,
+                self.aid_state, self.ring, self.z_limit, self.counts)
 
     def load(self, aiding: Aiding) -> None:
         """The ZUPT check's state as ``aiding`` has it (the generic loop's epochs change it)."""
@@ -455,8 +462,7 @@ class FusedRunner:
             state.x, state.P, state.t, self.t, self.fix, self.sample, self.coast, self.generic, i, stop,
             self.fix_lat, self.fix_lon, self.fix_alt, self.fix_var, self.source.lever, self.filt.gate_threshold(3),
             rec.nu, rec.nis, rec.accepted, rec.forced, rec.s_used, rec.r_used, rec.bias, rec.bias_var, self.knots,
-            keep, nodes_x, nodes_P, *self.prop, self.cons, st.run, st.zupt_var, st.zaru_ok, st.zaru_z, st.zaru_var,
-            st.max_speed, st.aid_state, st.ring, st.z_limit, st.counts)
+            keep, nodes_x, nodes_P, *self.prop, *st.arguments())
         if j == i:
             return i, state
         if keep:
