@@ -162,7 +162,7 @@ def _aid_update(x: np.ndarray, P: np.ndarray, z: np.ndarray, h: np.ndarray, H: n
 @compiled
 def _standstill(x: np.ndarray, P: np.ndarray, run: int, zupt_var: float, zaru: bool, zaru_z: np.ndarray,
                 zaru_var: float, max_speed: float, gate: float, aid_state: np.ndarray, ring: np.ndarray,
-                z_limit: float) -> tuple[bool, np.ndarray, np.ndarray, int, int]:
+                z_limit: float, aid_counts: np.ndarray) -> tuple[bool, np.ndarray, np.ndarray, int]:
     """The ZUPT and ZARU of a still epoch as :meth:`~navpp.aiding.Aiding.constraint_measurements`
     gives them and the generic loop applies them, from the state (``x``, ``P``) the fix left: none
     in a vetoed still run (``run``, ``aid_state[0]``) or when the speed gate
@@ -171,17 +171,18 @@ def _standstill(x: np.ndarray, P: np.ndarray, run: int, zupt_var: float, zaru: b
     (rad/s) with R ``zaru_var``.  ZUPT's consistency check (:meth:`~navpp.aiding.Aiding.observed`)
     runs on ``aid_state`` ``(vetoed run, run of the ring, innovations in the ring)`` and ``ring``
     (``ZUPT_RUN``, 3) (oldest first), which are updated, with the limit ``z_limit``
-    (:data:`~navpp.aiding.ZUPT_Z`).  Returns ``(ok, x, P, zupts, zarus)``;
-    ``ok`` is False when an update is rejected or fails, or the check vetoes the run (the generic
-    loop redoes the epoch; ``aid_state`` and ``ring`` are then left as they were)."""
+    (:data:`~navpp.aiding.ZUPT_Z`); the ZUPT and ZARU applied are added to ``aid_counts`` (2,).
+    Returns ``(ok, x, P, number of aids applied)``; ``ok`` is False when an update is rejected or
+    fails, or the check vetoes the run (the generic loop redoes the epoch; ``aid_state``, ``ring``
+    and ``aid_counts`` are then left as they were)."""
     if run == aid_state[0]:
-        return True, x, P, 0, 0
+        return True, x, P, 0
     ve, vn, vu = x[X_VE], x[X_VE + 1], x[X_VE + 2]
     speed = np.sqrt(ve * ve + vn * vn + vu * vu)
     trace = P[DX_VEL, DX_VEL] + P[DX_VEL + 1, DX_VEL + 1] + P[DX_VEL + 2, DX_VEL + 2]
     speed_std = np.sqrt(max(trace, 0.0))
     if not (speed <= max_speed and speed_std <= 2.0 * max_speed):
-        return True, x, P, 0, 0
+        return True, x, P, 0
     no_p = np.zeros(0)
     n_zupt = n_zaru = 0
     count = aid_state[2] if aid_state[1] == run else 0
@@ -190,7 +191,7 @@ def _standstill(x: np.ndarray, P: np.ndarray, run: int, zupt_var: float, zaru: b
         ok, nu, S, x, P = _aid_update(x, P, np.zeros(3), zero_velocity._h(x, no_p), zero_velocity._H(x, no_p),
                                       zupt_var, gate)
         if not ok:
-            return False, x, P, 0, 0
+            return False, x, P, 0
         n_zupt = 1
         if count == ZUPT_RUN:
             for r in range(ZUPT_RUN - 1):
@@ -206,18 +207,46 @@ def _standstill(x: np.ndarray, P: np.ndarray, run: int, zupt_var: float, zaru: b
                 for r in range(ZUPT_RUN):
                     total += new_ring[r, e]
                 if abs(total / ZUPT_RUN * np.sqrt(ZUPT_RUN)) > z_limit:
-                    return False, x, P, 0, 0
+                    return False, x, P, 0
     if zaru:
         ok, nu, S, x, P = _aid_update(x, P, zaru_z, zero_rate._h(x, no_p), zero_rate._H(x, no_p), zaru_var, gate)
         if not ok:
-            return False, x, P, 0, 0
+            return False, x, P, 0
         n_zaru = 1
     if n_zupt:
         aid_state[1], aid_state[2] = run, count
         for r in range(ZUPT_RUN):
             for e in range(3):
                 ring[r, e] = new_ring[r, e]
-    return True, x, P, n_zupt, n_zaru
+    aid_counts[0] += n_zupt
+    aid_counts[1] += n_zaru
+    return True, x, P, n_zupt + n_zaru
+
+
+@compiled
+def _record_fix(k: int, nu: np.ndarray, nis: float, S: np.ndarray, R: np.ndarray, x: np.ndarray, P: np.ndarray,
+                nu_out: np.ndarray, nis_out: np.ndarray, accepted_out: np.ndarray, forced_out: np.ndarray,
+                s_out: np.ndarray, r_out: np.ndarray, bias_out: np.ndarray, bias_var_out: np.ndarray) -> None:
+    """What the recorder keeps of fix ``k``, accepted (not forced) with innovation ``nu``, ``nis``,
+    ``S`` and ``R``, the epoch's posterior (``x``, ``P``) giving the biases and their variance."""
+    nu_out[k] = nu
+    nis_out[k] = nis
+    accepted_out[k] = True
+    forced_out[k] = False
+    s_out[k] = S
+    r_out[k] = R
+    for e in range(6):
+        bias_out[k, e] = x[X_BG + e]
+        bias_var_out[k, e] = P[DX_BG + e, DX_BG + e]
+
+
+@compiled
+def _path_row(path: np.ndarray, sample: int, x: np.ndarray) -> None:
+    """The recorded ``path``'s row of IMU ``sample`` (-1: none) from the posterior nominal ``x``."""
+    if sample >= 0:
+        row = path[sample]
+        for e in range(row.shape[0]):
+            row[e] = x[e]
 
 
 @compiled
@@ -247,10 +276,8 @@ def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep
     cross-covariance ``P Phi^T`` (a coasting stop's posterior is its prior).  The rest is the model's
     (:meth:`~navpp.ins.model.InsModel.propagation_arrays`): IMU data (``imu_t``, ``gyro``,
     ``accel``), the path, noise (``psd``, the profile, ``inv_tau_*``, ``cov_step_s``) and long
-    ``gaps``.  Still epochs (``ep_cons``) and their aids (:func:`_standstill`; per epoch its still
-    run ``ep_run`` and ZARU's ``zaru_ok``, ``zaru_z``, ``zaru_var``; the ZUPT's R ``zupt_var``, the
-    speed gate ``max_speed``, the ZUPT check's ``aid_state``, ``ring`` and ``z_limit``); the
-    ZUPTs and ZARUs applied are added to ``aid_counts`` (2,).
+    ``gaps``.  Still epochs ``ep_cons``, their aids' inputs (per epoch ``ep_run``, ``zaru_ok``,
+    ``zaru_z``, ``zaru_var``), state and counts: :func:`_standstill`.
 
     Returns the first epoch not run (``stop``, or an epoch the generic loop must run: marked,
     crossing a long gap, its fix or aid rejected, its state failing the check, its update failing,
@@ -271,9 +298,7 @@ def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep
                                           inv_tau_a, cov_step_s)
         Pp, PPhit = propagated_covariance(P, Phi, Qd)
         if keep:
-            nodes_x[i - first, 0] = xn
-            nodes_P[i - first, 0] = Pp
-            nodes_P[i - first, 2] = PPhit
+            nodes_x[i - first, 0], nodes_P[i - first, 0], nodes_P[i - first, 2] = xn, Pp, PPhit
         if ep_coast[i]:
             _knot_row(knots_out[n_knots], t1, Pp, Pp)
             n_knots += 1
@@ -285,35 +310,21 @@ def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep
         k = ep_fix[i]
         xp, Pn, applied = xn, Pp, False
         if k >= 0:
-            ok, nu, S, R, nis, xp, Pn = _fix_update(xn, Pp, fix_lat[k], fix_lon[k], fix_alt[k], fix_var[k], lever,
-                                                    gate)
-            if not ok:
+            applied, nu, S, R, nis, xp, Pn = _fix_update(xn, Pp, fix_lat[k], fix_lon[k], fix_alt[k], fix_var[k],
+                                                         lever, gate)
+            if not applied:
                 break
-            applied = True
         if ep_cons[i]:
-            ok, xp, Pn, n_zupt, n_zaru = _standstill(xp, Pn, ep_run[i], zupt_var, zaru_ok[i], zaru_z[i], zaru_var[i],
-                                                     max_speed, gate, aid_state, ring, z_limit)
-            if not ok or not (applied or n_zupt or n_zaru):
+            ok, xp, Pn, n_aids = _standstill(xp, Pn, ep_run[i], zupt_var, zaru_ok[i], zaru_z[i], zaru_var[i],
+                                             max_speed, gate, aid_state, ring, z_limit, aid_counts)
+            if not ok or not (applied or n_aids):
                 break
-            aid_counts[0] += n_zupt
-            aid_counts[1] += n_zaru
         if keep:
-            nodes_x[i - first, 1] = xp
-            nodes_P[i - first, 1] = Pn
+            nodes_x[i - first, 1], nodes_P[i - first, 1] = xp, Pn
         if k >= 0:
-            nu_out[k] = nu
-            nis_out[k] = nis
-            accepted_out[k] = True
-            forced_out[k] = False
-            s_out[k] = S
-            r_out[k] = R
-            for e in range(6):
-                bias_out[k, e] = xp[X_BG + e]
-                bias_var_out[k, e] = Pn[DX_BG + e, DX_BG + e]
-        if ep_sample[i] >= 0:
-            row = path[ep_sample[i]]
-            for e in range(row.shape[0]):
-                row[e] = xp[e]
+            _record_fix(k, nu, nis, S, R, xp, Pn, nu_out, nis_out, accepted_out, forced_out, s_out, r_out, bias_out,
+                        bias_var_out)
+        _path_row(path, ep_sample[i], xp)
         _knot_row(knots_out[n_knots], t1, Pp, Pn)
         n_knots += 1
         x, P, t_prev = xp, Pn, t1
