@@ -62,8 +62,10 @@ GROUPS: dict[str, tuple[tuple[str, str], ...]] = {
 }
 #: CPU seconds to compile each group from an empty cache (2-core EPYC, numba 0.68; "ins": a
 #: cold sample-drive EKF run 50.9 s against 2.3 s warm, less the "csv" group, with the compiled
-#: EKF epoch and the writers' formatter, both added in issue 21).
-COMPILE_S = {"ins": 47.0, "ros": 1.5, "mcap": 0.5, "csv": 1.5, "sigma": 9.0, "vce": 10.0, "smooth": 9.0}
+#: EKF epoch and the writers' formatter, both added in issue 21; then 3 % more with the still
+#: epochs' ZUPT and ZARU in the compiled epoch and the block-structured transition: a cold
+#: sample-drive EKF run 68.4 -> 70.4 s CPU, the two side by side at load 11).
+COMPILE_S = {"ins": 48.5, "ros": 1.5, "mcap": 0.5, "csv": 1.5, "sigma": 9.0, "vce": 10.0, "smooth": 9.0}
 #: Extra CPU µs per IMU sample when interpreted, per filter (forward run), and per sample
 #: for the smoother's backward pass; per message for decoding a ROS log.
 INTERPRETED_US = {"ekf": 40.0, "aekf": 60.0, "sif": 900.0, "ckf": 950.0, "ukf": 950.0, "aukf": 1000.0,

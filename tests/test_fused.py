@@ -1,8 +1,8 @@
 """The loop's compiled path (navpp.engine.fused) against the generic loop (the oracle): the same
 run with the path on and off gives the same result bit for bit, on drives that exercise what the
-kernel runs (fixes, coasting stops, a noise profile) and what it leaves to the generic loop
-(standstill aids, GNSS velocity, a long IMU gap, rejected and forced fixes), and filters other
-than the plain EKF never take it."""
+kernel runs (fixes, coasting stops, a noise profile, stops with ZUPT and ZARU alone) and what it
+leaves to the generic loop (a car's NHC with its standstill aids, GNSS velocity, a long IMU gap,
+rejected and forced fixes, vetoed still runs), and filters other than the plain EKF never take it."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scenarios import gnss_jump_recording
 
-from navpp import api, engine
+from navpp import aiding, api, engine
 from navpp.config import config_from_dict
 from navpp.engine import fused
 from navpp.filters.ekf import EKF
@@ -44,14 +44,18 @@ def _same(a: object, b: object, where: str = "result") -> None:
         assert a == b, where
 
 
-def _both(rec, cfg, monkeypatch: pytest.MonkeyPatch, name: str = "ekf", smooth: bool = False):
-    """The run with the compiled path and without; the number of epochs the kernel ran."""
+def _both(rec, cfg, monkeypatch: pytest.MonkeyPatch, name: str = "ekf", smooth: bool = False,
+          still: list | None = None):
+    """The run with the compiled path and without; the number of epochs the kernel ran (and in
+    ``still``, when given, the number of still epochs among them)."""
     ran = [0]
     kernel = fused.ekf_epochs
 
     def counted(*args):
         out = kernel(*args)
         ran[0] += out[0] - args[8]
+        if still is not None:
+            still.append(int(args[43][args[8]:out[0]].sum()))      # ep_cons
         return out
 
     monkeypatch.setattr(fused, "ekf_epochs", counted)
@@ -84,6 +88,33 @@ def test_consumer_car_drive_is_bit_identical(monkeypatch: pytest.MonkeyPatch, sm
     monkeypatch.setattr(fused, "STORE_STRETCH", 7)
     on, off, ran = _both(rec, cfg, monkeypatch, smooth=smooth)
     assert ran > 200 and (on.smoothed is not None) == smooth
+    _same(on, off)
+
+
+@pytest.mark.parametrize("smooth", [False, True])
+def test_standstill_epochs_are_bit_identical(monkeypatch: pytest.MonkeyPatch, smooth: bool) -> None:
+    """Stops with ZUPT and ZARU alone (the default vehicle, no GNSS velocity): the kernel runs the
+    still epochs too, with and without a fix, forward and smoothed, in short stretches."""
+    rec = simulate(SimulationSpec(duration_s=300.0, still_s=20.0, seed=7)).recording()
+    cfg = config_from_dict({"imu": {"preset": "automotive"}}, "test")
+    monkeypatch.setattr(fused, "STRETCH", 50)
+    monkeypatch.setattr(fused, "STORE_STRETCH", 7)
+    still: list[int] = []
+    on, off, ran = _both(rec, cfg, monkeypatch, smooth=smooth, still=still)
+    counts = on.updates
+    assert ran > 1000 and sum(still) > 100 and counts["zupt"]["applied"] > 100 and counts["zaru"]["applied"] > 100
+    _same(on, off)
+
+
+def test_vetoed_still_runs_are_bit_identical(monkeypatch: pytest.MonkeyPatch) -> None:
+    """ZUPT's consistency check with a limit so low that it vetoes still runs: the kernel leaves the
+    vetoing epoch to the generic loop and takes up the still run's state after it."""
+    rec = simulate(SimulationSpec(duration_s=300.0, still_s=20.0, seed=7)).recording()
+    cfg = config_from_dict({"imu": {"preset": "automotive"}}, "test")
+    monkeypatch.setattr(aiding, "ZUPT_Z", 0.3)
+    still: list[int] = []
+    on, off, _ = _both(rec, cfg, monkeypatch, still=still)
+    assert on.calibration["standstill_ended_early_s"] and sum(still) > 0
     _same(on, off)
 
 

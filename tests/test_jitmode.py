@@ -52,7 +52,7 @@ def test_workers_are_announced() -> None:
     cold = jitmode.decide("auto", [(900_000, 0, "csv")], ["ekf"], False, ("ins",))
     assert cold.compiled and cold.missing == ("ins",)
     line = jitmode.workers_note(cold, 2)
-    assert "each of the 2 worker processes first compiles" in line and "about 47 s" in line
+    assert "each of the 2 worker processes first compiles" in line and "about 48 s" in line
     assert jitmode.workers_note(cold, 1) == ""
     assert jitmode.workers_note(jitmode.decide("auto", [(10, 0, "csv")], ["ekf"], False, ()), 4) == ""
 

@@ -4,14 +4,18 @@ A run of the plain EKF (:class:`~navpp.filters.ekf.EKF` with the no-op adaptatio
 15-state INS (:class:`~navpp.ins.model.InsModel`), with the run's own measurement source and
 recorder (:class:`~navpp.engine.measurements.RunMeasurements`,
 :class:`~navpp.engine.recorder.RunRecorder` without smoothing or extra states), spends most
-of its epochs on one GNSS position fix that passes the gate, or on a coasting stop.  Such
-epochs go through :func:`ekf_epochs`, one compiled call for a stretch of them, which does what
-the generic loop does for them (:func:`navpp.engine.loop.run_epochs`: time update, the state
-check, measurement prediction, gate, gain, Joseph correction, the check again) with the same
-kernels in the same order, so the figures are the same bits, and writes what the recorder would
-write.  Any other epoch, and any epoch whose fix the gate rejects, whose state fails the check
-or whose update fails (the kernel stops before it), goes through the generic loop; so do
-filters, models, sources and recorders of any other kind (:func:`fused_runner` returns None).
+of its epochs on one GNSS position fix that passes the gate, or on a coasting stop, and when
+the only constraints are ZUPT and ZARU (no NHC, odometer or GNSS velocity), on the still epochs'
+ZUPT and ZARU (with or without a fix).  Such epochs go through :func:`ekf_epochs`, one compiled
+call for a stretch of them, which does what the generic loop does for them
+(:func:`navpp.engine.loop.run_epochs`: time update, the state check, measurement prediction,
+gate, gain, Joseph correction, the check again; for a still epoch the speed gate, the veto and
+ZUPT's consistency check of :class:`~navpp.aiding.Aiding`) with the same kernels in the same
+order, so the figures are the same bits, and writes what the recorder would write.  Any other
+epoch, and any epoch whose fix or aid the gate rejects, whose state fails the check, whose
+update fails or whose ZUPT check vetoes its still run (the kernel stops before it), goes
+through the generic loop; so do filters, models, sources and recorders of any other kind
+(:func:`fused_runner` returns None).
 """
 
 from __future__ import annotations
@@ -21,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from .. import aiding as aid_rules
+from ..aiding import ZUPT_RUN, Aiding
 from ..filters.adaptation import Adaptation
 from ..filters.base import Filter, GaussianState
 from ..filters.ekf import EKF
@@ -32,8 +38,9 @@ from ..filters.linalg import (
     linear_moments,
     propagated_covariance,
 )
+from ..ins.aids import ZeroRate, zero_rate, zero_velocity
 from ..ins.model import InsModel, gnss_innovation, gnss_jacobian, integrate_with_jacobian, plus
-from ..ins.state import DX_ATT, DX_BG, DX_VEL, NOMINAL_SIZE, X_BG
+from ..ins.state import DX_ATT, DX_BG, DX_VEL, NOMINAL_SIZE, X_BG, X_VE
 from ..jitmode import interpreted
 from .measurements import RunMeasurements
 from .recorder import KNOT, RunRecorder
@@ -134,6 +141,115 @@ def _fix_update(x: np.ndarray, P: np.ndarray, lat: float, lon: float, alt: float
 
 
 @compiled
+def _aid_update(x: np.ndarray, P: np.ndarray, z: np.ndarray, h: np.ndarray, H: np.ndarray, var: float, gate: float
+                ) -> tuple[bool, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The generic update of a three-element aid (value ``z``, its model's ``h`` and ``H`` at ``x``,
+    R ``var`` times the identity) on (``x``, ``P``) when it passes the ``gate`` and leaves a sound
+    state: ``(True, nu, S, x+, P+)``; else ``ok`` is False (the generic loop redoes the epoch)."""
+    nu = z - h
+    PHt, Pzz = linear_moments(P, H)
+    R = np.zeros((3, 3))
+    for e in range(3):
+        R[e, e] = var
+    S, K, nis, ok = innovation_gain(Pzz, R, PHt, nu)
+    if not ok or not nis <= gate:
+        return False, nu, S, x, P
+    dx, Pn = joseph_correction(P, K, H, R, nu)
+    xp = plus(x, dx)
+    return finite_with_positive_variances(xp, Pn), nu, S, xp, Pn
+
+
+@compiled
+def _standstill(x: np.ndarray, P: np.ndarray, run: int, zupt_var: float, zaru: bool, zaru_z: np.ndarray,
+                zaru_var: float, max_speed: float, gate: float, aid_state: np.ndarray, ring: np.ndarray,
+                z_limit: float, aid_counts: np.ndarray) -> tuple[bool, np.ndarray, np.ndarray, int]:
+    """The ZUPT and ZARU of a still epoch as :meth:`~navpp.aiding.Aiding.constraint_measurements`
+    gives them and the generic loop applies them, from the state (``x``, ``P``) the fix left: none
+    in a vetoed still run (``run``, ``aid_state[0]``) or when the speed gate
+    (:func:`~navpp.ins.aids.standstill.speed_allows`, ``max_speed`` m/s) refuses; the ZUPT with R
+    ``zupt_var`` (m/s)^2 (NaN: no ZUPT), then, with ``zaru``, the ZARU of the mean gyro ``zaru_z``
+    (rad/s) with R ``zaru_var``.  ZUPT's consistency check (:meth:`~navpp.aiding.Aiding.observed`)
+    runs on ``aid_state`` ``(vetoed run, run of the ring, innovations in the ring)`` and ``ring``
+    (``ZUPT_RUN``, 3) (oldest first), which are updated, with the limit ``z_limit``
+    (:data:`~navpp.aiding.ZUPT_Z`); the ZUPT and ZARU applied are added to ``aid_counts`` (2,).
+    Returns ``(ok, x, P, number of aids applied)``; ``ok`` is False when an update is rejected or
+    fails, or the check vetoes the run (the generic loop redoes the epoch; ``aid_state``, ``ring``
+    and ``aid_counts`` are then left as they were)."""
+    if run == aid_state[0]:
+        return True, x, P, 0
+    ve, vn, vu = x[X_VE], x[X_VE + 1], x[X_VE + 2]
+    speed = np.sqrt(ve * ve + vn * vn + vu * vu)
+    trace = P[DX_VEL, DX_VEL] + P[DX_VEL + 1, DX_VEL + 1] + P[DX_VEL + 2, DX_VEL + 2]
+    speed_std = np.sqrt(max(trace, 0.0))
+    if not (speed <= max_speed and speed_std <= 2.0 * max_speed):
+        return True, x, P, 0
+    no_p = np.zeros(0)
+    n_zupt = n_zaru = 0
+    count = aid_state[2] if aid_state[1] == run else 0
+    new_ring = ring.copy()
+    if zupt_var == zupt_var:
+        ok, nu, S, x, P = _aid_update(x, P, np.zeros(3), zero_velocity._h(x, no_p), zero_velocity._H(x, no_p),
+                                      zupt_var, gate)
+        if not ok:
+            return False, x, P, 0
+        n_zupt = 1
+        if count == ZUPT_RUN:
+            for r in range(ZUPT_RUN - 1):
+                for e in range(3):
+                    new_ring[r, e] = new_ring[r + 1, e]
+            count -= 1
+        for e in range(3):
+            new_ring[count, e] = nu[e] / np.sqrt(max(S[e, e], 1e-30))
+        count += 1
+        if count == ZUPT_RUN:
+            for e in range(3):
+                total = 0.0
+                for r in range(ZUPT_RUN):
+                    total += new_ring[r, e]
+                if abs(total / ZUPT_RUN * np.sqrt(ZUPT_RUN)) > z_limit:
+                    return False, x, P, 0
+    if zaru:
+        ok, nu, S, x, P = _aid_update(x, P, zaru_z, zero_rate._h(x, no_p), zero_rate._H(x, no_p), zaru_var, gate)
+        if not ok:
+            return False, x, P, 0
+        n_zaru = 1
+    if n_zupt:
+        aid_state[1], aid_state[2] = run, count
+        for r in range(ZUPT_RUN):
+            for e in range(3):
+                ring[r, e] = new_ring[r, e]
+    aid_counts[0] += n_zupt
+    aid_counts[1] += n_zaru
+    return True, x, P, n_zupt + n_zaru
+
+
+@compiled
+def _record_fix(k: int, nu: np.ndarray, nis: float, S: np.ndarray, R: np.ndarray, x: np.ndarray, P: np.ndarray,
+                nu_out: np.ndarray, nis_out: np.ndarray, accepted_out: np.ndarray, forced_out: np.ndarray,
+                s_out: np.ndarray, r_out: np.ndarray, bias_out: np.ndarray, bias_var_out: np.ndarray) -> None:
+    """What the recorder keeps of fix ``k``, accepted (not forced) with innovation ``nu``, ``nis``,
+    ``S`` and ``R``, the epoch's posterior (``x``, ``P``) giving the biases and their variance."""
+    nu_out[k] = nu
+    nis_out[k] = nis
+    accepted_out[k] = True
+    forced_out[k] = False
+    s_out[k] = S
+    r_out[k] = R
+    for e in range(6):
+        bias_out[k, e] = x[X_BG + e]
+        bias_var_out[k, e] = P[DX_BG + e, DX_BG + e]
+
+
+@compiled
+def _path_row(path: np.ndarray, sample: int, x: np.ndarray) -> None:
+    """The recorded ``path``'s row of IMU ``sample`` (-1: none) from the posterior nominal ``x``."""
+    if sample >= 0:
+        row = path[sample]
+        for e in range(row.shape[0]):
+            row[e] = x[e]
+
+
+@compiled
 def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep_fix: np.ndarray,
                ep_sample: np.ndarray, ep_coast: np.ndarray, ep_generic: np.ndarray, first: int, stop: int,
                fix_lat: np.ndarray, fix_lon: np.ndarray, fix_alt: np.ndarray, fix_var: np.ndarray,
@@ -143,7 +259,10 @@ def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep
                nodes_P: np.ndarray, imu_t: np.ndarray, gyro: np.ndarray,
                accel: np.ndarray, path: np.ndarray, psd: np.ndarray, has_profile: bool, prof_t: np.ndarray,
                prof_g: np.ndarray, prof_a: np.ndarray, white_g: float, white_a: float, inv_tau_g: float,
-               inv_tau_a: float, cov_step_s: float, gaps: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, float, int]:
+               inv_tau_a: float, cov_step_s: float, gaps: np.ndarray, ep_cons: np.ndarray, ep_run: np.ndarray,
+               zupt_var: float, zaru_ok: np.ndarray, zaru_z: np.ndarray, zaru_var: np.ndarray, max_speed: float,
+               aid_state: np.ndarray, ring: np.ndarray, z_limit: float, aid_counts: np.ndarray
+               ) -> tuple[int, np.ndarray, np.ndarray, float, int]:
     """The plain EKF over epochs ``first`` .. ``stop - 1`` from the state (``x`` (16,), ``P``
     (15, 15)) at ``t_prev`` (s), as the generic loop runs them (module docstring).
 
@@ -157,11 +276,13 @@ def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep
     cross-covariance ``P Phi^T`` (a coasting stop's posterior is its prior).  The rest is the model's
     (:meth:`~navpp.ins.model.InsModel.propagation_arrays`): IMU data (``imu_t``, ``gyro``,
     ``accel``), the path, noise (``psd``, the profile, ``inv_tau_*``, ``cov_step_s``) and long
-    ``gaps``.
+    ``gaps``.  Still epochs ``ep_cons``, their aids' inputs (per epoch ``ep_run``, ``zaru_ok``,
+    ``zaru_z``, ``zaru_var``), state and counts: :func:`_standstill`.
 
     Returns the first epoch not run (``stop``, or an epoch the generic loop must run: marked,
-    crossing a long gap, its fix rejected, its state failing the check or its update failing),
-    the state before it (x, P, t) and the number of knot rows written.
+    crossing a long gap, its fix or aid rejected, its state failing the check, its update failing,
+    its still run vetoed, or a still epoch that applied nothing), the state before it (x, P, t)
+    and the number of knot rows written.
     """
     n_knots = 0
     i = first
@@ -177,9 +298,7 @@ def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep
                                           inv_tau_a, cov_step_s)
         Pp, PPhit = propagated_covariance(P, Phi, Qd)
         if keep:
-            nodes_x[i - first, 0] = xn
-            nodes_P[i - first, 0] = Pp
-            nodes_P[i - first, 2] = PPhit
+            nodes_x[i - first, 0], nodes_P[i - first, 0], nodes_P[i - first, 2] = xn, Pp, PPhit
         if ep_coast[i]:
             _knot_row(knots_out[n_knots], t1, Pp, Pp)
             n_knots += 1
@@ -189,27 +308,25 @@ def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep
         if not finite_with_positive_variances(xn, Pp):
             break
         k = ep_fix[i]
-        ok, nu, S, R, nis, xp, Pn = _fix_update(xn, Pp, fix_lat[k], fix_lon[k], fix_alt[k], fix_var[k], lever, gate)
-        if not ok:
-            break
+        xp, Pn, applied = xn, Pp, False
+        if k >= 0:
+            applied, nu, S, R, nis, xp, Pn = _fix_update(xn, Pp, fix_lat[k], fix_lon[k], fix_alt[k], fix_var[k],
+                                                         lever, gate)
+            if not applied:
+                break
+        if ep_cons[i]:
+            ok, xp, Pn, n_aids = _standstill(xp, Pn, ep_run[i], zupt_var, zaru_ok[i], zaru_z[i], zaru_var[i],
+                                             max_speed, gate, aid_state, ring, z_limit, aid_counts)
+            if not ok or not (applied or n_aids):
+                break
         if keep:
-            nodes_x[i - first, 1] = xp
-            nodes_P[i - first, 1] = Pn
-        nu_out[k] = nu
-        nis_out[k] = nis
-        accepted_out[k] = True
-        forced_out[k] = False
-        s_out[k] = S
-        r_out[k] = R
-        if ep_sample[i] >= 0:
-            row = path[ep_sample[i]]
-            for e in range(row.shape[0]):
-                row[e] = xp[e]
+            nodes_x[i - first, 1], nodes_P[i - first, 1] = xp, Pn
+        if k >= 0:
+            _record_fix(k, nu, nis, S, R, xp, Pn, nu_out, nis_out, accepted_out, forced_out, s_out, r_out, bias_out,
+                        bias_var_out)
+        _path_row(path, ep_sample[i], xp)
         _knot_row(knots_out[n_knots], t1, Pp, Pn)
         n_knots += 1
-        for e in range(6):
-            bias_out[k, e] = xp[X_BG + e]
-            bias_var_out[k, e] = Pn[DX_BG + e, DX_BG + e]
         x, P, t_prev = xp, Pn, t1
         i += 1
     return i, x, P, t_prev, n_knots
@@ -223,6 +340,85 @@ def plain_ekf(filt: Filter) -> bool:
             and all(getattr(cls, name) is step for name, step in _EKF_STEPS.items()))
 
 
+def standstill_only(aiding: Aiding) -> bool:
+    """Whether ``aiding``'s constraints are ZUPT and ZARU alone (no NHC, odometer or GNSS
+    velocity): then its constraint epochs are the compiled path's too (:func:`_standstill`)."""
+    return (aiding.zupt or aiding.zaru) and not aiding.nhc and aiding.odo is None and aiding.vel is None
+
+
+class _StandstillInputs:
+    """What :func:`_standstill` needs of a run's still epochs (``cons`` (L,) bool, the epochs it may
+    run, at times ``t`` (L,) s; :attr:`cons` those whose IMU sample is still), taken from
+    ``aiding`` as :meth:`~navpp.aiding.Aiding.constraint_measurements` takes it, and its state (the
+    ZUPT check's ring and veto, the counts), which :meth:`load` takes before a stretch and
+    :meth:`ran` hands back after it."""
+
+    def __init__(self, aiding: Aiding, t: np.ndarray, cons: np.ndarray) -> None:
+        n = t.shape[0]
+        self.cons = cons.copy()
+        self.run = np.zeros(n, np.int64)
+        self.zaru_ok = np.zeros(n, bool)
+        self.zaru_z = np.zeros((n, 3))
+        self.zaru_var = np.zeros(n)
+        self.zupt_var = aiding.zupt_std ** 2 if aiding.zupt else np.nan
+        self.max_speed = aiding.settings.max_speed
+        self.z_limit = aid_rules.ZUPT_Z
+        self.aid_state = np.zeros(3, np.int64)
+        self.ring = np.zeros((ZUPT_RUN, 3))
+        self.counts = np.zeros(2, np.int64)
+        if not cons.any():
+            return
+        at = np.flatnonzero(cons)
+        imu_t = aiding.t
+        sample = np.clip(np.searchsorted(imu_t, t[at]), 0, imu_t.shape[0] - 1)
+        run_id = aiding._run_id
+        assert run_id is not None           # ZUPT or ZARU is on (standstill_only)
+        self.run[at] = run_id[sample]
+        self.cons[at] = aiding.still[sample]
+        at = at[self.cons[at]]
+        if not aiding.zaru:
+            return
+        # ZARU: the mean gyro since the previous constraint epoch when every sample in between is still
+        t_prev = aiding._last_constraint_t
+        moving = np.concatenate([[0], np.cumsum(~aiding.still)])
+        for e in at:
+            te = float(t[e])
+            if t_prev is not None:
+                lo = int(np.searchsorted(imu_t, t_prev, side="right"))
+                hi = int(np.searchsorted(imu_t, te, side="right"))
+                if hi - lo >= 2 and moving[hi] == moving[lo]:
+                    arw = aiding.gyro_arw
+                    if aiding.profile is not None:
+                        arw = max(arw, aiding.profile.over(t_prev, te)[0])
+                    meas = ZeroRate.at(te, aiding.gyro[lo:hi].mean(axis=0), te - t_prev, arw, aiding.zaru_floor)
+                    self.zaru_ok[e], self.zaru_z[e], self.zaru_var[e] = True, meas.z, meas.R[0, 0]
+            t_prev = te
+
+    def arguments(self) -> tuple[Any, ...]:
+        """:func:`ekf_epochs`'s still-epoch arguments, ``ep_cons`` (:attr:`cons`) on."""
+        return (self.cons, self.run, self.zupt_var, self.zaru_ok, self.zaru_z, self.zaru_var, self.max_speed,
+                self.aid_state, self.ring, self.z_limit, self.counts)
+
+    def load(self, aiding: Aiding) -> None:
+        """The ZUPT check's state as ``aiding`` has it (the generic loop's epochs change it)."""
+        self.aid_state[:] = (aiding._vetoed_run, aiding._zupt_run, len(aiding._zupt_z))
+        for r, z in enumerate(aiding._zupt_z):
+            self.ring[r] = z
+
+    def ran(self, aiding: Aiding, filt: Filter, t_last: float) -> None:
+        """After a stretch whose last still epoch was at ``t_last`` s: ``aiding`` and ``filt`` as the
+        generic loop would leave them (the ZUPT check's ring, the counts, the last constraint time,
+        the accepted kinds)."""
+        aiding._last_constraint_t = t_last
+        aiding._zupt_run = int(self.aid_state[1])
+        aiding._zupt_z = [self.ring[r].copy() for r in range(int(self.aid_state[2]))]
+        for kind, n in zip(("zupt", "zaru"), self.counts):
+            if n:
+                aiding.counts.applied[kind] += int(n)
+                filt.accepted(kind)
+        self.counts[:] = 0
+
+
 class FusedRunner:
     """Runs stretches of a run's epochs through :func:`ekf_epochs` and keeps the filter, the
     source and the recorder as the generic loop would leave them (see :func:`fused_runner`)."""
@@ -232,7 +428,10 @@ class FusedRunner:
         self.filt, self.source, self.recorder = filt, source, recorder
         n = len(epochs)
         self.t, index, self.fix, self.sample, constraints, self.coast = Schedule.columns(epochs)
-        self.generic = ~self.coast & ((self.fix < 0) | constraints)
+        self.aiding = aid = source.aiding
+        self.standstill = _StandstillInputs(aid, self.t, ~self.coast & constraints & standstill_only(aid))
+        self.cons = self.standstill.cons
+        self.generic = ~self.coast & (((self.fix < 0) & ~self.cons) | (constraints & ~self.cons))
         has_vel = source.velocity_mask()
         if has_vel is not None and has_vel.size:
             self.generic |= ~self.coast & (self.fix >= 0) & has_vel[np.maximum(self.fix, 0)]
@@ -263,20 +462,25 @@ class FusedRunner:
             nodes_x, nodes_P = np.empty((stop - i, 2, self.x_size)), np.empty((stop - i, 3, self.n_err, self.n_err))
         else:
             nodes_x, nodes_P = self.no_nodes
+        st = self.standstill
+        st.load(self.aiding)
         j, x, P, t, n_knots = ekf_epochs(
             state.x, state.P, state.t, self.t, self.fix, self.sample, self.coast, self.generic, i, stop,
             self.fix_lat, self.fix_lon, self.fix_alt, self.fix_var, self.source.lever, self.filt.gate_threshold(3),
             rec.nu, rec.nis, rec.accepted, rec.forced, rec.s_used, rec.r_used, rec.bias, rec.bias_var, self.knots,
-            keep, nodes_x, nodes_P, *self.prop)
+            keep, nodes_x, nodes_P, *self.prop, *st.arguments())
         if j == i:
             return i, state
         if keep:
             rec.fused_nodes(self.t[i:j], self.fix[i:j], self.coast[i:j], nodes_x, nodes_P)
         rec.fused_epochs(self.knots[:n_knots], t, int(self.sample[i:j].max()))
-        fixes = self.fix[i:j][~self.coast[i:j]]
-        if fixes.size:
-            self.source.fixes_accepted(float(self.t[i:j][~self.coast[i:j]][-1]), fixes.size)
+        with_fix = self.fix[i:j] >= 0
+        if with_fix.any():
+            self.source.fixes_accepted(float(self.t[i:j][with_fix][-1]), int(with_fix.sum()))
             self.filt.accepted("gnss_position")
+        cons = self.cons[i:j]
+        if cons.any():
+            st.ran(self.aiding, self.filt, float(self.t[i:j][cons][-1]))
         if self.report[j - 1] and rec.progress is not None:
             rec.progress(int(self.index[j - 1]) / rec.n_epochs)
         return j, GaussianState(t, x, P)

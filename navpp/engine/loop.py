@@ -110,8 +110,9 @@ def run_epochs(filt: Filter, model: Any, state: GaussianState, epochs: Iterable[
     update of every measurement epoch and after every update.  A
     :class:`~navpp.errors.FilterDivergedError` of the filter or the check propagates.  ``fast``
     (built for this run's epochs, a sequence then) runs what it can; each epoch it leaves goes
-    through :func:`epoch_step`.  The spilled IMU rows the run has passed leave memory
-    (:class:`~navpp.spill.Behind`)."""
+    through :func:`epoch_step` (after a stretch it ends, ``fast`` is asked again first: it may end
+    a stretch early, at its buffer's length or a progress report).  The spilled IMU rows the run
+    has passed leave memory (:class:`~navpp.spill.Behind`)."""
     ins = getattr(model, "ins", model)          # the INS under an augmented model
     behind = Behind(getattr(ins, "t", None), getattr(ins, "gyro", None), getattr(ins, "accel", None))
     if fast is None:
@@ -122,10 +123,11 @@ def run_epochs(filt: Filter, model: Any, state: GaussianState, epochs: Iterable[
     run = epochs if isinstance(epochs, Sequence) else list(epochs)
     i, n = 0, len(run)
     while i < n:
-        i, state = fast.run(i, state, n)
-        if i < n:
+        j, state = fast.run(i, state, n)
+        if j == i:          # an epoch ``fast`` leaves (not one after a stretch it cut short)
             state = epoch_step(filt, model, run[i], state, source, recorder, check)
-            i += 1
+            j += 1
+        i = j
         behind(state.t)
     return state
 
