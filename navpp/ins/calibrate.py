@@ -162,15 +162,19 @@ class Calibration:
 
 
 
-def trapezoid_integral(t: np.ndarray | float, w: np.ndarray) -> np.ndarray:
+def trapezoid_integral(t: np.ndarray | float, w: np.ndarray | Callable[[int, int], np.ndarray],
+                       n: int | None = None) -> np.ndarray:
     """The trapezoidal integral of the rate ``w`` (N,) at the stamps ``t`` (N,) s (or at a
     constant step ``t`` s) from 0 at the first, (N,): ``concatenate([[0], cumsum(0.5 * (w[1:] +
     w[:-1]) * diff(t))])`` to the bit, block by block (:func:`trapezoid_blocks`); ``[0]`` for
-    N = 0, as that concatenation gives."""
-    n = w.shape[0]
+    N = 0, as that concatenation gives.  ``w`` may be given block by block instead, as
+    :func:`trapezoid_blocks` takes it, with ``n`` = N: then no N-long rate is held."""
+    rate = w if callable(w) else (lambda lo, hi: w[lo:hi])
+    n = w.shape[0] if n is None and not callable(w) else n
+    assert n is not None, "trapezoid_integral: a rate given block by block needs n"
     theta = np.empty(max(n, 1))
     theta[0] = 0.0
-    for lo, _, part in trapezoid_blocks(t, lambda lo, hi: w[lo:hi], n):
+    for lo, _, part in trapezoid_blocks(t, rate, n):
         theta[lo:lo + part.shape[0]] = part
     return theta
 
