@@ -17,6 +17,7 @@ from ..errors import InputError
 from ..findings import Finding
 from ..ins.model import LONG_GAP_PERIODS
 from ..recording import Recording
+from ..spill import windows
 
 
 def check_imu_plausible(recording: Recording) -> list[Finding]:
@@ -28,18 +29,26 @@ def check_imu_plausible(recording: Recording) -> list[Finding]:
     """
     imu = recording.imu
     step = max(1, len(imu) // 20000)          # a subsample says as much, without full-length temporaries
-    f = float(np.median(np.linalg.norm(imu.accel[::step], axis=1)))
+    f = float(np.median(np.linalg.norm(every(imu.accel, step), axis=1)))
     if not 3.0 < f < 30.0:
         hint = ('are the accelerometer values in g? set [imu] accel_units = "g"' if 0.3 < f < 3.0
                 else "check the accelerometer columns and their units")
         raise InputError(f"{recording.source}: the median specific force is {f:.3g} m/s^2, not about 9.8: {hint}")
-    w = float(np.percentile(np.linalg.norm(imu.gyro[::step], axis=1), 99.0))
+    w = float(np.percentile(np.linalg.norm(every(imu.gyro, step), axis=1), 99.0))
     warnings = []
     if w > 5.0:
         warnings.append(Finding("gyro-rate-high",
                                 f"{recording.source}: gyro rates reach {w:.1f} rad/s ({np.degrees(w):.0f} deg/s) "
                                 'in the top percentile: if the gyro is in deg/s, set [imu] gyro_units = "deg/s"'))
     return warnings
+
+
+def every(rows: np.ndarray, step: int) -> np.ndarray:
+    """A copy of ``rows[::step]`` (``rows`` (N, ...)), taken window by window
+    (:func:`navpp.spill.windows`): of a spilled ``rows`` only a window's pages are resident at a
+    time (a subsample's rows further apart than a page touch every page of the whole)."""
+    parts = [rows[lo + (-lo) % step:hi:step].copy() for lo, hi in windows(rows.shape[0], rows)]
+    return np.concatenate(parts) if parts else rows[:0].copy()
 
 
 #: Saturation: a channel whose extreme value is held for this many consecutive samples.
@@ -90,13 +99,17 @@ def saturation(source: str, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
     """
     out = []
     for name, data, rng in (("gyro", gyro, gyro_range), ("accel", accel, accel_range)):
-        flag = np.zeros(data.shape[0], bool)
-        for axis in range(3):
+        n = data.shape[0]
+        flag = np.zeros(n, bool)
+        for axis in range(3):       # window by window: a spilled IMU's pages released behind
             v = data[:, axis]
-            for ext in (float(v.max()), float(v.min())):
+            ends = np.array([(v[a:b].max(), v[a:b].min()) for a, b in windows(n, data)]).reshape(-1, 2)
+            for ext in (float(ends[:, 0].max()), float(ends[:, 1].min())):
                 if abs(ext) < SATURATION_FLOOR[name]:
                     continue
-                at = v == ext
+                at = np.empty(n, bool)
+                for a, b in windows(n, data):
+                    np.equal(v[a:b], ext, out=at[a:b])
                 # runs of >= SATURATION_RUN: a sample and its SATURATION_RUN - 1 successors all at ext
                 run = at.copy()
                 for j in range(1, SATURATION_RUN):
@@ -106,7 +119,8 @@ def saturation(source: str, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
                     for j in range(SATURATION_RUN):     # mark the whole run, not only its starts
                         flag[j:] |= run[:data.shape[0] - j]
             if rng is not None:
-                flag |= np.abs(v) >= rng
+                for a, b in windows(n, data):
+                    flag[a:b] |= np.abs(v[a:b]) >= rng
         if flag.any():
             idx = np.nonzero(flag)[0]
             unit = "rad/s" if name == "gyro" else "m/s^2"

@@ -86,7 +86,7 @@ def interpolated_std_rows(t: np.ndarray, t0: float, var0: np.ndarray, tg: np.nda
     if not spill.spilled(like):
         return interpolated_std(t, t0, var0, tg, var_prior, var_post)
     out = spill.like(like, t.shape[0], (3,), np.float32)
-    for a, b in spill.windows(t.shape[0], out):
+    for a, b in spill.windows(t.shape[0], out, t):         # a spilled t's pages released too
         out[a:b] = interpolated_std(t[a:b], t0, var0, tg, var_prior, var_post)
     return out
 
@@ -149,11 +149,12 @@ def body_rate(t: np.ndarray, path: np.ndarray, gyro: np.ndarray, bias_t: np.ndar
     the attitude ``C_nb``, velocity and position from the recorded ``path`` rows (N, 10: q_nb,
     vel_enu, lat rad, lon rad, h m; read before :func:`solution_from_path` converts them).
     One compiled pass (:func:`_body_rate_into`): the result is the only IMU-rate array made
-    (spilled like ``path``, and then made window by window)."""
+    (spilled like ``path``, and then made window by window, the pages of every spilled input
+    released behind the window)."""
     out = spill.like(path, path.shape[0], (3,), np.float64)
     t, gyro = np.asarray(t, dtype=float), np.asarray(gyro, dtype=float)
     bias_t, bias_gyro, bias0 = (np.asarray(a, dtype=float) for a in (bias_t, bias_gyro, bias0))
-    for a, b in spill.windows(path.shape[0], path, out):
+    for a, b in spill.windows(path.shape[0], path, out, t, gyro):     # every spilled input released behind
         _body_rate_into(out[a:b], t[a:b], path[a:b], gyro[a:b], bias_t, bias_gyro, bias0)
     return out
 

@@ -19,6 +19,7 @@ from ..ins.attitude import rpy_deg_to_dcm
 from ..ins.model import NoiseModel
 from ..ins.state import POS
 from ..recording import Recording
+from ..spill import release_all
 from .checks import check_gyro_scale
 from .schedule import GnssFixes, with_prior_std
 
@@ -226,6 +227,7 @@ def timing_fixes(recording: Recording, config: Config,
     if len(gnss) < 20 or len(imu) < 20:
         return recording, notes, warnings
     up = imu.accel.mean(axis=0)            # the sensor's up, as logged
+    release_all(imu.accel)                 # a spilled IMU's pages that pass read: out of memory
     up = up / max(float(np.linalg.norm(up)), 1e-9)
     # origin at the middle fix, not the first: a first fix on the far side of the globe would mirror
     # the track in the tangent plane (the yaw-scale check would read it as lat/lon swapped)
@@ -281,7 +283,7 @@ def clock_offset_fixed(recording: Recording, up: np.ndarray, enu: np.ndarray, no
         vel = velocity_from_positions(gnss.t, enu[:, 0], enu[:, 1])
     ok = np.all(np.isfinite(vel), axis=1)
     try:
-        est = estimate_clock_offset(imu.t, imu.gyro @ up, gnss.t[ok], vel[ok])
+        est = estimate_clock_offset(imu.t, imu.gyro, gnss.t[ok], vel[ok], up=up)
     except ValueError:
         est = None
     if est is None or not math.isfinite(est.offset_s):

@@ -51,6 +51,7 @@ import numpy as np
 
 from .. import geodesy
 from ..recording import BLOCK_ROWS as BLOCK_ROWS  # re-exported for .alignment, .timing_estimates
+from ..spill import release, release_all
 from .attitude import rpy_to_dcm
 
 if TYPE_CHECKING:
@@ -162,15 +163,19 @@ class Calibration:
 
 
 
-def trapezoid_integral(t: np.ndarray | float, w: np.ndarray) -> np.ndarray:
+def trapezoid_integral(t: np.ndarray | float, w: np.ndarray | Callable[[int, int], np.ndarray],
+                       n: int | None = None) -> np.ndarray:
     """The trapezoidal integral of the rate ``w`` (N,) at the stamps ``t`` (N,) s (or at a
     constant step ``t`` s) from 0 at the first, (N,): ``concatenate([[0], cumsum(0.5 * (w[1:] +
     w[:-1]) * diff(t))])`` to the bit, block by block (:func:`trapezoid_blocks`); ``[0]`` for
-    N = 0, as that concatenation gives."""
-    n = w.shape[0]
+    N = 0, as that concatenation gives.  ``w`` may be given block by block instead, as
+    :func:`trapezoid_blocks` takes it, with ``n`` = N: then no N-long rate is held."""
+    rate = w if callable(w) else (lambda lo, hi: w[lo:hi])
+    n = w.shape[0] if n is None and not callable(w) else n
+    assert n is not None, "trapezoid_integral: a rate given block by block needs n"
     theta = np.empty(max(n, 1))
     theta[0] = 0.0
-    for lo, _, part in trapezoid_blocks(t, lambda lo, hi: w[lo:hi], n):
+    for lo, _, part in trapezoid_blocks(t, rate, n):
         theta[lo:lo + part.shape[0]] = part
     return theta
 
@@ -271,6 +276,7 @@ def block_statistics(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s
             b = x[b0 * w:b1 * w].reshape(b1 - b0, w, 3)
             mean[b0:b1], std[b0:b1] = b.mean(axis=1), b.std(axis=1)
             lp[b0:b1] = b.reshape(b1 - b0, w // m, m, 3).mean(axis=2).std(axis=1)
+            release((x,), b0 * w, b1 * w)      # a spilled IMU's rows read: out of memory
         per_sensor += [mean, std, lp]
     return BlockStatistics(w, m, nb, dt, *per_sensor)
 
@@ -438,6 +444,7 @@ def noise_profile(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: f
         # white noise is flat: the quieter band bounds it (a mount's shaking fills the top, a
         # walker's steps the band around 1 / tau)
         dens.append(np.sqrt(np.minimum(band, top)))
+        release_all(x)                          # a spilled IMU's pages this sensor's passes read
     edges = np.concatenate([t[0: nb * w: w], [t[min(nb * w, n - 1)]]])
     edges[-1] = max(edges[-1], float(t[-1]))
     return NoiseProfile(edges.astype(float), dens[0], dens[1])

@@ -31,6 +31,7 @@ from functools import cached_property
 
 import numpy as np
 
+from ..spill import release, release_all
 from .calibrate import BLOCK_ROWS, trapezoid_integral, trapezoid_integral_at
 
 __all__ = [
@@ -196,6 +197,7 @@ def find_stale_rows(
         local = starts[win] - lo
         n_fresh[win] = np.add.reduceat(fresh.astype(np.int64), local)
         n_same[win] = np.add.reduceat((same_ch & fresh[:, None]).astype(np.int64), local, axis=0)
+        release((gyro, accel), lo, hi)                  # a spilled IMU's rows read: out of memory
     k_obs = int(np.count_nonzero(rep))
 
     # 1. excess over chance, window by window: each window's channel rates from its counts (each
@@ -291,6 +293,7 @@ def fresh_count_dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_
         idx = np.searchsorted(edges, t[lo:lo + BLOCK_ROWS], side="right") - 1
         rows += np.bincount(idx, minlength=edges.shape[0])
         fresh += np.bincount(idx, weights=~repeats[lo:lo + BLOCK_ROWS], minlength=edges.shape[0])
+        release((t,), lo, lo + BLOCK_ROWS)
     rows, fresh = rows[1:-1], fresh[1:-1]       # drop the partial ends
     binom = float(np.mean(rows * f * (1.0 - f)))
     if binom < 2.0:
@@ -424,6 +427,7 @@ def estimate_clock_offset(
     min_turn_deg: float = 90.0,
     min_correlation: float = 0.7,
     max_sigma_s: float = 0.02,
+    up: np.ndarray | None = None,
 ) -> ClockOffset:
     """Delay of the IMU stamps against the GNSS stamps, from turns.
 
@@ -490,6 +494,9 @@ def estimate_clock_offset(
     outlier_sigmas : residual beyond which a sample is dropped, in robust sigmas.
     max_split_sigmas : the consistency rule above.
     min_turn_deg, min_correlation, max_sigma_s : the confidence rule above.
+    up : (3,) unit vector: ``gyro_z_up`` is then the (N, 3) gyro, rad/s, and its rate about ``up``
+        is taken block by block (no IMU-length copy, a spilled gyro's pages released behind), as
+        ``gyro_z_up @ up`` gives it.
 
     Returns
     -------
@@ -499,14 +506,15 @@ def estimate_clock_offset(
     w = np.asarray(gyro_z_up, dtype=float)
     t_g = np.asarray(t_gnss, dtype=float)
     v = np.asarray(vel_en, dtype=float)
-    if v.ndim != 2 or v.shape[0] != t_g.shape[0] or v.shape[1] < 2 or w.shape != t_imu.shape:
+    w_shape = t_imu.shape if up is None else (t_imu.shape[0], 3)
+    if v.ndim != 2 or v.shape[0] != t_g.shape[0] or v.shape[1] < 2 or w.shape != w_shape:
         raise ValueError(f"estimate_clock_offset: shapes t_imu {t_imu.shape}, gyro_z_up {w.shape}, "
-                         f"t_gnss {t_g.shape}, vel_en {v.shape}; expected (N,), (N,), (M,), (M, 2)")
+                         f"t_gnss {t_g.shape}, vel_en {v.shape}; expected (N,), {w_shape}, (M,), (M, 2)")
     fine = np.isfinite(t_g) & np.all(np.isfinite(v[:, :2]), axis=1)     # e.g. a lone fix's NaN velocity
     t_g, v = t_g[fine], v[fine]
     if t_g.shape[0] < 3 or t_imu.shape[0] < 3:
         return _failed("too few samples")
-    theta_at, t_lo, t_hi = _gyro_angle(t_imu, w, smooth_s)
+    theta_at, t_lo, t_hi = _gyro_angle(t_imu, _vertical_rate(w, up), smooth_s)
     samples = _course_rate_samples(t_g, v, baseline_s, min_speed, max_lag_s, t_lo, t_hi)
     if isinstance(samples, str):
         return _failed(samples)
@@ -603,10 +611,12 @@ def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
 
         spline = interpolate.CubicSpline(x, y, extrapolate=False)
         return spline
-    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
-        raise ValueError("_spline: x and y must be finite")
-    if not np.all(np.diff(x) > 0):
-        raise ValueError("_spline: x must be strictly increasing")
+    for lo in range(0, n, BLOCK_ROWS):             # block by block: no IMU-length temporaries
+        xb, yb = x[lo:lo + BLOCK_ROWS + 1], y[lo:lo + BLOCK_ROWS]
+        if not (np.all(np.isfinite(xb)) and np.all(np.isfinite(yb))):
+            raise ValueError("_spline: x and y must be finite")
+        if not np.all(xb[1:] > xb[:-1]):
+            raise ValueError("_spline: x must be strictly increasing")
     return Cubic(x, y, _spline_derivatives(x, y))
 
 
@@ -754,33 +764,74 @@ class Cubic:
         return out
 
 
-def _gyro_angle(t_imu: np.ndarray, w: np.ndarray, smooth_s: float) -> tuple[AngleAt, float, float]:
-    """The integral of the vertical rate ``w`` (rad/s at ``t_imu``) as a C2 interpolant, after a
-    centred moving average over ``smooth_s`` s (0: none), with the span (s) it covers.
+def _gyro_angle(t_imu: np.ndarray, rate: Callable[[int, int], np.ndarray],
+                smooth_s: float) -> tuple[AngleAt, float, float]:
+    """The integral of the vertical rate (rad/s at ``t_imu``, its rows ``lo:hi`` from ``rate(lo,
+    hi)``, :func:`_vertical_rate`) as a C2 interpolant, after a centred moving average over
+    ``smooth_s`` s (0: none), with the span (s) it covers.
 
     A C2 interpolant: with linear interpolation the lag search's cost has kinks at every lag
-    that aligns the GNSS stamps with IMU stamps, and the minimum sticks to them.  The moving
-    average is evaluated block by block and the raw integral's spline freed before the smoothed
-    one is built: the peak is while the average is formed, four IMU-length arrays (the raw
-    spline's angle and derivatives, the grid, the average)."""
-    theta_at = _spline(t_imu, trapezoid_integral(t_imu, w))
+    that aligns the GNSS stamps with IMU stamps, and the minimum sticks to them.  The rate, the
+    moving average and the average's grid are formed block by block, and the raw integral's
+    spline is freed (a spilled ``t_imu``'s pages released) before the grid of the smoothed one
+    is built: at most four IMU-length arrays at a time (the stamps, the raw spline's angle and
+    derivatives, the average's integral)."""
+    theta_at = _spline(t_imu, trapezoid_integral(t_imu, rate, t_imu.shape[0]))
     t_lo, t_hi = float(t_imu[0]), float(t_imu[-1])
     if smooth_s > 0.0 and t_hi - t_lo > 4.0 * smooth_s:
         # the centred moving average, on a uniform grid at the IMU's median step; its integral
         step = float(np.median(np.diff(t_imu), overwrite_input=True))
-        grid = np.arange(t_lo + 0.5 * smooth_s, t_hi - 0.5 * smooth_s, step)
-        ws = np.empty(grid.shape[0])
-        for k in range(0, grid.shape[0], BLOCK_ROWS):
-            g = grid[k:k + BLOCK_ROWS]
-            lo = np.clip(g - 0.5 * smooth_s, t_lo, t_hi)
-            hi = np.clip(g + 0.5 * smooth_s, t_lo, t_hi)
-            ws[k:k + g.shape[0]] = (theta_at(hi) - theta_at(lo)) / (hi - lo)
+        start, stop = t_lo + 0.5 * smooth_s, t_hi - 0.5 * smooth_s
+
+        def averaged(lo: int, hi: int) -> np.ndarray:
+            """Rows ``lo:hi`` of the moving average on the grid, rad/s."""
+            g = _arange_rows(start, step, lo, hi)
+            a = np.clip(g - 0.5 * smooth_s, t_lo, t_hi)
+            b = np.clip(g + 0.5 * smooth_s, t_lo, t_hi)
+            mean: np.ndarray = (theta_at(b) - theta_at(a)) / (b - a)
+            return mean
+
+        phi = trapezoid_integral(step, averaged, _arange_length(start, stop, step))
         del theta_at
-        phi = trapezoid_integral(step, ws)
-        del ws
+        release_all(t_imu)
+        grid = np.arange(start, stop, step)
         theta_at = _spline(grid, phi)
         t_lo, t_hi = float(grid[0]), float(grid[-1])
     return theta_at, t_lo, t_hi
+
+
+def _arange_length(start: float, stop: float, step: float) -> int:
+    """The length of ``np.arange(start, stop, step)`` (float, ``step`` > 0)."""
+    return max(math.ceil((stop - start) / step), 0)
+
+
+def _arange_rows(start: float, step: float, lo: int, hi: int) -> np.ndarray:
+    """Rows ``lo:hi`` of ``np.arange(start, stop, step)`` (float), the same bits without the
+    whole array: numpy fills row ``i >= 2`` with ``start + i * delta``, ``delta = (start + step)
+    - start``, row 1 with ``start + step`` and row 0 with ``start`` (tests/test_prep_blocks.py
+    checks it against numpy)."""
+    rows = np.arange(lo, hi, dtype=float)
+    rows *= (start + step) - start
+    rows += start
+    if lo <= 1 < hi:
+        rows[1 - lo] = start + step
+    if lo == 0 < hi:
+        rows[0] = start
+    return rows
+
+
+def _vertical_rate(gyro: np.ndarray, up: np.ndarray | None) -> Callable[[int, int], np.ndarray]:
+    """``rate(lo, hi)``: rows ``lo:hi`` of the rate about ``up``, rad/s: ``gyro`` (N, 3) rad/s
+    ``@ up`` (3,) (the same bits as the whole product), the rows of a spilled ``gyro`` released
+    once read (:func:`navpp.spill.release`); ``up`` None: ``gyro`` (N,) is that rate."""
+    if up is None:
+        return lambda lo, hi: gyro[lo:hi]
+
+    def rate(lo: int, hi: int) -> np.ndarray:
+        w: np.ndarray = gyro[lo:hi] @ up
+        release((gyro,), lo, hi)
+        return w
+    return rate
 
 
 def _course_rate_samples(t_g: np.ndarray, v: np.ndarray, baseline_s: float, min_speed: float, max_lag_s: float,
@@ -996,13 +1047,13 @@ def yaw_scale_from_track(t_imu: np.ndarray, gyro_z_up: np.ndarray, t_gnss: np.nd
     t_gnss : (M,) s, increasing, the same time base; east_m, north_m : (M,) m, local ENU.
     std_h_m : scalar or (M,) m, horizontal 1-sigma per fix (0: unknown, ``min_chord_m`` rules).
     up : (3,) unit vector: ``gyro_z_up`` is then the (N, 3) gyro, rad/s, and its rate about ``up``
-        is taken block by block (no IMU-length copy), as ``gyro_z_up @ up`` gives it.
+        is taken block by block (no IMU-length copy, a spilled gyro's pages released behind), as
+        ``gyro_z_up @ up`` gives it.
     """
     nan = float("nan")
     t_imu = np.asarray(t_imu, dtype=float)
     gyro = np.asarray(gyro_z_up, dtype=float)
-    rate: Callable[[int, int], np.ndarray] = ((lambda lo, hi: gyro[lo:hi]) if up is None
-                                              else (lambda lo, hi: gyro[lo:hi] @ up))
+    rate = _vertical_rate(gyro, up)
     t_g = np.asarray(t_gnss, dtype=float)
     e, nn = np.asarray(east_m, dtype=float), np.asarray(north_m, dtype=float)
     if t_g.shape[0] < 4 or t_imu.shape[0] < 4:
