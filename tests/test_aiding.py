@@ -146,6 +146,8 @@ def test_gnss_velocity_is_used_when_present_and_improves_the_solution(drive):
     assert 1.5 < np.mean(d.vel_nis) < 4.5
 
 
+@pytest.mark.slow     # a 760-s drive run twice; the quick run keeps NHC and ZUPT across 30-s outages in
+#                       test_mounting_is_estimated_and_a_wrong_one_is_warned (their effect: here)
 def test_nhc_and_zupt_bridge_outages():
     """A 15-minute drive, outages at 200, 450 and 700 s (a turn and a dip; a stop; a hill):
     the error at each outage's end with NHC + ZUPT against the same run without them."""
@@ -163,11 +165,13 @@ def test_nhc_and_zupt_bridge_outages():
     assert ratio <= 0.4, ends
 
 
-#: the three slowest filters run with the slow tests (the default run's CPU budget); the others always
-SLOW_FILTERS = ("rwckf", "sif", "vce-ckf")
+#: the default run's CPU budget: the EKF checks the aids' plumbing and the UKF the sigma-point one
+#: (the adaptive filters with aids: test_adaptive_filters_learn_r_from_gnss_position_only); the
+#: other filters run with the slow tests
+QUICK_FILTERS = ("ekf", "ukf")
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=[pytest.mark.slow] if n in SLOW_FILTERS else [])
+@pytest.mark.parametrize("name", [pytest.param(n, marks=[] if n in QUICK_FILTERS else [pytest.mark.slow])
                                   for n in sorted(FILTERS)])
 def test_every_filter_applies_every_aid(drive, name):
     rec = drive.recording()

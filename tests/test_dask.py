@@ -69,6 +69,8 @@ def test_dask_rows_equal_the_local_executors_bit_for_bit(scheduler_2, sim_log_di
     assert {"summary.csv", "report.md", "report.html"} <= names and any(n.endswith("_trajectory.png") for n in names)
 
 
+@pytest.mark.slow     # two worker processes of its own (4 s of CPU); the default run keeps the dask executor
+#                       on the module's one-worker cluster (test_smoothed_rows_on_dask, test_cli)
 def test_local_cluster_when_no_scheduler_is_given(sim_log_dir):
     res = compare([sim_log_dir], ["ekf"], executor="dask", jobs=2, report=False)
     assert res.jobs == 2 and res.rows[0].ok

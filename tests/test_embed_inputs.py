@@ -229,7 +229,14 @@ def test_every_topic_is_copied_byte_for_byte(inputs, kind, tmp_path):
     assert meta["embedded_input_skipped"] == "; ".join(skipped)
 
 
-@pytest.mark.parametrize("name", ["drive.mcap", "drive_odometry.mcap", "drive_ros2", "drive.bag"])
+#: the bundled MCAP runs always; the other logs (8 s of CPU) with the slow tests, for the default run
+#: embeds ROS 2 bags in test_every_topic_is_copied_byte_for_byte, a ROS 1 log converted to CDR in
+#: test_every_embedded_frame_resolves_to_map and an odometry topic in test_odometry_ros.py
+SLOW_SAMPLE_LOGS = ("drive_odometry.mcap", "drive_ros2", "drive.bag")
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=[pytest.mark.slow] if n in SLOW_SAMPLE_LOGS else [])
+                                  for n in ("drive.mcap", *SLOW_SAMPLE_LOGS)])
 def test_sample_logs_embed_every_topic_once(name, tmp_path):
     """The bundled logs: every input topic once, with its message count (ROS 1: converted to
     CDR; MCAP and ROS 2: the same bytes), nothing encoded a second time."""

@@ -388,8 +388,15 @@ def adaptive_run(adaptive_drive):
     return run
 
 
-@pytest.mark.parametrize("name", ["aekf", "sage-husa"])
-@pytest.mark.parametrize("scale", [1.0, 4.0, 0.25])
+#: (filter, GNSS std scale) pairs run with the slow tests: the default run keeps each filter on a
+#: too-small and a too-large std, and the AEKF on the right one (its runs are shared with
+#: test_ekf_suffers_from_a_wrong_gnss_std)
+SLOW_ADAPTIVE = (("aekf", 0.25), ("sage-husa", 1.0))
+
+
+@pytest.mark.parametrize(("scale", "name"), [
+    pytest.param(scale, name, id=f"{scale}-{name}", marks=[pytest.mark.slow] if (name, scale) in SLOW_ADAPTIVE else [])
+    for name in ("aekf", "sage-husa") for scale in (1.0, 4.0, 0.25)])
 def test_adaptive_filters_learn_the_gnss_noise(adaptive_run, name, scale):
     # the log's GNSS std is right, 4x too large or 4x too small: the adaptive filters learn the
     # true 1.8 m horizontal noise and keep the EKF's accuracy on correct std

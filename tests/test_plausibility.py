@@ -20,12 +20,16 @@ NEW_WORDS = ("configured GNSS sigma", "GNSS noise", "radians", "identical", "swa
              "altitude leaves", "speed exceeds", "cannot tell whether those sigmas")
 
 
-#: the drive with the slower filters runs with the slow tests (the walk, real data, always runs)
+#: the drive with the slower filters runs with the slow tests
 FAST_ON_DRIVE = ("ekf", "aekf", "sage-husa")
+#: the walk (real data) runs every filter in the default run but its two costliest (7 s of CPU),
+#: which run with the slow tests; its UKF, CKF and AEKF keep sigma-point and adaptive filters there
+SLOW_ON_WALK = ("aukf", "vce-ckf")
 
 
 @pytest.mark.parametrize(("name", "log"), [
-    pytest.param(n, log, id=f"{n}-{log}", marks=[pytest.mark.slow] if log == "drive" and n not in FAST_ON_DRIVE else [])
+    pytest.param(n, log, id=f"{n}-{log}", marks=[pytest.mark.slow] if (log == "drive" and n not in FAST_ON_DRIVE)
+                 or (log == "walk_0827" and n in SLOW_ON_WALK) else [])
     for log in ("drive", "walk_0827") for n in sorted(FILTERS)])
 def test_clean_logs_pass_every_filter_without_new_warnings(name, log, tmp_path):
     res = api.process(SAMPLE / log, filter_name=name, out_dir=tmp_path / "out")

@@ -101,7 +101,13 @@ def test_the_end_of_the_log_is_the_forward_filters(pair):
         assert getattr(s, name)[-1] == getattr(f, name)[-1]
 
 
-@pytest.mark.parametrize("name", sorted(FILTERS))
+#: the three costliest runs (2.6 s of CPU) go with the slow tests: the default run keeps every
+#: filter's smoother in test_smoother.py (a linear model) and its six others on this log
+SLOW_SMOOTHED = ("rwckf", "sif", "vce-ckf")
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=[pytest.mark.slow] if n in SLOW_SMOOTHED else [])
+                                  for n in sorted(FILTERS)])
 def test_every_filter_smooths(sim_log_dir, name):
     res = api.process(sim_log_dir, filter_name=name, write=False, smooth=True)
     f = res.metrics["forward"]["position_m"]["horizontal"]["rmse"]
