@@ -327,3 +327,29 @@ def test_behind_releases_what_a_pass_in_time_order_has_passed(spill_dir):
     idle = spill.Behind(np.arange(10.0), np.zeros((10, 3)))
     idle(5.0)
     assert idle.arrays == [] and idle.row == 0
+
+
+def test_a_parse_that_grows_past_the_budget_goes_onto_the_spill_file(spill_dir, tmp_path):
+    """Long rows first make the parser guess too few rows and fit its arrays in the budget; when
+    they grow past it, the grown arrays are made on the spill file, with the same bits."""
+    from navpp.io.csvparse import parse_columns
+
+    rng = np.random.default_rng(4)
+    n = 40_000
+    t = 1_700_000_000.0 + np.arange(n) * 0.008
+    v = rng.normal(0.0, 1.0, (n, 3))
+    lines = ["t,a,b,c"]
+    for k in range(n):                              # long rows first: the guess is too few rows
+        fmt = "{:.3f},{!r},{!r},{!r}" if k < 2000 else "{:.3f},{:.2f},{:.2f},{:.2f}"
+        lines.append(fmt.format(float(t[k]), *map(float, v[k])))
+    path = tmp_path / "grow.csv"
+    path.write_text("\n".join(lines) + "\n")
+    budget = n * 5 * 8 * 3 // 4                     # below what the rows need, above the first guess
+    kept = parse_columns(path, 4, [0, 1, 2, 3], 0, None, [1, 3])
+    grown = parse_columns(path, 4, [0, 1, 2, 3], 0, None, [1, 3], budget_bytes=budget)
+    assert kept is not None and grown is not None
+    assert not spill.spilled(kept[0][1])
+    assert spill.spilled(grown[0][1]) and grown[0][1].shape == (n, 3)
+    for a, b in zip(kept[0], grown[0]):
+        assert np.array_equal(a, b)
+    assert np.array_equal(kept[1], grown[1])

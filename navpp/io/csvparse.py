@@ -1,5 +1,6 @@
 """Fast path of the CSV reader: the numeric columns of a plain comma-separated file, parsed by
-a numba kernel (:func:`_parse_block`) a mapped window of the file at a time, without pandas.
+a numba kernel (:func:`_parse_block`) a 4 MiB block of the file at a time (read into one reused
+buffer, not mapped: a file cut short while it is read is an error line, not a SIGBUS), without pandas.
 
 The kernel takes only the plain form every logger writes: each data line ``n_fields`` cells
 separated by ``,``, ended by ``\\n`` or ``\\r\\n`` (the last one may lack it); a wanted cell is
@@ -16,7 +17,6 @@ that also locates and names the fault.
 
 from __future__ import annotations
 
-import mmap
 import os
 import stat
 from collections.abc import Callable, Sequence
@@ -286,7 +286,7 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
     with open(path, "rb") as fh:
         info = os.fstat(fh.fileno())
         if not stat.S_ISREG(info.st_mode):
-            return None                       # a pipe or device cannot be mapped: the slow path reads it
+            return None                       # a pipe or device: the slow path reads it
         size = info.st_size
         header = fh.readline(_BLOCK_BYTES)
         if not header.endswith(b"\n") or b'"' in header:
@@ -301,31 +301,30 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
         outs = tuple(empty_rows(capacity, (width,), np.uint64, spill, what) for width in shapes)
         rows = 0
         start = len(header)                   # file offset of the first line not parsed yet
+        buf = np.empty(_BLOCK_BYTES + 1, dtype=np.uint8)    # one byte more: the last line's missing end
         while start < size:
-            # the file's pages are parsed where they are (no copy), a window of _BLOCK_BYTES at a time
-            base = start - start % mmap.ALLOCATIONGRANULARITY
-            length = min(base + _BLOCK_BYTES, size) - base
-            with mmap.mmap(fh.fileno(), length, access=mmap.ACCESS_READ, offset=base) as window:
-                view = np.frombuffer(window, dtype=np.uint8)
-                done, outs, status = _parse_lines(view[start - base:], target, component, stamp_field, outs, rows)
-                del view                      # no reference into the window once it closes
+            # read into one reused buffer, not mapped: a file cut short while it is read must
+            # give an error line, not a SIGBUS
+            fh.seek(start)
+            got = fh.readinto(buf[:min(_BLOCK_BYTES, size - start)].data)
+            if got < min(_BLOCK_BYTES, size - start):
+                raise OSError(f"the file got shorter while it was read (at byte {start + got} of {size})")
+            last = start + got == size
+            if last and buf[got - 1] != 10:
+                buf[got] = 10                 # the last line lacks its end: give it one
+                got += 1
+            done, outs, status = _parse_lines(buf[:got], target, component, stamp_field, outs, rows, budget_bytes)
             release(outs, rows, rows + done[0])
             rows += done[0]
-            start += done[1]
             if status == _FALLBACK:
                 return None
-            if base + length == size and start < size:
-                fh.seek(start)                # the last line lacks its end: parse a copy that has one
-                tail = np.frombuffer(fh.read() + b"\n", dtype=np.uint8)
-                done, outs, status = _parse_lines(tail, target, component, stamp_field, outs, rows)
-                rows += done[0]
-                start = size
-                if status == _FALLBACK or done[1] < tail.shape[0]:
-                    return None
-            elif done[1] == 0:
-                return None                   # no line end in a window: the slow path says why
+            if done[1] == 0 or (last and done[1] < got):
+                return None                   # no line end in a block: the slow path says why
+            start = size if last else start + done[1]
             if progress is not None:
                 progress(min(start / max(size, 1), 1.0))
+        if os.fstat(fh.fileno()).st_size != size:
+            raise OSError("the file changed size while it was read")
         if rows == 0:
             return None                       # no data line: the slow path says so
     values = [out[:rows, 0].view(np.float64) if width == 1 else out[:rows].view(np.float64)
@@ -338,10 +337,12 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
 
 
 def _parse_lines(buf: np.ndarray, target: np.ndarray, component: np.ndarray, stamp_field: int,
-                 outs: tuple[np.ndarray, ...], rows: int) -> tuple[tuple[int, int], tuple[np.ndarray, ...], int]:
+                 outs: tuple[np.ndarray, ...], rows: int,
+                 budget_bytes: int | None = None) -> tuple[tuple[int, int], tuple[np.ndarray, ...], int]:
     """The whole lines of ``buf`` (uint8) parsed into ``outs`` from row ``rows`` on by
-    :func:`_parse_block`, the outputs grown as often as they fill: ((rows parsed, bytes consumed),
-    the outputs, status ``_OK`` or ``_FALLBACK``)."""
+    :func:`_parse_block`, the outputs grown as often as they fill (onto the spill file once they
+    would hold more than ``budget_bytes``; None: never): ((rows parsed, bytes consumed), the
+    outputs, status ``_OK`` or ``_FALLBACK``)."""
     done = used = 0
     while True:
         n, u, status = _parse_block(buf[used:], target, component, stamp_field, outs, rows + done, _POW5)
@@ -349,13 +350,16 @@ def _parse_lines(buf: np.ndarray, target: np.ndarray, component: np.ndarray, sta
         used += u
         if status != _FULL:
             return (done, used), outs, status
-        outs = tuple(_grown(out, rows + done, out.shape[0] * 5 // 4 + 1024) for out in outs)
+        capacity = outs[0].shape[0] * 5 // 4 + 1024
+        spill = any(spilled(out) for out in outs) or (
+            budget_bytes is not None and capacity * sum(out.shape[1] for out in outs) * 8 > budget_bytes)
+        outs = tuple(_grown(out, rows + done, capacity, spill) for out in outs)
 
 
-def _grown(out: np.ndarray, rows: int, capacity: int) -> np.ndarray:
+def _grown(out: np.ndarray, rows: int, capacity: int, spill: bool) -> np.ndarray:
     """``out`` (capacity, width) with its first ``rows`` rows kept and room for ``capacity``
-    (spilled like ``out``, copied a window at a time)."""
-    bigger = empty_rows(capacity, (out.shape[1],), out.dtype, spilled(out), "the parsed CSV values")
+    (on the spill file if ``spill``, copied a window at a time)."""
+    bigger = empty_rows(capacity, (out.shape[1],), out.dtype, spill, "the parsed CSV values")
     for a, b in windows(rows, out, bigger):
         bigger[a:b] = out[a:b]
     return bigger
