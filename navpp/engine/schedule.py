@@ -138,10 +138,11 @@ def _coast_times(t_from: float, t_to: float, knot_s: float) -> list[float]:
 
 
 class Schedule(Sequence[Epoch]):
-    """A run's epochs (what :func:`epochs` returns) as columns, 22 bytes per stop where a list of
+    """A run's epochs (what :func:`epochs` returns) as columns, 26 bytes per stop where a list of
     :class:`Epoch` objects holds about 230 (a float and three ints boxed each): ``t`` (n,)
-    float64 s, ``index``, ``fix``, ``sample`` (n,) int32 and ``constraints``, ``coast`` (n,)
-    bool, the fields of :class:`Epoch`.  An item (or each item of an iteration) is made as an
+    float64 s, ``index``, ``fix`` (n,) int32 (epochs and fixes: 2**31 at 10 Hz is 6.8 years),
+    ``sample`` (n,) int64 (IMU rows: 2**31 at 1 kHz would be only 25 days), ``constraints``,
+    ``coast`` (n,) bool, the fields of :class:`Epoch`.  An item (or each item of an iteration) is made as an
     :class:`Epoch` when asked for; a slice is a Schedule."""
 
     #: stops made into Epochs at a time by an iteration
@@ -210,7 +211,7 @@ def epochs(t_start: float, t_end: float, times: np.ndarray, fix: np.ndarray, con
         tail.append(t_end)
     total = n + int(counts.sum()) + len(tail)
     out = Schedule(np.empty(total), np.full(total, -1, np.int32), np.full(total, -1, np.int32),
-                   np.zeros(total, bool), np.full(total, -1, np.int32), np.ones(total, bool))
+                   np.zeros(total, bool), np.full(total, -1, np.int64), np.ones(total, bool))
     out.t[at], out.index[at], out.fix[at], out.sample[at] = times, np.arange(n), fix, sample
     out.constraints[at], out.coast[at] = constraints, False
     for e, stops in zip(gaps, before):
