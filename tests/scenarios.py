@@ -49,3 +49,20 @@ def load_benchmark(name: str):
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
+
+
+def spline_samples(rng, n, kind, gaps, shift=False):
+    """``(t, y)``: ``n`` stamps (s) and values for the spline tests.  ``kind`` 2: an even 8 ms grid
+    far from 0 (1.7e9 s); else stamps 8-9 ms apart, with ``kind`` 1 ``gaps`` gaps of 0.1 to 100 s,
+    moved by 100 s times a normal draw when ``shift``.  The values: a random walk over six decades."""
+    if kind == 2:
+        t = np.arange(1.7e9 + rng.random(), 1.7e9 + 1.0 + n * 0.008, 0.008)[:n]
+    else:
+        dt = 0.008 + 0.001 * rng.random(n)
+        if kind == 1:
+            dt[rng.integers(0, n, gaps)] += 10.0 ** rng.uniform(-1, 2, gaps)
+        t = np.cumsum(dt)
+        if shift:
+            t = t + 100.0 * rng.normal()
+    y = np.cumsum(rng.standard_normal(n)) * 10.0 ** rng.uniform(-3, 3)
+    return t, y

@@ -4,6 +4,7 @@ stale-row counts, across block edges."""
 
 import numpy as np
 import pytest
+from scenarios import spline_samples
 from scipy import interpolate
 
 from navpp.ins import calibrate, timing_estimates
@@ -78,15 +79,7 @@ def test_spline_derivatives_across_blocks(seed):
     rounding: thousands of rows over blocks of 64 (jittery stamps, gaps of 0.1 to 100 s, an even
     grid far from 0, where rounding differs in the last bits; values over six decades)."""
     rng = np.random.default_rng(10 + seed)
-    n = int(rng.integers(300, 6000))
-    if seed % 3 == 2:
-        t = np.arange(1.7e9 + rng.random(), 1.7e9 + 1.0 + n * 0.008, 0.008)[:n]
-    else:
-        dt = 0.008 + 0.001 * rng.random(n)
-        if seed % 3 == 1:
-            dt[rng.integers(0, n, 5)] += 10.0 ** rng.uniform(-1, 2, 5)
-        t = np.cumsum(dt)
-    y = np.cumsum(rng.standard_normal(n)) * 10.0 ** rng.uniform(-3, 3)
+    t, y = spline_samples(rng, int(rng.integers(300, 6000)), seed % 3, gaps=5)
     ref = interpolate.CubicSpline(t, y, extrapolate=False)
     got = timing_estimates._spline(t, y)
     scale = np.max(np.abs(ref.c[2]))

@@ -4,6 +4,7 @@ evaluation (:class:`~navpp.ins.timing_estimates.Cubic`)."""
 
 import numpy as np
 import pytest
+from scenarios import spline_samples
 from scipy import interpolate, special
 
 from navpp import chi2
@@ -28,15 +29,7 @@ def test_cubic_is_ppoly(seed):
     values over six decades) at points inside, outside, on the breakpoints and their neighbours,
     and NaN: the intervals found from the offsets are the binary search's."""
     rng = np.random.default_rng(seed)
-    n = int(rng.integers(4, 3000))
-    if seed % 3 == 2:
-        t = np.arange(1.7e9 + rng.random(), 1.7e9 + 1.0 + n * 0.008, 0.008)[:n]
-    else:
-        dt = 0.008 + 0.001 * rng.random(n)
-        if seed % 3 == 1:
-            dt[rng.integers(0, n, 3)] += 10.0 ** rng.uniform(-1, 2, 3)     # gaps of 0.1 to 100 s
-        t = np.cumsum(dt) + 100.0 * rng.normal()
-    y = np.cumsum(rng.standard_normal(n)) * 10.0 ** rng.uniform(-3, 3)
+    t, y = spline_samples(rng, int(rng.integers(4, 3000)), seed % 3, gaps=3, shift=True)
     got = timing_estimates._spline(t, y)
     ref = interpolate.CubicSpline(t, y, extrapolate=False)
     q = np.concatenate([np.linspace(t[0] - 0.5, t[-1] + 0.5, 2001), t, rng.uniform(t[0], t[-1], 2000),
