@@ -362,14 +362,25 @@ class Aiding:
             return out
         if self.zupt:
             out.append(ZeroVelocity.at(t, self.zupt_std))
-        if self.zaru and t_prev is not None:
-            lo, hi = np.searchsorted(self.t, t_prev, side="right"), np.searchsorted(self.t, t, side="right")
-            if hi - lo >= 2 and self.still[lo:hi].all():
-                arw = self.gyro_arw
-                if self.profile is not None:          # an idling engine shakes the mean rate too
-                    arw = max(arw, self.profile.over(t_prev, t)[0])
-                out.append(ZeroRate.at(t, self.gyro[lo:hi].mean(axis=0), t - t_prev, arw, self.zaru_floor))
+        if self.zaru:
+            zaru = self.zero_rate(t_prev, t)
+            if zaru is not None:
+                out.append(zaru)
         return out
+
+    def zero_rate(self, t_prev: float | None, t: float) -> ZeroRate | None:
+        """The ZARU at ``t`` s: the mean gyro (rad/s, body FLU) since the previous constraint epoch
+        ``t_prev`` s, when every IMU sample between them is still (None otherwise, or without a
+        previous epoch)."""
+        if t_prev is None:
+            return None
+        lo, hi = np.searchsorted(self.t, t_prev, side="right"), np.searchsorted(self.t, t, side="right")
+        if not (hi - lo >= 2 and self.still[lo:hi].all()):
+            return None
+        arw = self.gyro_arw
+        if self.profile is not None:          # an idling engine shakes the mean rate too
+            arw = max(arw, self.profile.over(t_prev, t)[0])
+        return ZeroRate.at(t, self.gyro[lo:hi].mean(axis=0), t - t_prev, arw, self.zaru_floor)
 
 
 def odometry_zero(t: np.ndarray, odo_t: np.ndarray, speed: np.ndarray, max_speed: float, window_s: float,

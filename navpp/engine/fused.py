@@ -38,7 +38,7 @@ from ..filters.linalg import (
     linear_moments,
     propagated_covariance,
 )
-from ..ins.aids import ZeroRate, zero_rate, zero_velocity
+from ..ins.aids import zero_rate, zero_velocity
 from ..ins.model import InsModel, gnss_innovation, gnss_jacobian, integrate_with_jacobian, plus
 from ..ins.state import DX_ATT, DX_BG, DX_VEL, NOMINAL_SIZE, X_BG, X_VE
 from ..jitmode import interpreted
@@ -380,18 +380,11 @@ class _StandstillInputs:
             return
         # ZARU: the mean gyro since the previous constraint epoch when every sample in between is still
         t_prev = aiding._last_constraint_t
-        moving = np.concatenate([[0], np.cumsum(~aiding.still)])
         for e in at:
             te = float(t[e])
-            if t_prev is not None:
-                lo = int(np.searchsorted(imu_t, t_prev, side="right"))
-                hi = int(np.searchsorted(imu_t, te, side="right"))
-                if hi - lo >= 2 and moving[hi] == moving[lo]:
-                    arw = aiding.gyro_arw
-                    if aiding.profile is not None:
-                        arw = max(arw, aiding.profile.over(t_prev, te)[0])
-                    meas = ZeroRate.at(te, aiding.gyro[lo:hi].mean(axis=0), te - t_prev, arw, aiding.zaru_floor)
-                    self.zaru_ok[e], self.zaru_z[e], self.zaru_var[e] = True, meas.z, meas.R[0, 0]
+            meas = aiding.zero_rate(t_prev, te)
+            if meas is not None:
+                self.zaru_ok[e], self.zaru_z[e], self.zaru_var[e] = True, meas.z, meas.R[0, 0]
             t_prev = te
 
     def arguments(self) -> tuple[Any, ...]:
