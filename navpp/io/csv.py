@@ -43,7 +43,7 @@ import numpy as np
 
 from navpp import jitmode, spill
 from navpp.errors import ConfigError, InputError
-from navpp.recording import BLOCK_ROWS, GnssData, ImuData, OdometryData, Recording, ReferenceData, lone_stamp
+from navpp.recording import GnssData, ImuData, OdometryData, Recording, ReferenceData, lone_stamp
 
 __all__ = ["increments_to_rates", "is_csv_log", "read_csv_log", "read_reference_csv"]
 
@@ -517,12 +517,10 @@ def _stamps_ns(table: _Table, header: list[str]) -> np.ndarray:
     # a block of rows at a time: the residuals first, then the ns (no full-length temporaries)
     if t_max * scale < 2.0 ** 51 and all(
             float(np.max(np.abs(scaled - np.round(scaled)))) <= tolerance
-            for scaled in (t[lo:lo + BLOCK_ROWS] * scale for lo in range(0, t.shape[0], BLOCK_ROWS))):
+            for scaled in (t[a:b] * scale for a, b in spill.windows(t.shape[0], t))):
         ns = spill.like(t, t.shape[0], (), np.int64)
-        for lo in range(0, t.shape[0], BLOCK_ROWS):
-            np.multiply(np.round(t[lo:lo + BLOCK_ROWS] * scale).astype(np.int64), 10 ** (9 - d),
-                        out=ns[lo:lo + BLOCK_ROWS])
-            spill.release((t, ns), lo, lo + BLOCK_ROWS)
+        for a, b in spill.windows(t.shape[0], t, ns):
+            np.multiply(np.round(t[a:b] * scale).astype(np.int64), 10 ** (9 - d), out=ns[a:b])
         return ns
     if table.stamps_ns is not None:     # the exact path's result, from the fast parser
         return table.stamps_ns
