@@ -610,8 +610,9 @@ class _Sink:
         n = int(starts.shape[0])
         if n == 0:
             return
-        if self.decoder is not None:
-            self._checked(lambda: self.decoder.add(buffer, starts, lengths, log_ns))
+        decoder = self.decoder
+        if decoder is not None:
+            self._checked(lambda: decoder.add(buffer, starts, lengths, log_ns))
         else:   # the payloads gathered into one buffer of their own
             ends = np.cumsum(lengths)
             take = np.arange(int(ends[-1]), dtype=np.int64) + np.repeat(starts - (ends - lengths), lengths)
