@@ -227,7 +227,7 @@ def _read_ros_log(kind: str, path: Path, config: Config, imu_topic: str | None, 
         wanted.append(odometry_topic if known.get(odometry_topic) in ODOMETRY_TYPES else None)
     if reference_topic:
         wanted.append(choose_topic(index, FIX_TYPE, "reference", "--reference-topic", reference_topic))
-    contents = read_topics(kind, path, list(dict.fromkeys(w for w in wanted if w)))
+    contents = read_topics(kind, path, list(dict.fromkeys(w for w in wanted if w)), config.output.memory)
     if gnss_from_file:
         contents = _with_placeholder_fix(contents, set(replaced))
         gnss_topic = _PLACEHOLDER

@@ -120,7 +120,7 @@ def test_bulk_and_library_decoders_agree(logs, monkeypatch, kind):
     calls = []
 
     def spy(*args, **kwargs):
-        calls.append(args[0])
+        calls.append(args[1])
         return decode(*args, **kwargs)
 
     monkeypatch.setattr(rosbag, "_bulk_decoder", lambda: spy)
@@ -135,7 +135,7 @@ def test_bulk_and_library_decoders_agree(logs, monkeypatch, kind):
 def test_ros1_index_path_and_rosbags_iteration_agree(logs, monkeypatch, kind):
     with rosbag._open([logs[kind]]) as reader:  # the index path is taken for navpp's (and rosbag's) bags
         topics = reader.topics
-        assert rosbag._collect_ros1(reader, topics, list(topics)) is not None
+        assert rosbag._collect_ros1(reader, topics, list(topics), _null_sinks(topics)) is not None
     fast = read_rosbag(logs[kind])
     monkeypatch.setattr(rosbag, "_FAST_ROS1", False)
     slow = read_rosbag(logs[kind])
@@ -147,10 +147,21 @@ def test_ros1_index_path_on_split_bags(rec, tmp_path, monkeypatch):
     rw.write_ros1_bag(rec, files[0], time_range=(-1.0, 15.0), chunk_size=20_000)
     rw.write_ros1_bag(rec, files[1], time_range=(15.0, 1e9), compression="lz4")
     with rosbag._open(files) as reader:
-        assert rosbag._collect_ros1(reader, reader.topics, list(reader.topics)) is not None
+        assert rosbag._collect_ros1(reader, reader.topics, list(reader.topics), _null_sinks(reader.topics)) is not None
     fast = read_rosbag(files)
     monkeypatch.setattr(rosbag, "_FAST_ROS1", False)
     assert_same_contents(fast, read_rosbag(files))
+
+
+class _NullSink:
+    """A sink that takes the messages and keeps nothing."""
+
+    def add(self, *args):
+        pass
+
+
+def _null_sinks(topics):
+    return {t: _NullSink() for t in topics}
 
 
 def assert_same_contents(a: LogContents, b: LogContents) -> None:

@@ -19,11 +19,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import spill
 from ..errors import InputError
 from ..findings import with_code
 from ..recording import GnssData, ImuData, OdometryData, Recording, ReferenceData, lone_stamp, order_samples
 from .detect import choose_odometry_topic, gnss_velocity_topics, in_vehicle_frame
-from .ros import FIX_TYPE, IMU_TYPE, FixMessages, LogContents
+from .ros import FIX_TYPE, IMU_TYPE, FixMessages, ImuMessages, LogContents
 
 GAP_FACTOR = 2.5
 
@@ -98,27 +99,41 @@ def _check_lone_stamp(stamps: np.ndarray, what: str, time_source: str) -> None:
                      f"while the messages around it are regular: a lone bad stamp (a clock not yet set?){hint}")
 
 
-def _finite_rows(arrays: list[np.ndarray], names: list[str], what: str, stamps: np.ndarray) -> None:
-    for a, name in zip(arrays, names, strict=True):
-        bad = ~np.isfinite(a)
-        if bad.ndim > 1:
-            bad = bad.any(axis=1)
-        if bad.any():
-            k = int(np.argmax(bad))
+def _first_bad(a: np.ndarray) -> int | None:
+    """The first row of ``a`` with a non-finite value, or None."""
+    bad = ~np.isfinite(a)
+    if bad.ndim > 1:
+        bad = bad.any(axis=1)
+    return int(np.argmax(bad)) if bad.any() else None
+
+
+def _finite_rows(arrays: list[np.ndarray], names: list[str], what: str, stamps: np.ndarray,
+                 first_bad: list[int | None] | None = None) -> None:
+    """InputError naming the first message of the first array in ``arrays`` with a non-finite
+    value; ``first_bad``: those first rows when already found (:func:`_imu_rows`)."""
+    for i, (a, name) in enumerate(zip(arrays, names, strict=True)):
+        k = _first_bad(a) if first_bad is None else first_bad[i]
+        if k is not None:
             raise InputError(f"{what}: message {k} (t = {_stamp_text(stamps[k])}): non-finite {name}")
 
 
-def _gap_warning(what: str, t: np.ndarray, warnings: list[str]) -> None:
+def _gap_warning(what: str, t: np.ndarray, nominal: float, warnings: list[str]) -> None:
+    """Warn about intervals of ``t`` (s) longer than ``GAP_FACTOR`` times ``nominal`` (s, the
+    median interval), window by window over a spilled ``t`` (:func:`navpp.spill.windows`)."""
     if t.shape[0] < 3:
         return
-    dt = np.diff(t)
-    nominal = float(np.median(dt))
-    gaps = dt > GAP_FACTOR * nominal
-    if gaps.any():
-        k = int(np.argmax(np.where(gaps, dt, -np.inf)))
-        n = int(np.count_nonzero(gaps))
+    n, k, largest = 0, -1, -np.inf
+    for a, b in spill.windows(t.shape[0] - 1, t):
+        dt = t[a + 1:b + 1] - t[a:b]
+        gaps = dt > GAP_FACTOR * nominal
+        n += int(np.count_nonzero(gaps))
+        if gaps.any():
+            j = int(np.argmax(np.where(gaps, dt, -np.inf)))
+            if dt[j] > largest:
+                k, largest = a + j, float(dt[j])
+    if n:
         warnings.append(f"{what}: {n} gap{'s' if n > 1 else ''} longer than {GAP_FACTOR} x the nominal interval "
-                        f"{nominal:.4g} s; largest {float(dt[k]):.4g} s from t = {float(t[k]):.3f} s (message {k}, "
+                        f"{nominal:.4g} s; largest {largest:.4g} s from t = {float(t[k]):.3f} s (message {k}, "
                         "t relative to the first IMU stamp)")
 
 
@@ -181,28 +196,64 @@ def _imu_data(contents: LogContents, imu_name: str, time_source: str, gyro_scale
               warnings: list[str]) -> tuple[ImuData, int]:
     """The IMU topic as :class:`ImuData` (s from its first kept sample; rad/s and m/s^2 times
     the scales) and that first sample's stamp (ns); samples out of order or repeated are
-    dropped (with a warning), a low rate and gaps are warned about."""
+    dropped (with a warning), a low rate and gaps are warned about.  Messages on a spill file
+    (:func:`navpp.io.mcap.read_mcap`'s ``memory``) give arrays on a spill file, made window by
+    window; the samples stay in memory only when some are out of order or repeated."""
     src = contents.source
     imu = contents.imu.get(imu_name)
     if imu is None or imu.stamp_ns.shape[0] == 0:
         raise InputError(f"{src}: topic {imu_name!r} has no IMU message")
     what = f"{src}: topic {imu_name!r}"
-    stamps = _stamps(imu, time_source, what)
-    _finite_rows([imu.gyro, imu.accel], ["angular_velocity", "linear_acceleration"], what, stamps)
+    stamps, gyro, accel, first_bad = _imu_rows(imu, _stamps(imu, time_source, what), gyro_scale, accel_scale)
+    _finite_rows([imu.gyro, imu.accel], ["angular_velocity", "linear_acceleration"], what, stamps, first_bad)
     _check_lone_stamp(stamps, what, time_source)
-    keep = _ordered(stamps, np.hstack([np.asarray(imu.gyro, float), np.asarray(imu.accel, float)]), what, warnings)
-    stamps = stamps[keep]
+    spill.release_all(stamps)
+    if not _increasing(stamps):     # else keep all: what _ordered gives for increasing stamps
+        keep = _ordered(stamps, np.hstack([np.asarray(imu.gyro, float), np.asarray(imu.accel, float)]), what,
+                        warnings)
+        stamps, gyro, accel = stamps[keep], gyro[keep], accel[keep]
     if stamps.shape[0] < 2:
         raise InputError(f"{what}: at least 2 IMU messages are needed, found {stamps.shape[0]}")
     t0_ns = int(stamps[0])
-    t_imu = (stamps - t0_ns) * 1e-9
-    rate = 1.0 / float(np.median(np.diff(t_imu)))
+    t_imu = stamps.view(np.float64)       # t = (stamps - t0_ns) * 1e-9 in the stamps' own memory
+    for a, b in spill.windows(stamps.shape[0], stamps):
+        np.subtract(stamps[a:b], t0_ns, out=stamps[a:b])
+        np.multiply(stamps[a:b], 1e-9, out=t_imu[a:b])
+    nominal = float(np.median(np.diff(t_imu), overwrite_input=True))
+    spill.release_all(t_imu)
+    rate = 1.0 / nominal
     if rate < 50.0:
         warnings.append(f"{what}: IMU rate {rate:.1f} Hz is low for strapdown navigation (100-200 Hz expected); "
                         "processed anyway")
-    _gap_warning(what, t_imu, warnings)
-    return ImuData(t_imu, np.ascontiguousarray(np.asarray(imu.gyro, float)[keep] * gyro_scale),
-                   np.ascontiguousarray(np.asarray(imu.accel, float)[keep] * accel_scale)), t0_ns
+    _gap_warning(what, t_imu, nominal, warnings)
+    return ImuData(t_imu, gyro, accel), t0_ns
+
+
+def _imu_rows(imu: ImuMessages, stamps: np.ndarray, gyro_scale: float, accel_scale: float,
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int | None]]:
+    """The IMU messages' ``stamps`` (ns), gyro and accel times their scales, as contiguous
+    copies made in one pass window by window (on a spill file when the messages are: their
+    rows released behind), and the first row of gyro and of accel with a non-finite value."""
+    n = stamps.shape[0]
+    st = spill.like(stamps, n, (), np.int64)
+    gyro = spill.like(imu.gyro, n, (3,), np.float64)
+    accel = spill.like(imu.accel, n, (3,), np.float64)
+    first_bad: list[int | None] = [None, None]
+    for a, b in spill.windows(n, stamps, imu.gyro, imu.accel, st, gyro, accel):
+        st[a:b] = stamps[a:b]
+        for i, (src, out, scale) in enumerate(((imu.gyro, gyro, gyro_scale), (imu.accel, accel, accel_scale))):
+            rows = np.asarray(src[a:b], float)
+            np.multiply(rows, scale, out=out[a:b])
+            k = _first_bad(rows) if first_bad[i] is None else None
+            if k is not None:
+                first_bad[i] = a + k
+    return st, gyro, accel, first_bad
+
+
+def _increasing(stamps: np.ndarray) -> bool:
+    """Whether ``stamps`` increase strictly (window by window over a spilled array)."""
+    return all(bool(np.all(stamps[max(a - 1, 0) + 1:b] > stamps[max(a - 1, 0):b - 1]))
+               for a, b in spill.windows(stamps.shape[0], stamps))
 
 
 def _assemble(contents: LogContents, *, imu_topic: str | None = None, gnss_topic: str | None = None,

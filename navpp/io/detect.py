@@ -82,15 +82,16 @@ def list_topics(kind: str, path: Path) -> tuple[TopicInfo, ...]:
     return bag_topics(bag_paths(kind, path))
 
 
-def read_topics(kind: str, path: Path, topics: list[str]) -> LogContents:
-    """Decode the given topics of a ROS log."""
+def read_topics(kind: str, path: Path, topics: list[str], memory: int | None = None) -> LogContents:
+    """Decode the given topics of a ROS log; a topic's messages beyond ``memory`` bytes (None:
+    never) go to a spill file as they are decoded (:mod:`navpp.spill`)."""
     if kind == "mcap":
         from .mcap import read_mcap
 
-        return read_mcap(path, topics)
+        return read_mcap(path, topics, memory=memory)
     from .rosbag import read_rosbag
 
-    return read_rosbag(bag_paths(kind, path), topics)
+    return read_rosbag(bag_paths(kind, path), topics, memory=memory)
 
 
 # --------------------------------------------------------------------------- wheel odometry role

@@ -34,7 +34,7 @@ from typing import Any, Literal
 import numpy as np
 from numba import njit
 
-from navpp import jitmode
+from navpp import jitmode, spill
 from navpp.errors import InputError
 from navpp.findings import Finding
 from navpp.io.messages import (
@@ -275,9 +275,12 @@ def _take(msgs: Messages, order: np.ndarray) -> Messages:
 
 
 def _in_log_order(msgs: Messages) -> Messages:
-    """Messages in log-time order (stable, as the ``mcap`` reader yields them)."""
+    """Messages in log-time order (stable, as the ``mcap`` reader yields them).  Spilled
+    messages (:mod:`navpp.spill`) are checked window by window; only out-of-order ones are
+    taken into memory in order."""
     log = msgs.log_ns
-    if log.shape[0] > 1 and bool(np.any(log[1:] < log[:-1])):
+    if any(bool(np.any(log[max(a - 1, 0) + 1:b] < log[max(a - 1, 0):b - 1]))
+           for a, b in spill.windows(log.shape[0], log)):
         return _take(msgs, np.argsort(log, kind="stable"))
     return msgs
 
@@ -285,9 +288,12 @@ def _in_log_order(msgs: Messages) -> Messages:
 class _Channels:
     """Schemas and channels seen so far, per-channel counts and the decoders of the topics."""
 
-    def __init__(self, source: str, topics: set[str] | None) -> None:
+    def __init__(self, source: str, topics: set[str] | None, memory: int | None = None) -> None:
         self.source = source
         self.wanted = topics
+        self.memory = memory
+        #: messages per topic in the summary's statistics (the decoders' first sizes)
+        self.expected: dict[str, int] = {}
         self.schemas: dict[int, Any] = {}
         self.channels: dict[int, Any] = {}
         self.count: dict[int, int] = {}
@@ -328,7 +334,8 @@ class _Channels:
                 text = schema.data.decode("utf-8", errors="replace")
             decoder = TopicDecoder(topic, msgtype, encoding, source=self.source,
                                    schema_name=schema.name if schema is not None else None,
-                                   schema_text=text)
+                                   schema_text=text, memory=self.memory,
+                                   expected=self.expected.get(topic, 0))
             self.decoders[topic] = decoder
         elif decoder.msgtype != msgtype or decoder.encoding != encoding:
             self.warnings.append(f"{self.source}: topic {topic!r} has channels of different types "
@@ -399,11 +406,11 @@ class _Channels:
 
 
 class _FastReader:
-    def __init__(self, path: Path, size: int, topics: set[str] | None) -> None:
+    def __init__(self, path: Path, size: int, topics: set[str] | None, memory: int | None = None) -> None:
         self.path = path
         self.source = str(path)
         self.size = size
-        self.reg = _Channels(self.source, topics)
+        self.reg = _Channels(self.source, topics, memory)
         self.n_messages = 0
         self.last_log: int | None = None
         self._cut_reason = ""
@@ -529,6 +536,9 @@ class _FastReader:
     def run(self) -> LogContents:
         summary = _read_summary(self.path, self.size)
         if summary is not None:
+            counts = summary.statistics.channel_message_counts if summary.statistics is not None else {}
+            for cid, channel in summary.channels.items():
+                self.reg.expected[channel.topic] = self.reg.expected.get(channel.topic, 0) + counts.get(cid, 0)
             for schema in summary.schemas.values():
                 self.reg.add_schema(schema)
             for channel in summary.channels.values():
@@ -648,7 +658,7 @@ def _read_with_library(path: Path, topics: set[str] | None) -> LogContents:
 
 
 def read_mcap(path: str | os.PathLike[str], topics: Iterable[str] | None = None, *,
-              engine: Literal["fast", "library"] = "fast") -> LogContents:
+              engine: Literal["fast", "library"] = "fast", memory: int | None = None) -> LogContents:
     """Read an MCAP file's topics and decode the supported ones.
 
     Parameters
@@ -664,6 +674,10 @@ def read_mcap(path: str | os.PathLike[str], topics: Iterable[str] | None = None,
     engine :
         ``"fast"`` (bulk scan and decode) or ``"library"`` (``mcap``'s per-message iteration and
         the ``mcap_ros2`` / ``mcap_ros1`` decoders; for cross-checks).
+    memory :
+        Bytes (``[output] memory``): a topic's decoded messages holding more are written to a
+        spill file (:mod:`navpp.spill`) chunk by chunk as they are decoded (an IMU topic's
+        arrays are then views of it); None: they stay in memory.  The fast engine only.
 
     Returns
     -------
@@ -686,7 +700,7 @@ def read_mcap(path: str | os.PathLike[str], topics: Iterable[str] | None = None,
         return _read_with_library(path, wanted)
     if engine != "fast":
         raise ValueError(f"engine must be 'fast' or 'library', not {engine!r}")
-    return _FastReader(path, size, wanted).run()
+    return _FastReader(path, size, wanted, memory).run()
 
 
 def list_topics(path: str | os.PathLike[str]) -> tuple[TopicInfo, ...]:

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from navpp import jitmode
+from navpp import jitmode, spill
 from navpp.errors import InputError
 from navpp.io.ros import (
     FIX_TYPE,
@@ -520,10 +520,19 @@ class TopicDecoder:
         The schema record of the channel when known.  A schema that is not the standard
         definition sends the whole topic through the library decoder; without one the
         standard layout is assumed.
+    memory :
+        Bytes (``[output] memory``) beyond which the decoded rows go to a spill file
+        (:mod:`navpp.spill`) as they are added, each piece's pages released once written;
+        None: the rows stay in memory.  With a budget the rows are kept in one table
+        (:class:`_Rows`) and the result's arrays of an IMU topic are views of it.
+    expected :
+        Messages the topic is expected to hold (a log's index or summary), the table's first
+        size (it grows if more come); 0: unknown.
     """
 
     def __init__(self, topic: str, msgtype: str, encoding: str, *, source: str = "",
-                 schema_name: str | None = None, schema_text: str | None = None) -> None:
+                 schema_name: str | None = None, schema_text: str | None = None,
+                 memory: int | None = None, expected: int = 0) -> None:
         self.topic = topic
         self.msgtype = normalise_type(msgtype)
         self.encoding = encoding
@@ -543,6 +552,7 @@ class TopicDecoder:
         self._tables: list[np.ndarray] = []
         self._stamps: list[np.ndarray] = []
         self._logs: list[np.ndarray] = []
+        self._rows = None if memory is None else _Rows(self._layout.n_cols, memory, expected)
         self.count = 0
         self.n_fallback = 0  # messages decoded by the library decoder
         self.frame_id: str | None = None
@@ -590,9 +600,12 @@ class TopicDecoder:
             flag = np.full(n, _LONG, dtype=np.uint8)
         for k in bad:
             self._fallback(int(k), int(flag[k]), buf, starts, lengths, log_ns, table, stamps)
-        self._tables.append(table)
-        self._stamps.append(stamps)
-        self._logs.append(log_ns)
+        if self._rows is not None:
+            self._rows.append(table, stamps, log_ns)
+        else:
+            self._tables.append(table)
+            self._stamps.append(stamps)
+            self._logs.append(log_ns)
         self.count += n
 
     def _fallback(self, i: int, flag: int, buf: np.ndarray, starts: np.ndarray,
@@ -636,6 +649,11 @@ class TopicDecoder:
     def result(self) -> Messages:
         """The decoded messages (in the order they were added)."""
         n_cols = self._layout.n_cols
+        if self._rows is not None:
+            table, stamps, logs = self._rows.result()
+            self._rows = None
+            return build_messages(self.msgtype, self.topic, table, stamps, logs, self.frame_id or "",
+                                  self.child_frame_id or "", views=spill.spilled(table))
         table = (np.concatenate(self._tables) if self._tables
                  else np.zeros((0, n_cols), dtype=np.uint64))
         stamps = np.concatenate(self._stamps) if self._stamps else np.zeros(0, dtype=np.int64)
@@ -646,10 +664,16 @@ class TopicDecoder:
 
 
 def build_messages(msgtype: str, topic: str, table: np.ndarray, stamp_ns: np.ndarray,
-                   log_ns: np.ndarray, frame_id: str, child_frame_id: str = "") -> Messages:
+                   log_ns: np.ndarray, frame_id: str, child_frame_id: str = "", *,
+                   views: bool = False) -> Messages:
     """The ros.py container for ``msgtype`` from a (N, n_cols) uint64 table in the kernel's
-    format (as :func:`decode_with_library` returns it); ``child_frame_id``: Odometry only."""
+    format (as :func:`decode_with_library` returns it); ``child_frame_id``: Odometry only.
+    ``views``: an IMU topic's arrays are views of ``table`` (strided columns, no copy: a
+    spilled table stays on its file), not contiguous copies."""
     f = table.view(np.float64)
+    if msgtype == IMU_TYPE and views:
+        return ImuMessages(topic=topic, stamp_ns=stamp_ns, log_ns=log_ns, gyro=f[:, 0:3], accel=f[:, 4:7],
+                           gyro_cov0=f[:, 3], accel_cov0=f[:, 7], frame_id=frame_id)
     if msgtype == IMU_TYPE:
         return ImuMessages(topic=topic, stamp_ns=stamp_ns, log_ns=log_ns,
                            gyro=np.ascontiguousarray(f[:, 0:3]),
@@ -671,6 +695,47 @@ def build_messages(msgtype: str, topic: str, table: np.ndarray, stamp_ns: np.nda
     return TwistMessages(topic=topic, stamp_ns=stamp_ns, log_ns=log_ns,
                          vel=np.ascontiguousarray(f[:, 0:3]), cov_diag=None, frame_id=frame_id,
                          angular=np.ascontiguousarray(f[:, 3:6]))
+
+
+class _Rows:
+    """A topic's decoded rows in one growing (capacity, n_cols + 2) uint64 table: the kernel's
+    columns, then the header stamp and the log time (ns, int64 bits).  On a spill file
+    (:mod:`navpp.spill`) once the table would hold more than ``memory`` bytes, the rows written
+    released behind (:func:`navpp.spill.release_before`); ``expected`` rows: the first capacity."""
+
+    def __init__(self, n_cols: int, memory: int, expected: int) -> None:
+        self.n_cols = n_cols
+        self.memory = memory
+        self.n = 0
+        self.table = self._empty(max(int(expected), 0), False)
+
+    def _empty(self, capacity: int, spilled: bool) -> np.ndarray:
+        spilled = spilled or capacity * (self.n_cols + 2) * 8 > self.memory
+        return spill.empty_rows(capacity, (self.n_cols + 2,), np.uint64, spilled, "the decoded messages")
+
+    def append(self, table: np.ndarray, stamps: np.ndarray, log_ns: np.ndarray) -> None:
+        """Rows ``table`` (n, n_cols) with their stamps and log times (n,) int64 after the others."""
+        n, end = table.shape[0], self.n + table.shape[0]
+        if end > self.table.shape[0]:       # grown by a quarter (a log without an index)
+            bigger = self._empty(max(end, self.table.shape[0] * 5 // 4 + 1024), spill.spilled(self.table))
+            for a, b in spill.windows(self.n, self.table, bigger):
+                bigger[a:b] = self.table[a:b]
+            self.table = bigger
+        rows = self.table[self.n:end]
+        rows[:, :self.n_cols] = table
+        rows[:, self.n_cols] = stamps.view(np.uint64)
+        rows[:, self.n_cols + 1] = log_ns.view(np.uint64)
+        self.n = end
+        spill.release_before(self.table, end - n)
+
+    def result(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(table (N, n_cols) uint64, stamp_ns (N,), log_ns (N,) int64): views of the rows."""
+        rows = self.table[:self.n]
+        spill.release_all(rows)
+        stamps, logs = rows[:, self.n_cols].view(np.int64), rows[:, self.n_cols + 1].view(np.int64)
+        if not spill.spilled(rows):
+            stamps, logs = stamps.copy(), logs.copy()
+        return rows[:, :self.n_cols], stamps, logs
 
 
 def _as_buffer(payloads: Payloads) -> tuple[Any, np.ndarray, np.ndarray]:

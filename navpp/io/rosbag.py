@@ -7,11 +7,12 @@ too), and message definitions stored in the bag (no typestore entry is needed: A
 registers the bag's own definitions; a ROS 2 bag without any, as Foxy/Galactic wrote them,
 is decoded with the ROS 2 Humble definitions).
 
-Decoding: the raw payloads of each wanted topic are collected (no message objects) and
-handed to the vectorised decoder :func:`navpp.io.messages.decode` when it is importable and
-the bag's definition of the type has the standard layout; otherwise (or when it returns
-None) each message is deserialised by rosbags and its fields copied into the arrays.  Both
-give the same arrays (tested).
+Decoding: the raw payloads of each wanted topic (no message objects) go in batches -- a ROS 1
+chunk at a time, or a few MB of rosbags' iteration -- to the vectorised decoder
+:class:`navpp.io.messages.TopicDecoder` when the bag's definition of the type has the standard
+layout, the decoded rows onto a spill file beyond the ``memory`` budget (:mod:`navpp.spill`), so
+memory does not grow with the bag; otherwise each message is deserialised by rosbags and its
+fields copied into the arrays.  Both give the same arrays (tested).
 
 Every failure is an :class:`~navpp.errors.InputError` with one line naming the file, and the
 topic and message where one is at fault.
@@ -102,7 +103,7 @@ def list_topics(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]
 
 
 def read_rosbag(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
-                topics: Iterable[str] | None = None) -> LogContents:
+                topics: Iterable[str] | None = None, *, memory: int | None = None) -> LogContents:
     """Decode a bag's IMU, NavSatFix, GNSS-velocity and wheel-odometry topics into numpy arrays.
 
     Parameters
@@ -113,6 +114,9 @@ def read_rosbag(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]
         (``sensor_msgs/Imu``, ``sensor_msgs/NavSatFix``,
         ``geometry_msgs/TwistWithCovarianceStamped``, ``geometry_msgs/TwistStamped``,
         ``nav_msgs/Odometry``).
+    memory : bytes (``[output] memory``): a topic's decoded messages holding more are written to
+        a spill file (:mod:`navpp.spill`) as they are decoded, batch by batch (an IMU topic's
+        arrays are then views of it); None: they stay in memory.
 
     Returns
     -------
@@ -142,23 +146,27 @@ def read_rosbag(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]
         for topic in wanted:
             conns = bag_topics[topic].connections
             plans[topic] = _plan(label, reader, std_store, topic, by_name[topic].msgtype, conns, warnings)
-        raw = _collect_ros1(reader, bag_topics, wanted) if not reader.is2 and _FAST_ROS1 else None
-        if raw is None:
-            raw = _collect(label, reader, [c for t in wanted for c in bag_topics[t].connections], wanted)
+
+        def new_sinks() -> dict[str, _Sink]:
+            return {t: _Sink(label, t, plans[t], by_name[t].encoding, memory, by_name[t].count) for t in wanted}
+
+        sinks = new_sinks()
+        if reader.is2 or not _FAST_ROS1 or _collect_ros1(reader, bag_topics, wanted, sinks) is None:
+            if not reader.is2:
+                sinks = new_sinks()          # the index path gave up part way: start again
+            _collect(label, reader, [c for t in wanted for c in bag_topics[t].connections], sinks)
         imu: dict[str, ImuMessages] = {}
         fix: dict[str, FixMessages] = {}
         twist: dict[str, TwistMessages] = {}
         spans: dict[str, tuple[int, int | None, int | None]] = {}
         for topic in wanted:
-            payloads = raw.pop(topic)
-            if reader.is2 and len(payloads) == 0 and by_name[topic].count > 0:
+            got = sinks.pop(topic)
+            if reader.is2 and got.count == 0 and by_name[topic].count > 0:
                 raise InputError(f"{label}: topic {topic!r}: metadata.yaml lists {by_name[topic].count} messages but "
                                  "the bag's storage holds none (the metadata does not match the storage file)")
-            msgtype, rosname, standard = plans[topic]
-            msgs = _decode(label, reader, topic, msgtype, rosname, standard, by_name[topic].encoding, payloads)
-            log_ns = payloads.log_ns
-            spans[topic] = (log_ns.size, int(log_ns[0]), int(log_ns[-1])) if log_ns.size else (0, None, None)
-            del payloads
+            msgs = got.result(reader)
+            spans[topic] = (got.count, got.first, got.last)
+            del got
             if isinstance(msgs, ImuMessages):
                 imu[topic] = msgs
             elif isinstance(msgs, FixMessages):
@@ -571,10 +579,83 @@ class _Payloads:
         return bytes(self.buffer[s:s + int(self.lengths[i])])
 
 
-def _collect(label: str, reader: Any, conns: Sequence[Any], wanted: Sequence[str]) -> dict[str, _Payloads]:
-    """Raw payloads and log times of the wanted topics, in one pass over the bag."""
-    acc: dict[str, tuple[list[int], list[int], bytearray]] = {t: ([], [], bytearray()) for t in wanted}
+class _Sink:
+    """One topic's messages as the bag is read, piece by piece in log-time order: decoded as they
+    come (:class:`navpp.io.messages.TopicDecoder`, onto a spill file beyond ``memory`` bytes) when
+    the bag's definition has the standard layout, else kept as payloads for rosbags'
+    per-message decoding (:func:`_decode_each`); the count and first / last log time (ns)."""
+
+    def __init__(self, label: str, topic: str, plan: tuple[str, str, bool], encoding: str, memory: int | None,
+                 expected: int) -> None:
+        self.label, self.topic = label, topic
+        self.msgtype, self.rosname, standard = plan
+        decoder = _bulk_decoder() if standard else None
+        self.decoder = None if decoder is None else self._checked(
+            lambda: decoder(topic, self.msgtype, encoding, source=label, memory=memory, expected=expected))
+        self.parts: list[_Payloads] = []
+        self.count = 0
+        self.first: int | None = None
+        self.last: int | None = None
+
+    def _checked(self, call: Callable[[], Any]) -> Any:
+        """``call()``, its InputError naming the bag first."""
+        try:
+            return call()
+        except InputError as exc:
+            text = str(exc)
+            raise InputError(text if text.startswith(self.label) else f"{self.label}: {text}") from None
+
+    def add(self, buffer: Any, starts: np.ndarray, lengths: np.ndarray, log_ns: np.ndarray) -> None:
+        """Messages ``buffer[starts[i]:starts[i] + lengths[i]]`` with their log times (ns), in order."""
+        n = int(starts.shape[0])
+        if n == 0:
+            return
+        decoder = self.decoder
+        if decoder is not None:
+            self._checked(lambda: decoder.add(buffer, starts, lengths, log_ns))
+        else:   # the payloads gathered into one buffer of their own
+            ends = np.cumsum(lengths)
+            take = np.arange(int(ends[-1]), dtype=np.int64) + np.repeat(starts - (ends - lengths), lengths)
+            data = bytearray(memoryview(np.frombuffer(buffer, dtype=np.uint8)[take]))
+            self.parts.append(_Payloads(data, ends - lengths, np.asarray(lengths, np.int64), np.array(log_ns)))
+        if self.first is None:
+            self.first = int(log_ns[0])
+        self.last = int(log_ns[-1])
+        self.count += n
+
+    def result(self, reader: Any) -> Messages:
+        if self.decoder is not None and self.count:
+            out = self.decoder.result()
+            if not isinstance(out, _RESULT_CLASS[self.msgtype]):
+                raise TypeError(f"the decoder returned {type(out).__name__} for {self.msgtype}")
+            return out
+        parts = self.parts or [_Payloads(bytearray(), *(np.zeros(0, np.int64),) * 3)]
+        base = np.cumsum([0] + [len(p.buffer) for p in parts[:-1]])
+        payloads = _Payloads(bytearray().join(p.buffer for p in parts),
+                             np.concatenate([p.starts + b for p, b in zip(parts, base.tolist())]),
+                             np.concatenate([p.lengths for p in parts]), np.concatenate([p.log_ns for p in parts]))
+        self.parts = []
+        return _decode_each(self.label, reader, self.topic, self.msgtype, self.rosname, payloads)
+
+
+#: Bytes of a topic's payloads gathered from rosbags' iteration before they are decoded.
+_BATCH_BYTES = 4 << 20
+
+
+def _collect(label: str, reader: Any, conns: Sequence[Any], sinks: dict[str, _Sink]) -> None:
+    """The wanted topics' payloads and log times in one pass over the bag (rosbags' iteration,
+    log-time order), handed to their sinks in batches of about :data:`_BATCH_BYTES`."""
+    acc: dict[str, tuple[list[int], list[int], bytearray]] = {t: ([], [], bytearray()) for t in sinks}
     last: list[Any] = [None, None]
+
+    def flush(topic: str) -> None:
+        times, lengths, buf = acc[topic]
+        lens = np.array(lengths, dtype=np.int64)
+        starts = np.zeros(lens.size, dtype=np.int64)
+        np.cumsum(lens[:-1], out=starts[1:])
+        sinks[topic].add(buf, starts, lens, np.array(times, dtype=np.int64))
+        acc[topic] = ([], [], bytearray())
+
     if conns:
         try:
             for conn, t, data in reader.messages(connections=conns):
@@ -584,22 +665,19 @@ def _collect(label: str, reader: Any, conns: Sequence[Any], wanted: Sequence[str
                 buf += data
                 last[0] = conn.topic
                 last[1] = t
+                if len(buf) >= _BATCH_BYTES:
+                    flush(conn.topic)
         except NavppError:
             raise
         except Exception as exc:  # noqa: BLE001 - damaged chunks / pages: rosbags' backends raise many kinds
             topic, t = last
-            n = sum(len(v[0]) for v in acc.values())
-            where = (f"after message {len(acc[topic][0]) - 1} of topic {topic!r} (log time {t * 1e-9:.9f} s)"
-                     if topic is not None else "before the first message")
+            n = sum(len(v[0]) + sinks[k].count for k, v in acc.items())
+            where = (f"after message {sinks[topic].count + len(acc[topic][0]) - 1} of topic {topic!r} (log time "
+                     f"{t * 1e-9:.9f} s)" if topic is not None else "before the first message")
             raise InputError(f"{label}: cannot read the bag {where}, {n} messages read: {_reason(exc)} "
                              "(truncated or damaged file?)") from None
-    out = {}
-    for topic, (times, lengths, buf) in acc.items():
-        lens = np.array(lengths, dtype=np.int64)
-        starts = np.zeros(lens.size, dtype=np.int64)
-        np.cumsum(lens[:-1], out=starts[1:])
-        out[topic] = _Payloads(buf, starts, lens, np.array(times, dtype=np.int64))
-    return out
+    for topic in sinks:
+        flush(topic)
 
 
 #: Length of a ROS 1 message-data record header: the fields op (8 bytes with its length
@@ -615,14 +693,17 @@ def _u32(b: np.ndarray, pos: np.ndarray) -> np.ndarray:
             | (b[p + 3].astype(np.int64) << 24))
 
 
-def _collect_ros1(reader: Any, bag_topics: Any, wanted: Sequence[str]) -> dict[str, _Payloads] | None:
+def _collect_ros1(reader: Any, bag_topics: Any, wanted: Sequence[str], sinks: dict[str, _Sink]) -> bool | None:
     """The ROS 1 fast path of :func:`_collect`: payloads located through the bag index.
 
     rosbags' own message iteration parses a record header per message in Python; here each
-    needed chunk is decompressed once and its message records are located with numpy from
-    the index offsets that rosbags has already read.  The order is AnyReader's: by log time,
-    ties in file, connection and index order.  Returns None (the caller then uses rosbags'
-    iteration, which also reports damage precisely) when anything is not as expected.
+    needed chunk is decompressed once, its message records are located with numpy from the
+    index offsets that rosbags has already read, and each topic's messages of the chunk go to
+    its sink straight from the chunk.  The order is AnyReader's: by log time, ties in file,
+    connection and index order; the chunks are read in file order, so every topic's messages
+    must come chunk after chunk in that order (as recorders write them).  Returns True, or None
+    (the caller then uses rosbags' iteration, with new sinks, which also reports damage
+    precisely) when anything is not as expected.
     """
     try:
         readers = list(reader.readers)
@@ -641,26 +722,23 @@ def _collect_ros1(reader: Any, bag_topics: Any, wanted: Sequence[str]) -> dict[s
             order = np.argsort(a[:, 0], kind="stable")
             a, rdx = a[order], rdx[order]
             key = (rdx << 48) | a[:, 1]  # (file, chunk position): chunk positions are < 2**48
-            group = np.argsort(key, kind="stable")
-            keys, first = np.unique(key[group], return_index=True)
-            bounds = dict(zip(keys.tolist(), zip(first.tolist(), [*first[1:].tolist(), len(group)])))
-            per_topic[topic] = (a, group, bounds, bytearray(), np.zeros(len(a), np.int64),
-                                np.zeros(len(a), np.int64))
-        all_keys = sorted({k for _, _, bounds, *_ in per_topic.values() for k in bounds})
+            if np.any(key[1:] < key[:-1]):
+                return None     # the log-time order goes back to an earlier chunk
+            keys, first = np.unique(key, return_index=True)
+            bounds = dict(zip(keys.tolist(), zip(first.tolist(), [*first[1:].tolist(), len(key)])))
+            per_topic[topic] = (a, bounds)
+        all_keys = sorted({k for _, bounds in per_topic.values() for k in bounds})
         for key in all_keys:
             r = readers[key >> 48]
             chunk = r.chunks[key & ((1 << 48) - 1)]
             r.bio.seek(chunk.datapos)
             raw = chunk.decompressor(r.bio.read(chunk.datasize))
             b = np.frombuffer(raw, dtype=np.uint8)
-            for a, group, bounds, buf, topic_starts, topic_lengths in per_topic.values():
+            for topic, (a, bounds) in per_topic.items():
                 if key not in bounds:
                     continue
                 lo, hi = bounds[key]
-                rows = group[lo:hi]
-                offs = a[rows, 2]
-                if offs.size == 0:
-                    continue
+                offs = a[lo:hi, 2]
                 if offs.min() < 0 or offs.max() + 4 + _ROS1_MSG_HEADER_LEN + 4 > b.size:
                     return None
                 if np.any(_u32(b, offs) != _ROS1_MSG_HEADER_LEN):
@@ -676,45 +754,20 @@ def _collect_ros1(reader: Any, bag_topics: Any, wanted: Sequence[str]) -> dict[s
                 starts = offs + 4 + _ROS1_MSG_HEADER_LEN + 4
                 if np.any(starts + lengths > b.size):
                     return None
-                # copy this chunk's payloads of the topic to the end of the topic's buffer
-                ends = np.cumsum(lengths)
-                take = np.arange(int(ends[-1]), dtype=np.int64) + np.repeat(starts - (ends - lengths), lengths)
-                topic_starts[rows] = len(buf) + ends - lengths
-                topic_lengths[rows] = lengths
-                buf += memoryview(b[take])
-        return {t: _Payloads(buf, starts, lengths, np.ascontiguousarray(a[:, 0]))
-                for t, (a, _, _, buf, starts, lengths) in per_topic.items()}
+                sinks[topic].add(b, starts, lengths, a[lo:hi, 0])
+        return True
+    except InputError:
+        raise
     except Exception:  # noqa: BLE001 - rosbags internals changed or the bag is damaged: use the library path
         return None
 
 
 def _bulk_decoder() -> Callable[..., Any] | None:
-    """``navpp.io.messages.decode`` when that module exists, else None."""
-    try:
-        from navpp.io import messages
-    except ModuleNotFoundError as exc:
-        if exc.name == "navpp.io.messages":
-            return None
-        raise
-    return getattr(messages, "decode", None)
+    """:class:`navpp.io.messages.TopicDecoder` (the bulk decoder; tests replace it with None to
+    decode every message with rosbags)."""
+    from navpp.io.messages import TopicDecoder
 
-
-def _decode(label: str, reader: Any, topic: str, msgtype: str, rosname: str, standard: bool, encoding: str,
-            payloads: _Payloads) -> Messages:
-    if standard and len(payloads):
-        decode = _bulk_decoder()
-        if decode is not None:
-            try:
-                out = decode(msgtype, encoding, (payloads.buffer, payloads.starts, payloads.lengths),
-                             payloads.log_ns, topic, source=label)
-            except InputError as exc:
-                text = str(exc)
-                raise InputError(text if text.startswith(label) else f"{label}: {text}") from None
-            if out is not None:
-                if not isinstance(out, _RESULT_CLASS[msgtype]):
-                    raise TypeError(f"navpp.io.messages.decode returned {type(out).__name__} for {msgtype}")
-                return out
-    return _decode_each(label, reader, topic, msgtype, rosname, payloads)
+    return TopicDecoder
 
 
 def _decode_each(label: str, reader: Any, topic: str, msgtype: str, rosname: str, payloads: _Payloads) -> Messages:
