@@ -441,11 +441,12 @@ class FusedRunner:
         self.x_size, self.n_err = NOMINAL_SIZE, model.dim
         self.no_nodes = (np.empty((0, 2, self.x_size)), np.empty((0, 3, self.n_err, self.n_err)))
 
-    def run(self, i: int, state: GaussianState, stop: int) -> tuple[int, GaussianState]:
-        """Epochs ``i`` .. at most ``stop - 1`` from ``state``; returns the first epoch not run
-        and the state before it."""
+    def run(self, i: int, state: GaussianState, stop: int) -> tuple[int, GaussianState, bool]:
+        """Epochs ``i`` .. at most ``stop - 1`` from ``state``; returns the first epoch not run,
+        the state before it and whether the generic loop must run that epoch
+        (:meth:`~navpp.engine.loop.FastPath.run`)."""
         if self.generic[i]:
-            return i, state
+            return i, state, True
         rec = self.recorder
         if self.report[i:stop].any():
             stop = i + int(np.argmax(self.report[i:stop])) + 1
@@ -462,8 +463,9 @@ class FusedRunner:
             self.fix_lat, self.fix_lon, self.fix_alt, self.fix_var, self.source.lever, self.filt.gate_threshold(3),
             rec.nu, rec.nis, rec.accepted, rec.forced, rec.s_used, rec.r_used, rec.bias, rec.bias_var, self.knots,
             keep, nodes_x, nodes_P, *self.prop, *st.arguments())
+        leaves = j < stop           # the kernel stopped before an epoch it does not run
         if j == i:
-            return i, state
+            return i, state, leaves
         if keep:
             rec.fused_nodes(self.t[i:j], self.fix[i:j], self.coast[i:j], nodes_x, nodes_P)
         rec.fused_epochs(self.knots[:n_knots], t, int(self.sample[i:j].max()))
@@ -476,7 +478,7 @@ class FusedRunner:
             st.ran(self.aiding, self.filt, float(self.t[i:j][cons][-1]))
         if self.report[j - 1] and rec.progress is not None:
             rec.progress(int(self.index[j - 1]) / rec.n_epochs)
-        return j, GaussianState(t, x, P)
+        return j, GaussianState(t, x, P), leaves
 
 
 def fused_runner(filt: Filter, model: Any, source: Any, recorder: Any, epochs: Sequence[Any]) -> FusedRunner | None:
