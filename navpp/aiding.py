@@ -23,7 +23,7 @@ the configuration and the data, at which times they apply:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -72,6 +72,34 @@ class AidCounts:
         """``{kind: {"applied": n, "rejected": n}}`` for the kinds that were tried."""
         return {k: {"applied": self.applied[k], "rejected": self.rejected[k]} for k in KINDS
                 if self.applied[k] or self.rejected[k]}
+
+
+@dataclass
+class ZuptCheck:
+    """ZUPT's consistency check (:meth:`Aiding.observed`) as it stands: ``z``, the last normalised
+    innovations (each (3,), oldest first, at most :data:`ZUPT_RUN`) of still run ``run`` (-1:
+    none); ``vetoed_run``, the still run it has stopped (-1: none)."""
+
+    run: int = -1
+    z: list[np.ndarray] = field(default_factory=list)
+    vetoed_run: int = -1
+
+    def add(self, run: int, z: np.ndarray) -> bool:
+        """ZUPT's normalised innovation ``z`` (3,) in still run ``run``; True when the mean of the
+        last :data:`ZUPT_RUN` is beyond :data:`ZUPT_Z` sigmas on an axis (``run`` is then vetoed)."""
+        if self.run != run:
+            self.z = []
+        self.run = run
+        self.z.append(z)
+        if len(self.z) > ZUPT_RUN:
+            self.z.pop(0)
+        if len(self.z) == ZUPT_RUN:
+            mean = np.mean(self.z, axis=0) * math.sqrt(ZUPT_RUN)
+            if np.any(np.abs(mean) > ZUPT_Z):
+                self.vetoed_run = run
+                self.z = []
+                return True
+        return False
 
 
 class Aiding:
@@ -153,12 +181,11 @@ class Aiding:
             self.vel, self.vel_var, self.vel_ok = v, var, ok
             self.vel_t = np.asarray(gnss.t, dtype=float)[sel]
         self.counts = AidCounts.empty()
-        self._last_constraint_t: float | None = None
+        #: the time of the last constraint epoch (s; None before the first): ZARU's mean gyro starts there
+        self.last_constraint_t: float | None = None
         # the still runs, numbered (ZUPT's own consistency check stops a run that is not still)
         self._run_id = np.cumsum(~self.still) if (self.zupt or self.zaru) else None
-        self._vetoed_run = -1
-        self._zupt_z: list[np.ndarray] = []     # ZUPT's last normalised innovations, of run _zupt_run
-        self._zupt_run = -1
+        self.zupt_check = ZuptCheck()
         self.vetoes: list[float] = []
 
     @property
@@ -207,6 +234,14 @@ class Aiding:
             times, fix, cons = times[keep], fix[keep], cons[keep]
         return times, fix, cons
 
+    def still_runs(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """At each epoch time ``t`` (s): whether the IMU sample :meth:`constraint_measurements`
+        reads there is still, and the number of its still run (:class:`ZuptCheck`; 0 without ZUPT
+        or ZARU)."""
+        i = np.clip(np.searchsorted(self.t, t), 0, self.t.shape[0] - 1)
+        runs = self._run_id[i] if self._run_id is not None else np.zeros(i.shape, np.int64)
+        return self.still[i], runs
+
     def _gyro_at(self, t: float) -> np.ndarray:
         i = int(np.searchsorted(self.t, t))
         if i <= 0:
@@ -252,20 +287,9 @@ class Aiding:
         if meas.kind != "zupt" or self._run_id is None:
             return
         i = int(np.clip(np.searchsorted(self.t, inn.t), 0, self.t.shape[0] - 1))
-        run = int(self._run_id[i])
-        if self._zupt_run != run:
-            self._zupt_z = []
-        self._zupt_run = run
         sd = np.sqrt(np.maximum(np.diagonal(inn.S), 1e-30))
-        self._zupt_z.append(np.asarray(inn.nu, dtype=float) / sd)
-        if len(self._zupt_z) > ZUPT_RUN:
-            self._zupt_z.pop(0)
-        if len(self._zupt_z) == ZUPT_RUN:
-            z = np.mean(self._zupt_z, axis=0) * math.sqrt(ZUPT_RUN)
-            if np.any(np.abs(z) > ZUPT_Z):
-                self._vetoed_run = run
-                self.vetoes.append(float(inn.t))
-                self._zupt_z = []
+        if self.zupt_check.add(int(self._run_id[i]), np.asarray(inn.nu, dtype=float) / sd):
+            self.vetoes.append(float(inn.t))
 
     def _odometry_at(self, t: float, values: np.ndarray, std: np.ndarray) -> tuple[float, float] | None:
         """An odometry quantity at ``t`` and its 1-sigma: linear between the two samples around ``t``
@@ -340,7 +364,7 @@ class Aiding:
         ``P``): NHC for a car; ZUPT and ZARU when the IMU around ``t`` is still and the speeds
         allow it."""
         out: list = []
-        t_prev, self._last_constraint_t = self._last_constraint_t, t
+        t_prev, self.last_constraint_t = self.last_constraint_t, t
         if self.nhc:
             out.append(NonHolonomic.at(t, self.nhc_std, self.c_vb, self._gyro_at(t), self.nhc_point))
         odo = self.odometer(t, x)
@@ -354,7 +378,7 @@ class Aiding:
         i = int(np.clip(np.searchsorted(self.t, t), 0, self.t.shape[0] - 1))
         if not self.still[i]:
             return out
-        if self._run_id is not None and self._run_id[i] == self._vetoed_run:
+        if self._run_id is not None and self._run_id[i] == self.zupt_check.vetoed_run:
             return out
         speed = float(np.linalg.norm(x[4:7]))
         speed_std = float(np.sqrt(max(np.trace(P[VEL, VEL]), 0.0)))
@@ -404,4 +428,4 @@ def odometry_zero(t: np.ndarray, odo_t: np.ndarray, speed: np.ndarray, max_speed
     return ok
 
 
-__all__ = ["KINDS", "AidCounts", "Aiding", "odometry_zero", "vehicle_matrix"]
+__all__ = ["KINDS", "AidCounts", "Aiding", "ZuptCheck", "odometry_zero", "vehicle_matrix"]

@@ -15,7 +15,7 @@ from scenarios import load_benchmark
 from typer.testing import CliRunner
 
 from navpp import api, engine
-from navpp.aiding import Aiding, vehicle_matrix
+from navpp.aiding import ZUPT_RUN, Aiding, ZuptCheck, vehicle_matrix
 from navpp.cli import app
 from navpp.config import config_from_dict
 from navpp.errors import ConfigError
@@ -100,6 +100,20 @@ def _run(rec, name="ekf", **sections):
                         runtime_s=res.runtime_s, imu_samples=len(rec.imu), gnss_epochs=res.gnss_epochs,
                         gnss_rejected=res.gnss_rejected, updates=res.updates)
     return res, m
+
+
+def test_zupt_check_vetoes_a_run_whose_innovations_keep_one_direction():
+    """The mean of the last ZUPT_RUN normalised innovations beyond ZUPT_Z sigmas vetoes the run;
+    a new run starts an empty ring, and a vetoed run's ring is emptied."""
+    check = ZuptCheck()
+    drift = np.array([0.0, 2.0, 0.0])                   # 2 sigma each: mean 2 * sqrt(10) = 6.3 sigma
+    assert not any(check.add(4, drift) for _ in range(ZUPT_RUN - 1))
+    assert not check.add(5, drift) and check.run == 5 and len(check.z) == 1       # another run
+    assert not any(check.add(5, drift) for _ in range(ZUPT_RUN - 2))
+    assert check.add(5, drift) and check.vetoed_run == 5 and check.z == []
+    white = ZuptCheck()
+    assert not any(white.add(1, np.array([1.0, -1.0, 0.5]) * (-1) ** k) for k in range(3 * ZUPT_RUN))
+    assert white.vetoed_run == -1 and len(white.z) == ZUPT_RUN
 
 
 def test_standstill_detector_finds_the_stops(drive):

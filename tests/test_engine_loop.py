@@ -124,6 +124,35 @@ def test_a_stage_sees_the_state_the_previous_stage_and_the_source_left():
     assert rec.outcomes[0].prior_used is rec.outcomes[0].prior       # the first applied update's prior
 
 
+def test_the_fast_path_is_asked_once_for_an_epoch_it_leaves():
+    """A fast path that runs epochs two at a time but leaves epoch 3 (and cuts a stretch short at
+    epoch 6): the generic loop takes epoch 3 at once, the fast path goes on at epochs 4 and 6, and
+    the run is the generic loop's."""
+    meas = _measurements(8)
+    schedule = [Epoch(m.t, k) for k, m in enumerate(meas)]
+    generic = Keep()
+    oracle = run_epochs(EKF(), LinearModel(PHI, Q), GaussianState(0.0, np.zeros(2), np.eye(2)), schedule,
+                        OneStage(meas), generic)
+
+    class TwoAtATime:
+        def __init__(self) -> None:
+            self.asked: list[int] = []
+
+        def run(self, i, state, stop):
+            self.asked.append(i)
+            if i == 3:
+                return i, state, True
+            j = min(i + 2, 3 if i < 3 else stop, stop)
+            return j, generic.outcomes[j - 1].state, j == 3
+
+    fast, rec = TwoAtATime(), Keep()
+    last = run_epochs(EKF(), LinearModel(PHI, Q), GaussianState(0.0, np.zeros(2), np.eye(2)), schedule,
+                      OneStage(meas), rec, fast=fast)
+    assert fast.asked == [0, 2, 4, 6]
+    assert [e.index for e, _ in rec.predictions] == [3]
+    np.testing.assert_array_equal(last.x, oracle.x)
+
+
 def test_a_rejected_measurement_applies_nothing():
     far = [LinearMeasurement(1.0, np.array([1e6]), H, R)]
     rec = Keep()

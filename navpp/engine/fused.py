@@ -369,17 +369,12 @@ class _StandstillInputs:
         if not cons.any():
             return
         at = np.flatnonzero(cons)
-        imu_t = aiding.t
-        sample = np.clip(np.searchsorted(imu_t, t[at]), 0, imu_t.shape[0] - 1)
-        run_id = aiding._run_id
-        assert run_id is not None           # ZUPT or ZARU is on (standstill_only)
-        self.run[at] = run_id[sample]
-        self.cons[at] = aiding.still[sample]
+        self.cons[at], self.run[at] = aiding.still_runs(t[at])
         at = at[self.cons[at]]
         if not aiding.zaru:
             return
         # ZARU: the mean gyro since the previous constraint epoch when every sample in between is still
-        t_prev = aiding._last_constraint_t
+        t_prev = aiding.last_constraint_t
         for e in at:
             te = float(t[e])
             meas = aiding.zero_rate(t_prev, te)
@@ -394,17 +389,18 @@ class _StandstillInputs:
 
     def load(self, aiding: Aiding) -> None:
         """The ZUPT check's state as ``aiding`` has it (the generic loop's epochs change it)."""
-        self.aid_state[:] = (aiding._vetoed_run, aiding._zupt_run, len(aiding._zupt_z))
-        for r, z in enumerate(aiding._zupt_z):
+        check = aiding.zupt_check
+        self.aid_state[:] = (check.vetoed_run, check.run, len(check.z))
+        for r, z in enumerate(check.z):
             self.ring[r] = z
 
     def ran(self, aiding: Aiding, filt: Filter, t_last: float) -> None:
         """After a stretch whose last still epoch was at ``t_last`` s: ``aiding`` and ``filt`` as the
         generic loop would leave them (the ZUPT check's ring, the counts, the last constraint time,
         the accepted kinds)."""
-        aiding._last_constraint_t = t_last
-        aiding._zupt_run = int(self.aid_state[1])
-        aiding._zupt_z = [self.ring[r].copy() for r in range(int(self.aid_state[2]))]
+        aiding.last_constraint_t = t_last
+        aiding.zupt_check.run = int(self.aid_state[1])
+        aiding.zupt_check.z = [self.ring[r].copy() for r in range(int(self.aid_state[2]))]
         for kind, n in zip(("zupt", "zaru"), self.counts):
             if n:
                 aiding.counts.applied[kind] += int(n)
@@ -441,11 +437,12 @@ class FusedRunner:
         self.x_size, self.n_err = NOMINAL_SIZE, model.dim
         self.no_nodes = (np.empty((0, 2, self.x_size)), np.empty((0, 3, self.n_err, self.n_err)))
 
-    def run(self, i: int, state: GaussianState, stop: int) -> tuple[int, GaussianState]:
-        """Epochs ``i`` .. at most ``stop - 1`` from ``state``; returns the first epoch not run
-        and the state before it."""
+    def run(self, i: int, state: GaussianState, stop: int) -> tuple[int, GaussianState, bool]:
+        """Epochs ``i`` .. at most ``stop - 1`` from ``state``; returns the first epoch not run,
+        the state before it and whether the generic loop must run that epoch
+        (:meth:`~navpp.engine.loop.FastPath.run`)."""
         if self.generic[i]:
-            return i, state
+            return i, state, True
         rec = self.recorder
         if self.report[i:stop].any():
             stop = i + int(np.argmax(self.report[i:stop])) + 1
@@ -462,8 +459,9 @@ class FusedRunner:
             self.fix_lat, self.fix_lon, self.fix_alt, self.fix_var, self.source.lever, self.filt.gate_threshold(3),
             rec.nu, rec.nis, rec.accepted, rec.forced, rec.s_used, rec.r_used, rec.bias, rec.bias_var, self.knots,
             keep, nodes_x, nodes_P, *self.prop, *st.arguments())
+        leaves = j < stop           # the kernel stopped before an epoch it does not run
         if j == i:
-            return i, state
+            return i, state, leaves
         if keep:
             rec.fused_nodes(self.t[i:j], self.fix[i:j], self.coast[i:j], nodes_x, nodes_P)
         rec.fused_epochs(self.knots[:n_knots], t, int(self.sample[i:j].max()))
@@ -476,7 +474,7 @@ class FusedRunner:
             st.ran(self.aiding, self.filt, float(self.t[i:j][cons][-1]))
         if self.report[j - 1] and rec.progress is not None:
             rec.progress(int(self.index[j - 1]) / rec.n_epochs)
-        return j, GaussianState(t, x, P)
+        return j, GaussianState(t, x, P), leaves
 
 
 def fused_runner(filt: Filter, model: Any, source: Any, recorder: Any, epochs: Sequence[Any]) -> FusedRunner | None:

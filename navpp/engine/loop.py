@@ -95,10 +95,11 @@ class FastPath(Protocol):
     """Runs stretches of common epochs faster than the generic loop, with the same result
     (:class:`navpp.engine.fused.FusedRunner`)."""
 
-    def run(self, i: int, state: GaussianState, stop: int) -> tuple[int, GaussianState]:
+    def run(self, i: int, state: GaussianState, stop: int) -> tuple[int, GaussianState, bool]:
         """Epochs ``i`` .. at most ``stop - 1`` of the run from ``state`` (the state before
-        epoch ``i``); returns the first epoch it did not run (``i``: none) and the state before
-        it."""
+        epoch ``i``); returns the first epoch it did not run (``i``: none), the state before it
+        and whether that epoch is one it leaves to the generic loop (False: it cut the stretch
+        short there, and may run that epoch when asked again)."""
         ...
 
 
@@ -110,9 +111,9 @@ def run_epochs(filt: Filter, model: Any, state: GaussianState, epochs: Iterable[
     update of every measurement epoch and after every update.  A
     :class:`~navpp.errors.FilterDivergedError` of the filter or the check propagates.  ``fast``
     (built for this run's epochs, a sequence then) runs what it can; each epoch it leaves goes
-    through :func:`epoch_step` (after a stretch it ends, ``fast`` is asked again first: it may end
-    a stretch early, at its buffer's length or a progress report).  The spilled IMU rows the run
-    has passed leave memory (:class:`~navpp.spill.Behind`)."""
+    through :func:`epoch_step` at once (``fast`` tries each epoch once; a stretch it cuts short, at
+    its buffer's length or a progress report, it goes on with when asked again).  The spilled IMU
+    rows the run has passed leave memory (:class:`~navpp.spill.Behind`)."""
     ins = getattr(model, "ins", model)          # the INS under an augmented model
     behind = Behind(getattr(ins, "t", None), getattr(ins, "gyro", None), getattr(ins, "accel", None))
     if fast is None:
@@ -123,9 +124,9 @@ def run_epochs(filt: Filter, model: Any, state: GaussianState, epochs: Iterable[
     run = epochs if isinstance(epochs, Sequence) else list(epochs)
     i, n = 0, len(run)
     while i < n:
-        j, state = fast.run(i, state, n)
-        if j == i:          # an epoch ``fast`` leaves (not one after a stretch it cut short)
-            state = epoch_step(filt, model, run[i], state, source, recorder, check)
+        j, state, leaves = fast.run(i, state, n)
+        if leaves:
+            state = epoch_step(filt, model, run[j], state, source, recorder, check)
             j += 1
         i = j
         behind(state.t)

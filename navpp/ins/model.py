@@ -238,10 +238,12 @@ _NAV = DX_BG
 @njit(cache=True, inline="always")
 def _segment_phi_blocks(F_start: np.ndarray, F_end: np.ndarray, fn: np.ndarray, T: float, FT: np.ndarray,
                         FT2: np.ndarray, Phi_j: np.ndarray) -> None:
-    """:func:`_segment_phi_shared` with the block structure: Phi (15, 15) of one segment of ``T`` s
-    into ``Phi_j`` (its zero block below the bias columns left as it is: zero), ``FT`` and ``FT2``
-    (15, 15) scratch.  With ``FT = [[X, Y], [0, diag d]]`` (X the navigation block), the powers
-    are ``FT^2 = [[X X, X Y + Y d], [0, d^2]]`` and ``FT^3 = FT FT^2``, so every product has the
+    """Phi (15, 15) of one segment of ``T`` s, ``I + FT + (FT)^2/2 + (FT)^3/6`` with F the mean of
+    the x-dependent parts of F at its two ends (:func:`_error_dynamics_into`) and its mean specific
+    force ``fn``, written for the block structure into ``Phi_j`` (its zero block below the bias
+    columns left as it is: zero), ``FT`` and ``FT2`` (15, 15) scratch.  With
+    ``FT = [[X, Y], [0, diag d]]`` (X the navigation block), the powers are
+    ``FT^2 = [[X X, X Y + Y d], [0, d^2]]`` and ``FT^3 = FT FT^2``, so every product has the
     sparse X (about 28 of 81 elements non-zero) on the left and skips its zeros."""
     for r in range(N_ERR):
         for c in range(N_ERR):
@@ -303,7 +305,8 @@ def _block_product(Phi_j: np.ndarray, Phi: np.ndarray, out: np.ndarray) -> None:
 
 @njit(cache=True, inline="always")
 def _trapezoid_blocks(Q: np.ndarray, Phi_j: np.ndarray, psd: np.ndarray, T: float, W: np.ndarray) -> None:
-    """:func:`_trapezoid_step` in place with the block structure: ``Q <- Phi_j (Q + D) Phi_j^T + D``,
+    """``Q`` (15, 15) carried over one segment of ``T`` s with its trapezoid noise, in place and
+    written for the block structure: ``Q <- Phi_j (Q + D) Phi_j^T + D``,
     ``D = diag(psd) T / 2``, for a block upper-triangular ``Phi_j`` and a symmetric ``Q`` whose bias
     block is diagonal (so is the result's, and it is exactly symmetric: the upper triangle is
     computed and mirrored); ``W`` (15, 15) scratch."""
@@ -373,32 +376,6 @@ def transition_from_segments(x_start: np.ndarray, seg_x: np.ndarray, seg_fn: np.
     return Phi, Qd
 
 
-@njit(cache=True, inline="always")
-def _trapezoid_step(Q: np.ndarray, Phi_j: np.ndarray, psd: np.ndarray, T: float) -> np.ndarray:
-    """``Q`` (15, 15) carried over one segment of ``T`` s with its trapezoid noise:
-    ``Phi_j (Q + D) Phi_j^T + D``, ``D = diag(psd) T / 2`` (``Q`` is not modified)."""
-    Qn = Q.copy()
-    for k in range(N_ERR):
-        Qn[k, k] += 0.5 * T * psd[k]
-    out: np.ndarray = Phi_j @ Qn @ Phi_j.T
-    for k in range(N_ERR):
-        out[k, k] += 0.5 * T * psd[k]
-    return out
-
-
-@njit(cache=True, inline="always")
-def _segment_phi_shared(F_start: np.ndarray, F_end: np.ndarray, fn: np.ndarray, T: float) -> np.ndarray:
-    """Phi (15, 15) of one segment of ``T`` s from the x-dependent parts of F at its two ends
-    (:func:`_error_dynamics_state`) and its mean specific force ``fn``: the same F element for
-    element (the specific-force block is the mean of two equal blocks)."""
-    F = 0.5 * (F_start + F_end)
-    _set_neg_skew(F, DX_VEL, DX_ATT, fn)
-    FT = F * T
-    FT2 = FT @ FT
-    Phi: np.ndarray = np.eye(N_ERR) + FT + 0.5 * FT2 + (FT2 @ FT) / 6.0
-    return Phi
-
-
 @njit(cache=True)
 def integrate_with_jacobian(x: np.ndarray, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, t_start: float,
                             t_end: float, out: np.ndarray, record: bool, psd: np.ndarray, inv_tau_g: float,
@@ -436,19 +413,24 @@ def _noise_groups_from_segments(x_start: np.ndarray, seg_x: np.ndarray, seg_fn: 
                                 ) -> np.ndarray:
     """Qd of every noise group over the strapdown's segments, in one pass, (G, 15, 15).
 
-    Same discretisation as :func:`transition_from_segments`, with the psd masked to one group
+    Same discretisation as :func:`transition_from_segments`, on the same block structure
+    (:func:`_segment_phi_blocks`, :func:`_trapezoid_blocks`), with the psd masked to one group
     at a time: Qd is linear in the psd, so the groups sum to the interval's Qd.
     """
     G = psd_groups.shape[0]
     Qg = np.zeros((G, N_ERR, N_ERR))
-    F_prev = _error_dynamics_state(x_start, inv_tau_g, inv_tau_a)
+    Phi_j = np.zeros((N_ERR, N_ERR))
+    work = np.zeros((2, N_ERR, N_ERR))
+    F_prev = np.zeros((N_ERR, N_ERR))
+    F_next = np.zeros((N_ERR, N_ERR))
+    _error_dynamics_into(x_start, inv_tau_g, inv_tau_a, F_prev)
     for j in range(n_seg):
         T = seg_T[j]
-        F_next = _error_dynamics_state(seg_x[j], inv_tau_g, inv_tau_a)
-        Phi_j = _segment_phi_shared(F_prev, F_next, seg_fn[j], T)
+        _error_dynamics_into(seg_x[j], inv_tau_g, inv_tau_a, F_next)
+        _segment_phi_blocks(F_prev, F_next, seg_fn[j], T, work[0], work[1], Phi_j)
         for g in range(G):
-            Qg[g] = _trapezoid_step(Qg[g], Phi_j, psd_groups[g], T)
-        F_prev = F_next
+            _trapezoid_blocks(Qg[g], Phi_j, psd_groups[g], T, work[0])
+        F_prev, F_next = F_next, F_prev
     return Qg
 
 
