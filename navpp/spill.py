@@ -16,6 +16,8 @@ function here, so the callers need no second path.
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import math
 import mmap
 import os
@@ -202,5 +204,28 @@ def copy_rows(rows: np.ndarray) -> np.ndarray:
     return out
 
 
+def _malloc_trim() -> Any:
+    """glibc's ``malloc_trim`` (None on another C library: musl, macOS, Windows)."""
+    name = ctypes.util.find_library("c")
+    try:
+        return ctypes.CDLL(name).malloc_trim if name else None
+    except (OSError, AttributeError):
+        return None
+
+
+_TRIM = _malloc_trim()
+
+
+def trim_heap() -> None:
+    """Give the pages of freed memory back to the system after a stage that freed large arrays.
+    glibc keeps a freed block of up to 32 MB in the process once a block that large was freed
+    (its mmap threshold rises to it), so the IMU- and GNSS-length transients of one stage stay
+    resident beside the next stage's (8-hour log: 175 MB after ``engine.run``);
+    ``malloc_trim(0)`` releases the free pages (a few ms).  Values are untouched; without glibc
+    nothing is done."""
+    if _TRIM is not None:
+        _TRIM(0)
+
+
 __all__ = ["WINDOW_ROWS", "Behind", "copy_rows", "empty_rows", "full_rows", "like", "release", "release_all",
-           "release_before", "spilled", "windows"]
+           "release_before", "spilled", "trim_heap", "windows"]

@@ -125,7 +125,7 @@ def test_a_spilled_run_writes_the_same_bytes(spill_dir, tmp_path_factory, smooth
     assert not _mapped(spill_dir) and not list(spill_dir.iterdir())
     (d0, a0), (d1, a1) = outs[1 << 30], outs[1]
     assert a0.keys() == a1.keys() and all(np.array_equal(a0[k], a1[k], equal_nan=True) for k in a0)
-    for f in ("trajectory.csv", "trajectory_forward.csv") if smooth else ("trajectory.csv",):
+    for f in ("trajectory.csv", "diagnostics.csv") + (("trajectory_forward.csv",) if smooth else ()):
         assert (d0 / f).read_bytes() == (d1 / f).read_bytes()
 
 
@@ -147,7 +147,8 @@ def test_the_spill_file_goes_on_an_interrupt(spill_dir):
         engine.run(rec, cfg, api.make_filter("ekf", cfg), progress=interrupt)
     del rec
     gc.collect()
-    assert seen == [4] and not _mapped(spill_dir) and not list(spill_dir.iterdir())
+    # the IMU's three, the path and the per-fix records nu, S, R, biases and their variance
+    assert seen == [9] and not _mapped(spill_dir) and not list(spill_dir.iterdir())
 
 
 def _spilled_copy(a: np.ndarray) -> np.ndarray:

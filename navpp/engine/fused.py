@@ -42,6 +42,7 @@ from ..ins.aids import zero_rate, zero_velocity
 from ..ins.model import InsModel, gnss_innovation, gnss_jacobian, integrate_with_jacobian, plus
 from ..ins.state import DX_ATT, DX_BG, DX_VEL, NOMINAL_SIZE, X_BG, X_VE
 from ..jitmode import interpreted
+from ..spill import Behind
 from .measurements import RunMeasurements
 from .recorder import KNOT, RunRecorder
 from .schedule import Epoch, Schedule
@@ -375,12 +376,14 @@ class _StandstillInputs:
             return
         # ZARU: the mean gyro since the previous constraint epoch when every sample in between is still
         t_prev = aiding.last_constraint_t
+        behind = Behind(aiding.t, aiding.gyro)      # a spilled gyro's pages read leave memory
         for e in at:
             te = float(t[e])
             meas = aiding.zero_rate(t_prev, te)
             if meas is not None:
                 self.zaru_ok[e], self.zaru_z[e], self.zaru_var[e] = True, meas.z, meas.R[0, 0]
             t_prev = te
+            behind(te)
 
     def arguments(self) -> tuple[Any, ...]:
         """:func:`ekf_epochs`'s still-epoch arguments, ``ep_cons`` (:attr:`cons`) on."""

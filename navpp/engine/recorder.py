@@ -20,7 +20,7 @@ from ..filters.base import GaussianState, Prediction, Update
 from ..filters.smoother import DEFAULT_BUDGET_BYTES, ForwardStore
 from ..ins.model import ATT, BA, BG, POS, VEL
 from ..ins.strapdown import NOMINAL_BA, NOMINAL_BG, PATH_SIZE
-from ..spill import full_rows, release_before
+from ..spill import empty_rows, full_rows, release_before, spilled
 from .loop import EpochOutcome
 from .results import BiasHistory, Diagnostics
 from .schedule import Epoch, GnssFixes
@@ -81,15 +81,20 @@ class RunRecorder:
         self.path = path
         self.n_path = path.shape[1]
         path[start_sample] = start.x[:self.n_path]
-        self.nu = np.full((m, 3), np.nan)
+        # the per-fix records of more than a few values a fix go on spill files beside a spilled
+        # path (8-hour log: 42 MB), their rows released behind the run (:meth:`_released_before`)
+        self.spill = spill = spilled(path)
+        self.fix_t = fixes.t           # the fixes' times, s, increasing
+        self.nu = full_rows(m, (3,), np.nan, spill)
         self.nis = np.full(m, np.nan)
         self.accepted = np.zeros(m, bool)
         self.forced = np.zeros(m, bool)
-        self.s_used = np.full((m, 3, 3), np.nan)     # each fix's innovation covariance and R as the filter had them
-        self.r_used = np.full((m, 3, 3), np.nan)
+        # each fix's innovation covariance and R as the filter had them
+        self.s_used = full_rows(m, (3, 3), np.nan, spill)
+        self.r_used = full_rows(m, (3, 3), np.nan, spill)
         self.adaptive: dict[str, np.ndarray] = {}
-        self.bias = np.empty((m, 6))
-        self.bias_var = np.empty((m, 6))
+        self.bias = empty_rows(m, (6,), np.float64, spill, "per-fix biases")
+        self.bias_var = empty_rows(m, (6,), np.float64, spill, "per-fix biases")
         # the model's extra states after each fix (the GNSS error, ENU m; the odometer's scale) and
         # their variance: (label, error index, nominal index) each
         self.extra = list(extra_states or [])
@@ -155,7 +160,7 @@ class RunRecorder:
             self.store.updated(outcome.prior_used, state, outcome.reset)
         if outcome.applied and epoch.sample >= 0:
             self.path[epoch.sample] = state.x[:self.n_path]     # the epoch's own sample shows the posterior
-        release_before(self.path, epoch.sample)      # rows before the epoch are final
+        self._released_before(epoch.sample, state.t)      # rows before the epoch are final
         self.knot(state, outcome.prior)
         k = epoch.fix
         if k >= 0:
@@ -181,7 +186,18 @@ class RunRecorder:
         self.knots.frombytes(np.ascontiguousarray(knots).tobytes())
         self.t = t
         if sample >= 0:
-            release_before(self.path, sample)
+            self._released_before(sample, t)
+
+    def _released_before(self, sample: int, t: float) -> None:
+        """The spilled path's rows before IMU sample ``sample`` and the spilled per-fix records of
+        the fixes before ``t`` (s) out of memory (:func:`~navpp.spill.release_before`: once they
+        make a window's worth)."""
+        if not self.spill:
+            return
+        release_before(self.path, sample)
+        k = int(np.searchsorted(self.fix_t, t))
+        for a in (self.nu, self.s_used, self.r_used, self.bias, self.bias_var):
+            release_before(a, k)
 
     def fused_nodes(self, t: np.ndarray, fix: np.ndarray, coast: np.ndarray, nodes_x: np.ndarray,
                     nodes_P: np.ndarray) -> None:
@@ -216,8 +232,18 @@ class RunRecorder:
     def knot_arrays_all(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The knots: times (K,) s, prior and posterior variance (K, 9) of the attitude error
         (rad^2, about the ENU axes), velocity (ENU m^2/s^2) and position (ENU m^2)."""
-        kn = np.frombuffer(self.knots, dtype=float).reshape(-1, 1 + 2 * _KNOT_N)
+        kn = self.knot_records()
         return kn[:, 0].copy(), kn[:, 1:1 + _KNOT_N].copy(), kn[:, 1 + _KNOT_N:].copy()
+
+    def knot_records(self) -> np.ndarray:
+        """The knots as recorded, no copy: (K, 19) rows of time (s), prior then posterior
+        variance of :data:`KNOT` (:meth:`knot`'s layout; a view of :attr:`knots`, which must not
+        grow while it lives)."""
+        return np.frombuffer(self.knots, dtype=float).reshape(-1, 1 + 2 * _KNOT_N)
+
+    def drop_knots(self) -> None:
+        """Free the knots once the output's 1-sigma is made from them (8-hour log: 23 MB)."""
+        self.knots = array("d")
 
     def diagnostics(self, t: np.ndarray, labels: dict[str, list[str]]) -> Diagnostics:
         """The per-fix record at the fix times ``t`` (s); an adaptive report with ``labels`` (the

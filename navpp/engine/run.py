@@ -31,7 +31,7 @@ from ..ins.gnss_error import Correlation, GnssErrorModel, GnssErrorSettings, inn
 from ..ins.model import InsModel
 from ..ins.strapdown import NOMINAL_BG
 from ..recording import ImuData, Recording
-from ..spill import release_all
+from ..spill import release_all, trim_heap
 from .checks import alignment_findings, check_data, check_imu_plausible
 from .fused import fused_runner
 from .gnss_error import (
@@ -58,7 +58,7 @@ from .prepare import (
     start_fixes,
     timing_fixes,
 )
-from .recorder import RunRecorder, new_path
+from .recorder import KNOT, RunRecorder, new_path
 from .results import RunResult, SmoothedRun
 from .schedule import GnssFixes, epochs, gnss_fixes, with_prior_std
 from .segments import ProgressFn, imu_segments, run_segments
@@ -93,6 +93,7 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
         else:
             result = run_one(recording, config, filt, progress, cov_step_s, smooth)
     compile_s = compile_seconds(rec.buffer)
+    trim_heap()         # the run's transients out of memory before the caller's writers
     if vehicle_note is not None:
         result = replace(result, notes=(vehicle_note, *result.notes))
     return replace(result, runtime_s=time.perf_counter() - t_wall - compile_s, compile_s=compile_s)
@@ -268,6 +269,7 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     """The steps of :func:`run_one`; ``log`` collects the notes and warnings as they come."""
     t_wall = time.perf_counter()
     prep = prepared(recording, config, cov_step_s, log)
+    trim_heap()         # the prepare stage's IMU-length transients
     recording, model, al, fixes = prep.recording, prep.model, prep.alignment, prep.fixes
     n_al = len(al.lines)
     log.notes += fixes.notes
@@ -314,15 +316,18 @@ def processed(recording: Recording, config: Config, filt: Filter, progress: Prog
     source = RunMeasurements(fixes, recording.gnss, lever, reopen, aiding, model=fmodel,
                              r_share=1.0 if choice is None else 1.0 - choice.share)
     check = DivergenceCheck(recording, config, filt.name, al.t, log, source)
+    fast = fused_runner(filt, fmodel, source, recorder, schedule)
+    released_imu(recording.imu, model.gyro, model.accel)    # its still epochs' ZARU read the whole gyro
     try:
-        state = run_epochs(filt, fmodel, start, schedule, source, recorder, check,
-                           fused_runner(filt, fmodel, source, recorder, schedule))
+        state = run_epochs(filt, fmodel, start, schedule, source, recorder, check, fast)
+        del fast, schedule
         check(state, state.t)
     except RunRefused:
         raise
     except FilterDivergedError as exc:
         raise check.diverged(recorder.t, exc.why or str(exc)) from None
     released_imu(recording.imu, model.gyro, model.accel)
+    trim_heap()
     if progress is not None:
         progress(1.0)
     result = finished(recording, config, filt, prep, recorder, source, smooth, log, fmodel)
@@ -400,13 +405,10 @@ def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared,
     if smooth:
         smoothed = smoothed_output(recorder, prep.model if fmodel is None else fmodel, t_out, path, fixes.t,
                                    recording.t0_ns, gyro)
-    kt, k_prior, k_post = recorder.knot_arrays_all()
-    std_out = {name: interpolated_std_rows(t_out, kt[0], np.ascontiguousarray(k_post[0, j:j + 3]), kt[1:],
-                                           np.ascontiguousarray(k_prior[1:, j:j + 3]),
-                                           np.ascontiguousarray(k_post[1:, j:j + 3]), like=path)
-               for name, j in (("att", 0), ("vel", 3), ("pos", 6))}      # the KNOT layout of the recorder
+    std_out = output_std(recorder, t_out, path)
     rate = body_rate(t_out, path, gyro, fixes.t, recorder.bias[:, :3], al.x[NOMINAL_BG])
     released_imu(recording.imu, prep.model.gyro, prep.model.accel)
+    trim_heap()         # the output step's transients, before the checks' own
     solution = solution_from_path(t_out, path, std_out["pos"], recording.t0_ns, std_att=std_out["att"],
                                   std_vel_enu=std_out["vel"], rate_body=rate)
     diag = recorder.diagnostics(fixes.t, filt.noise_report_labels())
@@ -439,6 +441,25 @@ def finished(recording: Recording, config: Config, filt: Filter, prep: Prepared,
                       "standstill_ended_early_s": [round(v, 3) for v in aiding.vetoes],
                       "gnss_innovation_score": round(innovation_score(recorder.nis, recorder.s_used,
                                                                       config.gnss.gate_probability), 2)})
+
+
+def output_std(recorder: RunRecorder, t_out: np.ndarray, path: np.ndarray) -> dict[str, np.ndarray]:
+    """The output's 1-sigma at ``t_out`` (s): ``"att"`` (rad, about the ENU axes), ``"vel"``
+    (ENU m/s), ``"pos"`` (ENU m), (N, 3) float32 each, spilled like ``path``
+    (:func:`~navpp.engine.output.interpolated_std_rows` between the recorder's knots).  Each
+    block's columns are copied from the recorded knots in turn, and the knots are dropped after:
+    nothing later reads them."""
+    kn = recorder.knot_records()
+    t0, kt = float(kn[0, 0]), np.ascontiguousarray(kn[1:, 0])
+    std_out = {}
+    for name, j in (("att", 0), ("vel", 3), ("pos", 6)):     # the KNOT layout of the recorder
+        prior, post = 1 + j, 1 + KNOT.stop - KNOT.start + j
+        std_out[name] = interpolated_std_rows(t_out, t0, np.ascontiguousarray(kn[0, post:post + 3]), kt,
+                                              np.ascontiguousarray(kn[1:, prior:prior + 3]),
+                                              np.ascontiguousarray(kn[1:, post:post + 3]), like=path)
+    del kn
+    recorder.drop_knots()
+    return std_out
 
 
 def smoothed_output(recorder: RunRecorder, model: Any, t_out: np.ndarray, path: np.ndarray,
