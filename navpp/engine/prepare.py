@@ -16,10 +16,10 @@ from ..config import DEG_PER_H_TO_RAD_PER_S, MG_TO_MPS2, PRESETS, Config
 from ..findings import Finding
 from ..ins.alignment import START_SHARE, Alignment, AlignmentSettings
 from ..ins.attitude import rpy_deg_to_dcm
+from ..ins.calibrate import rows_mean
 from ..ins.model import NoiseModel
 from ..ins.state import POS
 from ..recording import Recording
-from ..spill import release_all
 from .checks import check_gyro_scale
 from .schedule import GnssFixes, with_prior_std
 
@@ -226,8 +226,7 @@ def timing_fixes(recording: Recording, config: Config,
     imu, gnss = recording.imu, recording.gnss
     if len(gnss) < 20 or len(imu) < 20:
         return recording, notes, warnings
-    up = imu.accel.mean(axis=0)            # the sensor's up, as logged
-    release_all(imu.accel)                 # a spilled IMU's pages that pass read: out of memory
+    up = rows_mean(imu.accel, [(0, len(imu))], len(imu))     # the sensor's up, as logged, block by block
     up = up / max(float(np.linalg.norm(up)), 1e-9)
     # origin at the middle fix, not the first: a first fix on the far side of the globe would mirror
     # the track in the tangent plane (the yaw-scale check would read it as lat/lon swapped)

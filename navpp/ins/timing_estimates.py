@@ -31,7 +31,8 @@ from functools import cached_property
 
 import numpy as np
 
-from ..spill import release, release_all
+from ..intervals import interval_median
+from ..spill import Behind, like, release, release_all
 from .calibrate import BLOCK_ROWS, trapezoid_integral, trapezoid_integral_at
 
 __all__ = [
@@ -271,7 +272,7 @@ def _rate(t: np.ndarray) -> float:
 def _median_rate(t: np.ndarray) -> float:
     if t.shape[0] < 2:
         return float("nan")
-    return float(1.0 / np.median(np.diff(t), overwrite_input=True))
+    return float(1.0 / np.float64(interval_median(t)))
 
 
 def fresh_count_dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_s: float = 1.0) -> float:
@@ -617,6 +618,7 @@ def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
             raise ValueError("_spline: x and y must be finite")
         if not np.all(xb[1:] > xb[:-1]):
             raise ValueError("_spline: x must be strictly increasing")
+        release((x, y), lo, lo + BLOCK_ROWS)
     return Cubic(x, y, _spline_derivatives(x, y))
 
 
@@ -636,7 +638,7 @@ def _spline_derivatives(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     from scipy import linalg
 
     n = x.shape[0]
-    d = np.empty(n)
+    d = like(x, n, (), np.float64)          # spilled as x is: rows released behind the solve
     gtsv = None
     for lo in range(0, n, BLOCK_ROWS):
         hi = min(lo + BLOCK_ROWS, n)
@@ -648,6 +650,8 @@ def _spline_derivatives(x: np.ndarray, y: np.ndarray) -> np.ndarray:
         if info != 0:
             raise ValueError(f"_spline: the tridiagonal solve failed (info {info})")
         d[lo:hi] = sol[lo - a:hi - a, 0]
+        release((x, y, d), max(lo - BLOCK_ROWS - SPLINE_MARGIN_ROWS, 0), a)
+    release_all(x, y, d)
     return d
 
 
@@ -780,19 +784,24 @@ def _gyro_angle(t_imu: np.ndarray, rate: Callable[[int, int], np.ndarray],
     t_lo, t_hi = float(t_imu[0]), float(t_imu[-1])
     if smooth_s > 0.0 and t_hi - t_lo > 4.0 * smooth_s:
         # the centred moving average, on a uniform grid at the IMU's median step; its integral
-        step = float(np.median(np.diff(t_imu), overwrite_input=True))
+        step = interval_median(t_imu)
         start, stop = t_lo + 0.5 * smooth_s, t_hi - 0.5 * smooth_s
 
+        raw = theta_at
+        behind = Behind(t_imu, *((raw.y, raw.d) if isinstance(raw, Cubic) else ()))
+
         def averaged(lo: int, hi: int) -> np.ndarray:
-            """Rows ``lo:hi`` of the moving average on the grid, rad/s."""
+            """Rows ``lo:hi`` of the moving average on the grid, rad/s (the raw spline's spilled
+            rows released behind it)."""
             g = _arange_rows(start, step, lo, hi)
             a = np.clip(g - 0.5 * smooth_s, t_lo, t_hi)
             b = np.clip(g + 0.5 * smooth_s, t_lo, t_hi)
-            mean: np.ndarray = (theta_at(b) - theta_at(a)) / (b - a)
+            mean: np.ndarray = (raw(b) - raw(a)) / (b - a)
+            behind(float(a[0]) - smooth_s)
             return mean
 
         phi = trapezoid_integral(step, averaged, _arange_length(start, stop, step))
-        del theta_at
+        del theta_at, raw, behind
         release_all(t_imu)
         grid = np.arange(start, stop, step)
         theta_at = _spline(grid, phi)

@@ -1,0 +1,61 @@
+"""navpp.intervals and the calibration's run sums: what the whole-log numpy calls give, to the
+bit, for stamps and rows spilled to a file (read window by window) as for arrays in memory."""
+
+import numpy as np
+import pytest
+
+from navpp.ins.calibrate import rows_mean, sample_period
+from navpp.intervals import interval_median, long_intervals, mean_interval, pairwise_sum
+from navpp.spill import WINDOW_ROWS, empty_rows
+
+
+def _spilled(x: np.ndarray) -> np.ndarray:
+    out = empty_rows(x.shape[0], x.shape[1:], np.float64, True)
+    out[:] = x
+    return out
+
+
+def _stamps() -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(3)
+    return {
+        "regular": np.arange(3 * WINDOW_ROWS + 17) * 0.008,
+        "jitter": np.cumsum(0.008 + rng.normal(0.0, 1e-4, 2 * WINDOW_ROWS + 5)),
+        "quantised": np.round(np.cumsum(0.008 + rng.normal(0.0, 1e-4, WINDOW_ROWS + 9)), 3),
+        "gaps": np.concatenate([np.arange(WINDOW_ROWS) * 0.01, 900.0 + np.arange(WINDOW_ROWS + 1) * 0.01]),
+        "unsorted": rng.normal(0.0, 1.0, WINDOW_ROWS + 2),
+        "even count": np.cumsum(rng.exponential(0.01, 1001)),
+        "three": np.array([0.0, 1.0, 1.5]),
+        "two": np.array([0.0, 1.0]),
+    }
+
+
+@pytest.mark.parametrize("name", list(_stamps()))
+def test_intervals_match_numpy(name):
+    t = _stamps()[name]
+    d = np.diff(t)
+    med = float(np.median(d))
+    keep = d <= 5.0 * med
+    for arr in (t, _spilled(t)):
+        assert interval_median(arr) == med
+        assert np.array_equal(long_intervals(arr, 5.0 * med), np.nonzero(d > 5.0 * med)[0])
+        assert mean_interval(arr, 5.0 * med) == (float(d[keep].mean()) if keep.any() else None)
+        assert sample_period(arr) == sample_period(np.array(t))
+
+
+def test_pairwise_sum_is_numpys():
+    rng = np.random.default_rng(1)
+    for n in (7, 200, 131073, 3 * WINDOW_ROWS + 5):
+        x = rng.standard_normal(n) * 1e-3 + 0.008
+        parts = (x[a:a + 5000] for a in range(0, n, 5000))
+        assert pairwise_sum(parts, n) == np.add.reduce(x)
+
+
+def test_rows_mean_is_numpys():
+    rng = np.random.default_rng(5)
+    n = 2 * WINDOW_ROWS + 11
+    wide = _spilled(rng.normal(0.3, 1.0, (n, 7)))
+    runs = [(3, 1000), (5000, WINDOW_ROWS + 300), (2 * WINDOW_ROWS, n)]
+    sel = np.concatenate([np.arange(a, b) for a, b in runs])
+    for x in (wide[:, 1:4], np.ascontiguousarray(wide[:, 4:7])):
+        assert np.array_equal(rows_mean(x, [(0, n)], n), x.mean(axis=0))
+        assert np.array_equal(rows_mean(x, runs, sel.size), x[sel].mean(axis=0))
