@@ -59,3 +59,23 @@ def test_rows_mean_is_numpys():
     for x in (wide[:, 1:4], np.ascontiguousarray(wide[:, 4:7])):
         assert np.array_equal(rows_mean(x, [(0, n)], n), x.mean(axis=0))
         assert np.array_equal(rows_mean(x, runs, sel.size), x[sel].mean(axis=0))
+
+
+def test_grid_is_the_arange():
+    """The clock-offset spline's grid without the array (timing_estimates._Grid): its rows, its
+    searchsorted and the spline through it are those of ``np.arange``'s."""
+    from navpp.ins import timing_estimates as te
+
+    for start, step, stop in [(1.125, 0.008, 1500.0), (0.3, 0.01, 0.35)]:
+        n = te._arange_length(start, stop, step)
+        grid, whole = te._Grid(start, step, n), np.arange(start, stop, step)
+        idx = np.array([0, 1, 2, n - 1, n // 2, 3])
+        assert np.array_equal(grid[idx], whole[idx]) and grid[-1] == whole[-1] and grid[1] == whole[1]
+        assert np.array_equal(grid[2:n // 3], whole[2:n // 3]) and np.array_equal(grid[n - 5:n + 10], whole[n - 5:])
+        v = np.sort(np.random.default_rng(0).uniform(start - 1, stop + 1, 1000))
+        v[:3] = whole[:3]
+        for side in ("left", "right"):
+            assert np.array_equal(grid.searchsorted(v, side=side), np.searchsorted(whole, v, side=side))
+        y = np.cumsum(np.random.default_rng(1).normal(size=n))
+        q = np.random.default_rng(2).uniform(start, whole[-1], 5000)
+        assert np.array_equal(te._spline(grid, y)(q), te._spline(whole, y)(q), equal_nan=True)

@@ -28,6 +28,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any, Literal
 
 import numpy as np
 
@@ -598,7 +599,7 @@ def _failed(reason: str, n_used: int = 0) -> ClockOffset:
 AngleAt = Callable[[np.ndarray], np.ndarray]
 
 
-def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
+def _spline(x: np.ndarray | _Grid, y: np.ndarray) -> AngleAt:
     """``scipy.interpolate.CubicSpline(x, y, extrapolate=False)`` (not-a-knot ends) for (N,) float
     ``x`` (strictly increasing) and ``y``, its values to the bit: the first derivatives at ``x``
     from the same tridiagonal system and solver (LAPACK ``gtsv``, as ``solve_banded`` calls it),
@@ -612,13 +613,14 @@ def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
 
         spline = interpolate.CubicSpline(x, y, extrapolate=False)
         return spline
+    xs = x if isinstance(x, np.ndarray) else None  # (a _Grid holds no rows)
     for lo in range(0, n, BLOCK_ROWS):             # block by block: no IMU-length temporaries
         xb, yb = x[lo:lo + BLOCK_ROWS + 1], y[lo:lo + BLOCK_ROWS]
         if not (np.all(np.isfinite(xb)) and np.all(np.isfinite(yb))):
             raise ValueError("_spline: x and y must be finite")
         if not np.all(xb[1:] > xb[:-1]):
             raise ValueError("_spline: x must be strictly increasing")
-        release((x, y), lo, lo + BLOCK_ROWS)
+        release((xs, y), lo, lo + BLOCK_ROWS)
     return Cubic(x, y, _spline_derivatives(x, y))
 
 
@@ -628,7 +630,7 @@ def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
 SPLINE_MARGIN_ROWS = 128
 
 
-def _spline_derivatives(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def _spline_derivatives(x: np.ndarray | _Grid, y: np.ndarray) -> np.ndarray:
     """The first derivatives (N,) at ``x`` (N >= 4, strictly increasing) of the not-a-knot cubic
     spline through ``y``, block by block: each block's rows solved with
     :data:`SPLINE_MARGIN_ROWS` more on either side (the rows beyond left out), the margins
@@ -638,7 +640,8 @@ def _spline_derivatives(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     from scipy import linalg
 
     n = x.shape[0]
-    d = like(x, n, (), np.float64)          # spilled as x is: rows released behind the solve
+    d = like(y, n, (), np.float64)          # spilled as y is: rows released behind the solve
+    xs = x if isinstance(x, np.ndarray) else None
     gtsv = None
     for lo in range(0, n, BLOCK_ROWS):
         hi = min(lo + BLOCK_ROWS, n)
@@ -650,12 +653,12 @@ def _spline_derivatives(x: np.ndarray, y: np.ndarray) -> np.ndarray:
         if info != 0:
             raise ValueError(f"_spline: the tridiagonal solve failed (info {info})")
         d[lo:hi] = sol[lo - a:hi - a, 0]
-        release((x, y, d), max(lo - BLOCK_ROWS - SPLINE_MARGIN_ROWS, 0), a)
-    release_all(x, y, d)
+        release((xs, y, d), max(lo - BLOCK_ROWS - SPLINE_MARGIN_ROWS, 0), a)
+    release_all(xs, y, d)
     return d
 
 
-def _spline_rows(x: np.ndarray, y: np.ndarray, a: int, b: int) -> tuple[np.ndarray, ...]:
+def _spline_rows(x: np.ndarray | _Grid, y: np.ndarray, a: int, b: int) -> tuple[np.ndarray, ...]:
     """Rows ``a .. b - 1`` of the not-a-knot spline's system for the first derivatives ``d`` at
     ``x`` (N,) through ``y`` (N,), as ``gtsv`` takes them: (lower (b-a-1), main (b-a), upper
     (b-a-1), right-hand side (b-a, 1)); their couplings to rows outside are left out.  Row k
@@ -699,7 +702,7 @@ class Cubic:
     #: steps of one interval from the first guess before the binary search takes over
     STEPS = 3
 
-    def __init__(self, x: np.ndarray, y: np.ndarray, d: np.ndarray) -> None:
+    def __init__(self, x: np.ndarray | _Grid, y: np.ndarray, d: np.ndarray) -> None:
         self.x = x
         self.y = y
         self.d = d
@@ -725,7 +728,7 @@ class Cubic:
             i += up
         off = ((t < x[i]) & (i > 0)) | ((t >= x[i + 1]) & (i < last))
         if off.any():
-            found = np.searchsorted(x, t[off], side="right")
+            found = x.searchsorted(t[off], side="right")
             found -= 1
             i[off] = np.clip(found, 0, last)
         return i
@@ -800,10 +803,11 @@ def _gyro_angle(t_imu: np.ndarray, rate: Callable[[int, int], np.ndarray],
             behind(float(a[0]) - smooth_s)
             return mean
 
-        phi = trapezoid_integral(step, averaged, _arange_length(start, stop, step))
+        n_grid = _arange_length(start, stop, step)
+        phi = trapezoid_integral(step, averaged, n_grid)
         del theta_at, raw, behind
         release_all(t_imu)
-        grid = np.arange(start, stop, step)
+        grid = _Grid(start, step, n_grid)
         theta_at = _spline(grid, phi)
         t_lo, t_hi = float(grid[0]), float(grid[-1])
     return theta_at, t_lo, t_hi
@@ -827,6 +831,42 @@ def _arange_rows(start: float, step: float, lo: int, hi: int) -> np.ndarray:
     if lo == 0 < hi:
         rows[0] = start
     return rows
+
+
+class _Grid:
+    """``np.arange(start, stop, step)`` (float, ``n`` rows) without the array, as :func:`_spline`
+    and :class:`Cubic` read their breakpoints: a slice, a row or rows by index (an int array) are
+    formed when read, the same bits (:func:`_arange_rows`); ``searchsorted`` as the array's."""
+
+    def __init__(self, start: float, step: float, n: int) -> None:
+        self.start, self.step, self.shape = start, step, (n,)
+
+    def __getitem__(self, k: Any) -> Any:
+        n = self.shape[0]
+        if isinstance(k, slice):
+            lo, hi, stride = k.indices(n)
+            assert stride == 1, "_Grid: a slice with a step"
+            return _arange_rows(self.start, self.step, lo, max(hi, lo))
+        if isinstance(k, (int, np.integer)):
+            row = int(k) + n if k < 0 else int(k)
+            if not 0 <= row < n:
+                raise IndexError(f"_Grid: row {k} of {n}")
+            return _arange_rows(self.start, self.step, row, row + 1)[0]
+        idx = np.asarray(k)
+        rows = idx.astype(float)
+        rows *= (self.start + self.step) - self.start
+        rows += self.start
+        rows[idx == 1] = self.start + self.step
+        rows[idx == 0] = self.start
+        return rows
+
+    def searchsorted(self, v: np.ndarray, side: Literal["left", "right"] = "left") -> np.ndarray:
+        """``np.searchsorted(grid, v, side)``, the rows formed :data:`BLOCK_ROWS` at a time."""
+        n = self.shape[0]
+        found = np.zeros(np.shape(v), dtype=np.intp)
+        for lo in range(0, n, BLOCK_ROWS):
+            found += np.searchsorted(self[lo:lo + BLOCK_ROWS], v, side=side)
+        return found
 
 
 def _vertical_rate(gyro: np.ndarray, up: np.ndarray | None) -> Callable[[int, int], np.ndarray]:
