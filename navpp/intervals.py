@@ -13,6 +13,7 @@ order numpy's pairwise summation does (:func:`pairwise_sum`), so it is the same 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 
 import numpy as np
@@ -55,7 +56,7 @@ def _ranked(t: np.ndarray, ranks: list[int]) -> dict[int, float]:
     """The intervals of the stamps ``t`` at the 0-based ``ranks`` of their ascending order (s), by
     selection on their keys: each pass histograms the next :data:`_DIGIT_BITS` bits of the keys
     that share the bits above with a rank's candidates; candidates few enough are gathered and
-    sorted."""
+    sorted.  NaN at every rank when an interval is NaN."""
     out: dict[int, float] = {}
     todo: list[tuple[int, int | None, list[int], int]] = [(64 - _DIGIT_BITS, None, ranks, 0)]
     size = 1 << _DIGIT_BITS
@@ -63,6 +64,8 @@ def _ranked(t: np.ndarray, ranks: list[int]) -> dict[int, float]:
         shift, prefix, wanted, below = todo.pop()
         counts = np.zeros(size, np.int64)
         for d in _parts(t):
+            if prefix is None and np.isnan(d).any():
+                return {r: math.nan for r in ranks}     # as numpy's median: NaN
             k = _order_keys(d)
             if prefix is not None:
                 k = k[(k >> (shift + _DIGIT_BITS)) == prefix]
@@ -90,8 +93,6 @@ def interval_median(t: np.ndarray) -> float:
     window by window (see the module docstring)."""
     if not spilled(t):
         return float(np.median(np.diff(t), overwrite_input=True))
-    if any(np.isnan(d).any() for d in _parts(t)):
-        return float("nan")
     m = t.shape[0] - 1
     lo, hi = (m - 1) // 2, m // 2
     v = _ranked(t, sorted({lo, hi}))

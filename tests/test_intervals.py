@@ -79,3 +79,21 @@ def test_grid_is_the_arange():
         y = np.cumsum(np.random.default_rng(1).normal(size=n))
         q = np.random.default_rng(2).uniform(start, whole[-1], 5000)
         assert np.array_equal(te._spline(grid, y)(q), te._spline(whole, y)(q), equal_nan=True)
+
+
+@pytest.mark.parametrize("spill", [False, True])
+def test_band_row_sums_are_the_whole_logs(spill):
+    """calibrate._band_row_sums part by part: the row sums of the whole log's second differences
+    of the group means."""
+    from navpp.ins import calibrate
+
+    rng = np.random.default_rng(4)
+    size, w, nb = 5, 125, 2 * calibrate._STAT_CHUNK_BLOCKS + 7
+    x = rng.normal(0.0, 1.0, (nb * w, 3))
+    a = x.reshape(-1, size, 3).mean(axis=1)
+    d = np.zeros_like(a)
+    d[1:-1] = a[2:] - 2.0 * a[1:-1] + a[:-2]
+    d[0], d[-1] = d[1], d[-2]
+    whole = calibrate._row_sums(d.reshape(nb, w // size * 3))
+    parts = calibrate._band_row_sums(_spilled(x) if spill else x, size, w, nb)
+    assert all(np.array_equal(p, q) for p, q in zip(parts, whole))

@@ -351,12 +351,6 @@ def gnss_speed_at(gnss: GnssData, times: np.ndarray, half_window: float = 1.0) -
     return speed, sigma
 
 
-def _pooled_var(v: np.ndarray) -> np.ndarray:
-    """(nb,) mean square per row of ``v`` (nb, k) pooled with the neighbouring rows (a 3-row
-    window), departures beyond ``OUTLIER_K`` times the row's median |v| left out (glitches)."""
-    return _pooled(*_row_sums(v))
-
-
 def _row_sums(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(nb,) sum of squares and (nb,) count of the values kept per row of ``v`` (nb, k): those
     within ``OUTLIER_K`` times the row's median |v| (each row on its own: rows may come in parts)."""
@@ -401,18 +395,31 @@ def _top_row_sums(xb: np.ndarray, w: int, nb: int) -> tuple[np.ndarray, np.ndarr
     return ssq, cnt
 
 
-def _group_means(xb: np.ndarray, size: int, w: int, nb: int) -> np.ndarray:
-    """(nb * w // size, 3) means of consecutive groups of ``size`` rows of ``xb`` (nb * w, 3), ``w``
-    a multiple of ``size``: ``xb.reshape(-1, size, 3).mean(axis=1)``, :data:`_STAT_CHUNK_BLOCKS`
-    blocks of ``w`` rows at a time (each group's mean on its own: the same bits), a spilled
-    ``xb``'s rows released after each."""
+def _band_row_sums(xb: np.ndarray, size: int, w: int, nb: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_row_sums` per block of ``w`` rows of the second differences ``d[k] = a[k+1] - 2 a[k]
+    + a[k-1]`` of the means ``a`` of consecutive groups of ``size`` rows of ``xb`` (nb * w, 3), ``w``
+    a multiple of ``size`` and at least 3 groups (the first and last ``d`` those next to them),
+    :data:`_STAT_CHUNK_BLOCKS` blocks at a time with a group either side (each group's mean and each
+    difference on its own: the same bits as over the whole log), a spilled ``xb``'s rows released
+    after each part: no array of the means or differences as long as the log."""
     per = w // size
-    out = np.empty((nb * per, 3))
+    k_all = nb * per
+    ssq, cnt = np.empty(nb), np.empty(nb)
     for b0 in range(0, nb, _STAT_CHUNK_BLOCKS):
         b1 = min(nb, b0 + _STAT_CHUNK_BLOCKS)
-        out[b0 * per:b1 * per] = xb[b0 * w:b1 * w].reshape((b1 - b0) * per, size, 3).mean(axis=1)
-        release((xb,), b0 * w, b1 * w)
-    return out
+        k0, k1 = b0 * per, b1 * per                     # the part's groups
+        g0, g1 = max(k0 - 1, 0), min(k1 + 1, k_all)     # ... and their neighbours
+        a = xb[g0 * size:g1 * size].reshape(g1 - g0, size, 3).mean(axis=1)
+        d = np.zeros((k1 - k0, 3))
+        lo, hi = max(k0, 1), min(k1, k_all - 1)         # the differences with both neighbours
+        d[lo - k0:hi - k0] = a[lo + 1 - g0:hi + 1 - g0] - 2.0 * a[lo - g0:hi - g0] + a[lo - 1 - g0:hi - 1 - g0]
+        if k0 == 0:
+            d[0] = d[1]
+        if k1 == k_all:
+            d[-1] = d[-2]
+        ssq[b0:b1], cnt[b0:b1] = _row_sums(d.reshape(b1 - b0, per * 3))
+        release((xb,), g0 * size, g1 * size)
+    return ssq, cnt
 
 
 def noise_profile(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: float = NOISE_BLOCK_S,
@@ -455,11 +462,7 @@ def noise_profile(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: f
             mm = m * mult
             if per % mult or per // mult < 3:
                 continue
-            a = _group_means(xb, mm, w, nb)
-            d = np.zeros_like(a)
-            d[1:-1] = a[2:] - 2.0 * a[1:-1] + a[:-2]
-            d[0], d[-1] = d[1], d[-2]
-            band = np.minimum(band, _pooled_var(d.reshape(nb, per // mult * 3)) / 6.0 * (tau * mult))
+            band = np.minimum(band, _pooled(*_band_row_sums(xb, mm, w, nb)) / 6.0 * (tau * mult))
         # the top of the band: each sample against the mean of the NOISE_SPAN around it
         top = _pooled(*_top_row_sums(xb, w, nb)) * NOISE_SPAN / (NOISE_SPAN - 1.0) * dt
         # white noise is flat: the quieter band bounds it (a mount's shaking fills the top, a

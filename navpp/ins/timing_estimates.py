@@ -65,9 +65,6 @@ class StaleRows:
     fresh_rate_hz : float, Hz, rate of the kept (fresh) samples: ``(n_kept - 1) / (time span
         of the kept samples)``.  Robust to a jittery polling clock, where the fresh intervals
         scatter over a few poll periods.
-    fresh_median_rate_hz : float, Hz, ``1 / median(interval between kept samples)``.  Equals
-        ``fresh_rate_hz`` for a regular stream; on a polled stream it is biased by the poll
-        jitter (it picks one of the poll-period multiples), so prefer ``fresh_rate_hz``.
     n_repeats : int, rows whose six values bitwise equal the previous row's (stale or not).
     expected_by_chance : float, number of such all-six repeats expected if every channel
         repeated independently at its own rate (estimated in windows, from the rows that are
@@ -84,7 +81,6 @@ class StaleRows:
     count: int
     fraction: float
     fresh_rate_hz: float
-    fresh_median_rate_hz: float
     n_repeats: int
     expected_by_chance: float
     dispersion: float
@@ -177,7 +173,7 @@ def find_stale_rows(
     nan = float("nan")
     if n < 3:
         mask = np.zeros(n, dtype=bool)
-        return StaleRows(mask, 0, 0.0, _rate(t), _median_rate(t), 0, 0.0, nan, False,
+        return StaleRows(mask, 0, 0.0, _rate(t), 0, 0.0, nan, False,
                          f"only {n} rows: nothing to judge")
 
     # bitwise comparison: -0.0 vs +0.0 and NaN payloads count as different / equal by bits;
@@ -253,7 +249,7 @@ def find_stale_rows(
     kept = t[~mask] if stale else t
     count = int(mask.sum())
     return StaleRows(mask=mask, count=count, fraction=count / n, fresh_rate_hz=_rate(kept),
-                     fresh_median_rate_hz=_median_rate(kept), n_repeats=k_obs,
+                     n_repeats=k_obs,
                      expected_by_chance=float(expected), dispersion=float(dispersion),
                      confident=bool(confident), reason=reason)
 
@@ -268,12 +264,6 @@ def _rate(t: np.ndarray) -> float:
     if t.shape[0] < 2 or t[-1] <= t[0]:
         return float("nan")
     return float((t.shape[0] - 1) / (t[-1] - t[0]))
-
-
-def _median_rate(t: np.ndarray) -> float:
-    if t.shape[0] < 2:
-        return float("nan")
-    return float(1.0 / np.float64(interval_median(t)))
 
 
 def fresh_count_dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_s: float = 1.0) -> float:
