@@ -97,3 +97,34 @@ def test_band_row_sums_are_the_whole_logs(spill):
     whole = calibrate._row_sums(d.reshape(nb, w // size * 3))
     parts = calibrate._band_row_sums(_spilled(x) if spill else x, size, w, nb)
     assert all(np.array_equal(p, q) for p, q in zip(parts, whole))
+
+
+@pytest.mark.parametrize("spill", [False, True])
+def test_kept_rows_are_the_selection(spill):
+    """engine.prepare.kept_rows (the stale-row drop): each array's kept rows, spilled as it is."""
+    from navpp.engine.prepare import kept_rows
+    from navpp.spill import spilled
+
+    rng = np.random.default_rng(6)
+    n = 2 * WINDOW_ROWS + 3
+    t, gyro = np.cumsum(rng.uniform(0.001, 0.01, n)), rng.normal(0.0, 1.0, (n, 3))
+    keep = rng.uniform(size=n) > 0.3
+    arrays = (_spilled(t), _spilled(gyro)) if spill else (t, gyro)
+    got = kept_rows(keep, *arrays)
+    assert np.array_equal(got[0], t[keep]) and np.array_equal(got[1], gyro[keep])
+    assert all(spilled(g) == spill for g in got)
+
+
+@pytest.mark.parametrize("spill", [False, True])
+def test_rotated_rows_are_the_product(spill):
+    """engine.prepare.rotated_rows (a gross mounting's rotation): ``x @ rot.T``, spilled as x is."""
+    from navpp.engine.prepare import rotated_rows
+    from navpp.spill import spilled
+
+    rng = np.random.default_rng(7)
+    n = 2 * WINDOW_ROWS + 3
+    x = rng.normal(0.0, 1.0, (n, 7))
+    rot = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    arr = _spilled(x)[:, 1:4] if spill else x[:, 1:4]
+    got = rotated_rows(arr, rot)
+    assert np.array_equal(got, x[:, 1:4] @ rot.T) and spilled(got) == spill
