@@ -52,25 +52,40 @@ def _key_value(key: int) -> float:
     return float((k ^ ((k >> 63) & _LOW63)).view(np.float64)[0])
 
 
-def _ranked(t: np.ndarray, ranks: list[int]) -> dict[int, float]:
+def _ranked(t: np.ndarray, ranks: list[int], guess: int | None = None) -> dict[int, float]:
     """The intervals of the stamps ``t`` at the 0-based ``ranks`` of their ascending order (s), by
     selection on their keys: each pass histograms the next :data:`_DIGIT_BITS` bits of the keys
     that share the bits above with a rank's candidates; candidates few enough are gathered and
-    sorted.  NaN at every rank when an interval is NaN."""
+    sorted.  ``guess``: the top 64 - 2 :data:`_DIGIT_BITS` bits the ranks' keys likely share (from
+    a sample): the first pass then histograms the keys with them and counts those below, and the
+    search starts from the top only when a rank lies outside them.  NaN at every rank when an
+    interval is NaN."""
     out: dict[int, float] = {}
-    todo: list[tuple[int, int | None, list[int], int]] = [(64 - _DIGIT_BITS, None, ranks, 0)]
+    top = 64 - _DIGIT_BITS
+    todo: list[tuple[int, int | None, list[int], int | None]] = \
+        [(top, None, ranks, 0)] if guess is None else [(_DIGIT_BITS, guess, ranks, None)]
     size = 1 << _DIGIT_BITS
     while todo:
         shift, prefix, wanted, below = todo.pop()
         counts = np.zeros(size, np.int64)
+        first = prefix is None or below is None         # the first pass: NaN checked, keys below counted
+        under_guess = 0
         for d in _parts(t):
-            if prefix is None and np.isnan(d).any():
+            if first and np.isnan(d).any():
                 return {r: math.nan for r in ranks}     # as numpy's median: NaN
             k = _order_keys(d)
             if prefix is not None:
-                k = k[(k >> (shift + _DIGIT_BITS)) == prefix]
+                high = k >> (shift + _DIGIT_BITS)
+                if below is None:
+                    under_guess += int(np.count_nonzero(high < prefix))
+                k = k[high == prefix]
             digit = (k >> shift) + (size >> 1) if prefix is None else (k >> shift) & (size - 1)
             counts += np.bincount(digit, minlength=size)
+        if below is None:
+            below = under_guess
+            if not all(below <= r < below + int(counts.sum()) for r in wanted):
+                todo.append((top, None, wanted, 0))     # the guess missed: from the top
+                continue
         cum = np.cumsum(counts)
         groups: dict[int, list[int]] = {}
         for r in wanted:
@@ -95,7 +110,9 @@ def interval_median(t: np.ndarray) -> float:
         return float(np.median(np.diff(t), overwrite_input=True))
     m = t.shape[0] - 1
     lo, hi = (m - 1) // 2, m // 2
-    v = _ranked(t, sorted({lo, hi}))
+    sample = np.diff(t[:WINDOW_ROWS + 1])               # the first window's intervals: the guess
+    guess = int(_order_keys(np.median(sample, keepdims=True))[0]) >> (2 * _DIGIT_BITS)
+    v = _ranked(t, sorted({lo, hi}), guess)
     return v[lo] if lo == hi else float((np.float64(v[lo]) + np.float64(v[hi])) / 2.0)
 
 
