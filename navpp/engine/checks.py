@@ -16,6 +16,7 @@ from ..config import Config
 from ..errors import InputError
 from ..findings import Finding
 from ..ins.model import LONG_GAP_PERIODS
+from ..intervals import interval_median, long_intervals
 from ..recording import Recording
 from ..spill import windows
 
@@ -70,17 +71,17 @@ def imu_gaps(source: str, t: np.ndarray) -> list[Finding]:
     (:meth:`navpp.ins.model.InsModel.gap_noise`), but the user must know where they are."""
     if t.shape[0] < 3:
         return []
-    dt = np.diff(t)
-    nominal = float(np.median(dt))
-    long_ = np.nonzero(dt > LONG_GAP_PERIODS * nominal)[0]
+    nominal = interval_median(t)
+    long_ = long_intervals(t, LONG_GAP_PERIODS * nominal)
     if long_.size == 0:
         return []
-    k0, kmax = int(long_[0]), int(long_[np.argmax(dt[long_])])
+    gap = t[long_ + 1] - t[long_]           # the long intervals, s
+    k0, kmax = int(long_[0]), int(long_[np.argmax(gap)])
     n = long_.size
     line = (f"{source}: IMU: {n} gap{'s' if n > 1 else ''} longer than {LONG_GAP_PERIODS:g} periods "
-            f"({LONG_GAP_PERIODS * nominal:.3g} s), {float(dt[long_].sum()):.3g} s in all: first at "
-            f"{t_text(float(t[k0]))} ({float(dt[k0]):.3g} s), longest at {t_text(float(t[kmax]))} "
-            f"({float(dt[kmax]):.3g} s); integrated across with the true interval, the unseen motion added to "
+            f"({LONG_GAP_PERIODS * nominal:.3g} s), {float(gap.sum()):.3g} s in all: first at "
+            f"{t_text(float(t[k0]))} ({float(gap[0]):.3g} s), longest at {t_text(float(t[kmax]))} "
+            f"({float(gap.max()):.3g} s); integrated across with the true interval, the unseen motion added to "
             "the uncertainty")
     return [Finding("imu-gap", line)]
 

@@ -16,10 +16,11 @@ from ..config import DEG_PER_H_TO_RAD_PER_S, MG_TO_MPS2, PRESETS, Config
 from ..findings import Finding
 from ..ins.alignment import START_SHARE, Alignment, AlignmentSettings
 from ..ins.attitude import rpy_deg_to_dcm
+from ..ins.calibrate import rows_mean
 from ..ins.model import NoiseModel
 from ..ins.state import POS
 from ..recording import Recording
-from ..spill import release_all
+from ..spill import like, release, windows
 from .checks import check_gyro_scale
 from .schedule import GnssFixes, with_prior_std
 
@@ -129,7 +130,7 @@ def calibrated(recording: Recording, config: Config, gyro: np.ndarray, accel: np
     cal = measure(gyro, accel)
     rot = gross_mounting(cal.up_b) if auto.mounting else None
     if rot is not None:
-        gyro, accel = gyro @ rot.T, accel @ rot.T
+        gyro, accel = rotated_rows(gyro, rot), rotated_rows(accel, rot)
         total = rot @ mounting_matrix(config.imu.mounting_rpy_deg)
         up = cal.up_b
         axis = "xyz"[int(np.argmax(np.abs(up)))]
@@ -226,8 +227,7 @@ def timing_fixes(recording: Recording, config: Config,
     imu, gnss = recording.imu, recording.gnss
     if len(gnss) < 20 or len(imu) < 20:
         return recording, notes, warnings
-    up = imu.accel.mean(axis=0)            # the sensor's up, as logged
-    release_all(imu.accel)                 # a spilled IMU's pages that pass read: out of memory
+    up = rows_mean(imu.accel, [(0, len(imu))], len(imu))     # the sensor's up, as logged, block by block
     up = up / max(float(np.linalg.norm(up)), 1e-9)
     # origin at the middle fix, not the first: a first fix on the far side of the globe would mirror
     # the track in the tangent plane (the yaw-scale check would read it as lat/lon swapped)
@@ -255,8 +255,7 @@ def dropped_stale_rows(recording: Recording, notes: list[str], warnings: list[Fi
         info["stale_rows"] = {"dropped": int(stale.count), "fraction": round(float(stale.fraction), 5),
                               "fresh_rate_hz": round(float(stale.fresh_rate_hz), 3) if stale.count else None}
     if stale.count:
-        keep = ~stale.mask
-        recording = replace(recording, imu=ImuData(imu.t[keep], imu.gyro[keep], imu.accel[keep]))
+        recording = replace(recording, imu=ImuData(*kept_rows(~stale.mask, imu.t, imu.gyro, imu.accel)))
         warnings.append(Finding("stale-rows-dropped",
                                 f"{src}: IMU: {stale.count} stale rows ({100.0 * stale.fraction:.1f} %) repeat the "
                                 f"previous row's six values under a new stamp (a logger polling faster than the "
@@ -266,6 +265,33 @@ def dropped_stale_rows(recording: Recording, notes: list[str], warnings: list[Fi
         notes.append(f"IMU: {stale.n_repeats} rows repeat the previous row's values, no more than chance: kept "
                      f"({stale.reason})")
     return recording
+
+
+def rotated_rows(x: np.ndarray, rot: np.ndarray) -> np.ndarray:
+    """``x @ rot.T``: the rows of ``x`` (N, 3) rotated by ``rot`` (3, 3), window by window
+    (:func:`navpp.spill.windows`, the same bits), spilled as ``x`` is, the rows of both released
+    as the windows pass."""
+    out = like(x, x.shape[0], (3,), np.float64)
+    for a, b in windows(x.shape[0], x, out):
+        out[a:b] = x[a:b] @ rot.T
+    return out
+
+
+def kept_rows(keep: np.ndarray, *arrays: np.ndarray) -> list[np.ndarray]:
+    """``[a[keep] for a in arrays]`` (``keep`` (N,) bool over the arrays' rows), window by window
+    (:func:`navpp.spill.windows`): each result spilled as its array is (:func:`navpp.spill.like`),
+    the rows of both released as the windows pass."""
+    n_keep = int(np.count_nonzero(keep))
+    out = [like(a, n_keep, a.shape[1:], a.dtype) for a in arrays]
+    row = 0
+    for a, b in windows(keep.shape[0], *arrays):
+        sel = keep[a:b]
+        k = int(np.count_nonzero(sel))
+        for src, dst in zip(arrays, out):
+            dst[row:row + k] = src[a:b][sel]
+        release(out, row, row + k)
+        row += k
+    return out
 
 
 def clock_offset_fixed(recording: Recording, up: np.ndarray, enu: np.ndarray, notes: list[str],

@@ -25,6 +25,8 @@ import numpy as np
 from .. import geodesy
 from ..errors import InputError
 from ..findings import Finding
+from ..intervals import interval_median
+from ..spill import release
 from .aids.standstill import quiet_blocks
 from .attitude import dcm_to_quat, rph_to_dcm
 from .calibrate import MOVING_K, gnss_scatter_h, gnss_speed_at, spans, trapezoid_integral_at
@@ -122,7 +124,7 @@ def still_runs(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, *, min_durati
     gravity and the GNSS track.
     """
     n = t.shape[0]
-    dt = float(np.median(np.diff(t), overwrite_input=True)) if n > 1 else 1.0
+    dt = interval_median(t) if n > 1 else 1.0
     sig_a = accel_vrw / math.sqrt(dt)
     sig_g = gyro_arw / math.sqrt(dt)
     # generous: an idling engine shakes the IMU; align() confirms every run with gravity and GNSS
@@ -675,7 +677,7 @@ def _rotated_track(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_start: flo
     below ``min_speed``), else from positions, the still position as the origin.  ``gyro_bias``
     (3,) rad/s, if given, is taken off the gyro first.  The gyro's vertical rate and its integral
     are formed block by block (:func:`~navpp.ins.calibrate.trapezoid_integral_at`): neither is
-    held whole."""
+    held whole, and a spilled IMU's rows are released once read."""
     C = rph_to_dcm(roll, pitch, 0.0)
     i0 = int(np.searchsorted(t, t_start))
     ts = t[i0:]
@@ -686,6 +688,7 @@ def _rotated_track(t: np.ndarray, gyro: np.ndarray, gnss: GnssData, t_start: flo
         g = gyro[i0 + lo:i0 + hi]
         w: np.ndarray = (g if gyro_bias is None else g - gyro_bias) @ C[2]
         w -= earth
+        release((gyro,), i0 + lo, i0 + hi)      # a spilled gyro's rows read: out of memory
         return w
 
     after = gnss.t > t_still_end

@@ -50,8 +50,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import geodesy
+from ..intervals import interval_median, mean_interval, pairwise_sum
 from ..recording import BLOCK_ROWS as BLOCK_ROWS  # re-exported for .alignment, .timing_estimates
-from ..spill import release, release_all
+from ..spill import WINDOW_ROWS, like, release, release_all
 from .attitude import rpy_to_dcm
 
 if TYPE_CHECKING:
@@ -169,14 +170,16 @@ def trapezoid_integral(t: np.ndarray | float, w: np.ndarray | Callable[[int, int
     constant step ``t`` s) from 0 at the first, (N,): ``concatenate([[0], cumsum(0.5 * (w[1:] +
     w[:-1]) * diff(t))])`` to the bit, block by block (:func:`trapezoid_blocks`); ``[0]`` for
     N = 0, as that concatenation gives.  ``w`` may be given block by block instead, as
-    :func:`trapezoid_blocks` takes it, with ``n`` = N: then no N-long rate is held."""
+    :func:`trapezoid_blocks` takes it, with ``n`` = N: then no N-long rate is held.  Spilled
+    stamps: the integral is spilled too (:func:`navpp.spill.like`), its rows released once written."""
     rate = w if callable(w) else (lambda lo, hi: w[lo:hi])
     n = w.shape[0] if n is None and not callable(w) else n
     assert n is not None, "trapezoid_integral: a rate given block by block needs n"
-    theta = np.empty(max(n, 1))
+    theta = np.empty(max(n, 1)) if isinstance(t, float) else like(t, max(n, 1), (), np.float64)
     theta[0] = 0.0
     for lo, _, part in trapezoid_blocks(t, rate, n):
         theta[lo:lo + part.shape[0]] = part
+        release((theta,), lo, lo + part.shape[0])
     return theta
 
 
@@ -188,7 +191,8 @@ def trapezoid_blocks(t: np.ndarray | float, rate: Callable[[int, int], np.ndarra
     the integral's rows ``lo:lo + len(theta)`` (the same bits: the running sum carried from block
     to block, in the same order, as one cumsum adds) and ``stamps`` the stamps from the row before
     ``lo`` (from ``lo`` in the first block) to the block's last (``t`` itself for a constant
-    step).  Neither the rate nor the integral is held whole."""
+    step).  Neither the rate nor the integral is held whole; the rows of spilled stamps are
+    released once their block is done."""
     w_last = theta_last = 0.0
     for lo in range(0, n, BLOCK_ROWS):
         hi = min(lo + BLOCK_ROWS, n)
@@ -206,6 +210,8 @@ def trapezoid_blocks(t: np.ndarray | float, rate: Callable[[int, int], np.ndarra
             np.cumsum(inc, out=theta)
         yield lo, stamps, theta
         w_last, theta_last = w[-1], theta[-1]
+        if not isinstance(t, float):
+            release((t,), max(lo - 1, 0), hi - 1)     # the next block starts from row hi - 1
 
 
 def trapezoid_integral_at(t: np.ndarray, rate: Callable[[int, int], np.ndarray], n: int,
@@ -229,15 +235,13 @@ def trapezoid_integral_at(t: np.ndarray, rate: Callable[[int, int], np.ndarray],
 
 def sample_period(t: np.ndarray) -> float:
     """The IMU's sample period, s: the mean interval without the gaps (intervals over 5 times
-    the median), so that a jittery polled stream gets its real rate, not its commonest interval."""
+    the median), so that a jittery polled stream gets its real rate, not its commonest interval.
+    A spilled ``t`` is read window by window (:mod:`navpp.intervals`)."""
     if t.shape[0] < 2:
         return 1.0
-    med = float(np.median(np.diff(t), overwrite_input=True))
-    d = np.diff(t)
-    keep = d <= 5.0 * med
-    if not keep.all():      # else the same mean without a copy
-        d = d[keep]
-    return float(d.mean()) if d.size else med
+    med = interval_median(t)
+    mean = mean_interval(t, 5.0 * med)
+    return med if mean is None else mean
 
 
 @dataclass(frozen=True)
@@ -260,10 +264,11 @@ class BlockStatistics:
 
 
 def block_statistics(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: float = BLOCK_S,
-                     sub_s: float = SUB_S) -> BlockStatistics:
-    """:class:`BlockStatistics` over blocks of about ``block_s`` and sub-blocks of about ``sub_s`` s."""
+                     sub_s: float = SUB_S, dt: float | None = None) -> BlockStatistics:
+    """:class:`BlockStatistics` over blocks of about ``block_s`` and sub-blocks of about ``sub_s`` s
+    (``dt``: the :func:`sample_period` of ``t`` when known)."""
     n = t.shape[0]
-    dt = sample_period(t)
+    dt = sample_period(t) if dt is None else dt
     m = max(1, int(round(sub_s / dt)))
     w = max(2 * m, int(round(block_s / dt / m)) * m)
     nb = n // w
@@ -346,12 +351,6 @@ def gnss_speed_at(gnss: GnssData, times: np.ndarray, half_window: float = 1.0) -
     return speed, sigma
 
 
-def _pooled_var(v: np.ndarray) -> np.ndarray:
-    """(nb,) mean square per row of ``v`` (nb, k) pooled with the neighbouring rows (a 3-row
-    window), departures beyond ``OUTLIER_K`` times the row's median |v| left out (glitches)."""
-    return _pooled(*_row_sums(v))
-
-
 def _row_sums(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(nb,) sum of squares and (nb,) count of the values kept per row of ``v`` (nb, k): those
     within ``OUTLIER_K`` times the row's median |v| (each row on its own: rows may come in parts)."""
@@ -392,12 +391,41 @@ def _top_row_sums(xb: np.ndarray, w: int, nb: int) -> tuple[np.ndarray, np.ndarr
         for j in range(3):
             res[:, j] = xb[s:e, j] - np.convolve(xb[lo:hi, j], kernel, mode="same")[s - lo:e - lo]
         ssq[b0:b1], cnt[b0:b1] = _row_sums(res.reshape(b1 - b0, w * 3))
+        release((xb,), lo, hi)                  # a spilled IMU's rows read: out of memory
+    return ssq, cnt
+
+
+def _band_row_sums(xb: np.ndarray, size: int, w: int, nb: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_row_sums` per block of ``w`` rows of the second differences ``d[k] = a[k+1] - 2 a[k]
+    + a[k-1]`` of the means ``a`` of consecutive groups of ``size`` rows of ``xb`` (nb * w, 3), ``w``
+    a multiple of ``size`` and at least 3 groups (the first and last ``d`` those next to them),
+    :data:`_STAT_CHUNK_BLOCKS` blocks at a time with a group either side (each group's mean and each
+    difference on its own: the same bits as over the whole log), a spilled ``xb``'s rows released
+    after each part: no array of the means or differences as long as the log."""
+    per = w // size
+    k_all = nb * per
+    ssq, cnt = np.empty(nb), np.empty(nb)
+    for b0 in range(0, nb, _STAT_CHUNK_BLOCKS):
+        b1 = min(nb, b0 + _STAT_CHUNK_BLOCKS)
+        k0, k1 = b0 * per, b1 * per                     # the part's groups
+        g0, g1 = max(k0 - 1, 0), min(k1 + 1, k_all)     # ... and their neighbours
+        a = xb[g0 * size:g1 * size].reshape(g1 - g0, size, 3).mean(axis=1)
+        d = np.zeros((k1 - k0, 3))
+        lo, hi = max(k0, 1), min(k1, k_all - 1)         # the differences with both neighbours
+        d[lo - k0:hi - k0] = a[lo + 1 - g0:hi + 1 - g0] - 2.0 * a[lo - g0:hi - g0] + a[lo - 1 - g0:hi - 1 - g0]
+        if k0 == 0:
+            d[0] = d[1]
+        if k1 == k_all:
+            d[-1] = d[-2]
+        ssq[b0:b1], cnt[b0:b1] = _row_sums(d.reshape(b1 - b0, per * 3))
+        release((xb,), g0 * size, g1 * size)
     return ssq, cnt
 
 
 def noise_profile(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: float = NOISE_BLOCK_S,
-                  tau_s: float = NOISE_TAU_S) -> NoiseProfile:
-    """White-noise densities per block of ``block_s`` (see the module docstring).
+                  tau_s: float = NOISE_TAU_S, dt: float | None = None) -> NoiseProfile:
+    """White-noise densities per block of ``block_s`` (see the module docstring; ``dt``: the
+    :func:`sample_period` of ``t`` when known).
 
     White noise is flat across the spectrum, so any band's level bounds it from above; the
     reading is the quieter of two bands:
@@ -415,7 +443,7 @@ def noise_profile(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: f
     blocks (a 3-block window, so an interval's Q also covers the shaking just before and after
     it)."""
     n = t.shape[0]
-    dt = sample_period(t)
+    dt = sample_period(t) if dt is None else dt
     m = max(1, int(round(tau_s / dt)))
     tau = m * dt
     per = max(3, int(round(block_s / tau)))         # means per block
@@ -434,11 +462,7 @@ def noise_profile(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: f
             mm = m * mult
             if per % mult or per // mult < 3:
                 continue
-            a = xb.reshape(nb * per // mult, mm, 3).mean(axis=1)
-            d = np.zeros_like(a)
-            d[1:-1] = a[2:] - 2.0 * a[1:-1] + a[:-2]
-            d[0], d[-1] = d[1], d[-2]
-            band = np.minimum(band, _pooled_var(d.reshape(nb, per // mult * 3)) / 6.0 * (tau * mult))
+            band = np.minimum(band, _pooled(*_band_row_sums(xb, mm, w, nb)) / 6.0 * (tau * mult))
         # the top of the band: each sample against the mean of the NOISE_SPAN around it
         top = _pooled(*_top_row_sums(xb, w, nb)) * NOISE_SPAN / (NOISE_SPAN - 1.0) * dt
         # white noise is flat: the quieter band bounds it (a mount's shaking fills the top, a
@@ -447,6 +471,7 @@ def noise_profile(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s: f
         release_all(x)                          # a spilled IMU's pages this sensor's passes read
     edges = np.concatenate([t[0: nb * w: w], [t[min(nb * w, n - 1)]]])
     edges[-1] = max(edges[-1], float(t[-1]))
+    release_all(t)
     return NoiseProfile(edges.astype(float), dens[0], dens[1])
 
 
@@ -469,6 +494,7 @@ def standstill(t: np.ndarray, stats: BlockStatistics, gnss: GnssData, gyro_arw: 
     floor_g = max(K_WHITE * gyro_arw / math.sqrt(m * dt), math.radians(0.02))
     floor_a = max(K_WHITE * accel_vrw / math.sqrt(m * dt), 0.005)
     centres = t[np.minimum(np.arange(nb) * w + w // 2, n - 1)]
+    release_all(t)                              # a spilled t's pages the gather read
     speed, speed_std = gnss_speed_at(gnss, centres)
     has = np.isfinite(speed)
     limit = np.maximum(GNSS_STILL_SPEED, np.minimum(3.0 * np.nan_to_num(speed_std, nan=0.0), GNSS_STILL_SPEED_MAX))
@@ -503,10 +529,11 @@ def spans(t: np.ndarray, mask: np.ndarray, min_s: float) -> list[tuple[int, int]
     return [(int(a), int(b)) for a, b in zip(starts, ends) if b - a >= 2 and t[b - 1] - t[a] >= min_s]
 
 
-def _vertical_bias_from_course(t: np.ndarray, gyro_up: np.ndarray, gnss: GnssData, min_speed: float = 3.0
-                               ) -> tuple[float, float, float] | None:
+def _vertical_bias_from_course(t: np.ndarray, gyro: np.ndarray, up: np.ndarray, gnss: GnssData,
+                               min_speed: float = 3.0) -> tuple[float, float, float] | None:
     """Vertical gyro bias (rad/s) from the GNSS course: over every stretch driven faster than
-    ``min_speed`` without a gap, the integrated vertical rate minus the course change.
+    ``min_speed`` without a gap, the integrated vertical rate (``gyro`` (N, 3) rad/s about ``up``
+    (3,), taken block by block: no IMU-length rate or integral) minus the course change.
     Returns (bias, 1-sigma, seconds used) or None."""
     if len(gnss) < 10:
         return None
@@ -544,14 +571,23 @@ def _vertical_bias_from_course(t: np.ndarray, gyro_up: np.ndarray, gnss: GnssDat
     breaks = np.nonzero((np.diff(idx) > 1) | (np.diff(tc[idx]) > 3.0 * nominal) | jump)[0]
     starts = np.concatenate([[0], breaks + 1])
     ends = np.concatenate([breaks, [idx.size - 1]])
-    turned = np.concatenate([[0.0], np.cumsum(0.5 * (gyro_up[1:] + gyro_up[:-1]) * np.diff(t))])
+
+    def rate(lo: int, hi: int) -> np.ndarray:
+        """Rows ``lo:hi`` of the rate about up, rad/s (a spilled gyro's rows released once read)."""
+        w: np.ndarray = gyro[lo:hi] @ up
+        release((gyro,), lo, hi)
+        return w
+
+    # the integrated rate at both ends of each stretch (rad)
+    turned = trapezoid_integral_at(t, rate, t.shape[0], np.concatenate([tc[idx[starts]], tc[idx[ends]]]))
+    turned_start, turned_end = turned[:starts.size], turned[starts.size:]
     num = tot = var = 0.0
-    for a, b in zip(starts, ends):
+    for s, (a, b) in enumerate(zip(starts, ends)):
         i, j = idx[a], idx[b]
         T = float(tc[j] - tc[i])
         if T < 5.0:
             continue
-        gyro_turn = float(np.interp(tc[j], t, turned) - np.interp(tc[i], t, turned))
+        gyro_turn = float(turned_end[s] - turned_start[s])
         course = np.unwrap(yaw[idx[a:b + 1]])
         num += gyro_turn - float(course[-1] - course[0])
         tot += T
@@ -575,15 +611,15 @@ def calibrate(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: GnssData
     min_still_s : shortest still stretch used for the biases and the gravity axis, s.
     """
     notes: list[str] = []
-    stats = block_statistics(t, gyro, accel)
+    dt = sample_period(t)
+    stats = block_statistics(t, gyro, accel, dt=dt)
     still, _ = standstill(t, stats, gnss, gyro_arw, accel_vrw)
     runs = spans(t, still, min_still_s)
-    profile = noise_profile(t, gyro, accel)
+    profile = noise_profile(t, gyro, accel, dt=dt)
     lat = math.radians(float(np.median(gnss.lat_deg))) if len(gnss) else 0.0
     h = float(np.median(gnss.alt)) if len(gnss) else 0.0
     if runs:
-        est = _biases_at_rest(t, gyro, accel, runs, lat, h, gyro_bias_sigma, accel_bias_sigma)
-        dt = sample_period(t)
+        est = _biases_at_rest(gyro, accel, runs, dt, lat, h, gyro_bias_sigma, accel_bias_sigma)
         a, b = runs[0]
         n_still = sum(b1 - a1 for a1, b1 in runs)
         notes.append(
@@ -642,19 +678,19 @@ class _Biases:
     still_vrw: float | None = None
 
 
-def _biases_at_rest(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, runs: list[tuple[int, int]], lat: float,
+def _biases_at_rest(gyro: np.ndarray, accel: np.ndarray, runs: list[tuple[int, int]], dt: float, lat: float,
                     h: float, gyro_bias_sigma: float, accel_bias_sigma: float) -> _Biases:
-    """Up from the mean specific force of all still stretches (samples ``runs``); the biases from
+    """Up from the mean specific force of all still stretches (samples ``runs``, ``dt`` the sample
+    period, s); the biases from
     the first one: gyro = mean rate less the vertical Earth rate at ``lat`` (rad), the horizontal
     Earth rate (unknown heading) in its 1-sigma; accelerometer along up only, ``|f| - g(lat, h)``;
     each combined with the zero-mean prior (:func:`_with_prior`)."""
     g_local = float(geodesy.gravity(lat, h))
     w_e = geodesy.OMEGA_E
-    dt = sample_period(t)
-    sel = np.concatenate([np.arange(a, b) for a, b in runs])
-    f_all = accel[sel].mean(axis=0)
+    n_still = sum(b - a for a, b in runs)
+    f_all = rows_mean(accel, runs, n_still)
     up = f_all / np.linalg.norm(f_all)
-    up_from = f"{len(runs)} still stretch{'es' if len(runs) > 1 else ''}, {sel.size * dt:.0f} s"
+    up_from = f"{len(runs)} still stretch{'es' if len(runs) > 1 else ''}, {n_still * dt:.0f} s"
     a, b = runs[0]
     n = b - a
     w_mean = gyro[a:b].mean(axis=0)
@@ -675,11 +711,37 @@ def _biases_at_rest(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, runs: li
     gyro_bias, gyro_bias_std = _with_prior(est_g, sd_g, gyro_bias_sigma)
     # only the component along up is observed; across it the prior stays
     accel_bias, accel_bias_std = _with_prior(est_a, np.where(np.abs(up1) > 0.5, sd_a, np.inf), accel_bias_sigma)
-    res = gyro[sel] - gyro[sel].mean(axis=0)
-    still_arw = float(np.sqrt(np.mean(res ** 2))) * math.sqrt(dt)
-    resf = accel[sel] - accel[sel].mean(axis=0)
-    still_vrw = float(np.sqrt(np.mean(resf ** 2))) * math.sqrt(dt)
+    still_arw = _runs_rms(gyro, runs, n_still, rows_mean(gyro, runs, n_still)) * math.sqrt(dt)
+    still_vrw = _runs_rms(accel, runs, n_still, f_all) * math.sqrt(dt)
     return _Biases(up, up_from, gyro_bias, gyro_bias_std, accel_bias, accel_bias_std, "still", still_arw, still_vrw)
+
+
+def _runs_rows(x: np.ndarray, runs: list[tuple[int, int]]) -> Iterator[np.ndarray]:
+    """The rows of ``x`` (N, 3) in the index ranges ``runs`` ([a, b), in order) as contiguous parts
+    of at most :data:`~navpp.spill.WINDOW_ROWS` rows; a spilled ``x``'s rows released after each."""
+    for a, b in runs:
+        for lo in range(a, b, WINDOW_ROWS):
+            hi = min(b, lo + WINDOW_ROWS)
+            yield np.ascontiguousarray(x[lo:hi])
+            release((x,), lo, hi)
+
+
+def rows_mean(x: np.ndarray, runs: list[tuple[int, int]], n: int) -> np.ndarray:
+    """(3,) mean of the ``n`` rows of ``x`` (N, 3) in ``runs``: ``x[sel].mean(axis=0)`` to the bit
+    (numpy adds the rows of an axis-0 sum one after the other; each part continues the sum)."""
+    acc: np.ndarray | None = None
+    for part in _runs_rows(x, runs):
+        acc = np.add.reduce(part if acc is None else np.vstack([acc[None], part]), axis=0)
+    assert acc is not None
+    mean: np.ndarray = acc / n
+    return mean
+
+
+def _runs_rms(x: np.ndarray, runs: list[tuple[int, int]], n: int, mean: np.ndarray) -> float:
+    """The root mean square of the ``n`` rows of ``x`` (N, 3) in ``runs`` less ``mean`` (3,) over all
+    three axes: ``np.sqrt(np.mean((x[sel] - mean) ** 2))`` to the bit (:func:`navpp.intervals.pairwise_sum`)."""
+    ssq = pairwise_sum((((part - mean) ** 2).ravel() for part in _runs_rows(x, runs)), 3 * n)
+    return float(np.sqrt(ssq / (3 * n)))
 
 
 def _biases_in_motion(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: GnssData, gyro_bias_sigma: float,
@@ -688,11 +750,12 @@ def _biases_in_motion(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: 
     30 s, the gyro biases across up from the mean rate (a land vehicle or a walker does not keep
     rolling or pitching) and the vertical one from the GNSS course
     (:func:`_vertical_bias_from_course`); else the priors alone."""
-    f_all = accel.mean(axis=0)
+    whole = [(0, t.shape[0])]
+    f_all = rows_mean(accel, whole, t.shape[0])
     up = f_all / np.linalg.norm(f_all)
     gyro_bias, gyro_bias_std = np.zeros(3), np.full(3, gyro_bias_sigma)
     bias_from = "none"
-    w_all = gyro.mean(axis=0)
+    w_all = rows_mean(gyro, whole, t.shape[0])
     T = float(t[-1] - t[0])
     if T > 30.0:
         # across up: a land vehicle or a walker does not keep rolling or pitching
@@ -700,7 +763,7 @@ def _biases_in_motion(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gnss: 
         sd_across = math.radians(5.0) / T              # a few degrees of net roll/pitch change
         est = across.copy()
         sd = np.full(3, sd_across)
-        vert = _vertical_bias_from_course(t, gyro @ up, gnss)
+        vert = _vertical_bias_from_course(t, gyro, up, gnss)
         if vert is not None:
             est = est + vert[0] * up
             sd = np.sqrt(sd ** 2 + (vert[1] * up) ** 2)

@@ -25,6 +25,7 @@ import numpy as np
 from numba import njit
 
 from ..geodesy import GRAVITY_H1, GRAVITY_H1_LAT, GRAVITY_H2, OMEGA_E
+from ..intervals import interval_median, long_intervals
 from ..recording import LONG_GAP_PERIODS
 from .attitude import (
     quat_conj,
@@ -643,8 +644,8 @@ class InsModel:
         if self.path is None:
             self.path = np.full((self.t.shape[0], PATH_SIZE), np.nan)
         # long gaps: (start, end) times of IMU intervals over LONG_GAP_PERIODS nominal periods
-        dt = np.diff(self.t)
-        k = np.nonzero(dt > LONG_GAP_PERIODS * np.median(dt))[0] if dt.size > 1 else np.zeros(0, int)
+        k = long_intervals(self.t, LONG_GAP_PERIODS * interval_median(self.t)) if self.t.shape[0] > 2 \
+            else np.zeros(0, int)
         self.gaps = np.column_stack([self.t[k], self.t[k + 1]]) if k.size else np.zeros((0, 2))
 
     def psd_over(self, interval: tuple[float, float]) -> np.ndarray:

@@ -28,10 +28,12 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any, Literal
 
 import numpy as np
 
-from ..spill import release, release_all
+from ..intervals import interval_median
+from ..spill import Behind, like, release, release_all
 from .calibrate import BLOCK_ROWS, trapezoid_integral, trapezoid_integral_at
 
 __all__ = [
@@ -63,9 +65,6 @@ class StaleRows:
     fresh_rate_hz : float, Hz, rate of the kept (fresh) samples: ``(n_kept - 1) / (time span
         of the kept samples)``.  Robust to a jittery polling clock, where the fresh intervals
         scatter over a few poll periods.
-    fresh_median_rate_hz : float, Hz, ``1 / median(interval between kept samples)``.  Equals
-        ``fresh_rate_hz`` for a regular stream; on a polled stream it is biased by the poll
-        jitter (it picks one of the poll-period multiples), so prefer ``fresh_rate_hz``.
     n_repeats : int, rows whose six values bitwise equal the previous row's (stale or not).
     expected_by_chance : float, number of such all-six repeats expected if every channel
         repeated independently at its own rate (estimated in windows, from the rows that are
@@ -82,7 +81,6 @@ class StaleRows:
     count: int
     fraction: float
     fresh_rate_hz: float
-    fresh_median_rate_hz: float
     n_repeats: int
     expected_by_chance: float
     dispersion: float
@@ -175,7 +173,7 @@ def find_stale_rows(
     nan = float("nan")
     if n < 3:
         mask = np.zeros(n, dtype=bool)
-        return StaleRows(mask, 0, 0.0, _rate(t), _median_rate(t), 0, 0.0, nan, False,
+        return StaleRows(mask, 0, 0.0, _rate(t), 0, 0.0, nan, False,
                          f"only {n} rows: nothing to judge")
 
     # bitwise comparison: -0.0 vs +0.0 and NaN payloads count as different / equal by bits;
@@ -251,7 +249,7 @@ def find_stale_rows(
     kept = t[~mask] if stale else t
     count = int(mask.sum())
     return StaleRows(mask=mask, count=count, fraction=count / n, fresh_rate_hz=_rate(kept),
-                     fresh_median_rate_hz=_median_rate(kept), n_repeats=k_obs,
+                     n_repeats=k_obs,
                      expected_by_chance=float(expected), dispersion=float(dispersion),
                      confident=bool(confident), reason=reason)
 
@@ -266,12 +264,6 @@ def _rate(t: np.ndarray) -> float:
     if t.shape[0] < 2 or t[-1] <= t[0]:
         return float("nan")
     return float((t.shape[0] - 1) / (t[-1] - t[0]))
-
-
-def _median_rate(t: np.ndarray) -> float:
-    if t.shape[0] < 2:
-        return float("nan")
-    return float(1.0 / np.median(np.diff(t), overwrite_input=True))
 
 
 def fresh_count_dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_s: float = 1.0) -> float:
@@ -597,7 +589,7 @@ def _failed(reason: str, n_used: int = 0) -> ClockOffset:
 AngleAt = Callable[[np.ndarray], np.ndarray]
 
 
-def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
+def _spline(x: np.ndarray | _Grid, y: np.ndarray) -> AngleAt:
     """``scipy.interpolate.CubicSpline(x, y, extrapolate=False)`` (not-a-knot ends) for (N,) float
     ``x`` (strictly increasing) and ``y``, its values to the bit: the first derivatives at ``x``
     from the same tridiagonal system and solver (LAPACK ``gtsv``, as ``solve_banded`` calls it),
@@ -611,12 +603,14 @@ def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
 
         spline = interpolate.CubicSpline(x, y, extrapolate=False)
         return spline
+    xs = x if isinstance(x, np.ndarray) else None  # (a _Grid holds no rows)
     for lo in range(0, n, BLOCK_ROWS):             # block by block: no IMU-length temporaries
         xb, yb = x[lo:lo + BLOCK_ROWS + 1], y[lo:lo + BLOCK_ROWS]
         if not (np.all(np.isfinite(xb)) and np.all(np.isfinite(yb))):
             raise ValueError("_spline: x and y must be finite")
         if not np.all(xb[1:] > xb[:-1]):
             raise ValueError("_spline: x must be strictly increasing")
+        release((xs, y), lo, lo + BLOCK_ROWS)
     return Cubic(x, y, _spline_derivatives(x, y))
 
 
@@ -626,7 +620,7 @@ def _spline(x: np.ndarray, y: np.ndarray) -> AngleAt:
 SPLINE_MARGIN_ROWS = 128
 
 
-def _spline_derivatives(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def _spline_derivatives(x: np.ndarray | _Grid, y: np.ndarray) -> np.ndarray:
     """The first derivatives (N,) at ``x`` (N >= 4, strictly increasing) of the not-a-knot cubic
     spline through ``y``, block by block: each block's rows solved with
     :data:`SPLINE_MARGIN_ROWS` more on either side (the rows beyond left out), the margins
@@ -636,7 +630,8 @@ def _spline_derivatives(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     from scipy import linalg
 
     n = x.shape[0]
-    d = np.empty(n)
+    d = like(y, n, (), np.float64)          # spilled as y is: rows released behind the solve
+    xs = x if isinstance(x, np.ndarray) else None
     gtsv = None
     for lo in range(0, n, BLOCK_ROWS):
         hi = min(lo + BLOCK_ROWS, n)
@@ -648,10 +643,12 @@ def _spline_derivatives(x: np.ndarray, y: np.ndarray) -> np.ndarray:
         if info != 0:
             raise ValueError(f"_spline: the tridiagonal solve failed (info {info})")
         d[lo:hi] = sol[lo - a:hi - a, 0]
+        release((xs, y, d), max(lo - BLOCK_ROWS - SPLINE_MARGIN_ROWS, 0), a)
+    release_all(xs, y, d)
     return d
 
 
-def _spline_rows(x: np.ndarray, y: np.ndarray, a: int, b: int) -> tuple[np.ndarray, ...]:
+def _spline_rows(x: np.ndarray | _Grid, y: np.ndarray, a: int, b: int) -> tuple[np.ndarray, ...]:
     """Rows ``a .. b - 1`` of the not-a-knot spline's system for the first derivatives ``d`` at
     ``x`` (N,) through ``y`` (N,), as ``gtsv`` takes them: (lower (b-a-1), main (b-a), upper
     (b-a-1), right-hand side (b-a, 1)); their couplings to rows outside are left out.  Row k
@@ -695,7 +692,7 @@ class Cubic:
     #: steps of one interval from the first guess before the binary search takes over
     STEPS = 3
 
-    def __init__(self, x: np.ndarray, y: np.ndarray, d: np.ndarray) -> None:
+    def __init__(self, x: np.ndarray | _Grid, y: np.ndarray, d: np.ndarray) -> None:
         self.x = x
         self.y = y
         self.d = d
@@ -721,7 +718,7 @@ class Cubic:
             i += up
         off = ((t < x[i]) & (i > 0)) | ((t >= x[i + 1]) & (i < last))
         if off.any():
-            found = np.searchsorted(x, t[off], side="right")
+            found = x.searchsorted(t[off], side="right")
             found -= 1
             i[off] = np.clip(found, 0, last)
         return i
@@ -780,21 +777,27 @@ def _gyro_angle(t_imu: np.ndarray, rate: Callable[[int, int], np.ndarray],
     t_lo, t_hi = float(t_imu[0]), float(t_imu[-1])
     if smooth_s > 0.0 and t_hi - t_lo > 4.0 * smooth_s:
         # the centred moving average, on a uniform grid at the IMU's median step; its integral
-        step = float(np.median(np.diff(t_imu), overwrite_input=True))
+        step = interval_median(t_imu)
         start, stop = t_lo + 0.5 * smooth_s, t_hi - 0.5 * smooth_s
 
+        raw = theta_at
+        behind = Behind(t_imu, *((raw.y, raw.d) if isinstance(raw, Cubic) else ()))
+
         def averaged(lo: int, hi: int) -> np.ndarray:
-            """Rows ``lo:hi`` of the moving average on the grid, rad/s."""
+            """Rows ``lo:hi`` of the moving average on the grid, rad/s (the raw spline's spilled
+            rows released behind it)."""
             g = _arange_rows(start, step, lo, hi)
             a = np.clip(g - 0.5 * smooth_s, t_lo, t_hi)
             b = np.clip(g + 0.5 * smooth_s, t_lo, t_hi)
-            mean: np.ndarray = (theta_at(b) - theta_at(a)) / (b - a)
+            mean: np.ndarray = (raw(b) - raw(a)) / (b - a)
+            behind(float(a[0]) - smooth_s)
             return mean
 
-        phi = trapezoid_integral(step, averaged, _arange_length(start, stop, step))
-        del theta_at
+        n_grid = _arange_length(start, stop, step)
+        phi = trapezoid_integral(step, averaged, n_grid)
+        del theta_at, raw, behind
         release_all(t_imu)
-        grid = np.arange(start, stop, step)
+        grid = _Grid(start, step, n_grid)
         theta_at = _spline(grid, phi)
         t_lo, t_hi = float(grid[0]), float(grid[-1])
     return theta_at, t_lo, t_hi
@@ -818,6 +821,42 @@ def _arange_rows(start: float, step: float, lo: int, hi: int) -> np.ndarray:
     if lo == 0 < hi:
         rows[0] = start
     return rows
+
+
+class _Grid:
+    """``np.arange(start, stop, step)`` (float, ``n`` rows) without the array, as :func:`_spline`
+    and :class:`Cubic` read their breakpoints: a slice, a row or rows by index (an int array) are
+    formed when read, the same bits (:func:`_arange_rows`); ``searchsorted`` as the array's."""
+
+    def __init__(self, start: float, step: float, n: int) -> None:
+        self.start, self.step, self.shape = start, step, (n,)
+
+    def __getitem__(self, k: Any) -> Any:
+        n = self.shape[0]
+        if isinstance(k, slice):
+            lo, hi, stride = k.indices(n)
+            assert stride == 1, "_Grid: a slice with a step"
+            return _arange_rows(self.start, self.step, lo, max(hi, lo))
+        if isinstance(k, (int, np.integer)):
+            row = int(k) + n if k < 0 else int(k)
+            if not 0 <= row < n:
+                raise IndexError(f"_Grid: row {k} of {n}")
+            return _arange_rows(self.start, self.step, row, row + 1)[0]
+        idx = np.asarray(k)
+        rows = idx.astype(float)
+        rows *= (self.start + self.step) - self.start
+        rows += self.start
+        rows[idx == 1] = self.start + self.step
+        rows[idx == 0] = self.start
+        return rows
+
+    def searchsorted(self, v: np.ndarray, side: Literal["left", "right"] = "left") -> np.ndarray:
+        """``np.searchsorted(grid, v, side)``, the rows formed :data:`BLOCK_ROWS` at a time."""
+        n = self.shape[0]
+        found = np.zeros(np.shape(v), dtype=np.intp)
+        for lo in range(0, n, BLOCK_ROWS):
+            found += np.searchsorted(self[lo:lo + BLOCK_ROWS], v, side=side)
+        return found
 
 
 def _vertical_rate(gyro: np.ndarray, up: np.ndarray | None) -> Callable[[int, int], np.ndarray]:
