@@ -118,8 +118,13 @@ def decided() -> bool | None:
 
 
 def apply(compiled: bool) -> None:
-    """Set the mode for kernels decorated from now on, here and in worker processes."""
+    """Set the mode for kernels decorated from now on, here and in worker processes; compiled,
+    with scipy's BLAS module loaded on its own first (:func:`navpp.scipy_parts.preload_blas`)."""
     os.environ["NUMBA_DISABLE_JIT"] = "0" if compiled else "1"
+    if compiled:
+        from .scipy_parts import preload_blas
+
+        preload_blas()
     config = sys.modules.get("numba.core.config")
     if config is not None:
         config.DISABLE_JIT = 0 if compiled else 1  # type: ignore[attr-defined]
