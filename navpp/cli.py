@@ -114,10 +114,12 @@ class _Progress:
         self.marks: dict[str, list[float]] = {}     # stage -> [first call, last call], perf_counter s (--verbose)
 
     def __enter__(self):
+        if self.quiet:
+            return self                 # no bars: rich is not even imported
         from rich.console import Console
 
         console = Console(stderr=True)
-        if not self.quiet and console.is_terminal:
+        if console.is_terminal:
             from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
             self.bar = Progress(TextColumn("{task.description:<10}"), BarColumn(),
