@@ -24,9 +24,26 @@ from typing import Annotated
 import typer
 
 from .cli_print import note, print_compare_details, print_comparison, print_process_summary, process_details
+from .cli_values import install as install_plain_values
+
+
+class _Group(typer.core.TyperGroup):
+    """navpp's command group: it and the command about to run coerce their plain option values
+    themselves (:mod:`navpp.cli_values`: no pydantic on a run's start), the rest as typer does."""
+
+    def parse_args(self, ctx, args):
+        install_plain_values(self, ctx)
+        return super().parse_args(ctx, args)
+
+    def resolve_command(self, ctx, args):
+        name, command, rest = super().resolve_command(ctx, args)
+        if command is not None:       # its --help option is named as the group's (ctx.help_option_names)
+            install_plain_values(command, ctx)
+        return name, command, rest
+
 
 app = typer.Typer(
-    no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
+    cls=_Group, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
     help="Post-process inertial navigation logs: strapdown INS + loosely coupled GNSS filters.",
 )
 
@@ -97,10 +114,12 @@ class _Progress:
         self.marks: dict[str, list[float]] = {}     # stage -> [first call, last call], perf_counter s (--verbose)
 
     def __enter__(self):
+        if self.quiet:
+            return self                 # no bars: rich is not even imported
         from rich.console import Console
 
         console = Console(stderr=True)
-        if not self.quiet and console.is_terminal:
+        if console.is_terminal:
             from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
             self.bar = Progress(TextColumn("{task.description:<10}"), BarColumn(),

@@ -27,15 +27,18 @@ def print_process_summary(res: Any, quiet: bool, details: list[str] = (), compil
     the warnings only.  ``details``: more note lines after the notes (``--verbose``).
     ``compile_s``: the command's seconds compiling navpp's kernels (reading and writing
     included, :class:`navpp.jitcache.CompileAnnouncer`); default the filter run's."""
+    if quiet and not res.warnings:
+        return                          # nothing to print: rich is not imported
     from rich.console import Console
     from rich.markup import escape
-    from rich.table import Table
 
     err = Console(stderr=True, highlight=False, soft_wrap=True)
     for line in res.warnings:
         err.print(f"[yellow]warning:[/] {escape(line)}")
     if quiet:
         return
+    from rich.table import Table
+
     for line in (*res.notes, *details):
         note(err, line)
     if compile_s is None:

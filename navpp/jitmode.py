@@ -37,7 +37,6 @@ Python), so their ratio carries over to other machines better than either figure
 
 from __future__ import annotations
 
-import ast
 import os
 import sys
 from dataclasses import dataclass
@@ -118,8 +117,13 @@ def decided() -> bool | None:
 
 
 def apply(compiled: bool) -> None:
-    """Set the mode for kernels decorated from now on, here and in worker processes."""
+    """Set the mode for kernels decorated from now on, here and in worker processes; compiled,
+    with scipy's BLAS module loaded on its own first (:func:`navpp.scipy_parts.preload_blas`)."""
     os.environ["NUMBA_DISABLE_JIT"] = "0" if compiled else "1"
+    if compiled:
+        from .scipy_parts import preload_blas
+
+        preload_blas()
     config = sys.modules.get("numba.core.config")
     if config is not None:
         config.DISABLE_JIT = 0 if compiled else 1  # type: ignore[attr-defined]
@@ -137,14 +141,25 @@ def interpreted() -> bool:
 
 
 def _first_line(path: Path, name: str) -> int | None:
-    """Line of the first decorator of module-level function ``name`` (numba's cache key)."""
+    """Line (1-based) of the first decorator of module-level function ``name`` (numba's cache
+    key), found in the text without parsing the module (``ast.parse`` of the kernel modules
+    costs about 40 ms of every run's start): the ``def name(`` at column 0, and above it the
+    lines of its decorators (each starting with ``@``, their continuations indented or closing
+    a bracket), up to a blank or other line."""
     try:
-        tree = ast.parse(path.read_text(encoding="utf-8"))
-    except (OSError, SyntaxError, ValueError):
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except (OSError, ValueError):
         return None
-    for node in tree.body:
-        if isinstance(node, ast.FunctionDef) and node.name == name:
-            return min([d.lineno for d in node.decorator_list] + [node.lineno])
+    head = f"def {name}("
+    for k, line in enumerate(lines):
+        if line.startswith(head):
+            first = k
+            j = k
+            while j > 0 and lines[j - 1].strip() and lines[j - 1][0] in "@ \t)]}":
+                j -= 1
+                if lines[j].startswith("@"):
+                    first = j
+            return first + 1
     return None
 
 

@@ -2,8 +2,8 @@
 
 Pure functions, no I/O and no configuration: the caller passes arrays (as held by
 :class:`navpp.recording.ImuData` / :class:`navpp.recording.GnssData`) and decides what to do
-with the answers.  numpy, and of scipy only what a run loads anyway (:mod:`scipy.linalg`'s
-tridiagonal solve: numba's kernels import scipy.linalg) or needs rarely (``scipy.special`` when
+with the answers.  numpy, and of scipy only LAPACK's tridiagonal solve (``dgtsv`` of ``scipy.linalg._flapack``,
+loaded without the rest of scipy.linalg: :mod:`navpp.scipy_parts`) or what it needs rarely (``scipy.special`` when
 rows repeat, ``scipy.interpolate`` for a spline of fewer than 4 points): the spline's
 evaluation (:class:`Cubic`) is scipy's to the bit without importing scipy.interpolate (0.3 s
 and more of every run's start); the bounded lag refinement is a golden-section search
@@ -627,18 +627,16 @@ def _spline_derivatives(x: np.ndarray | _Grid, y: np.ndarray) -> np.ndarray:
     dropped.  The margins' solves start and end elsewhere than the whole system's, but what that
     changes dies out across them: the derivatives are the whole solve's (checked to the bit in
     tests/test_prep_blocks.py), without its IMU-length diagonals and right-hand side."""
-    from scipy import linalg
+    from ..scipy_parts import extension
 
     n = x.shape[0]
     d = like(y, n, (), np.float64)          # spilled as y is: rows released behind the solve
     xs = x if isinstance(x, np.ndarray) else None
-    gtsv = None
+    gtsv = extension("scipy.linalg._flapack").dgtsv     # get_lapack_funcs("gtsv") for float64
     for lo in range(0, n, BLOCK_ROWS):
         hi = min(lo + BLOCK_ROWS, n)
         a, b = max(lo - SPLINE_MARGIN_ROWS, 0), min(hi + SPLINE_MARGIN_ROWS, n)
         lower, main, upper, rhs = _spline_rows(x, y, a, b)
-        if gtsv is None:
-            gtsv, = linalg.get_lapack_funcs(("gtsv",), (main, rhs))
         sol, info = gtsv(lower, main, upper, rhs, True, True, True, True)[3:]     # (b - a, 1), int
         if info != 0:
             raise ValueError(f"_spline: the tridiagonal solve failed (info {info})")
