@@ -86,5 +86,8 @@ def install(command: Any, ctx: Any) -> None:
         info = descriptor.parameter_info
         own = [getattr(info, name, None) for name in ("parser", "min", "max", "path_type")]
         if all(v is None for v in own) and not getattr(info, "clamp", False):
-            param._runtime_param = PlainValue(annotation=descriptor.annotation,
-                                              parameter_info=descriptor.parameter_info)
+            try:
+                plain = PlainValue(annotation=descriptor.annotation, parameter_info=descriptor.parameter_info)
+            except TypeError:       # a typer whose coercion class is not 0.29's: its own coercion throughout
+                return
+            param._runtime_param = plain

@@ -99,3 +99,19 @@ def test_flapack_alone_is_get_lapack_funcs_gtsv() -> None:
                "ab = np.array([[0, 1, 1], [2, 2, 2], [1, 1, 0.0]])\n"
                "print(gtsv is alone, np.array_equal(x, y), linalg.solve_banded((1, 1), ab, np.ones(3)))")
     assert out == "True True [0.5 0.  0.5]"
+
+
+def test_a_typer_whose_coercion_class_differs_keeps_its_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    """When the plain coercion cannot be made (a typer whose RuntimeParam takes other arguments),
+    every value goes through typer's own coercion: same messages, nothing broken."""
+    class Other:
+        def __init__(self) -> None:
+            pass
+
+    monkeypatch.setattr(cli_values, "PlainValue", Other)
+    res = CliRunner().invoke(app, ["process", "LOG", "--output-rate", "abc"])
+    assert res.exit_code == 2
+    assert "Input should be a valid number" in res.output
+    res = CliRunner().invoke(app, ["simulate", "OUT", "--seed", "-1"])
+    assert res.exit_code == 2
+    assert "must be a non-negative integer, got -1" in res.output
