@@ -68,6 +68,9 @@ WHITE_DIFFERENCE_CORRELATION = -0.25
 #: not for an overconfident filter a few metres off the fixes' band.
 ALTITUDE_FLOOR_M = 100.0
 
+#: Fixes per window of the innovation checks' passes over the (M, 3, 3) covariances (1.2 MB each).
+WINDOW_FIXES = 1 << 14
+
 #: The gate probability the checks use when gating is off (``gate_probability = 0``).
 DEFAULT_GATE_PROBABILITY = 0.9999
 
@@ -165,7 +168,9 @@ def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray
     covariance as the filter computed it; R_used : (M, 3, 3) the R it used; var0 : (M, 3) the prior R's
     diagonal, m^2; accepted : (M,) bool.  M fixes; nothing is checked below 20.
     """
-    ok = np.all(np.isfinite(nu), axis=1) & np.all(np.isfinite(S), axis=(1, 2)) & np.all(var0 > 0.0, axis=1)
+    ok = np.all(np.isfinite(nu), axis=1) & np.all(var0 > 0.0, axis=1)
+    for a, b in windows(ok.shape[0], S, rows=WINDOW_FIXES):
+        ok[a:b] &= np.all(np.isfinite(S[a:b]), axis=(1, 2))
     m = int(np.count_nonzero(ok))
     if m < 20:
         return []
@@ -194,19 +199,18 @@ def innovation_findings(name: str, std_label: str, t: np.ndarray, nu: np.ndarray
     # far larger than the prior says: the fixes' own scatter, the R the data support
     z2 = second_differences(t, nu, var0, ok)
     spread = fix_spread(z2)
-    nu, S, R_used, var0, acc = nu[ok], S[ok], R_used[ok], var0[ok], accepted[ok]
-    failed = _beyond_prior(nu, S, R_used, var0, acc, hi3, hi1, max_fraction)
+    failed = _beyond_prior(nu, S, R_used, var0, ok, accepted, hi3, hi1, max_fraction)
     # judged against the fixes' own scatter where it is larger: a filter that learnt it (AEKF,
     # Sage-Husa, VCE) is right to; one whose innovations lie beyond even that has lost the GNSS
     # (and lies beyond the prior's gate all the more: the headline gives that one)
     if failed is not None and (not np.any(spread > 1.0)
-                               or _beyond_prior(nu, S, R_used, var0 * spread ** 2, acc, hi3, hi1,
+                               or _beyond_prior(nu, S, R_used, var0 * spread ** 2, ok, accepted, hi3, hi1,
                                                 max_fraction) is not None):
         beyond, how = failed
         out.append(Verdict(True, f"{name} diverged: {_share(beyond, m)} fail the configured GNSS sigma's gate ({how})"))
     elif np.any(spread > 1.0) and (failed is not None or far_too_small(z2, gate_probability)):
         by = "/".join(f"{v:.1f}" for v in spread)
-        r_ratio = np.sqrt(np.median(np.diagonal(R_used, axis1=1, axis2=2) / var0, axis=0))
+        r_ratio = np.sqrt(np.median(np.diagonal(R_used, axis1=1, axis2=2)[ok] / var0[ok], axis=0))
         learnt = (f"; {name} used R {'/'.join(f'{v:.1f}' for v in r_ratio)}x them" if np.any(r_ratio > 1.5)
                   else "")
         out.append(Verdict(False, f"GNSS noise {by}x (E/N/U) larger than {std_label} say (second differences of "
@@ -281,24 +285,41 @@ def sigmas_too_small(t: np.ndarray, nu: np.ndarray, var: np.ndarray, std_label: 
     return f"{std_label} {by}x (E/N/U) too small by the fixes' own scatter"
 
 
-def _beyond_prior(nu: np.ndarray, S: np.ndarray, R_used: np.ndarray, var: np.ndarray, acc: np.ndarray, hi3: float,
-                  hi1: float, max_fraction: float) -> tuple[int, str] | None:
+def _beyond_prior(nu: np.ndarray, S: np.ndarray, R_used: np.ndarray, var: np.ndarray, ok: np.ndarray,
+                  accepted: np.ndarray, hi3: float, hi1: float, max_fraction: float) -> tuple[int, str] | None:
     """The divergence test of :func:`innovation_findings` against the GNSS variance ``var`` (M, 3),
-    m^2: (fixes beyond its gate, what else shows it) when it fails, else None.  nu (M, 3) m; S,
-    R_used (M, 3, 3) m^2 as the filter used them; acc (M,) bool."""
-    m = nu.shape[0]
-    # far beyond the prior R (what a learnt R or an inflated P let through)
-    S0 = S - R_used + var[:, :, None] * np.eye(3)
-    try:
-        nis0 = np.einsum("ki,ki->k", nu, np.linalg.solve(S0, nu[:, :, None])[:, :, 0])
-    except np.linalg.LinAlgError:
+    m^2, over the fixes ``ok`` (M,) bool: (fixes beyond its gate, what else shows it) when it
+    fails, else None.  nu (M, 3) m; S, R_used (M, 3, 3) m^2 as the filter used them; accepted
+    (M,) bool.  In windows of :data:`WINDOW_FIXES` fixes (the (M, 3, 3) temporaries of the
+    stacked solves stay a window's; spilled records are released as they pass), each fix's
+    figures the bits of one stacked pass."""
+    m = int(np.count_nonzero(ok))
+    acc = accepted[ok]
+    nis0, r_ratio, q_post = np.empty(m), np.empty(m), np.empty(m)
+    singular = False                             # the prior S of some fix is not solvable
+    row = 0
+    for a, b in windows(ok.shape[0], nu, S, R_used, rows=WINDOW_FIXES):
+        sel = ok[a:b]
+        k = int(np.count_nonzero(sel))
+        if k == 0:
+            continue
+        nu_w, S_w, R_w, var_w = nu[a:b][sel], S[a:b][sel], R_used[a:b][sel], var[a:b][sel]
+        # far beyond the prior R (what a learnt R or an inflated P let through)
+        S0 = S_w - R_w + var_w[:, :, None] * np.eye(3)
+        if not singular:
+            try:
+                nis0[row:row + k] = np.einsum("ki,ki->k", nu_w, np.linalg.solve(S0, nu_w[:, :, None])[:, :, 0])
+            except np.linalg.LinAlgError:
+                singular = True
+        r_ratio[row:row + k] = np.sqrt(np.diagonal(R_w, axis1=1, axis2=2) / var_w).max(axis=1)
+        S_inv_nu = np.linalg.solve(S_w, nu_w[:, :, None])
+        post = np.einsum("kij,kjl->kil", R_w, S_inv_nu)[:, :, 0]
+        q_post[row:row + k] = np.sum(post * post / var_w, axis=1)
+        row += k
+    if singular:
         nis0 = np.zeros(m)                       # no judgement without a solvable prior S
-    r_ratio = np.sqrt(np.diagonal(R_used, axis1=1, axis2=2) / var).max(axis=1)
     beyond = int(np.count_nonzero(~(nis0 <= hi3)))
     grown = int(np.count_nonzero(r_ratio > math.sqrt(hi1)))
-    S_inv_nu = np.linalg.solve(S, nu[:, :, None])
-    post = np.einsum("kij,kjl->kil", R_used, S_inv_nu)[:, :, 0]
-    q_post = np.sum(post * post / var, axis=1)
     far = int(np.count_nonzero(acc & ~(q_post <= hi3)))
     n_acc = int(np.count_nonzero(acc))
     # a learnt R (or an inflated P) alone is no divergence: AEKF's R holds the prediction error by

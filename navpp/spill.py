@@ -144,10 +144,12 @@ def release_before(a: np.ndarray, row: int) -> None:
         m.released = end
 
 
-def windows(n_rows: int, *arrays: np.ndarray | None) -> Iterator[tuple[int, int]]:
+def windows(n_rows: int, *arrays: np.ndarray | None, rows: int | None = None) -> Iterator[tuple[int, int]]:
     """``(start, stop)`` windows of :data:`WINDOW_ROWS` rows over ``n_rows`` rows, one window for an
-    array in memory; after each window the rows of the spilled ``arrays`` are released."""
-    step = WINDOW_ROWS if any(spilled(a) for a in arrays) else max(n_rows, 1)
+    array in memory (given ``rows``: windows of that many rows either way, for a pass whose
+    per-row temporaries are larger than its arrays); after each window the rows of the spilled
+    ``arrays`` are released."""
+    step = rows if rows is not None else WINDOW_ROWS if any(spilled(a) for a in arrays) else max(n_rows, 1)
     for start in range(0, n_rows, step):
         stop = min(n_rows, start + step)
         yield start, stop

@@ -15,7 +15,7 @@ from scenarios import load_benchmark
 from typer.testing import CliRunner
 
 from navpp import api, engine
-from navpp.aiding import ZUPT_RUN, Aiding, ZuptCheck, vehicle_matrix
+from navpp.aiding import ZUPT_RUN, Aiding, StillRuns, ZuptCheck, vehicle_matrix
 from navpp.cli import app
 from navpp.config import config_from_dict
 from navpp.errors import ConfigError
@@ -393,3 +393,19 @@ def test_mounting_auto_without_enough_motion_is_warned(sim_log_dir, monkeypatch)
     res = engine.run(api.read_log(sim_log_dir, cfg), cfg, api.make_filter("ekf", cfg))
     assert not any("estimated" in n for n in res.notes)
     assert any('mounting_rpy_deg = "auto": less than 10 s of fast straight driving' in w for w in res.warnings)
+
+
+@pytest.mark.parametrize("mask", ["runs", "alternating", "all still", "none still", "edges"])
+def test_still_run_numbers_are_the_cumulative_sum_of_moving_samples(mask):
+    """Oracle: ``np.cumsum(~still)``, the numbering the runs' bounds stand for, at every sample,
+    as arrays and one at a time (in order, backwards and shuffled)."""
+    rng = np.random.default_rng(4)
+    still = {"runs": np.repeat(rng.random(300) < 0.4, 11), "alternating": np.arange(501) % 2 == 0,
+             "all still": np.ones(9, bool), "none still": np.zeros(9, bool),
+             "edges": np.array([True, True, False, False, True, False, True, True])}[mask]
+    want = np.cumsum(~still)
+    runs = StillRuns(still)
+    got = runs.number(np.arange(still.size))
+    assert got.dtype == want.dtype and np.array_equal(got, want)
+    for order in (np.arange(still.size), np.arange(still.size)[::-1], rng.permutation(still.size)):
+        assert [runs.number_at(int(i)) for i in order] == [int(v) for v in want[order]]

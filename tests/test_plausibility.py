@@ -104,6 +104,32 @@ def test_a_learnt_r_hiding_large_innovations_is_a_divergence():
     assert f.fatal and "sage-husa diverged" in f.headline and "configured GNSS sigma" in f.headline, f
 
 
+@pytest.mark.parametrize("case", ["diverged", "noisier", "singular prior"])
+def test_innovation_checks_in_windows_find_what_one_pass_finds(case, monkeypatch):
+    """Oracle: the same checks in one window (the arrays as one stacked pass saw them).  Windows
+    of 7 fixes, with non-finite innovations and covariances among them and a rejected fix: the
+    same findings, counts and factors (the per-fix figures are the same bits)."""
+    t, nu, S, R, var0, acc = _white(m=400)
+    if case == "diverged":
+        nu, R, S = nu + _drift(t, var0, 30.0), R * 900.0, S * 900.0
+    elif case == "noisier":
+        nu, S, R = 4.0 * nu, S * 16.0, R * 16.0
+    else:                                   # S - R + var0 singular at one fix: no prior gate at all
+        nu, R, S = nu + _drift(t, var0, 30.0), R * 900.0, S * 900.0
+        S[100] = R[100] - np.diag(var0[100])
+    nu[[3, 50, 51]] = np.nan
+    S[[10, 200], 1, 2] = np.inf
+    acc[7] = False
+    monkeypatch.setattr(pl, "WINDOW_FIXES", 1 << 20)
+    whole = pl.innovation_findings("aekf", "std", t, nu, S, R, var0, acc, 0.9999, 0.25)
+    monkeypatch.setattr(pl, "WINDOW_FIXES", 7)
+    assert pl.innovation_findings("aekf", "std", t, nu, S, R, var0, acc, 0.9999, 0.25) == whole
+    if case == "singular prior":            # no prior gate, no judgement: nothing found
+        assert whole == []
+    else:
+        assert whole and whole[0].fatal == (case == "diverged")
+
+
 def test_fixes_noisier_than_their_sigmas_learnt_by_the_filter_only_warn():
     """Oracle: the model's own numbers.  White fix errors 4x their declared sigma (R 16x too
     small) that an adaptive filter learnt (R and S 16x): the innovations are what the fixes'

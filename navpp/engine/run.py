@@ -54,6 +54,7 @@ from .prepare import (
     calibrated,
     mounting_matrix,
     noise_model,
+    rotated_rows,
     start_covariance,
     start_fixes,
     timing_fixes,
@@ -231,7 +232,7 @@ def prepared(recording: Recording, config: Config, cov_step_s: float, log: Journ
     gyro, accel = imu.gyro, imu.accel
     if any(a != 0.0 for a in config.imu.mounting_rpy_deg):
         m = mounting_matrix(config.imu.mounting_rpy_deg)
-        gyro, accel = gyro @ m.T, accel @ m.T
+        gyro, accel = rotated_rows(gyro, m), rotated_rows(accel, m)     # spilled as read, window by window
     gyro, accel, noise, cal, cal_notes, cal_warnings = calibrated(recording, config, gyro, accel, calibration)
     log.notes += cal_notes
     log.warnings += cal_warnings
