@@ -22,6 +22,7 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -479,3 +480,27 @@ def test_ros2_metadata_naming_a_topic_the_storage_lacks(originals, tmp_path: Pat
         read(bag)
     assert str(exc.value) == (f"{bag}: topic 'x': metadata.yaml lists 201 messages but the bag's storage holds "
                               "none (the metadata does not match the storage file)")
+
+
+def test_a_damaged_message_count_does_not_size_the_decoded_table(originals, tmp_path: Path,
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """The ROS 1 bag's last byte is a message count of its last chunk's connection: flipped, rosbags
+    reports ~185 million messages, and the decoded table was sized for them (62 GB reserved on the
+    spill file, or "no space left").  The first size is now bounded by what the file can hold."""
+    from navpp import spill
+    from navpp.io import messages
+
+    data = bytearray(originals["ros1"].read_bytes())
+    data[-1] ^= 11
+    path = tmp_path / "bad.bag"
+    path.write_bytes(bytes(data))
+    requested: list[int] = []
+    real = spill.empty_rows
+
+    def recorded(n_rows: int, row_shape: tuple[int, ...], dtype: object, spilled: bool, what: str = "") -> object:
+        requested.append(n_rows * int(np.prod(row_shape)) * np.dtype(dtype).itemsize)
+        return real(n_rows, row_shape, dtype, spilled, what)
+
+    monkeypatch.setattr(messages.spill, "empty_rows", recorded)
+    check_outcome(lambda: read(path), str(path))
+    assert requested and max(requested) <= 8 * len(data)      # an Imu row: 44 words per message of ≥ 64 bytes

@@ -43,6 +43,7 @@ from navpp.io.messages import (
     TopicDecoder,
     build_messages,
     decode_with_library,
+    plausible_count,
 )
 from navpp.io.ros import (
     FIX_TYPE,
@@ -539,6 +540,8 @@ class _FastReader:
             counts = summary.statistics.channel_message_counts if summary.statistics is not None else {}
             for cid, channel in summary.channels.items():
                 self.reg.expected[channel.topic] = self.reg.expected.get(channel.topic, 0) + counts.get(cid, 0)
+            for topic, count in self.reg.expected.items():     # a damaged count: no more than the file holds
+                self.reg.expected[topic] = plausible_count(count, self.size)
             for schema in summary.schemas.values():
                 self.reg.add_schema(schema)
             for channel in summary.channels.values():

@@ -697,6 +697,18 @@ def build_messages(msgtype: str, topic: str, table: np.ndarray, stamp_ns: np.nda
                          angular=np.ascontiguousarray(f[:, 3:6]))
 
 
+#: The fewest bytes any supported message takes serialized (a TwistStamped with an empty frame
+#: id: header 16 + twist 48, either encoding): a log of N bytes holds at most N / this many.
+MIN_MESSAGE_BYTES = 64
+
+
+def plausible_count(expected: int, log_bytes: int) -> int:
+    """A message count from a log's index or summary (``expected``) as a first table size: at most
+    what ``log_bytes`` bytes of log can hold (:data:`MIN_MESSAGE_BYTES` each), so that a damaged
+    count cannot ask for a table larger than the log (the table grows if more messages come)."""
+    return max(0, min(int(expected), int(log_bytes) // MIN_MESSAGE_BYTES))
+
+
 class _Rows:
     """A topic's decoded rows in one growing (capacity, n_cols + 2) uint64 table: the kernel's
     columns, then the header stamp and the log time (ns, int64 bits).  On a spill file

@@ -131,8 +131,11 @@ def read_rosbag(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]
         unsupported type asked for, a message definition without the needed fields, or a
         message that cannot be decoded.
     """
+    from navpp.io.messages import plausible_count
+
     files = _check_paths(paths)
     label = _label(files)
+    size = _log_bytes(files)
     with _open(files) as reader:
         infos = _topic_infos(reader)
         if sum(t.count for t in infos) == 0:
@@ -148,7 +151,8 @@ def read_rosbag(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]
             plans[topic] = _plan(label, reader, std_store, topic, by_name[topic].msgtype, conns, warnings)
 
         def new_sinks() -> dict[str, _Sink]:
-            return {t: _Sink(label, t, plans[t], by_name[t].encoding, memory, by_name[t].count) for t in wanted}
+            return {t: _Sink(label, t, plans[t], by_name[t].encoding, memory, plausible_count(by_name[t].count, size))
+                    for t in wanted}
 
         sinks = new_sinks()
         if reader.is2 or not _FAST_ROS1 or _collect_ros1(reader, bag_topics, wanted, sinks) is None:
@@ -191,6 +195,15 @@ def _as_list(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -
 
 def _label(files: Sequence[Path]) -> str:
     return str(files[0]) if len(files) == 1 else " + ".join(str(f) for f in files)
+
+
+def _log_bytes(files: Sequence[Path]) -> int:
+    """Bytes of the bag: its files' sizes (a ROS 2 bag directory's files inside it)."""
+    total = 0
+    for path in files:
+        inside = [p for p in path.iterdir() if p.is_file()] if path.is_dir() else [path]
+        total += sum(p.stat().st_size for p in inside)
+    return total
 
 
 def _head(path: Path, n: int = 16) -> bytes:
