@@ -60,16 +60,25 @@ if RuntimeParam is not None:
 
         def _coerce_value(self, value: Any, param: Any, ctx: Any) -> Any:
             annotation: Any = self.annotation
-            if get_origin(annotation) is list and isinstance(value, (list, tuple)):
-                (item_type,) = get_args(annotation)
-                items = [_plain(item_type, v, param, ctx) for v in value]
-                if all(ok for ok, _ in items):
-                    return [v for _, v in items]
-            else:
-                ok, coerced = _plain(annotation, value, param, ctx)
-                if ok:
-                    return coerced
-            return build_runtime_param(param.type_descriptor)._coerce_value(value, param=param, ctx=ctx)
+            try:
+                if get_origin(annotation) is list and isinstance(value, (list, tuple)):
+                    (item_type,) = get_args(annotation)
+                    items = [_plain(item_type, v, param, ctx) for v in value]
+                    if all(ok for ok, _ in items):
+                        return [v for _, v in items]
+                else:
+                    ok, coerced = _plain(annotation, value, param, ctx)
+                    if ok:
+                        return coerced
+            except (TypeError, AttributeError):     # typer's helpers not as 0.29's: its own coercion
+                pass
+            own = _OWN.get(param)
+            if own is None:
+                own = _OWN[param] = build_runtime_param(param.type_descriptor)
+            return own._coerce_value(value, param=param, ctx=ctx)
+
+    #: typer's own coercion of a parameter, built the first time a value is not a plain one
+    _OWN: dict[Any, Any] = {}
 
 
 def install(command: Any, ctx: Any) -> None:

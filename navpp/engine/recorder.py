@@ -223,18 +223,6 @@ class RunRecorder:
         out: np.ndarray = np.sqrt(np.diagonal(self.r_used, axis1=1, axis2=2))
         return out
 
-    def knot_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The knots: times (K,) s, prior and posterior position variance (K, 3) ENU m^2."""
-        t, prior, post = self.knot_arrays_all()
-        pos = slice(POS.start - KNOT.start, POS.stop - KNOT.start)
-        return t, np.ascontiguousarray(prior[:, pos]), np.ascontiguousarray(post[:, pos])
-
-    def knot_arrays_all(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The knots: times (K,) s, prior and posterior variance (K, 9) of the attitude error
-        (rad^2, about the ENU axes), velocity (ENU m^2/s^2) and position (ENU m^2)."""
-        kn = self.knot_records()
-        return kn[:, 0].copy(), kn[:, 1:1 + _KNOT_N].copy(), kn[:, 1 + _KNOT_N:].copy()
-
     def knot_records(self) -> np.ndarray:
         """The knots as recorded, no copy: (K, 19) rows of time (s), prior then posterior
         variance of :data:`KNOT` (:meth:`knot`'s layout; a view of :attr:`knots`, which must not

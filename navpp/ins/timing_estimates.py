@@ -632,7 +632,12 @@ def _spline_derivatives(x: np.ndarray | _Grid, y: np.ndarray) -> np.ndarray:
     n = x.shape[0]
     d = like(y, n, (), np.float64)          # spilled as y is: rows released behind the solve
     xs = x if isinstance(x, np.ndarray) else None
-    gtsv = extension("scipy.linalg._flapack").dgtsv     # get_lapack_funcs("gtsv") for float64
+    try:
+        gtsv = extension("scipy.linalg._flapack").dgtsv     # get_lapack_funcs("gtsv") for float64
+    except (ImportError, AttributeError):                   # a scipy laid out otherwise: its public way
+        from scipy.linalg import get_lapack_funcs
+
+        gtsv = get_lapack_funcs("gtsv", (np.empty(0), np.empty((0, 1))))
     for lo in range(0, n, BLOCK_ROWS):
         hi = min(lo + BLOCK_ROWS, n)
         a, b = max(lo - SPLINE_MARGIN_ROWS, 0), min(hi + SPLINE_MARGIN_ROWS, n)

@@ -22,6 +22,7 @@ import numpy as np
 from .. import spill
 from ..errors import InputError
 from ..findings import with_code
+from ..intervals import interval_median
 from ..recording import GnssData, ImuData, OdometryData, Recording, ReferenceData, lone_stamp, order_samples
 from .detect import choose_odometry_topic, gnss_velocity_topics, in_vehicle_frame
 from .ros import FIX_TYPE, IMU_TYPE, FixMessages, ImuMessages, LogContents
@@ -219,7 +220,7 @@ def _imu_data(contents: LogContents, imu_name: str, time_source: str, gyro_scale
     for a, b in spill.windows(stamps.shape[0], stamps):
         np.subtract(stamps[a:b], t0_ns, out=stamps[a:b])
         np.multiply(stamps[a:b], 1e-9, out=t_imu[a:b])
-    nominal = float(np.median(np.diff(t_imu), overwrite_input=True))
+    nominal = interval_median(t_imu)     # a spilled t_imu window by window, the same bits
     spill.release_all(t_imu)
     rate = 1.0 / nominal
     if rate < 50.0:
