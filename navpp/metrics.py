@@ -29,6 +29,7 @@ import numpy as np
 from navpp import geodesy, spill
 from navpp.errors import InputError
 from navpp.ins.attitude import rph_deg_to_dcm
+from navpp.intervals import interval_median, long_intervals
 from navpp.recording import GnssData, ReferenceData, Solution
 
 __all__ = [
@@ -89,8 +90,8 @@ def associate(t_est: np.ndarray, t_ref: np.ndarray, skip_holes: bool = False) ->
         # is not interpolated across: longer than the INS bridges and 3 of the estimate's own intervals
         from .ins.model import max_bridgeable_gap_s
 
-        d = np.diff(t_est)
-        holes = np.flatnonzero(d > max(max_bridgeable_gap_s(), 3.0 * float(np.median(d))))
+        limit = max(max_bridgeable_gap_s(), 3.0 * interval_median(t_est))
+        holes = long_intervals(t_est, limit)        # np.diff(t_est) > limit, a spilled t_est window by window
         for k in holes:
             inside &= ~((t_ref > t_est[k]) & (t_ref < t_est[k + 1]))
     idx = np.flatnonzero(inside).astype(np.int64)
@@ -118,6 +119,7 @@ class _Bracket(NamedTuple):
             return cls(np.zeros(t.shape, int), np.zeros(t.shape, int), np.zeros(t.shape))
         span = t_src[i1] - t_src[i0]
         w = np.clip((t - t_src[i0]) / np.where(span > 0, span, 1.0), 0.0, 1.0)
+        spill.release_all(t_src)        # a spilled t_src's pages the indexing touched leave memory
         return cls(i0, i1, w)
 
     def pair(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -150,6 +152,16 @@ def _interp(t_src: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
     return _Bracket.of(np.asarray(t_src, dtype=float), np.asarray(t, dtype=float)).linear(y)
 
 
+def _decreasing(t: np.ndarray) -> bool:
+    """Whether the times ``t`` (N,) s ever decrease; a spilled ``t`` window by window, its pages
+    released behind (:func:`navpp.spill.windows`)."""
+    for a, b in spill.windows(t.shape[0], t):
+        seg = t[max(a - 1, 0):b]            # with the window's first pair across its start
+        if np.any(seg[1:] < seg[:-1]):
+            return True
+    return False
+
+
 def _interp_track(t_src: np.ndarray, lat_deg: np.ndarray, lon_deg: np.ndarray, alt: np.ndarray,
                   vel_enu: np.ndarray | None, rph_deg: np.ndarray | None,
                   t: np.ndarray) -> dict[str, np.ndarray]:
@@ -163,7 +175,7 @@ def _interp_track(t_src: np.ndarray, lat_deg: np.ndarray, lon_deg: np.ndarray, a
     t = np.asarray(t, dtype=float)
     if t_src.size == 0:
         raise ValueError("cannot interpolate a trajectory with no epochs")
-    if t_src.size > 1 and np.any(t_src[1:] < t_src[:-1]):
+    if _decreasing(t_src):
         raise InputError("trajectory times are not increasing; cannot interpolate")
     br = _Bracket.of(t_src, t)
     out = {
@@ -199,6 +211,11 @@ def interpolate_solution(sol: Solution, t: np.ndarray) -> dict[str, np.ndarray]:
     return out
 
 
+#: Points per block of :func:`position_errors_enu`: its ECEF differences and rotations are (K, 3)
+#: and (K, 3, 3) temporaries, which for an 8-hour reference at 10 Hz were about 66 MB at once.
+ENU_BLOCK = 1 << 15
+
+
 def position_errors_enu(lat_deg: np.ndarray, lon_deg: np.ndarray, alt: np.ndarray,
                         ref_lat_deg: np.ndarray, ref_lon_deg: np.ndarray,
                         ref_alt: np.ndarray) -> np.ndarray:
@@ -216,12 +233,16 @@ def position_errors_enu(lat_deg: np.ndarray, lon_deg: np.ndarray, alt: np.ndarra
     -------
     (K, 3) float, m: east (longitude error), north (latitude error), up (height error).
     """
-    return geodesy.geodetic_to_enu(
-        np.radians(np.asarray(lat_deg, dtype=float)), np.radians(np.asarray(lon_deg, dtype=float)),
-        np.asarray(alt, dtype=float),
-        np.radians(np.asarray(ref_lat_deg, dtype=float)),
-        np.radians(np.asarray(ref_lon_deg, dtype=float)), np.asarray(ref_alt, dtype=float),
-    ).reshape(-1, 3)
+    cols = [np.atleast_1d(np.asarray(a, dtype=float)) for a in (lat_deg, lon_deg, alt, ref_lat_deg, ref_lon_deg,
+                                                                  ref_alt)]
+    k = max(c.shape[0] for c in cols)
+    cols = [np.broadcast_to(c, (k,)) for c in cols]
+    out = np.empty((k, 3))
+    for a in range(0, k, ENU_BLOCK):     # point by point, so blocks give the same bits as one call
+        la, lo, h, rla, rlo, rh = (c[a:a + ENU_BLOCK] for c in cols)
+        out[a:a + ENU_BLOCK] = geodesy.geodetic_to_enu(np.radians(la), np.radians(lo), h, np.radians(rla),
+                                                       np.radians(rlo), rh)
+    return out
 
 
 def _abs_stats(a: np.ndarray) -> dict[str, float]:

@@ -278,3 +278,20 @@ def test_raw_gnss_vertical_lever_arm_without_reference_heading():
     gnss = GnssData(t, ref.lat_deg.copy(), ref.lon_deg.copy(), ref.alt + 1.5)   # antenna 1.5 m up
     g = compute_metrics(sol, ref, gnss=gnss, lever_arm_m=(0.3, 0.0, 1.5), **_kwargs())["gnss_position_m"]
     assert g["up"]["max"] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_decreasing_times_found_across_the_windows_of_a_spilled_series() -> None:
+    """metrics._decreasing on a spilled series (window by window) agrees with the whole-array check,
+    also for a decrease between the last row of one window and the first of the next."""
+    from navpp import spill
+    from navpp.metrics import _decreasing
+
+    n = 2 * spill.WINDOW_ROWS + 3
+    t = spill.empty_rows(n, (), np.float64, True)
+    t[:] = np.arange(n, dtype=float)
+    assert spill.spilled(t) and not _decreasing(t)
+    for k in (1, spill.WINDOW_ROWS, spill.WINDOW_ROWS + 1, n - 1):       # t[k] < t[k - 1]
+        t[:] = np.arange(n, dtype=float)
+        t[k] = t[k - 1] - 0.5
+        assert _decreasing(t) == bool(np.any(np.asarray(t)[1:] < np.asarray(t)[:-1])) is True
+    assert not _decreasing(np.array([3.0]))
