@@ -134,8 +134,13 @@ def committed() -> bool:
 
 
 def check() -> None:
-    """Raise :class:`Interrupted` if a signal was received (and swallowed on the way)."""
+    """Raise :class:`Interrupted` if a signal was received (and swallowed on the way).  The run
+    stops from here: a redelivery still pending (:func:`_redeliver`, for a signal that came in
+    fragile code) is then ignored, so that it cannot break off the clean-up (a staging
+    directory half removed) with a second :class:`Interrupted`."""
+    global _retrying
     if _received is not None and not _committing:
+        _retrying = False
         raise Interrupted(_received)
 
 

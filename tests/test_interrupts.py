@@ -204,3 +204,17 @@ def test_a_cut_short_teardown_leaves_no_semaphore_for_the_tracker_to_report(how:
         assert "leaked semaphore" in proc.stderr
     else:
         assert proc.stderr == ""
+
+
+def test_a_pending_redelivery_does_not_break_off_the_clean_up(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A signal that came in fragile code is redelivered a moment later; when the run has stopped
+    by then (check() raised at the commit), the redelivery must not raise a second Interrupted in
+    the clean-up (the soak once found a staging directory left half removed)."""
+    from navpp import interrupts
+
+    monkeypatch.setattr(interrupts, "_received", signal.SIGTERM)
+    monkeypatch.setattr(interrupts, "_retrying", True)           # a redelivery is pending
+    monkeypatch.setattr(interrupts, "_committing", False)
+    with pytest.raises(interrupts.Interrupted):
+        interrupts.check()
+    interrupts._handler(signal.SIGTERM, None)                      # the redelivery: ignored
