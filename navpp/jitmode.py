@@ -20,9 +20,10 @@ module is imported (numba reads the flag when a function is decorated):
     the CPU seconds of compiling the missing groups (:data:`COMPILE_S`) against the extra CPU
     seconds of interpreting this job (IMU samples x filters, :data:`INTERPRETED_US`), and take
     the cheaper, charging this job half the compile cost (:data:`COMPILE_SHARE`: compiled
-    kernels serve later runs too).  With an EKF the break-even is near 80 minutes of 125 Hz
-    IMU; with a sigma-point filter, about a minute.  The sample counts come from the logs' indexes (MCAP summary, ROS 2
-    ``metadata.yaml``, ROS 1 bag index) or, for CSV, from the file size and its first lines.
+    kernels serve later runs too).  With an EKF the break-even is near 6.5 minutes of 125 Hz
+    IMU; with a sigma-point filter, about 2 minutes (the SIF: 30 s).  The sample counts come
+    from the logs' indexes (MCAP summary, ROS 2 ``metadata.yaml``, ROS 1 bag index) or, for
+    CSV, from the file size and its first lines.
 
 The choice comes from ``--jit`` (process, compare), else ``NAVPP_JIT``, else ``auto`` on the
 command line and ``on`` in the Python API (``navpp.process(..., jit=...)``: a program may go on
@@ -66,10 +67,16 @@ GROUPS: dict[str, tuple[tuple[str, str], ...]] = {
 #: sample-drive EKF run 68.4 -> 70.4 s CPU, the two side by side at load 11).
 COMPILE_S = {"ins": 48.5, "ros": 1.5, "mcap": 0.5, "csv": 1.5, "sigma": 9.0, "vce": 10.0, "smooth": 9.0}
 #: Extra CPU µs per IMU sample when interpreted, per filter (forward run), and per sample
-#: for the smoother's backward pass; per message for decoding a ROS log.
-INTERPRETED_US = {"ekf": 40.0, "aekf": 60.0, "sif": 900.0, "ckf": 950.0, "ukf": 950.0, "aukf": 1000.0,
-                  "rwckf": 1200.0, "vce-ckf": 1100.0}
-SMOOTH_US = 130.0
+#: for the smoother's backward pass; per message for decoding a ROS log.  Measured with
+#: ``benchmarks/bench_interpreted.py`` (sample drive cut to 60 and 120 s, the slope of
+#: interpreted minus compiled CPU; 2-core EPYC, load 6-16, 3 Dec 2026): EKF 509, AEKF 494,
+#: UKF 2049, CKF 1957, AUKF 1967, RWCKF 2362, VCE-CKF 2971, SIF 9221; the smoother (EKF with
+#: ``--smooth``, less the forward run) 368.  The figures these replace (40 µs for the EKF, about
+#: 1 ms for the sigma-point filters, 130 µs for the smoother) were 2 to 13 times too low, so
+#: ``auto`` ran EKF logs of up to 80 minutes interpreted (an hour: ~230 s of CPU by these figures).
+INTERPRETED_US = {"ekf": 510.0, "aekf": 495.0, "sif": 9200.0, "ckf": 1960.0, "ukf": 2050.0, "aukf": 1970.0,
+                  "rwckf": 2360.0, "vce-ckf": 2970.0}
+SMOOTH_US = 370.0
 DECODE_US = {"ros": 5.0, "mcap": 5.0}
 #: The share of the compile cost charged to this job (the rest to the later runs it also serves).
 COMPILE_SHARE = 0.5

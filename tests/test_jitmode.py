@@ -28,16 +28,17 @@ def test_decide_takes_the_cheaper_side() -> None:
     """Interpreted when its estimated extra CPU is below the compile cost of the missing groups,
     compiled when every group is cached, when asked, or when a log's size is unknown."""
     small = [(37_500, 39_000, "mcap")]
-    big = [(7_200 * 125, 7_200 * 130, "mcap")]     # 2 h: beyond the EKF break-even (about 80 min)
+    big = [(900 * 125, 900 * 130, "mcap")]     # 15 min: beyond the EKF break-even (about 6.5 min)
     missing = ("ins", "ros", "mcap")
     assert not jitmode.decide("auto", small, ["ekf"], False, missing).compiled
     assert jitmode.decide("auto", big, ["ekf"], False, missing).compiled
-    # a sigma-point filter interpreted costs about 1 ms a sample: 37,500 samples outweigh compiling
+    # a sigma-point filter interpreted costs about 2 ms a sample: 37,500 samples outweigh compiling
     assert jitmode.decide("auto", small, ["ckf"], False, (*missing, "sigma")).compiled
     # a process is compiled or interpreted as a whole: with the INS cached, compiling only the
     # smoother's group beats interpreting the whole smoothed run
     assert jitmode.decide("auto", small, ["ekf"], True, ("smooth",)).compiled
-    assert not jitmode.decide("auto", small, ["ekf"], True, (*missing, "smooth")).compiled
+    assert not jitmode.decide("auto", [(20_000, 21_000, "mcap")], ["ekf"], True, (*missing, "smooth")).compiled
+    assert jitmode.decide("auto", small, ["ekf"], True, (*missing, "smooth")).compiled   # 0.9 ms a sample
     assert jitmode.decide("auto", small, ["ekf"], False, ()).compiled
     assert jitmode.decide("auto", [None], ["ekf"], False, missing).compiled
     assert not jitmode.decide("off", big, ["ckf"], False, ()).compiled
