@@ -12,8 +12,10 @@ What runs: navpp's simulator writes one log (car drive, automotive IMU at 125 Hz
 at 5 Hz, seed 7; cached in the work directory).  Each tool then runs on that log in its own
 fresh process, end to end (read the files, filter, write the IMU-rate trajectory):
 
-* navpp: ``python -m navpp process LOG --filter ekf --out DIR`` (numba cache warmed by one
-  run before the timed ones; this also computes metrics against reference.csv, as always);
+* navpp: ``python -m navpp process LOG --filter ekf --out DIR`` (numba cache warmed by
+  ``navpp compile`` and one run before the timed ones: a run alone does not cache on a short log,
+  whose kernels navpp then runs interpreted; this also computes metrics against reference.csv,
+  as always);
 * pyins: our glue (``_pyins_child``): pandas reads imu.csv/gnss.csv, FLU axes turned to
   pyins's FRD, ``pyins.strapdown.compute_increments_from_imu``,
   ``pyins.filters.run_feedback_filter`` with ``pyins.measurements.Position``, the trajectory
@@ -379,9 +381,9 @@ def main() -> None:
     env = child_env(hwm)
     nav_out, py_out, kf_out = work / "out-navpp", work / "out-pyins", work / "out-kfgins"
     py_out.mkdir(parents=True, exist_ok=True)
-    nav_cmd = python_cmd("import runpy, sys; sys.argv = ['navpp'] + sys.argv[1:]; "
-                         "runpy.run_module('navpp', run_name='__main__', alter_sys=True)") + [
-        "process", str(log), "--filter", "ekf", "--out", str(nav_out)]
+    navpp_cli = python_cmd("import runpy, sys; sys.argv = ['navpp'] + sys.argv[1:]; "
+                           "runpy.run_module('navpp', run_name='__main__', alter_sys=True)")
+    nav_cmd = navpp_cli + ["process", str(log), "--filter", "ekf", "--out", str(nav_out)]
     py_cmd = python_cmd("import runpy, sys; sys.argv = [sys.argv[1], '--pyins-child'] + sys.argv[2:]; "
                         "runpy.run_path(sys.argv[0], run_name='__main__')") + [
         str(Path(__file__).resolve()), str(log), str(py_out / "trajectory.csv")]
@@ -390,7 +392,9 @@ def main() -> None:
     if args.kf_gins is not None and "kf-gins" in tools:
         kf_cmd = gnu_time_cmd([str(args.kf_gins.resolve()), str(write_kfgins_inputs(log, kf_out, noise))], hwm)
 
-    print("warm-up: one navpp run (numba cache); pyins's kernels have no disk cache (compiled in each run)")
+    print("warm-up: `navpp compile` (numba cache: without it a short log's run stays interpreted) and one "
+          "navpp run; pyins's kernels have no disk cache (compiled in each run)")
+    run_child(navpp_cli + ["compile"], hwm, env)
     run_child(nav_cmd, hwm, env)
     runs: dict[str, list[dict[str, Any]]] = {"navpp": [], "pyins": [], "KF-GINS": []}
     for _ in range(args.repeats):                   # alternating, paired
