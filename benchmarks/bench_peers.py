@@ -1,18 +1,21 @@
 """navpp against its peers on one simulated log: pyins (python-ins) and, given its binary, KF-GINS.
 
 Usage:  python benchmarks/bench_peers.py [--duration 3600] [--repeats 3] [--kf-gins PATH]
-                                         [--workdir DIR]
+                                         [--tools navpp,pyins,kf-gins] [--workdir DIR]
 
 pyins is not a navpp dependency; install it into the same environment to compare with it:
 ``pip install python-ins`` (the bench skips it with one line when it is missing).  KF-GINS
 (https://github.com/i2Nav-WHU/KF-GINS, C++) runs when ``--kf-gins`` names its built binary.
+``--tools navpp,kf-gins`` leaves pyins out (it would take about 23 CPU minutes on a 1-hour log).
 
 What runs: navpp's simulator writes one log (car drive, automotive IMU at 125 Hz, GNSS position
 at 5 Hz, seed 7; cached in the work directory).  Each tool then runs on that log in its own
 fresh process, end to end (read the files, filter, write the IMU-rate trajectory):
 
-* navpp: ``python -m navpp process LOG --filter ekf --out DIR`` (numba cache warmed by one
-  run before the timed ones; this also computes metrics against reference.csv, as always);
+* navpp: ``python -m navpp process LOG --filter ekf --out DIR`` (numba cache warmed by
+  ``navpp compile`` and one run before the timed ones: a run alone does not cache on a short log,
+  whose kernels navpp then runs interpreted; this also computes metrics against reference.csv,
+  as always);
 * pyins: our glue (``_pyins_child``): pandas reads imu.csv/gnss.csv, FLU axes turned to
   pyins's FRD, ``pyins.strapdown.compute_increments_from_imu``,
   ``pyins.filters.run_feedback_filter`` with ``pyins.measurements.Position``, the trajectory
@@ -30,8 +33,9 @@ bench_process.py's.
 Timing: navpp and pyins alternate, ``--repeats`` times each (KF-GINS after them in each
 round); the figures are medians.  Wall time is the parent's clock around the child; CPU time is
 the child's user + system time (``RUSAGE_CHILDREN``); peak memory is the child's own high-water
-mark, ``VmHWM`` of /proc/<pid>/status read at its exit (KF-GINS: ``ru_maxrss`` of the child,
-which on Linux is at least the bench's small parent process's resident size at fork).
+mark, ``VmHWM`` of /proc/<pid>/status read at its exit (KF-GINS: the maximum resident set size
+GNU time reports for it, ``gnu_time_cmd``; the ``ru_maxrss`` the bench sees would include the
+Python parent's resident size at the spawn).
 
 Accuracy: each trajectory is interpolated (linearly, in time) to reference.csv's epochs where
 all of them have a solution, and horizontal / up RMSE against the simulated truth are computed
@@ -46,7 +50,10 @@ Fairness, and where the tools differ (printed too):
 * all three are loosely coupled, GNSS position only, error-state with feedback (closed loop),
   no smoothing, zero lever arm (the simulator's);
 * pyins and KF-GINS are given the true initial position, velocity and attitude (neither
-  aligns by itself); navpp aligns from the data (static levelling, heading from GNSS);
+  aligns by itself), at their first epoch (pyins: the first IMU sample; KF-GINS: the end of the
+  first IMU increment, reference.csv interpolated there), with the same initial 1-sigma (2 m,
+  0.1 m/s, 1 deg level, 5 deg heading); navpp aligns from the data (static levelling, heading
+  from GNSS);
 * pyins models biases as random constant + random walk (we give the walk that matches the
   Gauss-Markov instability over its correlation time), no scale factors, and propagates its
   covariance every 0.1 s (its default); KF-GINS and navpp use first-order Gauss-Markov biases;
@@ -72,6 +79,7 @@ from typing import Any
 
 import numpy as np
 
+TOOLS = ("navpp", "pyins", "kf-gins")      # --tools names
 G0 = 9.80665                       # m/s^2 per g, as the simulator's mg
 DEG_PER_H = math.pi / 180.0 / 3600.0          # rad/s per deg/h
 DEG_PER_SQRT_H = math.pi / 180.0 / 60.0       # rad/sqrt(s) per deg/sqrt(h)
@@ -121,11 +129,17 @@ def flu_to_frd(v: np.ndarray) -> np.ndarray:
     return v * np.array([1.0, -1.0, -1.0])
 
 
-def initial_state(ref: np.ndarray) -> dict[str, list[float]]:
-    """True initial state from reference.csv's first row: lat/lon deg, alt m; velocity NED m/s;
-    roll, pitch, heading deg of FRD body to NED, taken as navpp's FLU-to-ENU angles (the same
-    heading; the simulated drive starts level, so roll/pitch sign conventions do not enter)."""
+def initial_state(ref: np.ndarray, t: float | None = None) -> dict[str, list[float]]:
+    """True initial state from reference.csv (rows t, lat, lon, alt, v east/north/up, roll, pitch,
+    heading) at unix time ``t`` s (linear in time, heading unwrapped; default: its first row):
+    lat/lon deg, alt m; velocity NED m/s; roll, pitch, heading deg of FRD body to NED, which are
+    navpp's angles as they are (roll right side down, pitch nose up, heading clockwise from north)."""
     r = ref[0]
+    if t is not None:
+        cols = ref.copy()
+        cols[:, 9] = np.unwrap(cols[:, 9], period=360.0)
+        r = np.array([np.interp(t, cols[:, 0], cols[:, k]) for k in range(cols.shape[1])])
+        r[9] %= 360.0
     return {"lla": [r[1], r[2], r[3]], "vel_ned": [r[5], r[4], -r[6]], "rph": [r[7], r[8], r[9]]}
 
 
@@ -138,8 +152,10 @@ def write_kfgins_inputs(log: Path, out: Path, noise: dict[str, float]) -> Path:
     imu.txt rows ``t, dtheta_xyz rad, dvel_xyz m/s`` (FRD body; the increment over the interval
     ending at t, here the trapezoid of the two rate samples); gnss.txt rows ``t, lat deg, lon deg,
     h m, std north/east/down m``.  t is seconds since the first IMU sample plus 1 (KF-GINS reads
-    GNSS seconds of week; a log-relative clock keeps an 8-hour log inside one "week").
-    Returns the config path.
+    GNSS seconds of week; a log-relative clock keeps an 8-hour log inside one "week").  The
+    config (keys and units of KF-GINS's kf_gins.cpp ``loadConfig``: deg, deg/h, mGal, ppm, h)
+    starts at imu.txt's first row (KF-GINS refuses a ``starttime`` before it) with the true
+    state there; ``imudatarate`` is an integer (KF-GINS reads an int).  Returns the config path.
     """
     d = read_log_arrays(log)
     imu, gnss, ref = d["imu"], d["gnss"], d["reference"]
@@ -153,8 +169,8 @@ def write_kfgins_inputs(log: Path, out: Path, noise: dict[str, float]) -> Path:
     np.savetxt(out / "imu.txt", np.column_stack([t[1:], dtheta, dvel]), fmt="%.6f" + " %.12e" * 6)
     g = np.column_stack([gnss[:, 0] - t0 + 1.0, gnss[:, 1:4], gnss[:, 5], gnss[:, 4], gnss[:, 6]])
     np.savetxt(out / "gnss.txt", g, fmt="%.6f %.12f %.12f %.4f %.4f %.4f %.4f")
-    s = initial_state(ref)
-    rate = round(1.0 / float(np.median(np.diff(imu[:, 0]))), 3)   # Hz; unix-time rounding off
+    s = initial_state(ref, float(imu[1, 0]))          # KF-GINS's state epoch: its first IMU row
+    rate = round(1.0 / float(np.median(np.diff(imu[:, 0]))))      # Hz, an integer for KF-GINS
     tau_h = noise["gyro_bias_corr_time_s"] / 3600.0
     sf = noise["scale_factor_ppm"]
     bg, ba = noise["gyro_bias_deg_per_h"], noise["accel_bias_mg"] * MGAL_PER_MG
@@ -166,7 +182,7 @@ def write_kfgins_inputs(log: Path, out: Path, noise: dict[str, float]) -> Path:
     cfg.write_text("\n".join([
         "# written by navpp benchmarks/bench_peers.py",
         f'imupath: "{out / "imu.txt"}"', f'gnsspath: "{out / "gnss.txt"}"', f'outputpath: "{out}"',
-        "imudatalen: 7", f"imudatarate: {rate:.10g}", "starttime: 1.0", "endtime: -1",
+        "imudatalen: 7", f"imudatarate: {rate}", f"starttime: {t[1]:.6f}", "endtime: -1",
         f"initpos: {v3(s['lla'])}", f"initvel: {v3(s['vel_ned'])}", f"initatt: {v3(s['rph'])}",
         f"initgyrbias: {v3(0.0)}", f"initaccbias: {v3(0.0)}", f"initgyrscale: {v3(0.0)}",
         f"initaccscale: {v3(0.0)}",
@@ -240,8 +256,9 @@ def _pyins_child(log: Path, out_csv: Path) -> None:
 # --------------------------------------------------------------------------- timing
 
 def run_child(cmd: list[str], hwm_file: Path | None, env: dict[str, str] | None = None,
-              cwd: Path | None = None) -> dict[str, Any]:
-    """Run ``cmd``; wall s, CPU s (user + sys), peak MB (VmHWM from the hook, else ru_maxrss)."""
+              cwd: Path | None = None, peak_source: str = "VmHWM") -> dict[str, Any]:
+    """Run ``cmd``; wall s, CPU s (user + sys), peak MB: the KiB number ``cmd`` writes to
+    ``hwm_file`` (``peak_source`` names what it is), else ru_maxrss of the bench's children."""
     if hwm_file is not None and hwm_file.exists():
         hwm_file.unlink()
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -253,7 +270,7 @@ def run_child(cmd: list[str], hwm_file: Path | None, env: dict[str, str] | None 
         sys.exit(f"bench_peers: {' '.join(cmd[:4])} ... failed (exit {proc.returncode}):\n{proc.stderr[-2000:]}")
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     if hwm_file is not None and hwm_file.exists():
-        peak, how = int(hwm_file.read_text()) / 1024.0, "VmHWM"
+        peak, how = int(hwm_file.read_text().split()[-1]) / 1024.0, peak_source
     else:
         peak, how = after.ru_maxrss / 1024.0, "ru_maxrss"
     return {"wall_s": wall, "cpu_s": cpu, "peak_mb": peak, "peak_source": how}
@@ -261,6 +278,19 @@ def run_child(cmd: list[str], hwm_file: Path | None, env: dict[str, str] | None 
 
 def python_cmd(code: str) -> list[str]:
     return [sys.executable, "-c", _HWM_HOOK + code]
+
+
+def gnu_time_cmd(cmd: list[str], hwm_file: Path) -> list[str]:
+    """``cmd`` under GNU time writing the child's maximum resident set size (KiB) to ``hwm_file``.
+
+    A native child cannot report its own ``VmHWM``, and its ``ru_maxrss`` seen from the bench
+    counts the (large) Python parent it was spawned from; GNU time is a small parent, so the
+    figure it writes is the binary's own peak.  ``cmd`` unchanged when /usr/bin/time is missing.
+    """
+    gnu_time = Path("/usr/bin/time")
+    if not gnu_time.is_file():
+        return cmd
+    return [str(gnu_time), "-f", "%M", "-o", str(hwm_file)] + cmd
 
 
 def child_env(hwm_file: Path) -> dict[str, str]:
@@ -318,6 +348,9 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=3600.0, help="simulated log length, s")
     ap.add_argument("--repeats", type=int, default=3, help="timed runs of each tool (median)")
     ap.add_argument("--kf-gins", type=Path, help="path of a built KF-GINS binary")
+    ap.add_argument("--tools", default=",".join(TOOLS),
+                    help="comma-separated tools to run, navpp always among them (default: all; "
+                         "pyins runs when installed, KF-GINS when --kf-gins is given)")
     ap.add_argument("--workdir", type=Path, default=Path(tempfile.gettempdir()) / "navpp-bench-peers")
     ap.add_argument("--pyins-child", nargs=2, type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -326,6 +359,9 @@ def main() -> None:
         return
     if args.duration <= 0 or args.repeats < 1:
         sys.exit("bench_peers: --duration must be > 0 and --repeats >= 1")
+    tools = {t.strip().lower() for t in args.tools.split(",") if t.strip()}
+    if "navpp" not in tools or not tools <= set(TOOLS):
+        sys.exit(f"bench_peers: --tools {args.tools!r}: a subset of {','.join(TOOLS)} with navpp in it")
     if args.kf_gins is not None and not (args.kf_gins.is_file() and os.access(args.kf_gins, os.X_OK)):
         sys.exit(f"bench_peers: --kf-gins {args.kf_gins} is not an executable file")
 
@@ -340,23 +376,25 @@ def main() -> None:
 
     import importlib.util
 
-    have_pyins = importlib.util.find_spec("pyins") is not None
+    have_pyins = "pyins" in tools and importlib.util.find_spec("pyins") is not None
     hwm = work / "hwm.txt"
     env = child_env(hwm)
     nav_out, py_out, kf_out = work / "out-navpp", work / "out-pyins", work / "out-kfgins"
     py_out.mkdir(parents=True, exist_ok=True)
-    nav_cmd = python_cmd("import runpy, sys; sys.argv = ['navpp'] + sys.argv[1:]; "
-                         "runpy.run_module('navpp', run_name='__main__', alter_sys=True)") + [
-        "process", str(log), "--filter", "ekf", "--out", str(nav_out)]
+    navpp_cli = python_cmd("import runpy, sys; sys.argv = ['navpp'] + sys.argv[1:]; "
+                           "runpy.run_module('navpp', run_name='__main__', alter_sys=True)")
+    nav_cmd = navpp_cli + ["process", str(log), "--filter", "ekf", "--out", str(nav_out)]
     py_cmd = python_cmd("import runpy, sys; sys.argv = [sys.argv[1], '--pyins-child'] + sys.argv[2:]; "
                         "runpy.run_path(sys.argv[0], run_name='__main__')") + [
         str(Path(__file__).resolve()), str(log), str(py_out / "trajectory.csv")]
     noise = imu_noise(log)
     kf_cmd = None
-    if args.kf_gins is not None:
-        kf_cmd = [str(args.kf_gins.resolve()), str(write_kfgins_inputs(log, kf_out, noise))]
+    if args.kf_gins is not None and "kf-gins" in tools:
+        kf_cmd = gnu_time_cmd([str(args.kf_gins.resolve()), str(write_kfgins_inputs(log, kf_out, noise))], hwm)
 
-    print("warm-up: one navpp run (numba cache); pyins's kernels have no disk cache (compiled in each run)")
+    print("warm-up: `navpp compile` (numba cache: without it a short log's run stays interpreted) and one "
+          "navpp run; pyins's kernels have no disk cache (compiled in each run)")
+    run_child(navpp_cli + ["compile"], hwm, env)
     run_child(nav_cmd, hwm, env)
     runs: dict[str, list[dict[str, Any]]] = {"navpp": [], "pyins": [], "KF-GINS": []}
     for _ in range(args.repeats):                   # alternating, paired
@@ -364,7 +402,7 @@ def main() -> None:
         if have_pyins:
             runs["pyins"].append(run_child(py_cmd, hwm, env))
         if kf_cmd is not None:
-            runs["KF-GINS"].append(run_child(kf_cmd, None, env, cwd=kf_out))
+            runs["KF-GINS"].append(run_child(kf_cmd, hwm, env, cwd=kf_out, peak_source="GNU time %M"))
     load = os.getloadavg()
 
     d = read_log_arrays(log)
@@ -384,8 +422,9 @@ def main() -> None:
     print(f"log: {log}: {n_imu} IMU samples ({args.duration:.0f} s, 125 Hz), {n_gnss} GNSS fixes (5 Hz); "
           f"IMU errors: the simulator's {noise['preset']} preset, given to every filter")
     print(f"median of {args.repeats} alternating runs each, end to end (read, filter, write IMU-rate trajectory)")
-    print("us/IMU: end-to-end wall time per IMU sample")
-    print(f"{'tool':8s} {'wall s':>8s} {'CPU s':>8s} {'us/IMU':>8s} {'peak MB':>8s} {'horiz m':>8s} {'up m':>8s}")
+    print("us/IMU: end-to-end wall and CPU time per IMU sample")
+    print(f"{'tool':8s} {'wall s':>8s} {'CPU s':>8s} {'wall us':>8s} {'CPU us':>8s} {'peak MB':>8s} "
+          f"{'horiz m':>8s} {'up m':>8s}")
     med: dict[str, dict[str, float]] = {}
     for name, rs in runs.items():
         if not rs:
@@ -393,11 +432,16 @@ def main() -> None:
         med[name] = {k: statistics.median(r[k] for r in rs) for k in ("wall_s", "cpu_s", "peak_mb")}
         m, a = med[name], acc[name]
         print(f"{name:8s} {m['wall_s']:8.2f} {m['cpu_s']:8.2f} {m['wall_s'] / n_imu * 1e6:8.2f} "
+              f"{m['cpu_s'] / n_imu * 1e6:8.2f} "
               f"{m['peak_mb']:8.0f} {a['horizontal_m']:8.3f} {a['up_m']:8.3f}   "
               f"(peak: {rs[0]['peak_source']}; RMSE at {a['epochs']} reference epochs)")
-    if not have_pyins:
+    if "pyins" not in tools:
+        print("pyins: not run (not in --tools)")
+    elif not have_pyins:
         print("pyins: not run (not installed; `pip install python-ins` into this environment)")
-    if kf_cmd is None:
+    if "kf-gins" not in tools:
+        print("KF-GINS: not run (not in --tools)")
+    elif kf_cmd is None:
         print("KF-GINS: not run (give --kf-gins PATH of a built binary)")
     for peer in ("pyins", "KF-GINS"):
         if peer in med:

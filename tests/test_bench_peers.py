@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 _SPEC = importlib.util.spec_from_file_location(
     "bench_peers", Path(__file__).resolve().parent.parent / "benchmarks" / "bench_peers.py")
@@ -50,7 +52,8 @@ def test_kfgins_inputs_round_trip(tmp_path: Path) -> None:
     np.testing.assert_allclose(gnss[0], [1.02, 45.0, 7.0, 300.0, 1.8, 1.5, 2.5], atol=1e-9)  # std N, E, D
 
     text = cfg.read_text()
-    assert "imudatarate: 100\n" in text
+    assert "imudatarate: 100\n" in text                          # an integer: KF-GINS reads an int
+    assert "starttime: 1.010000\n" in text                       # its first IMU row, not before it
     assert "initvel: [ 2, 1, -0.5 ]" in text                    # NED from ENU
     assert "initatt: [ 0, 0, 30 ]" in text
     # automotive: 2 mg turn-on accel bias = 2e-3 * 9.80665 m/s^2 = 1961.33 mGal; tau 300 s
@@ -63,3 +66,35 @@ def test_kfgins_inputs_round_trip(tmp_path: Path) -> None:
     np.savetxt(res_dir / "KF_GINS_Navresult.nav", [[0, 1.02, 45.0, 7.0, 300.0, 0, 0, 0, 0, 0, 30]])
     back = bench_peers.read_kfgins_result(res_dir, 1700000000.0)
     np.testing.assert_allclose(back, [[1700000000.02, 45.0, 7.0, 300.0]], atol=1e-6)
+
+
+def test_initial_state_interpolated_in_time() -> None:
+    # t, lat, lon, alt, ve, vn, vu, roll, pitch, heading; heading crosses north between the rows
+    ref = np.array([[100.0, 45.0, 7.0, 300.0, 1.0, 2.0, 0.0, 1.0, 0.0, 350.0],
+                    [101.0, 45.0, 7.0, 302.0, 3.0, 4.0, 0.2, 3.0, 2.0, 10.0]])
+    s = bench_peers.initial_state(ref, 100.5)
+    np.testing.assert_allclose(s["lla"], [45.0, 7.0, 301.0])
+    np.testing.assert_allclose(s["vel_ned"], [3.0, 2.0, -0.1])              # NED from ENU
+    np.testing.assert_allclose(s["rph"], [2.0, 1.0, 0.0], atol=1e-9)        # 350 -> 10 deg through 0
+    assert bench_peers.initial_state(ref)["rph"] == [1.0, 0.0, 350.0]       # default: the first row
+
+
+def test_tools_must_include_navpp(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(sys, "argv", ["bench_peers.py", "--tools", "pyins,kf-gins"])
+    with pytest.raises(SystemExit, match="navpp in it"):
+        bench_peers.main()
+    monkeypatch.setattr(sys, "argv", ["bench_peers.py", "--tools", "navpp,kfgins"])
+    with pytest.raises(SystemExit, match="a subset of navpp,pyins,kf-gins"):
+        bench_peers.main()
+
+
+def test_native_peak_from_gnu_time(tmp_path: Path) -> None:
+    cmd = bench_peers.gnu_time_cmd(["/bin/true"], tmp_path / "hwm.txt")
+    if not Path("/usr/bin/time").is_file():
+        assert cmd == ["/bin/true"]
+        return
+    assert cmd[-1] == "/bin/true"
+    parent = np.ones(12_500_000)                        # 100 MB resident in the parent at the spawn
+    run = bench_peers.run_child(cmd, tmp_path / "hwm.txt", peak_source="GNU time %M")
+    assert run["peak_source"] == "GNU time %M"
+    assert 0.0 < run["peak_mb"] < 20.0 < parent.nbytes / 2**20   # /bin/true's own, not the parent's
