@@ -630,3 +630,16 @@ def test_damaged_ros1_index_gives_one_line(logs, tmp_path, where):
         assert text.startswith(str(path)) and "\n" not in text and "Traceback" not in text
     else:
         assert lc.imu["/imu/data"].gyro.shape[0] > 0
+
+
+def test_ros1_bags_read_without_rosbags_reader(logs, rec, monkeypatch):
+    """Reading and listing a ROS 1 bag do not open rosbags' Reader (whose index holds an object
+    per message): navpp's index reader does it all."""
+    from rosbags.rosbag1 import Reader
+
+    def refused(self):
+        raise AssertionError("rosbags' ROS 1 Reader opened")
+
+    monkeypatch.setattr(Reader, "open", refused)
+    assert_matches_recording(read_rosbag(logs["ros1-lz4"]), rec, ros1=True)
+    assert [t.topic for t in list_topics(logs["ros1"])] == ["/gnss/fix", "/gnss/vel", "/imu/data", "/reference/fix"]
