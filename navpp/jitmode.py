@@ -235,14 +235,14 @@ def _ros2_counts(path: Path) -> tuple[int, int] | None:
 
 
 def _ros1_counts(path: Path) -> tuple[int, int] | None:
-    """(IMU messages, all messages) from a ROS 1 bag's index."""
-    from rosbags.rosbag1 import Reader
+    """(IMU messages, all messages) from a ROS 1 bag's chunk infos (navpp's index reader: no
+    object per message, as rosbags' Reader builds)."""
+    from navpp.io.ros1index import read_index
 
-    with Reader(path) as reader:
-        conns = list(reader.connections)
-        total = sum(c.msgcount for c in conns)
-        imu = sum(c.msgcount for c in conns if c.msgtype.endswith("Imu"))
-    return imu, total
+    with read_index(path) as bag:
+        counts = bag.counts()
+        imu = sum(counts[c.conn] for c in bag.connections if c.msgtype.endswith("Imu"))
+    return imu, sum(counts.values())
 
 
 def _csv_rows(path: Path) -> int | None:

@@ -133,10 +133,9 @@ def test_bulk_and_library_decoders_agree(logs, monkeypatch, kind):
 
 @pytest.mark.parametrize("kind", ["ros1", "ros1-lz4", "ros1-bz2"])
 def test_ros1_index_path_and_rosbags_iteration_agree(logs, monkeypatch, kind):
-    with rosbag._open([logs[kind]]) as reader:  # the index path is taken for navpp's (and rosbag's) bags
-        topics = reader.topics
-        assert rosbag._collect_ros1(reader, topics, list(topics), _null_sinks(topics)) is not None
     fast = read_rosbag(logs[kind])
+    assert fast.warnings == ()      # navpp's index path was taken, not rosbags' reader
+    assert list_topics(logs[kind]) == _rosbags_topics([logs[kind]])
     monkeypatch.setattr(rosbag, "_FAST_ROS1", False)
     slow = read_rosbag(logs[kind])
     assert_same_contents(fast, slow)
@@ -146,22 +145,17 @@ def test_ros1_index_path_on_split_bags(rec, tmp_path, monkeypatch):
     files = [tmp_path / "s_0.bag", tmp_path / "s_1.bag"]
     rw.write_ros1_bag(rec, files[0], time_range=(-1.0, 15.0), chunk_size=20_000)
     rw.write_ros1_bag(rec, files[1], time_range=(15.0, 1e9), compression="lz4")
-    with rosbag._open(files) as reader:
-        assert rosbag._collect_ros1(reader, reader.topics, list(reader.topics), _null_sinks(reader.topics)) is not None
     fast = read_rosbag(files)
+    assert fast.warnings == ()
+    assert list_topics(files) == _rosbags_topics(files)
     monkeypatch.setattr(rosbag, "_FAST_ROS1", False)
     assert_same_contents(fast, read_rosbag(files))
 
 
-class _NullSink:
-    """A sink that takes the messages and keeps nothing."""
-
-    def add(self, *args):
-        pass
-
-
-def _null_sinks(topics):
-    return {t: _NullSink() for t in topics}
+def _rosbags_topics(files):
+    """The topics as rosbags' AnyReader gives them (its per-message index)."""
+    with rosbag._open(files) as reader:
+        return rosbag._topic_infos(reader)
 
 
 def assert_same_contents(a: LogContents, b: LogContents) -> None:
@@ -535,3 +529,117 @@ def test_definition_hash_mismatch(tmp_path):
     with pytest.raises(InputError) as e:
         read_rosbag(p)
     check_error(e, p, "message definitions", "hash mismatch")
+
+
+# --------------------------------------------------------------------------- navpp's ROS 1 index reader
+
+
+def _rewritten_ros1(src: Path, dst: Path, order, *, chunk_bytes: int = 6_000, compression: str | None = None,
+                    second_callerid: bool = False) -> None:
+    """``src``'s messages written again by rosbags' writer in the order ``order(messages)`` gives
+    (lists of (topic, msgtype, log ns, payload)); with ``second_callerid`` the IMU messages
+    alternate between two connections of the topic."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    with AnyReader([src]) as r:
+        msgs = [(c.topic, c.msgtype, t, bytes(d)) for c, t, d in r.messages()]
+        defs = {c.topic: (c.msgdef.data, c.digest) for c in r.connections}
+    store = get_typestore(Stores.ROS1_NOETIC)
+    w = Writer(dst)
+    w.chunk_threshold = chunk_bytes
+    if compression:
+        w.set_compression(getattr(Writer.CompressionFormat, compression))
+    with w:
+        conns = {}
+        for topic, msgtype, _, _ in msgs:
+            ids = [topic, topic + "#2"] if second_callerid and topic == "/imu/data" else [topic]
+            for key in ids:
+                if key not in conns:
+                    msgdef, md5 = defs[topic]
+                    conns[key] = w.add_connection(topic, msgtype, typestore=store, msgdef=msgdef, md5sum=md5,
+                                                  callerid=key)
+        for k, (topic, _, t, data) in enumerate(order(msgs)):
+            key = topic + "#2" if second_callerid and topic == "/imu/data" and k % 2 else topic
+            w.write(conns[key], t, data)
+
+
+def _blocks_swapped(msgs):
+    """Blocks of 300 messages, each pair of blocks written in reverse: the log time goes back
+    across chunks (some messages get the time of their neighbour, for ties across chunks)."""
+    out = []
+    for a in range(0, len(msgs), 600):
+        out += msgs[a + 300:a + 600] + msgs[a:a + 300]
+    return [(tp, ty, t - (t % 20_000_000) if i % 7 == 0 else t, d) for i, (tp, ty, t, d) in enumerate(out)]
+
+
+@pytest.mark.parametrize("compression", [None, "LZ4", "BZ2"])
+@pytest.mark.parametrize("order", ["as recorded", "back across chunks"])
+def test_ros1_index_path_orders_like_anyreader(logs, tmp_path, monkeypatch, order, compression):
+    """Messages in AnyReader's order -- by log time, ties by connection, chunk and entry -- also when
+    the log time goes back across chunks and a topic has two connections; read by navpp's index
+    reader (no warning), not by rosbags' slower one."""
+    path = tmp_path / "odd.bag"
+    _rewritten_ros1(logs["ros1"], path, (lambda m: m) if order == "as recorded" else _blocks_swapped,
+                    compression=compression, second_callerid=True)
+    fast = read_rosbag(path)
+    assert fast.warnings == ()
+    assert list_topics(path) == _rosbags_topics([path])
+    monkeypatch.setattr(rosbag, "_FAST_ROS1", False)
+    assert_same_contents(fast, read_rosbag(path))
+
+
+def test_ros1_index_path_left_with_a_note(logs, tmp_path, monkeypatch):
+    """A bag navpp's index reader does not take (here: an index entry pointing at a connection
+    record, which rosbags skips) is read by rosbags' reader, and a warning says so and why."""
+    from navpp.io import ros1index
+
+    real = ros1index.BagIndex.entries
+
+    def shifted(self, record, chunk):
+        t_ns, offset = real(self, record, chunk)
+        return t_ns, np.where(offset == offset.min(), 0, offset) if chunk is self.chunks[0] else offset
+
+    monkeypatch.setattr(ros1index.BagIndex, "entries", shifted)
+    lc = read_rosbag(logs["ros1"])
+    (note,) = lc.warnings
+    assert note.startswith(f"{logs['ros1']}: chunk at byte ") and "rosbags' reader instead" in note
+    monkeypatch.undo()
+    assert_same_contents(lc, read_rosbag(logs["ros1"]))
+
+
+@pytest.mark.parametrize("where", ["index_pos", "chunk_info", "index_data", "chunk_data"])
+def test_damaged_ros1_index_gives_one_line(logs, tmp_path, where):
+    """Damage in the bag header, the chunk infos, an index-data record or a chunk: one InputError
+    line naming the file (rosbags' reader reports it), or the messages read as rosbags reads them."""
+    from navpp.io import ros1index
+
+    data = bytearray(logs["ros1-lz4"].read_bytes())
+    with ros1index.read_index(logs["ros1-lz4"]) as index:
+        chunk = index.chunks[1]
+        at = {"index_pos": data.index(b"index_pos=") + 10, "chunk_info": len(data) - 30,
+              "index_data": chunk.records[0].pos + 2, "chunk_data": chunk.data_pos + 40}[where]
+    data[at:at + 4] = b"\xff\xfe\xfd\xfc"
+    path = tmp_path / "bad.bag"
+    path.write_bytes(bytes(data))
+    try:
+        lc = read_rosbag(path)
+    except InputError as exc:
+        text = str(exc)
+        assert text.startswith(str(path)) and "\n" not in text and "Traceback" not in text
+    else:
+        assert lc.imu["/imu/data"].gyro.shape[0] > 0
+
+
+def test_ros1_bags_read_without_rosbags_reader(logs, rec, monkeypatch):
+    """Reading and listing a ROS 1 bag do not open rosbags' Reader (whose index holds an object
+    per message): navpp's index reader does it all."""
+    from rosbags.rosbag1 import Reader
+
+    def refused(self):
+        raise AssertionError("rosbags' ROS 1 Reader opened")
+
+    monkeypatch.setattr(Reader, "open", refused)
+    assert_matches_recording(read_rosbag(logs["ros1-lz4"]), rec, ros1=True)
+    assert [t.topic for t in list_topics(logs["ros1"])] == ["/gnss/fix", "/gnss/vel", "/imu/data", "/reference/fix"]

@@ -1,11 +1,17 @@
 """Read ROS bags with ``rosbags``: ROS 1 ``.bag`` files and ROS 2 bag directories.
 
-Handled through :class:`rosbags.highlevel.AnyReader`: ROS 1 bags (uncompressed, bz2 or lz4
+Handled through :class:`rosbags.highlevel.AnyReader` (ROS 1 bags through navpp's own index
+reader first, below): ROS 1 bags (uncompressed, bz2 or lz4
 chunks), several ROS 1 files read as one (split bags, merged in log-time order), ROS 2 bag
 directories with ``sqlite3`` (``.db3``) or ``mcap`` storage (file or message compression
 too), and message definitions stored in the bag (no typestore entry is needed: AnyReader
 registers the bag's own definitions; a ROS 2 bag without any, as Foxy/Galactic wrote them,
 is decoded with the ROS 2 Humble definitions).
+
+ROS 1 bags are read through navpp's own index reader (:mod:`navpp.io.ros1index`: index entries
+straight into numpy arrays, a chunk at a time, where rosbags' reader builds an object per message
+when it opens a bag), with rosbags for the stored message definitions; a bag that reader does not
+take (damaged, unusual layout) is read by AnyReader, with a warning that says why.
 
 Decoding: the raw payloads of each wanted topic (no message objects) go in batches -- a ROS 1
 chunk at a time, or a few MB of rosbags' iteration -- to the vectorised decoder
@@ -25,7 +31,6 @@ import struct
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass
-from itertools import chain
 from pathlib import Path, PosixPath, WindowsPath
 from typing import Any
 
@@ -46,6 +51,7 @@ from navpp.io.ros import (
     TwistMessages,
     normalise_type,
 )
+from navpp.io.ros1index import BagIndex, Connection, IndexRecord, Ros1IndexError, read_index
 
 __all__ = ["list_topics", "read_rosbag"]
 
@@ -71,8 +77,8 @@ _REQUIRED_FIELDS: dict[str, tuple[str, ...]] = {
 }
 
 Messages = ImuMessages | FixMessages | TwistMessages
-#: Locate ROS 1 payloads through the bag index (:func:`_collect_ros1`); tests switch it off
-#: to compare with rosbags' own iteration.
+#: Read ROS 1 bags through navpp's own index (:class:`_Ros1Bags`, :func:`_collect_ros1`); tests
+#: switch it off to compare with rosbags' AnyReader.
 _FAST_ROS1 = True
 
 _RESULT_CLASS = {IMU_TYPE: ImuMessages, FIX_TYPE: FixMessages, TWIST_COV_TYPE: TwistMessages,
@@ -95,8 +101,13 @@ def list_topics(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]
     InputError : not a bag, empty, truncated or damaged, unknown message definitions.
     """
     files = _check_paths(paths)
-    with _open(files) as reader:
-        infos = _topic_infos(reader)
+    infos = None
+    if _ros1_fast(files):
+        with suppress(Ros1IndexError), _Ros1Bags.open(files) as bags:
+            infos = _topic_infos(bags)
+    if infos is None:   # ROS 2, or a ROS 1 bag navpp's index reader leaves to rosbags
+        with _open(files) as reader:
+            infos = _topic_infos(reader)
     if sum(t.count for t in infos) == 0:
         raise InputError(f"{_label(files)}: the bag holds no messages")
     return infos
@@ -131,57 +142,65 @@ def read_rosbag(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]
         unsupported type asked for, a message definition without the needed fields, or a
         message that cannot be decoded.
     """
-    from navpp.io.messages import plausible_count
-
     files = _check_paths(paths)
     label = _label(files)
-    size = _log_bytes(files)
+    notes: list[str] = []
+    if _ros1_fast(files):
+        try:
+            with _Ros1Bags.open(files) as bags:
+                return _read(label, _log_bytes(files), bags, topics, memory, notes)
+        except Ros1IndexError as exc:
+            notes.append(f"{exc}; the bag is read with rosbags' reader instead (slower, and its index of every "
+                         "message makes memory grow with the bag)")
     with _open(files) as reader:
-        infos = _topic_infos(reader)
-        if sum(t.count for t in infos) == 0:
-            raise InputError(f"{label}: the bag holds no messages")
-        by_name = {t.topic: t for t in infos}
-        wanted = _wanted_topics(label, infos, topics)
-        bag_topics = reader.topics
-        warnings: list[str] = []
-        std_store = _standard_typestore(reader)
-        plans = {}
-        for topic in wanted:
-            conns = bag_topics[topic].connections
-            plans[topic] = _plan(label, reader, std_store, topic, by_name[topic].msgtype, conns, warnings)
+        return _read(label, _log_bytes(files), reader, topics, memory, notes)
 
-        def new_sinks() -> dict[str, _Sink]:
-            return {t: _Sink(label, t, plans[t], by_name[t].encoding, memory, plausible_count(by_name[t].count, size))
-                    for t in wanted}
 
-        sinks = new_sinks()
-        if reader.is2 or not _FAST_ROS1 or _collect_ros1(reader, bag_topics, wanted, sinks) is None:
-            if not reader.is2:
-                sinks = new_sinks()          # the index path gave up part way: start again
-            _collect(label, reader, [c for t in wanted for c in bag_topics[t].connections], sinks)
-        imu: dict[str, ImuMessages] = {}
-        fix: dict[str, FixMessages] = {}
-        twist: dict[str, TwistMessages] = {}
-        spans: dict[str, tuple[int, int | None, int | None]] = {}
-        for topic in wanted:
-            got = sinks.pop(topic)
-            if reader.is2 and got.count == 0 and by_name[topic].count > 0:
-                raise InputError(f"{label}: topic {topic!r}: metadata.yaml lists {by_name[topic].count} messages but "
-                                 "the bag's storage holds none (the metadata does not match the storage file)")
-            msgs = got.result(reader)
-            spans[topic] = (got.count, got.first, got.last)
-            del got
-            if isinstance(msgs, ImuMessages):
-                imu[topic] = msgs
-            elif isinstance(msgs, FixMessages):
-                fix[topic] = msgs
-            else:
-                twist[topic] = msgs
-        infos = tuple(
-            TopicInfo(t.topic, t.msgtype, *spans[t.topic], t.encoding) if t.topic in spans else t
-            for t in infos
-        )
-        return LogContents(label, infos, imu, fix, twist, tuple(warnings))
+def _read(label: str, size: int, reader: Any, topics: Iterable[str] | None, memory: int | None,
+          warnings: list[str]) -> LogContents:
+    """:func:`read_rosbag` with ``reader`` open: an AnyReader, or :class:`_Ros1Bags` (ROS 1 bags
+    through navpp's own index; it raises Ros1IndexError when the bag is not as expected)."""
+    from navpp.io.messages import plausible_count
+
+    infos = _topic_infos(reader)
+    if sum(t.count for t in infos) == 0:
+        raise InputError(f"{label}: the bag holds no messages")
+    by_name = {t.topic: t for t in infos}
+    wanted = _wanted_topics(label, infos, topics)
+    std_store = _standard_typestore(reader)
+    plans = {}
+    for topic in wanted:
+        plans[topic] = _plan(label, reader, std_store, topic, by_name[topic].msgtype, _connections(reader, topic),
+                             warnings)
+    sinks = {t: _Sink(label, t, plans[t], by_name[t].encoding, memory, plausible_count(by_name[t].count, size))
+             for t in wanted}
+    if isinstance(reader, _Ros1Bags):
+        _collect_ros1(reader, wanted, sinks)
+    else:
+        _collect(label, reader, [c for t in wanted for c in _connections(reader, t)], sinks)
+    imu: dict[str, ImuMessages] = {}
+    fix: dict[str, FixMessages] = {}
+    twist: dict[str, TwistMessages] = {}
+    spans: dict[str, tuple[int, int | None, int | None]] = {}
+    for topic in wanted:
+        got = sinks.pop(topic)
+        if reader.is2 and got.count == 0 and by_name[topic].count > 0:
+            raise InputError(f"{label}: topic {topic!r}: metadata.yaml lists {by_name[topic].count} messages but "
+                             "the bag's storage holds none (the metadata does not match the storage file)")
+        msgs = got.result(reader)
+        spans[topic] = (got.count, got.first, got.last)
+        del got
+        if isinstance(msgs, ImuMessages):
+            imu[topic] = msgs
+        elif isinstance(msgs, FixMessages):
+            fix[topic] = msgs
+        else:
+            twist[topic] = msgs
+    infos = tuple(
+        TopicInfo(t.topic, t.msgtype, *spans[t.topic], t.encoding) if t.topic in spans else t
+        for t in infos
+    )
+    return LogContents(label, infos, imu, fix, twist, tuple(warnings))
 
 
 # --------------------------------------------------------------------------- opening
@@ -430,6 +449,109 @@ def _open(files: Sequence[Path]) -> Iterator[Any]:
             reader.close()
 
 
+def _ros1_fast(files: Sequence[Path]) -> bool:
+    """ROS 1 bags (as :func:`_check_paths` gives them) to be read through navpp's own index."""
+    return _FAST_ROS1 and all(f.suffix == ".bag" for f in files)
+
+
+class _Ros1Bags:
+    """ROS 1 bag files read through navpp's own index (:mod:`navpp.io.ros1index`), with what
+    :func:`_read` uses of an AnyReader: the topics, and the message definitions stored in the
+    bags as a rosbags typestore (for the layout checks and message-by-message decoding), checked
+    against their MD5 sums as AnyReader checks them.  :meth:`open` raises Ros1IndexError naming
+    the file when a bag is not as expected (rosbags then reads it and reports any damage)."""
+
+    is2 = False
+
+    def __init__(self, bags: list[BagIndex]) -> None:
+        self.bags = bags
+        conns = [(i, c) for i, bag in enumerate(bags) for c in bag.connections]
+        #: topic -> [(file number, connection)], file and record order (AnyReader's)
+        self.topics: dict[str, list[tuple[int, Connection]]] = {}
+        for i, c in sorted(conns, key=lambda ic: ic[1].topic):
+            self.topics.setdefault(c.topic, []).append((i, c))
+        self.counts = [bag.counts() for bag in bags]
+        self.typestore = self._typestore([c for _, c in conns])
+
+    @classmethod
+    @contextmanager
+    def open(cls, files: Sequence[Path]) -> Iterator[_Ros1Bags]:
+        bags: list[BagIndex] = []
+        try:
+            for path in files:
+                try:
+                    bags.append(read_index(path))
+                except Ros1IndexError as exc:
+                    raise Ros1IndexError(f"{path}: {exc}") from None
+                except OSError as exc:
+                    raise Ros1IndexError(f"{path}: cannot read: {exc.strerror or exc}") from None
+            yield cls(bags)
+        finally:
+            for bag in bags:
+                bag.close()
+
+    def _typestore(self, conns: Sequence[Connection]) -> Any:
+        from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+        label = _label([b.path for b in self.bags])
+        try:
+            types: dict[str, Any] = {}
+            for c in conns:
+                types.update(get_types_from_msg(c.definition, c.msgtype))
+            store = get_typestore(Stores.EMPTY)
+            store.register(types)
+            digest_ok = all(store.generate_msgdef(c.msgtype)[1] == c.md5sum for c in conns if c.md5sum)
+        except Exception as exc:  # noqa: BLE001 - rosbags' typesys raises several kinds; rosbags reports them
+            raise Ros1IndexError(f"{label}: the stored message definitions cannot be used ({_reason(exc)})") from None
+        if not digest_ok:
+            raise Ros1IndexError(f"{label}: a stored message definition does not match its MD5 sum")
+        return store
+
+    def deserialize(self, raw: bytes, msgtype: str) -> Any:
+        return self.typestore.deserialize_ros1(raw, msgtype)
+
+    def topic_infos(self) -> tuple[TopicInfo, ...]:
+        """Every topic as AnyReader's topics give it: counts from the chunk infos, the first and
+        last log time from the index entries (of the few chunks that can hold them)."""
+        infos = []
+        for name, conns in self.topics.items():
+            types = sorted({normalise_type(c.msgtype) for _, c in conns})
+            count = sum(self.counts[i][c.conn] for i, c in conns)
+            infos.append(TopicInfo(name, types[0] if len(types) == 1 else ",".join(types), count,
+                                   *self._span(conns), "ros1"))
+        return tuple(infos)
+
+    def _span(self, conns: Sequence[tuple[int, Connection]]) -> tuple[int | None, int | None]:
+        """(first, last) log time (ns) of the connections' messages, None without any: the index
+        entries of the chunks, taken earliest start first (latest end first), until no chunk left
+        can hold an earlier (later) message."""
+        ids = {(i, c.conn) for i, c in conns}
+        held = [(chunk, r, self.bags[i]) for i, bag in enumerate(self.bags) for chunk in bag.chunks
+                for r in chunk.records if (i, r.conn) in ids and r.count]
+        first = last = None
+        for chunk, r, bag in sorted(held, key=lambda h: h[0].start_ns):
+            if first is not None and chunk.start_ns >= first:
+                break
+            t = int(self._times(bag, r, chunk).min())
+            first = t if first is None else min(first, t)
+        for chunk, r, bag in sorted(held, key=lambda h: -h[0].end_ns):
+            if last is not None and chunk.end_ns <= last:
+                break
+            t = int(self._times(bag, r, chunk).max())
+            last = t if last is None else max(last, t)
+        return first, last
+
+    @staticmethod
+    def _times(bag: BagIndex, record: IndexRecord, chunk: Any) -> np.ndarray:
+        """The log times (ns) of an index-data record; Ros1IndexError naming the file."""
+        try:
+            return bag.entries(record, chunk)[0]
+        except Ros1IndexError as exc:
+            raise Ros1IndexError(f"{bag.path}: {exc}") from None
+        except OSError as exc:
+            raise Ros1IndexError(f"{bag.path}: cannot read: {exc.strerror or exc}") from None
+
+
 def _check_ros2_connections(files: Sequence[Path], reader: Any) -> None:
     """InputError naming metadata.yaml when a topic entry lacks a usable name, type or count
     (rosbags takes damaged metadata as it is and fails later with a TypeError)."""
@@ -472,7 +594,17 @@ def _first_bad(files: Sequence[Path], is2: bool, exc: BaseException) -> InputErr
 # --------------------------------------------------------------------------- topics
 
 
+def _connections(reader: Any, topic: str) -> list[Any]:
+    """The connections of ``topic`` (rosbags' or :class:`navpp.io.ros1index.Connection`), in file
+    and record order."""
+    if isinstance(reader, _Ros1Bags):
+        return [c for _, c in reader.topics[topic]]
+    return list(reader.topics[topic].connections)
+
+
 def _topic_infos(reader: Any) -> tuple[TopicInfo, ...]:
+    if isinstance(reader, _Ros1Bags):
+        return reader.topic_infos()
     infos = []
     for name, info in reader.topics.items():
         conns = info.connections
@@ -592,6 +724,17 @@ class _Payloads:
         return bytes(self.buffer[s:s + int(self.lengths[i])])
 
 
+def _gathered(buffer: Any, starts: np.ndarray, lengths: np.ndarray) -> tuple[bytearray, np.ndarray]:
+    """Messages ``buffer[starts[i]:starts[i] + lengths[i]]`` copied into one buffer of their own,
+    one after the other, with their starts in it."""
+    lengths = np.asarray(lengths, np.int64)
+    ends = np.cumsum(lengths)
+    if ends.size == 0:
+        return bytearray(), ends
+    take = np.arange(int(ends[-1]), dtype=np.int64) + np.repeat(starts - (ends - lengths), lengths)
+    return bytearray(memoryview(np.frombuffer(buffer, dtype=np.uint8)[take])), ends - lengths
+
+
 class _Sink:
     """One topic's messages as the bag is read, piece by piece in log-time order: decoded as they
     come (:class:`navpp.io.messages.TopicDecoder`, onto a spill file beyond ``memory`` bytes) when
@@ -626,11 +769,9 @@ class _Sink:
         decoder = self.decoder
         if decoder is not None:
             self._checked(lambda: decoder.add(buffer, starts, lengths, log_ns))
-        else:   # the payloads gathered into one buffer of their own
-            ends = np.cumsum(lengths)
-            take = np.arange(int(ends[-1]), dtype=np.int64) + np.repeat(starts - (ends - lengths), lengths)
-            data = bytearray(memoryview(np.frombuffer(buffer, dtype=np.uint8)[take]))
-            self.parts.append(_Payloads(data, ends - lengths, np.asarray(lengths, np.int64), np.array(log_ns)))
+        else:
+            data, data_starts = _gathered(buffer, starts, lengths)
+            self.parts.append(_Payloads(data, data_starts, np.asarray(lengths, np.int64), np.array(log_ns)))
         if self.first is None:
             self.first = int(log_ns[0])
         self.last = int(log_ns[-1])
@@ -697,82 +838,128 @@ def _collect(label: str, reader: Any, conns: Sequence[Any], sinks: dict[str, _Si
 #: prefix), conn (13) and time (17), in any order.
 _ROS1_MSG_HEADER_LEN = 38
 _ROS1_OP_FIELD_POS = (0, 13, 17, 30)  # where the op field can start inside that header
+_ROS1_OP_MSG_DATA = np.frombuffer(b"\x04\x00\x00\x00op=\x02", dtype=np.uint8)  # the op field of a message record
 
 
-def _u32(b: np.ndarray, pos: np.ndarray) -> np.ndarray:
-    """Little-endian uint32 at each byte position of ``b`` (int64 result)."""
-    p = pos.astype(np.int64)
-    return (b[p].astype(np.int64) | (b[p + 1].astype(np.int64) << 8) | (b[p + 2].astype(np.int64) << 16)
-            | (b[p + 3].astype(np.int64) << 24))
+def _ros1_payloads(b: np.ndarray, offs: np.ndarray, chunk_pos: int) -> tuple[np.ndarray, np.ndarray]:
+    """(starts, lengths) of the payloads of the message-data records at byte offsets ``offs`` of an
+    uncompressed chunk ``b``, found from the record headers with numpy, not record by record: each
+    record's header length, op field and payload length taken in one gather of its first bytes."""
+    head = 4 + _ROS1_MSG_HEADER_LEN + 4   # header length, header, payload length
+    if offs.size and offs.max() + head > b.size:
+        raise Ros1IndexError(f"chunk at byte {chunk_pos}: an index entry points past the chunk's end")
+    first = b[offs[:, None] + np.arange(head)]
+
+    def u32(col: int) -> np.ndarray:
+        return np.ascontiguousarray(first[:, col:col + 4]).view("<u4")[:, 0].astype(np.int64)
+
+    is_msg = np.zeros(offs.size, dtype=bool)
+    for p in _ROS1_OP_FIELD_POS:
+        is_msg |= (first[:, 4 + p:12 + p] == _ROS1_OP_MSG_DATA).all(axis=1)
+    if not (is_msg & (u32(0) == _ROS1_MSG_HEADER_LEN)).all():
+        raise Ros1IndexError(f"chunk at byte {chunk_pos}: an index entry does not point at a message-data record "
+                             "of the usual layout")
+    lengths = u32(head - 4)
+    starts = offs + head
+    if np.any(starts + lengths > b.size):
+        raise Ros1IndexError(f"chunk at byte {chunk_pos}: a message runs past the chunk's end")
+    return starts, lengths
 
 
-def _collect_ros1(reader: Any, bag_topics: Any, wanted: Sequence[str], sinks: dict[str, _Sink]) -> bool | None:
-    """The ROS 1 fast path of :func:`_collect`: payloads located through the bag index.
+#: A log time (ns) after every other: no later chunk holds the topic.
+_NO_LATER_NS = np.iinfo(np.int64).max
 
-    rosbags' own message iteration parses a record header per message in Python; here each
-    needed chunk is decompressed once, its message records are located with numpy from the
-    index offsets that rosbags has already read, and each topic's messages of the chunk go to
-    its sink straight from the chunk.  The order is AnyReader's: by log time, ties in file,
-    connection and index order; the chunks are read in file order, so every topic's messages
-    must come chunk after chunk in that order (as recorders write them).  Returns True, or None
-    (the caller then uses rosbags' iteration, with new sinks, which also reports damage
-    precisely) when anything is not as expected.
+
+class _Ros1Order:
+    """One topic's messages handed to its sink in AnyReader's order -- by log time, ties by
+    connection (file, then record order), chunk and index entry -- while the chunks are read one
+    by one in file order.  A message is handed on once no later chunk can hold an earlier one of
+    the topic (its log time is before ``bound``, the earliest start of a later chunk holding the
+    topic); the others are held back, copied out of their chunk.  Recorders write chunks in log
+    time order, so only messages at a chunk boundary's very time are ever held; a bag whose log
+    time goes back across chunks holds more, until the chunks it overlaps are read."""
+
+    def __init__(self, sink: _Sink) -> None:
+        self.sink = sink
+        self.held: tuple[bytearray, np.ndarray, np.ndarray, tuple[np.ndarray, ...]] | None = None
+
+    def add(self, b: Any, starts: np.ndarray, lengths: np.ndarray, keys: tuple[np.ndarray, ...], bound: int) -> None:
+        """A chunk's messages ``b[starts[i]:starts[i] + lengths[i]]`` in key order; ``keys``: log time
+        (ns), connection, chunk and entry numbers, each int64."""
+        if self.held is not None:
+            held_b, held_starts, held_lengths, held_keys = self.held
+            new_b, new_starts = _gathered(b, starts, lengths)
+            b = held_b + new_b
+            starts = np.concatenate([held_starts, new_starts + len(held_b)])
+            lengths = np.concatenate([held_lengths, lengths])
+            keys = tuple(np.concatenate(pair) for pair in zip(held_keys, keys))
+            order = np.lexsort(keys[::-1])
+            starts, lengths, keys = starts[order], lengths[order], tuple(k[order] for k in keys)
+        cut = int(np.searchsorted(keys[0], bound))
+        self.sink.add(b, starts[:cut], lengths[:cut], keys[0][:cut])
+        if cut == starts.size:
+            self.held = None
+        else:
+            rest_b, rest_starts = _gathered(b, starts[cut:], lengths[cut:])
+            self.held = (rest_b, rest_starts, lengths[cut:], tuple(k[cut:] for k in keys))
+
+    def flush(self) -> None:
+        if self.held is not None:
+            empty = np.zeros(0, np.int64)
+            self.add(bytearray(), empty, empty, (empty,) * 4, _NO_LATER_NS)
+
+
+def _collect_ros1(bags: _Ros1Bags, wanted: Sequence[str], sinks: dict[str, _Sink]) -> None:
+    """The wanted topics' payloads from ROS 1 bags through navpp's own index, chunk by chunk.
+
+    Each chunk holding a wanted topic is read and decompressed once; its index entries come
+    into numpy arrays and its message records are located with numpy (:func:`_ros1_payloads`);
+    each topic's messages go to its sink straight from the chunk, in AnyReader's order
+    (:class:`_Ros1Order`), so memory holds a chunk at a time besides the sinks' tables.
+    Raises Ros1IndexError when the bag is not as expected (the caller reads it with rosbags).
     """
-    try:
-        readers = list(reader.readers)
-        per_topic = {}
-        for topic in wanted:
-            parts_idx, parts_reader = [], []
-            for c in bag_topics[topic].connections:
-                owner = c.owner
-                ridx = next(i for i, r in enumerate(readers) if r is owner)
-                idx = owner.indexes[c.id]
-                a = np.fromiter(chain.from_iterable(idx), dtype=np.int64, count=3 * len(idx)).reshape(-1, 3)
-                parts_idx.append(a)
-                parts_reader.append(np.full(len(idx), ridx, dtype=np.int64))
-            a = np.concatenate(parts_idx) if parts_idx else np.zeros((0, 3), np.int64)
-            rdx = np.concatenate(parts_reader) if parts_reader else np.zeros(0, np.int64)
-            order = np.argsort(a[:, 0], kind="stable")
-            a, rdx = a[order], rdx[order]
-            key = (rdx << 48) | a[:, 1]  # (file, chunk position): chunk positions are < 2**48
-            if np.any(key[1:] < key[:-1]):
-                return None     # the log-time order goes back to an earlier chunk
-            keys, first = np.unique(key, return_index=True)
-            bounds = dict(zip(keys.tolist(), zip(first.tolist(), [*first[1:].tolist(), len(key)])))
-            per_topic[topic] = (a, bounds)
-        all_keys = sorted({k for _, bounds in per_topic.values() for k in bounds})
-        for key in all_keys:
-            r = readers[key >> 48]
-            chunk = r.chunks[key & ((1 << 48) - 1)]
-            r.bio.seek(chunk.datapos)
-            raw = chunk.decompressor(r.bio.read(chunk.datasize))
-            b = np.frombuffer(raw, dtype=np.uint8)
-            for topic, (a, bounds) in per_topic.items():
-                if key not in bounds:
-                    continue
-                lo, hi = bounds[key]
-                offs = a[lo:hi, 2]
-                if offs.min() < 0 or offs.max() + 4 + _ROS1_MSG_HEADER_LEN + 4 > b.size:
-                    return None
-                if np.any(_u32(b, offs) != _ROS1_MSG_HEADER_LEN):
-                    return None
-                is_msg = np.zeros(offs.size, dtype=bool)
-                for p in _ROS1_OP_FIELD_POS:
-                    q = offs + 4 + p
-                    is_msg |= ((_u32(b, q) == 4) & (b[q + 4] == ord("o")) & (b[q + 5] == ord("p"))
-                               & (b[q + 6] == ord("=")) & (b[q + 7] == 2))
-                if not is_msg.all():
-                    return None
-                lengths = _u32(b, offs + 4 + _ROS1_MSG_HEADER_LEN)
-                starts = offs + 4 + _ROS1_MSG_HEADER_LEN + 4
-                if np.any(starts + lengths > b.size):
-                    return None
-                sinks[topic].add(b, starts, lengths, a[lo:hi, 0])
-        return True
-    except InputError:
-        raise
-    except Exception:  # noqa: BLE001 - rosbags internals changed or the bag is damaged: use the library path
-        return None
+    where: dict[tuple[int, int], tuple[str, int]] = {}  # (file, conn id) -> (topic, connection number)
+    for topic in wanted:
+        for k, (i, c) in enumerate(bags.topics[topic]):
+            where[(i, c.conn)] = (topic, k)
+    chunks = [(i, chunk) for i, bag in enumerate(bags.bags) for chunk in bag.chunks]
+    mine: list[dict[str, list[tuple[int, IndexRecord]]]] = []
+    for i, chunk in chunks:
+        here: dict[str, list[tuple[int, IndexRecord]]] = {}
+        for r in chunk.records:
+            if (hit := where.get((i, r.conn))) is not None and r.count:
+                here.setdefault(hit[0], []).append((hit[1], r))
+        mine.append(here)
+    bounds = []     # per chunk: each topic's earliest log time (ns) in the chunks after it
+    later = dict.fromkeys(wanted, int(_NO_LATER_NS))
+    for (_, chunk), here in zip(reversed(chunks), reversed(mine)):
+        bounds.append(dict(later))
+        for topic in here:
+            later[topic] = min(later[topic], chunk.start_ns)
+    bounds.reverse()
+    order = {topic: _Ros1Order(sinks[topic]) for topic in wanted}
+    for n, ((i, chunk), here) in enumerate(zip(chunks, mine)):
+        if not here:
+            continue
+        bag = bags.bags[i]
+        try:
+            b = np.frombuffer(bag.chunk_data(chunk), dtype=np.uint8)
+            for topic, records in here.items():
+                entries = [bag.entries(r, chunk) for _, r in records]
+                log_ns = np.concatenate([e[0] for e in entries])
+                conn = np.concatenate([np.full(r.count, k, dtype=np.int64) for k, r in records])
+                entry = np.arange(log_ns.size, dtype=np.int64)
+                s = np.lexsort((entry, conn, log_ns))
+                starts, lengths = _ros1_payloads(b, np.concatenate([e[1] for e in entries])[s], chunk.pos)
+                keys = (log_ns[s], conn[s], np.full(s.size, n, dtype=np.int64), entry[s])
+                order[topic].add(b, starts, lengths, keys, bounds[n][topic])
+        except Ros1IndexError as exc:
+            raise Ros1IndexError(f"{bag.path}: {exc}") from None
+        except OSError as exc:
+            raise Ros1IndexError(f"{bag.path}: cannot read: {exc.strerror or exc}") from None
+        del b
+    for topic in wanted:
+        order[topic].flush()
 
 
 def _bulk_decoder() -> Callable[..., Any] | None:
