@@ -450,15 +450,14 @@ def output_std(recorder: RunRecorder, t_out: np.ndarray, path: np.ndarray) -> di
     (:func:`~navpp.engine.output.interpolated_std_rows` between the recorder's knots).  Each
     block's columns are copied from the recorded knots in turn, and the knots are dropped after:
     nothing later reads them."""
-    kn = recorder.knot_records()
-    t0, kt = float(kn[0, 0]), np.ascontiguousarray(kn[1:, 0])
+    kt = recorder.knot_values(slice(0, 1))[:, 0]
+    t0, kt = float(kt[0]), kt[1:]
     std_out = {}
     for name, j in (("att", 0), ("vel", 3), ("pos", 6)):     # the KNOT layout of the recorder
         prior, post = 1 + j, 1 + KNOT.stop - KNOT.start + j
-        std_out[name] = interpolated_std_rows(t_out, t0, np.ascontiguousarray(kn[0, post:post + 3]), kt,
-                                              np.ascontiguousarray(kn[1:, prior:prior + 3]),
-                                              np.ascontiguousarray(kn[1:, post:post + 3]), like=path)
-    del kn
+        kp, kq = recorder.knot_values(slice(prior, prior + 3)), recorder.knot_values(slice(post, post + 3))
+        std_out[name] = interpolated_std_rows(t_out, t0, kq[0], kt, kp[1:], kq[1:], like=path)
+        del kp, kq
     recorder.drop_knots()
     return std_out
 
