@@ -355,24 +355,25 @@ def _gnss_position_metrics(gnss: GnssData, ref: ReferenceData,
     note = None
     if np.any(lever != 0.0):
         if "rph_deg" in r:
-            mat_nb = rph_deg_to_dcm(r["rph_deg"])
+            rph_nb = r["rph_deg"]       # deg: C_b^n's angles (the DCMs formed block by block below)
         else:
             heading = _heading_from_velocity(r["vel_enu"]) if "vel_enu" in r else None
             if heading is None:
                 # no heading: only the vertical part of the lever arm is known (roll = pitch = 0)
-                mat_nb = None
+                rph_nb = None
                 err = err - np.array([0.0, 0.0, lever[2]])
                 note = ("only the vertical part of the lever arm applied: the reference has no attitude and "
                         "no velocity to take a heading from")
             else:
-                mat_nb = rph_deg_to_dcm(np.stack([np.zeros_like(heading), np.zeros_like(heading),
-                                                  heading], axis=-1))
+                rph_nb = np.stack([np.zeros_like(heading), np.zeros_like(heading), heading], axis=-1)
                 note = ("lever arm rotated with the heading of the reference velocity "
                         "(roll and pitch taken as zero): the reference has no attitude")
-        if mat_nb is not None:
+        if rph_nb is not None:
             # antenna = body + C_b^n l; in the ENU frame of the body point (the frame of the
-            # antenna point differs by |l| / R ~ 1e-7 rad)
-            err = err - mat_nb @ lever
+            # antenna point differs by |l| / R ~ 1e-7 rad); the (K, 3, 3) DCMs in blocks of
+            # ENU_BLOCK fixes (each fix's product does not depend on the block)
+            for a in range(0, err.shape[0], ENU_BLOCK):
+                err[a:a + ENU_BLOCK] -= rph_deg_to_dcm(rph_nb[a:a + ENU_BLOCK]) @ lever
     out: dict[str, Any] = {"epochs": int(i.size)}
     out.update(error_stats(err))
     if note is not None:
