@@ -36,6 +36,7 @@ from .ins.aids.yaw_rate import OdometerYawRate
 from .ins.attitude import quat_to_dcm, rpy_deg_to_dcm
 from .ins.model import VEL
 from .ins.state import NOMINAL_Q, X_H, X_LAT
+from .intervals import interval_median
 from .units import STANDARD_GRAVITY
 
 #: Aid kinds in the order they are reported (the GNSS position first).
@@ -169,7 +170,7 @@ class Aiding:
         veh = config.vehicle
         self.profile = profile            # the data's noise (navpp.ins.calibrate.NoiseProfile) or None
         self.t, self.gyro, self.accel = t, gyro, accel
-        self.imu_period = max(float(np.median(np.diff(t))), 1e-9) if t.shape[0] > 1 else 1.0   # s
+        self.imu_period = max(interval_median(t), 1e-9) if t.shape[0] > 1 else 1.0   # s
         self.gaps = np.zeros((0, 2)) if gaps is None else np.asarray(gaps, dtype=float).reshape(-1, 2)
         self.gyro_arw = gyro_arw
         self.nhc = veh.type == "car" and veh.nhc

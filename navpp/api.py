@@ -415,7 +415,7 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
         ``[output] smooth``; None uses it (default off).
     memory : memory the smoother's stored forward run and the IMU-rate output may each hold
         before they spill to a temporary file in ``$TMPDIR``, bytes or text (``"500MB"``, ``"1GB"``,
-        ``"2G"``); overrides ``[output] memory`` (default 128 MB); None uses it.
+        ``"2G"``); overrides ``[output] memory`` (default 64 MB); None uses it.
     plot : also write the run's figures beside the outputs (:mod:`navpp.plots`: the error per
         axis with its +-3-sigma band, the trajectory, the adaptive noise, an HTML overview map);
         ignored with ``write=False``.

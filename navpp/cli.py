@@ -248,7 +248,7 @@ def process(
     memory: Annotated[str | None, typer.Option(
         "--memory", metavar="SIZE", help="Memory the smoother's stored forward run and the IMU-rate output may each "
         "hold (500MB, 1GB, 2G; binary units); beyond it they go to a temporary file in $TMPDIR, deleted at the end.  "
-        "[default: [output] memory, else 128MB]", show_default=False)] = None,
+        "[default: [output] memory, else 64MB]", show_default=False)] = None,
     plot: Annotated[bool, typer.Option(
         "--plot", help="Also write figures beside the outputs: <log>_<filter>_errors.png (error per axis with the "
                        "±3σ band, outages, rejected fixes; without a reference <log>_<filter>_innovations.png), "
@@ -338,7 +338,7 @@ def compare(
     memory: Annotated[str | None, typer.Option(
         "--memory", metavar="SIZE", help="Memory each run's smoother store and IMU-rate output may each hold "
         "(500MB, 1GB, 2G; binary units); beyond it they go to a temporary file in $TMPDIR.  "
-        "[default: [output] memory, else 128MB]",
+        "[default: [output] memory, else 64MB]",
         show_default=False)] = None,
     executor: Annotated[str, typer.Option(
         "--executor", help="Where the runs go: local (this machine, --jobs processes) or dask (a Dask cluster: "

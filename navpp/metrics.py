@@ -21,7 +21,8 @@ nose up, roll right side down); body frame FLU, navigation frame ENU.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import itertools
+from collections.abc import Iterator, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -103,6 +104,21 @@ def wrap_deg(angle: np.ndarray | float, low: float = -180.0) -> np.ndarray:
     return np.mod(np.asarray(angle, dtype=float) - low, 360.0) + low
 
 
+def _by_source_window(rows: np.ndarray) -> Iterator[slice | np.ndarray]:
+    """The positions in ``rows`` (K,) (indices of source rows) grouped by the window of
+    :data:`~navpp.spill.WINDOW_ROWS` source rows each falls in, window after window: slices of
+    ``rows`` when they are non-decreasing (times in order, the usual case), index arrays otherwise."""
+    win = rows // spill.WINDOW_ROWS
+    if win.size == 0:
+        return
+    ordered = bool(np.all(win[1:] >= win[:-1]))
+    order = None if ordered else np.argsort(win, kind="stable")
+    win = win if order is None else win[order]
+    bounds = [0, *(np.flatnonzero(win[1:] != win[:-1]) + 1).tolist(), win.size]
+    for a, b in itertools.pairwise(bounds):
+        yield slice(a, b) if order is None else order[a:b]
+
+
 class _Bracket(NamedTuple):
     """Indices and weights that interpolate a source series at new times: ``y[i0] + w (y[i1] - y[i0])``."""
 
@@ -112,27 +128,49 @@ class _Bracket(NamedTuple):
 
     @classmethod
     def of(cls, t_src: np.ndarray, t: np.ndarray) -> _Bracket:
+        """The bracket of each time ``t`` (K,) s in the non-decreasing source times ``t_src`` (N,) s;
+        a spilled ``t_src`` is searched and indexed one window of source rows at a time
+        (:func:`_by_source_window`), its rows released behind each, so that the pages it touches
+        stay a window's worth whatever the number of times."""
         n = t_src.shape[0]
-        i1 = np.clip(np.searchsorted(t_src, t, side="right"), 1, max(n - 1, 1))
-        i0 = i1 - 1
         if n == 1:
             return cls(np.zeros(t.shape, int), np.zeros(t.shape, int), np.zeros(t.shape))
-        span = t_src[i1] - t_src[i0]
-        w = np.clip((t - t_src[i0]) / np.where(span > 0, span, 1.0), 0.0, 1.0)
-        spill.release_all(t_src)        # a spilled t_src's pages the indexing touched leave memory
+        if not spill.spilled(t_src):
+            i1 = np.clip(np.searchsorted(t_src, t, side="right"), 1, max(n - 1, 1))
+            i0 = i1 - 1
+            span = t_src[i1] - t_src[i0]
+            return cls(i0, i1, np.clip((t - t_src[i0]) / np.where(span > 0, span, 1.0), 0.0, 1.0))
+        step = spill.WINDOW_ROWS
+        # the window of each time from every window's first stamp (a strided read of N / step rows):
+        # t_src[j * step] <= t < t_src[(j + 1) * step], so its place is inside window j
+        first = np.array(t_src[::step])
+        spill.release_all(t_src)
+        win = np.maximum(np.searchsorted(first, t, side="right") - 1, 0)
+        i0, i1, w = np.empty(t.shape, np.int64), np.empty(t.shape, np.int64), np.empty(t.shape)
+        for sel in _by_source_window(win * step):
+            start = int(win[sel][0]) * step
+            lo = max(start - 1, 0)                  # a bracket's rows lie in start - 1 .. start + step
+            seg = t_src[lo:start + step + 1]
+            tk = t[sel]
+            k1 = np.clip(start + np.searchsorted(seg[start - lo:start - lo + step], tk, side="right"), 1, n - 1)
+            a, b = seg[k1 - 1 - lo], seg[k1 - lo]
+            span = b - a
+            i0[sel], i1[sel] = k1 - 1, k1
+            w[sel] = np.clip((tk - a) / np.where(span > 0, span, 1.0), 0.0, 1.0)
+            spill.release([t_src], lo, start + step + 1)
         return cls(i0, i1, w)
 
     def pair(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``y[i0]``, ``y[i1]`` as float: indexed first, converted after (no full-length copy); a
-        spilled ``y`` (:mod:`navpp.spill`) in windows of :data:`~navpp.spill.WINDOW_ROWS` times,
-        its rows released behind each."""
+        spilled ``y`` (:mod:`navpp.spill`) one window of :data:`~navpp.spill.WINDOW_ROWS` source
+        rows at a time (:func:`_by_source_window`), its rows released behind each."""
         y = np.asarray(y)
         if not spill.spilled(y):
             return y[self.i0].astype(float), y[self.i1].astype(float)
         a, b = np.empty((self.i0.shape[0], *y.shape[1:])), np.empty((self.i0.shape[0], *y.shape[1:]))
-        for s in range(0, self.i0.shape[0], spill.WINDOW_ROWS):
-            i0, i1 = self.i0[s:s + spill.WINDOW_ROWS], self.i1[s:s + spill.WINDOW_ROWS]
-            a[s:s + i0.shape[0]], b[s:s + i0.shape[0]] = y[i0], y[i1]
+        for sel in _by_source_window(self.i0):
+            i0, i1 = self.i0[sel], self.i1[sel]
+            a[sel], b[sel] = y[i0], y[i1]
             spill.release([y], int(i0.min()), int(i1.max()) + 1)
         return a, b
 
@@ -177,7 +215,12 @@ def _interp_track(t_src: np.ndarray, lat_deg: np.ndarray, lon_deg: np.ndarray, a
         raise ValueError("cannot interpolate a trajectory with no epochs")
     if _decreasing(t_src):
         raise InputError("trajectory times are not increasing; cannot interpolate")
-    br = _Bracket.of(t_src, t)
+    return _track_at(_Bracket.of(t_src, t), lat_deg, lon_deg, alt, vel_enu, rph_deg, t)
+
+
+def _track_at(br: _Bracket, lat_deg: np.ndarray, lon_deg: np.ndarray, alt: np.ndarray,
+              vel_enu: np.ndarray | None, rph_deg: np.ndarray | None, t: np.ndarray) -> dict[str, np.ndarray]:
+    """:func:`_interp_track`'s values at the times ``t`` (K,) s bracketed by ``br`` in its source."""
     out = {
         "t": t,
         "lat_deg": br.linear(lat_deg),
@@ -312,24 +355,25 @@ def _gnss_position_metrics(gnss: GnssData, ref: ReferenceData,
     note = None
     if np.any(lever != 0.0):
         if "rph_deg" in r:
-            mat_nb = rph_deg_to_dcm(r["rph_deg"])
+            rph_nb = r["rph_deg"]       # deg: C_b^n's angles (the DCMs formed block by block below)
         else:
             heading = _heading_from_velocity(r["vel_enu"]) if "vel_enu" in r else None
             if heading is None:
                 # no heading: only the vertical part of the lever arm is known (roll = pitch = 0)
-                mat_nb = None
+                rph_nb = None
                 err = err - np.array([0.0, 0.0, lever[2]])
                 note = ("only the vertical part of the lever arm applied: the reference has no attitude and "
                         "no velocity to take a heading from")
             else:
-                mat_nb = rph_deg_to_dcm(np.stack([np.zeros_like(heading), np.zeros_like(heading),
-                                                  heading], axis=-1))
+                rph_nb = np.stack([np.zeros_like(heading), np.zeros_like(heading), heading], axis=-1)
                 note = ("lever arm rotated with the heading of the reference velocity "
                         "(roll and pitch taken as zero): the reference has no attitude")
-        if mat_nb is not None:
+        if rph_nb is not None:
             # antenna = body + C_b^n l; in the ENU frame of the body point (the frame of the
-            # antenna point differs by |l| / R ~ 1e-7 rad)
-            err = err - mat_nb @ lever
+            # antenna point differs by |l| / R ~ 1e-7 rad); the (K, 3, 3) DCMs in blocks of
+            # ENU_BLOCK fixes (each fix's product does not depend on the block)
+            for a in range(0, err.shape[0], ENU_BLOCK):
+                err[a:a + ENU_BLOCK] -= rph_deg_to_dcm(rph_nb[a:a + ENU_BLOCK]) @ lever
     out: dict[str, Any] = {"epochs": int(i.size)}
     out.update(error_stats(err))
     if note is not None:
@@ -436,28 +480,43 @@ def compute_metrics(sol: Solution, ref: ReferenceData, *, filter_name: str, log:
             f"(solution {sol_span}, reference {ref_span}, relative to the log start)"
         )
     i = assoc.idx_ref
-    est = interpolate_solution(sol, assoc.t)
-    pos_err = position_errors_enu(est["lat_deg"], est["lon_deg"], est["alt"],
-                                  ref.lat_deg[i], ref.lon_deg[i], ref.alt[i])
+    if _decreasing(t_sol):
+        raise InputError("trajectory times are not increasing; cannot interpolate")
+    # interpolate_solution's values but the 1-sigma (unused here) and their errors in blocks of
+    # ENU_BLOCK reference points, so that no reference-length temporaries pile up (the errors of
+    # each point do not depend on the block: the same bits as at once)
+    n_ref = i.size
+    pos_err = np.empty((n_ref, 3))
+    vel_err, vel_rows = (np.empty((n_ref, 3)), np.empty(n_ref, bool)) if ref.vel_enu is not None else (None, None)
+    att_err, att_rows = (np.empty((n_ref, 3)), np.empty(n_ref, bool)) if ref.rph_deg is not None else (None, None)
+    for a in range(0, n_ref, ENU_BLOCK):
+        b = min(n_ref, a + ENU_BLOCK)
+        ib, tb = i[a:b], assoc.t[a:b]
+        est = _track_at(_Bracket.of(t_sol, tb), sol.lat_deg, sol.lon_deg, sol.alt, sol.vel_enu, sol.rph_deg, tb)
+        pos_err[a:b] = position_errors_enu(est["lat_deg"], est["lon_deg"], est["alt"],
+                                           ref.lat_deg[ib], ref.lon_deg[ib], ref.alt[ib])
+        if vel_err is not None and vel_rows is not None:
+            ref_vel = np.asarray(ref.vel_enu, dtype=float)[ib]
+            vel_err[a:b] = est["vel_enu"] - ref_vel
+            vel_rows[a:b] = np.all(np.isfinite(ref_vel), axis=1)
+        if att_err is not None and att_rows is not None:
+            ref_rph = np.asarray(ref.rph_deg, dtype=float)[ib]
+            att_err[a:b] = np.abs(wrap_deg(est["rph_deg"] - ref_rph))
+            att_rows[a:b] = np.all(np.isfinite(ref_rph), axis=1)
     metrics: dict[str, Any] = {
         "filter": str(filter_name),
         "log": str(log),
         "reference": str(reference),
-        "epochs": int(i.size),
+        "epochs": int(n_ref),
         "position_m": error_stats(pos_err),
     }
-    if ref.vel_enu is not None:
-        vel_err = est["vel_enu"] - np.asarray(ref.vel_enu, dtype=float)[i]
-        rows = np.all(np.isfinite(np.asarray(ref.vel_enu, dtype=float)[i]), axis=1)
-        if rows.any():
-            metrics["velocity_mps"] = error_stats(vel_err[rows])
-    if ref.rph_deg is not None:
-        ref_rph = np.asarray(ref.rph_deg, dtype=float)[i]
-        rows = np.all(np.isfinite(ref_rph), axis=1)
-        if rows.any():
-            a = np.abs(wrap_deg(est["rph_deg"][rows] - ref_rph[rows]))
-            metrics["attitude_deg"] = {name: _abs_stats(a[:, j])
-                                       for j, name in enumerate(("roll", "pitch", "heading"))}
+    if vel_err is not None and vel_rows is not None and vel_rows.any():
+        metrics["velocity_mps"] = error_stats(vel_err[vel_rows])
+    del vel_err
+    if att_err is not None and att_rows is not None and att_rows.any():
+        att = att_err[att_rows]
+        metrics["attitude_deg"] = {name: _abs_stats(att[:, j]) for j, name in enumerate(("roll", "pitch", "heading"))}
+    del att_err
     metrics["runtime_s"] = float(runtime_s)
     metrics["imu_samples"] = int(imu_samples)
     metrics["gnss_epochs"] = int(gnss_epochs)
@@ -469,4 +528,6 @@ def compute_metrics(sol: Solution, ref: ReferenceData, *, filter_name: str, log:
     if updates:
         metrics["updates"] = {k: {"applied": int(v["applied"]), "rejected": int(v["rejected"])}
                               for k, v in updates.items()}
+    del pos_err
+    spill.trim_heap()       # the reference-length errors' pages back to the system before the writers
     return metrics

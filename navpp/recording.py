@@ -79,7 +79,9 @@ class ImuData:
         """Nominal rate from the median sample interval."""
         if len(self) < 2:
             return float("nan")
-        return float(1.0 / np.median(np.diff(self.t)))
+        from .intervals import interval_median
+
+        return float(1.0 / interval_median(self.t))      # a spilled t window by window
 
 
 def lone_stamp(t: np.ndarray, reorder_s: float = MAX_REORDER_S) -> tuple[int, float] | None:

@@ -111,7 +111,10 @@ def _arrays(sol: Solution) -> dict[str, np.ndarray]:
 
 
 @pytest.mark.parametrize("smooth", [False, True])
-def test_a_spilled_run_writes_the_same_bytes(spill_dir, tmp_path_factory, smooth):
+def test_a_spilled_run_writes_the_same_bytes(spill_dir, tmp_path_factory, smooth, monkeypatch):
+    from navpp.engine import recorder
+
+    monkeypatch.setattr(recorder, "KNOT_CHUNK", 97)      # the spilled run's knots in many chunks
     cfg = api.resolve_config(DRIVE, None)
     outs = {}
     for budget in (1 << 30, 1):
@@ -354,3 +357,25 @@ def test_a_parse_that_grows_past_the_budget_goes_onto_the_spill_file(spill_dir, 
     for a, b in zip(kept[0], grown[0]):
         assert np.array_equal(a, b)
     assert np.array_equal(kept[1], grown[1])
+
+
+def test_brackets_in_a_spilled_source_are_found_window_by_window(spill_dir, monkeypatch):
+    """metrics._Bracket on a spilled source searches and gathers one window of source rows at a
+    time: the same indices, weights and values as on the source in memory, for times in order,
+    out of order, repeated, outside the span and NaN, and a source with repeated stamps."""
+    from navpp import metrics
+
+    monkeypatch.setattr(spill, "WINDOW_ROWS", 64)
+    rng = np.random.default_rng(11)
+    n = 1_000
+    t_src = np.cumsum(rng.choice([0.0, 0.01, 0.02], n))       # non-decreasing, with repeats
+    y = rng.normal(0, 1, (n, 3))
+    ordered = np.sort(rng.uniform(t_src[0] - 0.5, t_src[-1] + 0.5, 700))
+    shuffled = rng.permutation(np.concatenate([ordered, t_src[::37], [np.nan]]))
+    for t in (ordered, shuffled, t_src[[0, 63, 64, 128, n - 1]], np.empty(0)):
+        whole = metrics._Bracket.of(t_src, t)
+        windowed = metrics._Bracket.of(_spilled_copy(t_src), t)
+        for a, b in zip(whole, windowed):
+            assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True)
+        assert np.array_equal(windowed.linear(_spilled_copy(y)), whole.linear(y), equal_nan=True)
+        assert np.array_equal(windowed.angle_deg(_spilled_copy(y[:, 2])), whole.angle_deg(y[:, 2]), equal_nan=True)

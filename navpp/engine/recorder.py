@@ -20,7 +20,7 @@ from ..filters.base import GaussianState, Prediction, Update
 from ..filters.smoother import DEFAULT_BUDGET_BYTES, ForwardStore
 from ..ins.model import ATT, BA, BG, POS, VEL
 from ..ins.strapdown import NOMINAL_BA, NOMINAL_BG, PATH_SIZE
-from ..spill import empty_rows, full_rows, release_before, spilled
+from ..spill import empty_rows, full_rows, release_all, release_before, spilled
 from .loop import EpochOutcome
 from .results import BiasHistory, Diagnostics
 from .schedule import Epoch, GnssFixes
@@ -32,6 +32,11 @@ AID_COLUMNS = {"odometer": "odo", "odometer_yaw": "yaw"}
 KNOT = slice(ATT.start, POS.stop)
 _KNOT_N = KNOT.stop - KNOT.start
 assert (ATT.stop, VEL.start, VEL.stop, POS.start) == (3, 3, 6, 6) and _KNOT_N == 9
+#: doubles per knot record: the time, then the prior and the posterior variances
+_KNOT_DOUBLES = 1 + 2 * _KNOT_N
+#: knot records a run beside a spilled path holds in memory before they go to a spill file
+#: (8-hour log: 23 MB of knots)
+KNOT_CHUNK = 1 << 14
 #: the gyro then accelerometer biases, adjacent in the nominal and in the error state: each
 #: recorded per fix in one copy
 BIASES_X = slice(NOMINAL_BG.start, NOMINAL_BA.stop)
@@ -107,8 +112,11 @@ class RunRecorder:
         self.noise_report = noise_report
         self.t = start.t            # time of the last state the loop made, s
         # covariance knots for the output's 1-sigma: flat (t, prior E/N/U variance, posterior E/N/U
-        # variance) records, one per stop; long gaps between fixes get coasting stops
+        # variance) records, one per stop; long gaps between fixes get coasting stops.  Beside a
+        # spilled path, every KNOT_CHUNK records move to a spill file of their own (knot_chunks)
         self.knots = array("d")
+        self.knot_chunks: list[np.ndarray] = []
+        self._chunk_doubles = KNOT_CHUNK * _KNOT_DOUBLES if spill else None
         self.store: ForwardStore | None = None
         self.epoch_node = np.zeros(m, np.int64)       # the smoother's node of each GNSS epoch
         if smooth:
@@ -126,6 +134,19 @@ class RunRecorder:
         self.knots.append(state.t)
         self.knots.frombytes(v if prior is None else prior.P.diagonal()[KNOT].tobytes())
         self.knots.frombytes(v)
+        if self._chunk_doubles is not None and len(self.knots) >= self._chunk_doubles:
+            self._spilled_knots()
+
+    def _spilled_knots(self) -> None:
+        """The knot records in memory onto a spill file of their own (:attr:`knot_chunks`), its
+        pages released (a run beside a spilled path: the knots' memory stays a chunk's)."""
+        rows = np.frombuffer(self.knots, dtype=float).reshape(-1, _KNOT_DOUBLES)
+        chunk = empty_rows(rows.shape[0], (_KNOT_DOUBLES,), np.float64, True, "covariance knots")
+        chunk[:] = rows
+        release_all(chunk)
+        self.knot_chunks.append(chunk)
+        del rows
+        self.knots = array("d")
 
     # the loop's Recorder -------------------------------------------------------------------
     def predicted(self, epoch: Epoch, prediction: Prediction) -> None:
@@ -184,6 +205,8 @@ class RunRecorder:
         state ``t`` (s) and the IMU sample of its last epoch ``sample`` (-1: none), before which
         the path's rows are final (a spilled path releases them, as :meth:`epoch_done` does)."""
         self.knots.frombytes(np.ascontiguousarray(knots).tobytes())
+        if self._chunk_doubles is not None and len(self.knots) >= self._chunk_doubles:
+            self._spilled_knots()
         self.t = t
         if sample >= 0:
             self._released_before(sample, t)
@@ -223,15 +246,21 @@ class RunRecorder:
         out: np.ndarray = np.sqrt(np.diagonal(self.r_used, axis1=1, axis2=2))
         return out
 
-    def knot_records(self) -> np.ndarray:
-        """The knots as recorded, no copy: (K, 19) rows of time (s), prior then posterior
-        variance of :data:`KNOT` (:meth:`knot`'s layout; a view of :attr:`knots`, which must not
-        grow while it lives)."""
-        return np.frombuffer(self.knots, dtype=float).reshape(-1, 1 + 2 * _KNOT_N)
+    def knot_values(self, cols: slice) -> np.ndarray:
+        """A copy of the columns ``cols`` of the knots as recorded, (K, C) float64 in recording
+        order: of the (K, 19) rows of time (s), prior then posterior variance of :data:`KNOT`
+        (:meth:`knot`'s layout); the spilled chunks read and released in turn."""
+        parts = [np.frombuffer(self.knots, dtype=float).reshape(-1, _KNOT_DOUBLES)[:, cols]]
+        for chunk in self.knot_chunks:
+            parts.insert(-1, chunk[:, cols])
+        out = np.concatenate(parts)
+        release_all(*self.knot_chunks)
+        return out
 
     def drop_knots(self) -> None:
         """Free the knots once the output's 1-sigma is made from them (8-hour log: 23 MB)."""
         self.knots = array("d")
+        self.knot_chunks = []
 
     def diagnostics(self, t: np.ndarray, labels: dict[str, list[str]]) -> Diagnostics:
         """The per-fix record at the fix times ``t`` (s); an adaptive report with ``labels`` (the

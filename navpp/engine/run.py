@@ -31,7 +31,7 @@ from ..ins.gnss_error import Correlation, GnssErrorModel, GnssErrorSettings, inn
 from ..ins.model import InsModel
 from ..ins.strapdown import NOMINAL_BG
 from ..recording import ImuData, Recording
-from ..spill import release_all, trim_heap
+from ..spill import map_large_blocks, release_all, spilled, trim_heap
 from .checks import alignment_findings, check_data, check_imu_plausible
 from .fused import fused_runner
 from .gnss_error import (
@@ -59,7 +59,7 @@ from .prepare import (
     start_fixes,
     timing_fixes,
 )
-from .recorder import KNOT, RunRecorder, new_path
+from .recorder import KNOT, OUTPUT_ROW_BYTES, RunRecorder, new_path
 from .results import RunResult, SmoothedRun
 from .schedule import GnssFixes, epochs, gnss_fixes, with_prior_std
 from .segments import ProgressFn, imu_segments, run_segments
@@ -87,6 +87,9 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
 
     t_wall = time.perf_counter()
     config, vehicle_note = resolved_vehicle(recording, config)
+    if spilled(recording.imu.t) or len(recording.imu) * OUTPUT_ROW_BYTES > config.output.memory:
+        map_large_blocks()      # a long run: its large temporaries' memory back to the system when freed
+        trim_heap()             # and the reader's, freed on the heap before
     with numba_event.install_recorder("numba:compile") as rec:
         segments = imu_segments(recording)
         if len(segments) > 1:
@@ -450,15 +453,14 @@ def output_std(recorder: RunRecorder, t_out: np.ndarray, path: np.ndarray) -> di
     (:func:`~navpp.engine.output.interpolated_std_rows` between the recorder's knots).  Each
     block's columns are copied from the recorded knots in turn, and the knots are dropped after:
     nothing later reads them."""
-    kn = recorder.knot_records()
-    t0, kt = float(kn[0, 0]), np.ascontiguousarray(kn[1:, 0])
+    kt = recorder.knot_values(slice(0, 1))[:, 0]
+    t0, kt = float(kt[0]), kt[1:]
     std_out = {}
     for name, j in (("att", 0), ("vel", 3), ("pos", 6)):     # the KNOT layout of the recorder
         prior, post = 1 + j, 1 + KNOT.stop - KNOT.start + j
-        std_out[name] = interpolated_std_rows(t_out, t0, np.ascontiguousarray(kn[0, post:post + 3]), kt,
-                                              np.ascontiguousarray(kn[1:, prior:prior + 3]),
-                                              np.ascontiguousarray(kn[1:, post:post + 3]), like=path)
-    del kn
+        kp, kq = recorder.knot_values(slice(prior, prior + 3)), recorder.knot_values(slice(post, post + 3))
+        std_out[name] = interpolated_std_rows(t_out, t0, kq[0], kt, kp[1:], kq[1:], like=path)
+        del kp, kq
     recorder.drop_knots()
     return std_out
 

@@ -38,12 +38,13 @@ def imu_segments(recording: Recording) -> list[tuple[int, int]]:
     sample count (at most one bridgeable gap per sample), so no loop over time can run away.
     """
     from ..ins.model import max_bridgeable_gap_s
+    from ..intervals import long_intervals
 
     t = recording.imu.t
     n = int(t.shape[0])
     if n < 2:
         return [(0, n)]
-    cuts = np.flatnonzero(np.diff(t) > max_bridgeable_gap_s()) + 1
+    cuts = long_intervals(t, max_bridgeable_gap_s()) + 1          # a spilled t window by window
     edges = [0, *cuts.tolist(), n]
     return [(edges[k], edges[k + 1]) for k in range(len(edges) - 1)]
 
