@@ -43,7 +43,6 @@ from ..ins.aids import zero_rate, zero_velocity
 from ..ins.model import GnssPosition, InsModel, gnss_innovation, gnss_jacobian, integrate_with_jacobian, plus
 from ..ins.state import DX_ATT, DX_BG, DX_VEL, NOMINAL_SIZE, X_BG, X_VE
 from ..jitmode import interpreted
-from ..spill import Behind
 from .measurements import RunMeasurements
 from .recorder import KNOT, RunRecorder
 from .schedule import Epoch, Schedule
@@ -398,18 +397,8 @@ class _StandstillInputs:
         at = np.flatnonzero(cons)
         self.cons[at], self.run[at] = aiding.still_runs(t[at])
         at = at[self.cons[at]]
-        if not aiding.zaru:
-            return
-        # ZARU: the mean gyro since the previous constraint epoch when every sample in between is still
-        t_prev = aiding.last_constraint_t
-        behind = Behind(aiding.t, aiding.gyro)      # a spilled gyro's pages read leave memory
-        for e in at:
-            te = float(t[e])
-            meas = aiding.zero_rate(t_prev, te)
-            if meas is not None:
-                self.zaru_ok[e], self.zaru_z[e], self.zaru_var[e] = True, meas.z, meas.R[0, 0]
-            t_prev = te
-            behind(te)
+        if aiding.zaru:     # the mean gyro since the previous constraint epoch when every sample in between is still
+            self.zaru_ok[at], self.zaru_z[at], self.zaru_var[at] = aiding.zero_rates(aiding.last_constraint_t, t[at])
 
     def arguments(self) -> tuple[Any, ...]:
         """:func:`ekf_epochs`'s still-epoch arguments, ``ep_cons`` (:attr:`cons`) on."""
