@@ -279,27 +279,14 @@ def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep
     """The plain EKF over epochs ``first`` .. ``stop - 1`` from the state (``x`` (16,), ``P``
     (15, 15)) at ``t_prev`` (s), as the generic loop runs them (module docstring).
 
-    Epoch arrays: times ``ep_t`` s, fix index ``ep_fix``, IMU sample at the epoch ``ep_sample``
-    (-1: none), ``ep_coast``, ``ep_generic`` (an epoch the generic loop must run).  The fixes
-    (rad, rad, m) with the variance of their R (M, 3) ENU m^2 and the antenna ``lever`` (body
-    FLU, m); the NIS ``gate``.  Writes the recorder's per-fix arrays, ``knots_out`` (rows of
-    :data:`KNOT_RECORD`) and the model's recorded ``path``; with ``keep``, each epoch's states
-    for the smoother's store, at row ``i - first``: ``nodes_x`` (L, 2, 16) the propagated
-    nominal and the posterior, ``nodes_P`` (L, 3, 15, 15) the prior, the posterior and the
-    cross-covariance ``P Phi^T`` (a coasting stop's posterior is its prior).  The rest is the model's
-    (:meth:`~navpp.ins.model.InsModel.propagation_arrays`): IMU data (``imu_t``, ``gyro``,
-    ``accel``), the path, noise (``psd``, the profile, ``inv_tau_*``, ``cov_step_s``) and long
-    ``gaps``.  Still epochs ``ep_cons``, their aids' inputs (per epoch ``ep_run``, ``zaru_ok``,
-    ``zaru_z``, ``zaru_var``), state and counts: :func:`_standstill`.  A fix the gate rejects is
-    recorded as rejected (the epoch applies nothing, or only its still epoch's aids);
-    ``rejecting_since`` (s, NaN: none) is when the fixes' current run of rejections began and
-    ``reanchor_after_s`` how long it may last before the filter forces a fix in
-    (:meth:`~navpp.filters.base.Filter.apply_measurement`).
-
-    Returns the first epoch not run (``stop``, or an epoch the generic loop must run: marked,
-    crossing a long gap, its fix to be forced, its aid rejected, its state failing the check, its
-    update failing, its still run vetoed, or a still epoch that applied nothing), the state before
-    it (x, P, t) and the number of knot rows written.
+    Epochs: ``ep_t`` s, fix ``ep_fix``, IMU sample ``ep_sample`` (-1: none), ``ep_coast``,
+    ``ep_generic``.  Fixes (rad, rad, m), R's diagonal ENU m^2, ``lever`` body FLU m, NIS ``gate``;
+    the run of rejections began at ``rejecting_since`` s (NaN: none), forced in after
+    ``reanchor_after_s``.  Writes the per-fix arrays (rejected fixes too), ``knots_out``, the
+    ``path``; with ``keep`` ``nodes_x`` (L, 2, 16) propagated and posterior nominal, ``nodes_P``
+    (L, 3, 15, 15) prior, posterior, ``P Phi^T``.  Then the model's arrays and the still epochs'
+    (:func:`_standstill`).  Returns the first epoch not run (``stop``, or the generic loop's: see
+    the module docstring), the state before it (x, P, t) and the knot rows written.
     """
     n_knots = 0
     i = first
