@@ -37,6 +37,7 @@ from .ins.attitude import quat_to_dcm, rpy_deg_to_dcm
 from .ins.model import VEL
 from .ins.state import NOMINAL_Q, X_H, X_LAT
 from .intervals import interval_median
+from .spill import Behind
 from .units import STANDARD_GRAVITY
 
 #: Aid kinds in the order they are reported (the GNSS position first).
@@ -46,6 +47,8 @@ KINDS = ("gnss_position", "gnss_velocity", "zupt", "zaru", "nhc", "odometer", "o
 #: sigmas their mean may reach on an axis (white innovations: false alarm ~1e-6 per test).
 ZUPT_RUN = 10
 ZUPT_Z = 5.0
+#: constraint epochs whose gyro samples :meth:`Aiding.zero_rates` gathers at a time
+ZARU_GATHER = 256
 
 
 def vehicle_matrix(rpy_deg: tuple[float, float, float]) -> np.ndarray:
@@ -443,6 +446,35 @@ class Aiding:
         if self.profile is not None:          # an idling engine shakes the mean rate too
             arw = max(arw, self.profile.over(t_prev, t)[0])
         return ZeroRate.at(t, self.gyro[lo:hi].mean(axis=0), t - t_prev, arw, self.zaru_floor)
+
+    def zero_rates(self, t_prev: float | None, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`zero_rate` at each of the constraint epochs ``t`` (E,) s in turn, each since the
+        one before it (the first since ``t_prev``): whether there is one (E,) bool, its value
+        (E, 3) rad/s body FLU and its R's diagonal (E,) (rad/s)^2, the same figures.  The mean
+        rates of the epochs with as many samples are taken together; a spilled gyro's rows
+        leave memory behind the epochs (:class:`~navpp.spill.Behind`)."""
+        n = t.shape[0]
+        ok, z, var = np.zeros(n, bool), np.zeros((n, 3)), np.zeros(n)
+        if n == 0:
+            return ok, z, var
+        since = np.concatenate([[t[0] if t_prev is None else t_prev], t[:-1]])
+        lo, hi = np.searchsorted(self.t, since, side="right"), np.searchsorted(self.t, t, side="right")
+        ok = hi - lo >= 2
+        ok[0] &= t_prev is not None
+        for e in np.flatnonzero(ok):
+            ok[e] = self.still[lo[e]:hi[e]].all()
+        behind = Behind(self.t, self.gyro)
+        size = hi - lo
+        for m in np.unique(size[ok]):
+            at = np.flatnonzero(ok & (size == m))
+            for part in np.array_split(at, max(1, at.size // ZARU_GATHER)):
+                z[part] = self.gyro[lo[part, None] + np.arange(m)].mean(axis=1)
+                behind(float(t[part[-1]]))
+        for e in np.flatnonzero(ok):
+            t0, t1 = float(since[e]), float(t[e])
+            arw = self.gyro_arw if self.profile is None else max(self.gyro_arw, self.profile.over(t0, t1)[0])
+            var[e] = ZeroRate.variance(t1 - t0, arw, self.zaru_floor)
+        return ok, z, var
 
 
 def odometry_zero(t: np.ndarray, odo_t: np.ndarray, speed: np.ndarray, max_speed: float, window_s: float,

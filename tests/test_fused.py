@@ -45,9 +45,10 @@ def _same(a: object, b: object, where: str = "result") -> None:
 
 
 def _both(rec, cfg, monkeypatch: pytest.MonkeyPatch, name: str = "ekf", smooth: bool = False,
-          still: list | None = None):
+          still: list | None = None, rejected: list | None = None):
     """The run with the compiled path and without; the number of epochs the kernel ran (and in
-    ``still``, when given, the number of still epochs among them)."""
+    ``still``, ``rejected``, when given, the number of still epochs and of rejected fixes among
+    them)."""
     ran = [0]
     kernel = fused.ekf_epochs
 
@@ -55,7 +56,10 @@ def _both(rec, cfg, monkeypatch: pytest.MonkeyPatch, name: str = "ekf", smooth: 
         out = kernel(*args)
         ran[0] += out[0] - args[8]
         if still is not None:
-            still.append(int(args[43][args[8]:out[0]].sum()))      # ep_cons
+            still.append(int(args[45][args[8]:out[0]].sum()))      # ep_cons
+        if rejected is not None:
+            fixes = args[4][args[8]:out[0]]                          # ep_fix
+            rejected.append(int((~args[20][fixes[fixes >= 0]]).sum()))     # accepted_out
         return out
 
     monkeypatch.setattr(fused, "ekf_epochs", counted)
@@ -118,12 +122,17 @@ def test_vetoed_still_runs_are_bit_identical(monkeypatch: pytest.MonkeyPatch) ->
     _same(on, off)
 
 
-def test_rejected_and_forced_fixes_are_bit_identical(monkeypatch: pytest.MonkeyPatch) -> None:
-    """A GNSS jump: fixes rejected for 10 s, then one forced through the gate (generic epochs
-    between kernel stretches)."""
+@pytest.mark.parametrize("smooth", [False, True])
+def test_rejected_and_forced_fixes_are_bit_identical(monkeypatch: pytest.MonkeyPatch, smooth: bool) -> None:
+    """A GNSS jump: fixes rejected for 10 s (the kernel records them), then one forced through
+    the gate (a generic epoch between kernel stretches), forward and smoothed."""
     cfg = config_from_dict({"imu": {"preset": "automotive"}}, "test")
-    on, off, ran = _both(gnss_jump_recording(duration_s=200.0), cfg, monkeypatch)
-    assert ran > 200 and np.any(on.diagnostics.forced) and not np.all(on.diagnostics.accepted)
+    rejected: list[int] = []
+    on, off, ran = _both(gnss_jump_recording(duration_s=200.0), cfg, monkeypatch, smooth=smooth,
+                         rejected=rejected)
+    diag = on.diagnostics
+    assert ran > 200 and np.any(diag.forced) and not np.all(diag.accepted)
+    assert sum(rejected) == int((~diag.accepted).sum()) > 10
     _same(on, off)
 
 

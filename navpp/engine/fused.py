@@ -11,11 +11,12 @@ call for a stretch of them, which does what the generic loop does for them
 (:func:`navpp.engine.loop.run_epochs`: time update, the state check, measurement prediction,
 gate, gain, Joseph correction, the check again; for a still epoch the speed gate, the veto and
 ZUPT's consistency check of :class:`~navpp.aiding.Aiding`) with the same kernels in the same
-order, so the figures are the same bits, and writes what the recorder would write.  Any other
-epoch, and any epoch whose fix or aid the gate rejects, whose state fails the check, whose
-update fails or whose ZUPT check vetoes its still run (the kernel stops before it), goes
-through the generic loop; so do filters, models, sources and recorders of any other kind
-(:func:`fused_runner` returns None).
+order, so the figures are the same bits, and writes what the recorder would write; a fix the
+gate rejects it records as rejected, as the generic loop does.  Any other epoch, and any epoch
+whose fix the filter would force through the gate, whose aid the gate rejects, whose state
+fails the check, whose update fails or whose ZUPT check vetoes its still run (the kernel stops
+before it), goes through the generic loop; so do filters, models, sources and recorders of any
+other kind (:func:`fused_runner` returns None).
 """
 
 from __future__ import annotations
@@ -39,10 +40,9 @@ from ..filters.linalg import (
     propagated_covariance,
 )
 from ..ins.aids import zero_rate, zero_velocity
-from ..ins.model import InsModel, gnss_innovation, gnss_jacobian, integrate_with_jacobian, plus
+from ..ins.model import GnssPosition, InsModel, gnss_innovation, gnss_jacobian, integrate_with_jacobian, plus
 from ..ins.state import DX_ATT, DX_BG, DX_VEL, NOMINAL_SIZE, X_BG, X_VE
 from ..jitmode import interpreted
-from ..spill import Behind
 from .measurements import RunMeasurements
 from .recorder import KNOT, RunRecorder
 from .schedule import Epoch, Schedule
@@ -118,14 +118,22 @@ def _knot_row(row: np.ndarray, t: float, P_prior: np.ndarray, P_post: np.ndarray
         row[1 + _KNOT_N + e] = P_post[KNOT_START + e, KNOT_START + e]
 
 
+#: the measurement kind of a GNSS position fix
+FIX_KIND = GnssPosition.kind
+#: what :func:`_fix_update` did with a fix: passed the gate and corrected the state, failed the gate
+#: (not forced), or neither (the generic loop redoes the epoch: a forced fix, divergence)
+FIX_ACCEPTED, FIX_REJECTED, FIX_GENERIC = 0, 1, 2
+
+
 @compiled
 def _fix_update(x: np.ndarray, P: np.ndarray, lat: float, lon: float, alt: float, var: np.ndarray,
                 lever: np.ndarray, gate: float
-                ) -> tuple[bool, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]:
+                ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]:
     """The generic update of one GNSS position fix (``lat``, ``lon`` rad, ``alt`` m; R's diagonal
-    ``var`` ENU m^2; antenna ``lever`` body FLU m) on the prior (``x``, ``P``) when it passes
-    the gate ``gate`` and leaves a sound state: ``(True, nu, S, R, nis, x+, P+)``; else
-    ``ok`` is False (the generic loop redoes the epoch: rejection, forcing, divergence)."""
+    ``var`` ENU m^2; antenna ``lever`` body FLU m) on the prior (``x``, ``P``):
+    ``(status, nu, S, R, nis, x+, P+)``, ``status`` :data:`FIX_ACCEPTED` when it passes the gate
+    ``gate`` and leaves a sound state, :data:`FIX_REJECTED` (the prior returned) when it fails the
+    gate, else :data:`FIX_GENERIC` (S not positive definite, an unsound posterior)."""
     H = gnss_jacobian(x, lever)
     PHt, Pzz = linear_moments(P, H)
     nu = gnss_innovation(x, lat, lon, alt, lever)
@@ -133,12 +141,14 @@ def _fix_update(x: np.ndarray, P: np.ndarray, lat: float, lon: float, alt: float
     for e in range(3):
         R[e, e] = var[e]
     S, K, nis, ok = innovation_gain(Pzz, R, PHt, nu)
-    if not ok or not nis <= gate:
-        return False, nu, S, R, nis, x, P
+    if not ok:
+        return FIX_GENERIC, nu, S, R, nis, x, P
+    if not nis <= gate:
+        return FIX_REJECTED, nu, S, R, nis, x, P
     dx, Pn = joseph_correction(P, K, H, R, nu)
     xp = plus(x, dx)
     ok = finite_with_positive_variances(xp, Pn)     # all_finite (the filter's own test) too
-    return ok, nu, S, R, nis, xp, Pn
+    return (FIX_ACCEPTED if ok else FIX_GENERIC), nu, S, R, nis, xp, Pn
 
 
 @compiled
@@ -225,14 +235,16 @@ def _standstill(x: np.ndarray, P: np.ndarray, run: int, zupt_var: float, zaru: b
 
 
 @compiled
-def _record_fix(k: int, nu: np.ndarray, nis: float, S: np.ndarray, R: np.ndarray, x: np.ndarray, P: np.ndarray,
-                nu_out: np.ndarray, nis_out: np.ndarray, accepted_out: np.ndarray, forced_out: np.ndarray,
-                s_out: np.ndarray, r_out: np.ndarray, bias_out: np.ndarray, bias_var_out: np.ndarray) -> None:
-    """What the recorder keeps of fix ``k``, accepted (not forced) with innovation ``nu``, ``nis``,
-    ``S`` and ``R``, the epoch's posterior (``x``, ``P``) giving the biases and their variance."""
+def _record_fix(k: int, accepted: bool, nu: np.ndarray, nis: float, S: np.ndarray, R: np.ndarray, x: np.ndarray,
+                P: np.ndarray, nu_out: np.ndarray, nis_out: np.ndarray, accepted_out: np.ndarray,
+                forced_out: np.ndarray, s_out: np.ndarray, r_out: np.ndarray, bias_out: np.ndarray,
+                bias_var_out: np.ndarray) -> None:
+    """What the recorder keeps of fix ``k``, ``accepted`` or rejected by the gate (not forced), with
+    innovation ``nu``, ``nis``, ``S`` and ``R``, the epoch's posterior (``x``, ``P``) giving the
+    biases and their variance."""
     nu_out[k] = nu
     nis_out[k] = nis
-    accepted_out[k] = True
+    accepted_out[k] = accepted
     forced_out[k] = False
     s_out[k] = S
     r_out[k] = R
@@ -254,10 +266,10 @@ def _path_row(path: np.ndarray, sample: int, x: np.ndarray) -> None:
 def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep_fix: np.ndarray,
                ep_sample: np.ndarray, ep_coast: np.ndarray, ep_generic: np.ndarray, first: int, stop: int,
                fix_lat: np.ndarray, fix_lon: np.ndarray, fix_alt: np.ndarray, fix_var: np.ndarray,
-               lever: np.ndarray, gate: float, nu_out: np.ndarray, nis_out: np.ndarray, accepted_out: np.ndarray,
-               forced_out: np.ndarray, s_out: np.ndarray, r_out: np.ndarray, bias_out: np.ndarray,
-               bias_var_out: np.ndarray, knots_out: np.ndarray, keep: bool, nodes_x: np.ndarray,
-               nodes_P: np.ndarray, imu_t: np.ndarray, gyro: np.ndarray,
+               lever: np.ndarray, gate: float, rejecting_since: float, reanchor_after_s: float, nu_out: np.ndarray,
+               nis_out: np.ndarray, accepted_out: np.ndarray, forced_out: np.ndarray, s_out: np.ndarray,
+               r_out: np.ndarray, bias_out: np.ndarray, bias_var_out: np.ndarray, knots_out: np.ndarray, keep: bool,
+               nodes_x: np.ndarray, nodes_P: np.ndarray, imu_t: np.ndarray, gyro: np.ndarray,
                accel: np.ndarray, path: np.ndarray, psd: np.ndarray, has_profile: bool, prof_t: np.ndarray,
                prof_g: np.ndarray, prof_a: np.ndarray, white_g: float, white_a: float, inv_tau_g: float,
                inv_tau_a: float, cov_step_s: float, gaps: np.ndarray, ep_cons: np.ndarray, ep_run: np.ndarray,
@@ -267,23 +279,14 @@ def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep
     """The plain EKF over epochs ``first`` .. ``stop - 1`` from the state (``x`` (16,), ``P``
     (15, 15)) at ``t_prev`` (s), as the generic loop runs them (module docstring).
 
-    Epoch arrays: times ``ep_t`` s, fix index ``ep_fix``, IMU sample at the epoch ``ep_sample``
-    (-1: none), ``ep_coast``, ``ep_generic`` (an epoch the generic loop must run).  The fixes
-    (rad, rad, m) with the variance of their R (M, 3) ENU m^2 and the antenna ``lever`` (body
-    FLU, m); the NIS ``gate``.  Writes the recorder's per-fix arrays, ``knots_out`` (rows of
-    :data:`KNOT_RECORD`) and the model's recorded ``path``; with ``keep``, each epoch's states
-    for the smoother's store, at row ``i - first``: ``nodes_x`` (L, 2, 16) the propagated
-    nominal and the posterior, ``nodes_P`` (L, 3, 15, 15) the prior, the posterior and the
-    cross-covariance ``P Phi^T`` (a coasting stop's posterior is its prior).  The rest is the model's
-    (:meth:`~navpp.ins.model.InsModel.propagation_arrays`): IMU data (``imu_t``, ``gyro``,
-    ``accel``), the path, noise (``psd``, the profile, ``inv_tau_*``, ``cov_step_s``) and long
-    ``gaps``.  Still epochs ``ep_cons``, their aids' inputs (per epoch ``ep_run``, ``zaru_ok``,
-    ``zaru_z``, ``zaru_var``), state and counts: :func:`_standstill`.
-
-    Returns the first epoch not run (``stop``, or an epoch the generic loop must run: marked,
-    crossing a long gap, its fix or aid rejected, its state failing the check, its update failing,
-    its still run vetoed, or a still epoch that applied nothing), the state before it (x, P, t)
-    and the number of knot rows written.
+    Epochs: ``ep_t`` s, fix ``ep_fix``, IMU sample ``ep_sample`` (-1: none), ``ep_coast``,
+    ``ep_generic``.  Fixes (rad, rad, m), R's diagonal ENU m^2, ``lever`` body FLU m, NIS ``gate``;
+    the run of rejections began at ``rejecting_since`` s (NaN: none), forced in after
+    ``reanchor_after_s``.  Writes the per-fix arrays (rejected fixes too), ``knots_out``, the
+    ``path``; with ``keep`` ``nodes_x`` (L, 2, 16) propagated and posterior nominal, ``nodes_P``
+    (L, 3, 15, 15) prior, posterior, ``P Phi^T``.  Then the model's arrays and the still epochs'
+    (:func:`_standstill`).  Returns the first epoch not run (``stop``, or the generic loop's: see
+    the module docstring), the state before it (x, P, t) and the knot rows written.
     """
     n_knots = 0
     i = first
@@ -311,21 +314,30 @@ def ekf_epochs(x: np.ndarray, P: np.ndarray, t_prev: float, ep_t: np.ndarray, ep
         k = ep_fix[i]
         xp, Pn, applied = xn, Pp, False
         if k >= 0:
-            applied, nu, S, R, nis, xp, Pn = _fix_update(xn, Pp, fix_lat[k], fix_lon[k], fix_alt[k], fix_var[k],
-                                                         lever, gate)
-            if not applied:
+            status, nu, S, R, nis, xp, Pn = _fix_update(xn, Pp, fix_lat[k], fix_lon[k], fix_alt[k], fix_var[k],
+                                                        lever, gate)
+            if status == FIX_GENERIC:
+                break
+            applied = status == FIX_ACCEPTED
+            if applied:
+                rejecting_since = np.nan
+            elif rejecting_since != rejecting_since:        # NaN: the first rejection of a run
+                rejecting_since = t1
+            elif t1 - rejecting_since >= reanchor_after_s:  # the filter forces this fix in
                 break
         if ep_cons[i]:
             ok, xp, Pn, n_aids = _standstill(xp, Pn, ep_run[i], zupt_var, zaru_ok[i], zaru_z[i], zaru_var[i],
                                              max_speed, gate, aid_state, ring, z_limit, aid_counts)
             if not ok or not (applied or n_aids):
                 break
+            applied = True
         if keep:
             nodes_x[i - first, 1], nodes_P[i - first, 1] = xp, Pn
         if k >= 0:
-            _record_fix(k, nu, nis, S, R, xp, Pn, nu_out, nis_out, accepted_out, forced_out, s_out, r_out, bias_out,
-                        bias_var_out)
-        _path_row(path, ep_sample[i], xp)
+            _record_fix(k, status == FIX_ACCEPTED, nu, nis, S, R, xp, Pn, nu_out, nis_out, accepted_out, forced_out,
+                        s_out, r_out, bias_out, bias_var_out)
+        if applied:
+            _path_row(path, ep_sample[i], xp)
         _knot_row(knots_out[n_knots], t1, Pp, Pn)
         n_knots += 1
         x, P, t_prev = xp, Pn, t1
@@ -372,18 +384,8 @@ class _StandstillInputs:
         at = np.flatnonzero(cons)
         self.cons[at], self.run[at] = aiding.still_runs(t[at])
         at = at[self.cons[at]]
-        if not aiding.zaru:
-            return
-        # ZARU: the mean gyro since the previous constraint epoch when every sample in between is still
-        t_prev = aiding.last_constraint_t
-        behind = Behind(aiding.t, aiding.gyro)      # a spilled gyro's pages read leave memory
-        for e in at:
-            te = float(t[e])
-            meas = aiding.zero_rate(t_prev, te)
-            if meas is not None:
-                self.zaru_ok[e], self.zaru_z[e], self.zaru_var[e] = True, meas.z, meas.R[0, 0]
-            t_prev = te
-            behind(te)
+        if aiding.zaru:     # the mean gyro since the previous constraint epoch when every sample in between is still
+            self.zaru_ok[at], self.zaru_z[at], self.zaru_var[at] = aiding.zero_rates(aiding.last_constraint_t, t[at])
 
     def arguments(self) -> tuple[Any, ...]:
         """:func:`ekf_epochs`'s still-epoch arguments, ``ep_cons`` (:attr:`cons`) on."""
@@ -457,9 +459,12 @@ class FusedRunner:
             nodes_x, nodes_P = self.no_nodes
         st = self.standstill
         st.load(self.aiding)
+        since = self.filt.rejecting_since(FIX_KIND)
+        since = np.nan if since is None else since
         j, x, P, t, n_knots = ekf_epochs(
             state.x, state.P, state.t, self.t, self.fix, self.sample, self.coast, self.generic, i, stop,
             self.fix_lat, self.fix_lon, self.fix_alt, self.fix_var, self.source.lever, self.filt.gate_threshold(3),
+            since, self.filt.reanchor_after_s,
             rec.nu, rec.nis, rec.accepted, rec.forced, rec.s_used, rec.r_used, rec.bias, rec.bias_var, self.knots,
             keep, nodes_x, nodes_P, *self.prop, *st.arguments())
         leaves = j < stop           # the kernel stopped before an epoch it does not run
@@ -468,16 +473,31 @@ class FusedRunner:
         if keep:
             rec.fused_nodes(self.t[i:j], self.fix[i:j], self.coast[i:j], nodes_x, nodes_P)
         rec.fused_epochs(self.knots[:n_knots], t, int(self.sample[i:j].max()))
-        with_fix = self.fix[i:j] >= 0
-        if with_fix.any():
-            self.source.fixes_accepted(float(self.t[i:j][with_fix][-1]), int(with_fix.sum()))
-            self.filt.accepted("gnss_position")
+        with_fix = i + np.flatnonzero(self.fix[i:j] >= 0)
+        if with_fix.size:
+            self._fixes_gated(with_fix)
         cons = self.cons[i:j]
         if cons.any():
             st.ran(self.aiding, self.filt, float(self.t[i:j][cons][-1]))
         if self.report[j - 1] and rec.progress is not None:
             rec.progress(int(self.index[j - 1]) / rec.n_epochs)
         return j, GaussianState(t, x, P), leaves
+
+    def _fixes_gated(self, epochs: np.ndarray) -> None:
+        """The filter and the source as the generic loop leaves them after the kernel gated the
+        fixes of ``epochs`` (indices of epochs with a fix, in order; none forced): the counts, the
+        last accepted fix and the current run of rejections."""
+        k = self.fix[epochs]
+        ok = self.recorder.accepted[k]
+        passed = np.flatnonzero(ok)
+        n_ok = int(passed.size)
+        tail = epochs[passed[-1] + 1:] if n_ok else epochs      # the rejected fixes after the last accepted one
+        t_good = float(self.t[epochs[passed[-1]]]) if n_ok else None
+        self.source.fixes_gated(n_ok, k.size - n_ok, t_good, self.recorder.nis[self.fix[tail]])
+        since = None if n_ok else self.filt.rejecting_since(FIX_KIND)
+        if tail.size and since is None:
+            since = float(self.t[tail[0]])
+        self.filt.gated(FIX_KIND, k.size - n_ok, since)
 
 
 def fused_runner(filt: Filter, model: Any, source: Any, recorder: Any, epochs: Sequence[Any]) -> FusedRunner | None:

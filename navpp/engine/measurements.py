@@ -143,13 +143,17 @@ class RunMeasurements:
         """Which fixes come with a GNSS velocity measurement (M,) (None: none does)."""
         return None if self.aiding.vel is None else np.asarray(self.aiding.vel_ok, dtype=bool)
 
-    def fixes_accepted(self, t_last: float, n: int) -> None:
-        """What :meth:`observed` keeps after ``n`` position fixes in a row that passed the gate
-        (the last at ``t_last`` s) and whose epochs had no other measurement (the loop's
-        compiled path, :mod:`navpp.engine.fused`)."""
-        self.aiding.counts.applied["gnss_position"] += n
-        self.last_good = t_last
-        self._rejected_nis = []
+    def fixes_gated(self, n_accepted: int, n_rejected: int, t_good: float | None, rejected_nis: np.ndarray) -> None:
+        """What :meth:`observed` keeps after position fixes the gate passed (``n_accepted``, the
+        last at ``t_good`` s; None: none) or rejected (``n_rejected``, none forced; the NIS of
+        those after the last accepted one ``rejected_nis``), whose epochs had no other measurement
+        than a still epoch's aids (the loop's compiled path, :mod:`navpp.engine.fused`)."""
+        self.aiding.counts.applied["gnss_position"] += n_accepted
+        self.aiding.counts.rejected["gnss_position"] += n_rejected
+        if t_good is not None:
+            self.last_good = t_good
+            self._rejected_nis = []
+        self._rejected_nis.extend(rejected_nis.tolist())
 
     def observed(self, epoch: Epoch, meas: Any, update: Update) -> GaussianState:
         inn, state = update.innovation, update.state

@@ -104,14 +104,14 @@ def interpolated_std(t, t0, var0, tg, var_prior, var_post):
         while k < m and tg[k] <= t[i]:
             k += 1
         ta = t0 if k == 0 else tg[k - 1]
+        between = k < m and tg[k] > ta
+        w = 0.0
+        if between:             # the weight of the next epoch's prior, the same for the three axes
+            w = (t[i] - ta) / (tg[k] - ta)
+            w = min(max(w, 0.0), 1.0)
         for j in range(3):
             va = var0[j] if k == 0 else var_post[k - 1, j]
-            if k < m and tg[k] > ta:
-                w = (t[i] - ta) / (tg[k] - ta)
-                w = min(max(w, 0.0), 1.0)
-                v = (1.0 - w) * va + w * var_prior[k, j]
-            else:
-                v = va
+            v = (1.0 - w) * va + w * var_prior[k, j] if between else va
             out[i, j] = np.sqrt(max(v, 0.0))
     return out
 
@@ -162,9 +162,16 @@ def body_rate(t: np.ndarray, path: np.ndarray, gyro: np.ndarray, bias_t: np.ndar
 @njit(cache=True)
 def _body_rate_into(out, t, path, gyro, bias_t, bias_gyro, bias0):
     """:func:`body_rate` row by row into ``out`` (N, 3) rad/s, body FLU; the sums in the order
-    numpy's vectorised form took them, so the figures are the same to the last bit."""
+    numpy's vectorised form took them, so the figures are the same to the last bit.  The bias
+    in force (the last at or before ``t[i]``) is searched for at the first row and followed from
+    row to row after it (afresh where ``t`` goes back)."""
+    m = bias_t.shape[0]
+    k = -1              # the last bias time at or before the row's time (-1: none)
     for i in range(path.shape[0]):
-        k = np.searchsorted(bias_t, t[i], side="right") - 1
+        if i == 0 or (k >= 0 and t[i] < bias_t[k]):
+            k = np.searchsorted(bias_t, t[i], side="right") - 1
+        while k + 1 < m and bias_t[k + 1] <= t[i]:
+            k += 1
         bg = bias_gyro[k] if k >= 0 else bias0
         w, x, y, z = path[i, 0], path[i, 1], path[i, 2], path[i, 3]
         ve, vn, lat, h = path[i, 4], path[i, 5], path[i, 7], path[i, 9]

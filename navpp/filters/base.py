@@ -212,6 +212,21 @@ class Filter:
         """A measurement of ``kind`` passed the gate: its run of rejections (if any) is over."""
         self._rejecting_since.pop(kind, None)
 
+    def rejecting_since(self, kind: str) -> float | None:
+        """When the current run of gate rejections of ``kind`` began (s; None: its last
+        measurement passed, or none was gated yet)."""
+        return self._rejecting_since.get(kind)
+
+    def gated(self, kind: str, n_rejected: int, since: float | None) -> None:
+        """Measurements of ``kind`` gated outside :meth:`update` (the loop's compiled path,
+        :mod:`navpp.engine.fused`), none forced: ``n_rejected`` of them rejected, and the current
+        run of rejections began at ``since`` (s; None: the last one passed)."""
+        self.rejected += n_rejected
+        if since is None:
+            self.accepted(kind)
+        else:
+            self._rejecting_since[kind] = since
+
     def _moments(self, state: GaussianState, pred: MeasurementPrediction,
                  R: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """Innovation covariance ``S = Pzz + R``, gain and NIS; divergence when S is not

@@ -48,6 +48,7 @@ from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import njit
 
 from .. import geodesy
 from ..intervals import interval_median, mean_interval, pairwise_sum
@@ -275,15 +276,54 @@ def block_statistics(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, block_s
     per_sensor: list[np.ndarray] = []
     for x in (gyro, accel):
         mean, std, lp = np.empty((nb, 3)), np.empty((nb, 3)), np.empty((nb, 3))
-        # _STAT_CHUNK_BLOCKS blocks at a time: std's deviations are no array as long as the log
+        # _STAT_CHUNK_BLOCKS blocks at a time: a spilled IMU's rows leave memory once read
         for b0 in range(0, nb, _STAT_CHUNK_BLOCKS):
             b1 = min(nb, b0 + _STAT_CHUNK_BLOCKS)
-            b = x[b0 * w:b1 * w].reshape(b1 - b0, w, 3)
-            mean[b0:b1], std[b0:b1] = b.mean(axis=1), b.std(axis=1)
-            lp[b0:b1] = b.reshape(b1 - b0, w // m, m, 3).mean(axis=2).std(axis=1)
-            release((x,), b0 * w, b1 * w)      # a spilled IMU's rows read: out of memory
+            _block_moments(x[b0 * w:b1 * w], w, m, mean[b0:b1], std[b0:b1], lp[b0:b1])
+            release((x,), b0 * w, b1 * w)
         per_sensor += [mean, std, lp]
     return BlockStatistics(w, m, nb, dt, *per_sensor)
+
+
+@njit(cache=True)
+def _block_moments(x: np.ndarray, w: int, m: int, mean: np.ndarray, std: np.ndarray, lp: np.ndarray) -> None:
+    """Per block of ``w`` rows of ``x`` (nb * w, 3) and axis, into (nb, 3) each: the ``mean``, the
+    standard deviation ``std`` and ``lp``, the standard deviation of the means of the block's
+    sub-blocks of ``m`` rows.  One pass over ``x``, the same bits as numpy's ``mean`` and ``std``
+    over the blocks (each sum in row order from the first row, divided by the count; the
+    deviations from the mean squared and summed likewise)."""
+    per = w // m
+    sub = np.empty(per)
+    for b in range(mean.shape[0]):
+        r0 = b * w
+        for j in range(3):
+            total = x[r0, j]
+            for r in range(r0 + 1, r0 + w):
+                total += x[r, j]
+            mu = total / w
+            d = x[r0, j] - mu
+            sq = d * d
+            for r in range(r0 + 1, r0 + w):
+                d = x[r, j] - mu
+                sq += d * d
+            mean[b, j] = mu
+            std[b, j] = np.sqrt(sq / w)
+            for k in range(per):
+                s0 = r0 + k * m
+                total = x[s0, j]
+                for r in range(s0 + 1, s0 + m):
+                    total += x[r, j]
+                sub[k] = total / m
+            total = sub[0]
+            for k in range(1, per):
+                total += sub[k]
+            mu = total / per
+            d = sub[0] - mu
+            sq = d * d
+            for k in range(1, per):
+                d = sub[k] - mu
+                sq += d * d
+            lp[b, j] = np.sqrt(sq / per)
 
 
 def gnss_scatter_h(tg: np.ndarray, enu: np.ndarray) -> float:

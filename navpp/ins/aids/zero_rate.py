@@ -60,5 +60,11 @@ class ZeroRate(Aid):
     def at(cls, t: float, mean_gyro: np.ndarray, duration_s: float, gyro_arw: float,
            floor_rps: float) -> ZeroRate:
         """``mean_gyro`` (3,) rad/s averaged over ``duration_s``; ``gyro_arw`` rad/sqrt(s)."""
-        var = gyro_arw ** 2 / max(duration_s, 1e-9) + floor_rps ** 2
+        var = cls.variance(duration_s, gyro_arw, floor_rps)
         return cls(t, np.asarray(mean_gyro, dtype=float), np.eye(3) * var, np.zeros(0))
+
+    @staticmethod
+    def variance(duration_s: float, gyro_arw: float, floor_rps: float) -> float:
+        """Each axis's variance, (rad/s)^2, of a mean rate over ``duration_s`` (s) of white noise
+        ``gyro_arw`` (rad/sqrt(s)) with the floor ``floor_rps`` (rad/s)."""
+        return gyro_arw ** 2 / max(duration_s, 1e-9) + floor_rps ** 2
