@@ -20,8 +20,8 @@ module is imported (numba reads the flag when a function is decorated):
     the CPU seconds of compiling the missing groups (:data:`COMPILE_S`) against the extra CPU
     seconds of interpreting this job (IMU samples x filters, :data:`INTERPRETED_US`), and take
     the cheaper, charging this job half the compile cost (:data:`COMPILE_SHARE`: compiled
-    kernels serve later runs too).  With an EKF the break-even is near 6.5 minutes of 125 Hz
-    IMU; with a sigma-point filter, about 2 minutes (the SIF: 30 s).  The sample counts come
+    kernels serve later runs too).  With an EKF the break-even is near 12.5 minutes of 125 Hz
+    IMU; with a sigma-point filter, about 3.5 minutes (the SIF: 45 s).  The sample counts come
     from the logs' indexes (MCAP summary, ROS 2 ``metadata.yaml``, ROS 1 bag index) or, for
     CSV, from the file size and its first lines.
 
@@ -64,8 +64,10 @@ GROUPS: dict[str, tuple[tuple[str, str], ...]] = {
 #: cold sample-drive EKF run 50.9 s against 2.3 s warm, less the "csv" group, with the compiled
 #: EKF epoch and the writers' formatter, both added in issue 21; then 3 % more with the still
 #: epochs' ZUPT and ZARU in the compiled epoch and the block-structured transition: a cold
-#: sample-drive EKF run 68.4 -> 70.4 s CPU, the two side by side at load 11).
-COMPILE_S = {"ins": 48.5, "ros": 1.5, "mcap": 0.5, "csv": 1.5, "sigma": 9.0, "vce": 10.0, "smooth": 9.0}
+#: sample-drive EKF run 68.4 -> 70.4 s CPU, the two side by side at load 11; on 3 Dec 2026, after
+#: the rejected GNSS fixes and the block moments went into compiled kernels, a cold 1-hour CSV
+#: EKF run with ``--jit on`` took 98.8 s of CPU at load ~1, against ~3 s warm: 94.5 s for "ins").
+COMPILE_S = {"ins": 94.5, "ros": 1.5, "mcap": 0.5, "csv": 1.5, "sigma": 9.0, "vce": 10.0, "smooth": 9.0}
 #: Extra CPU µs per IMU sample when interpreted, per filter (forward run), and per sample
 #: for the smoother's backward pass; per message for decoding a ROS log.  Measured with
 #: ``benchmarks/bench_interpreted.py`` (sample drive cut to 60 and 120 s, the slope of

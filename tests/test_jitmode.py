@@ -28,7 +28,7 @@ def test_decide_takes_the_cheaper_side() -> None:
     """Interpreted when its estimated extra CPU is below the compile cost of the missing groups,
     compiled when every group is cached, when asked, or when a log's size is unknown."""
     small = [(37_500, 39_000, "mcap")]
-    big = [(900 * 125, 900 * 130, "mcap")]     # 15 min: beyond the EKF break-even (about 6.5 min)
+    big = [(1_200 * 125, 1_200 * 130, "mcap")]     # 20 min: beyond the EKF break-even (about 12.5 min)
     missing = ("ins", "ros", "mcap")
     assert not jitmode.decide("auto", small, ["ekf"], False, missing).compiled
     assert jitmode.decide("auto", big, ["ekf"], False, missing).compiled
@@ -38,7 +38,7 @@ def test_decide_takes_the_cheaper_side() -> None:
     # smoother's group beats interpreting the whole smoothed run
     assert jitmode.decide("auto", small, ["ekf"], True, ("smooth",)).compiled
     assert not jitmode.decide("auto", [(20_000, 21_000, "mcap")], ["ekf"], True, (*missing, "smooth")).compiled
-    assert jitmode.decide("auto", small, ["ekf"], True, (*missing, "smooth")).compiled   # 0.9 ms a sample
+    assert jitmode.decide("auto", [(75_000, 78_000, "mcap")], ["ekf"], True, (*missing, "smooth")).compiled
     assert jitmode.decide("auto", small, ["ekf"], False, ()).compiled
     assert jitmode.decide("auto", [None], ["ekf"], False, missing).compiled
     assert not jitmode.decide("off", big, ["ckf"], False, ()).compiled
@@ -53,7 +53,7 @@ def test_workers_are_announced() -> None:
     cold = jitmode.decide("auto", [(900_000, 0, "csv")], ["ekf"], False, ("ins",))
     assert cold.compiled and cold.missing == ("ins",)
     line = jitmode.workers_note(cold, 2)
-    assert "each of the 2 worker processes first compiles" in line and "about 48 s" in line
+    assert "each of the 2 worker processes first compiles" in line and "about 94 s" in line
     assert jitmode.workers_note(cold, 1) == ""
     assert jitmode.workers_note(jitmode.decide("auto", [(10, 0, "csv")], ["ekf"], False, ()), 4) == ""
 
