@@ -168,19 +168,3 @@ def test_interpreted_kernels_take_the_generic_loop(monkeypatch: pytest.MonkeyPat
     assert ran_interp == 0
     _same(on, interp)
 
-
-def test_still_epochs_after_the_last_fix_keep_its_smoother_node(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The fixes end inside a stop (209.5-220.4 s of this drive): the still epochs after the last
-    fix have constraints alone, and the kernel's replay into the smoother's store must leave the
-    last fix's node as the generic loop does (it had been overwritten by those epochs')."""
-    rec = simulate(SimulationSpec(duration_s=300.0, still_s=20.0, seed=7)).recording()
-    gnss = rec.gnss
-    keep = gnss.t <= rec.reference.t[0] + 212.0
-    sliced = {f.name: getattr(gnss, f.name)[keep] for f in dataclasses.fields(gnss)
-              if isinstance(getattr(gnss, f.name), np.ndarray) and getattr(gnss, f.name).shape[:1] == gnss.t.shape}
-    rec = replace(rec, gnss=replace(gnss, **sliced))
-    cfg = config_from_dict({"imu": {"preset": "automotive"}}, "test")
-    still: list[int] = []
-    on, off, ran = _both(rec, cfg, monkeypatch, smooth=True, still=still)
-    assert ran > 1000 and sum(still) > 50 and on.smoothed is not None
-    _same(on, off)
