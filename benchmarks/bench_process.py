@@ -116,7 +116,9 @@ def measure(log: Path, filter_name: str, out: Path, smooth: bool = False, full: 
     t_import = time.perf_counter()
     from navpp import api, engine
     from navpp.io import writers
+    from navpp.spill import allow_large_block_mapping
     t_import = time.perf_counter() - t_import
+    allow_large_block_mapping()     # as the navpp command does
 
     cfg = api.resolve_config(log, None)
     filt = api.make_filter(filter_name, cfg)
@@ -248,6 +250,9 @@ def memory_map(log: Path, filter_name: str, out: Path, smooth: bool) -> None:
 
     from navpp import api, engine
     from navpp.engine import output as eng_output
+    from navpp.spill import allow_large_block_mapping
+
+    allow_large_block_mapping()     # as the navpp command does
     from navpp.io import writers
 
     eng_run = importlib.import_module("navpp.engine.run")   # the module: navpp.engine.run is also a function

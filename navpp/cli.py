@@ -764,8 +764,10 @@ def main() -> None:
     its ``finally`` blocks remove the staging files, drop the ``--out`` lock and stop the
     workers; then one line ``navpp: interrupted ...`` and exit code 130."""
     from . import interrupts
+    from .spill import allow_large_block_mapping
 
     interrupts.install()
+    allow_large_block_mapping()     # the command's own process: large blocks back to the system when freed
     _numba_cache_note()
     try:
         app(prog_name="navpp")

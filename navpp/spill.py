@@ -222,6 +222,17 @@ _M_MMAP_THRESHOLD = -3
 LARGE_BLOCK = 4 << 20
 
 
+#: Whether :func:`map_large_blocks` may change the C allocator's setting, which is process-wide
+#: and for good: the ``navpp`` command allows it (:func:`allow_large_block_mapping`); a program
+#: that calls :func:`navpp.process` keeps glibc's own setting.
+_LARGE_BLOCKS_ALLOWED = [False]
+
+
+def allow_large_block_mapping() -> None:
+    """Let :func:`map_large_blocks` act in this process (the ``navpp`` command calls this)."""
+    _LARGE_BLOCKS_ALLOWED[0] = True
+
+
 def map_large_blocks() -> None:
     """From now on, give every block of :data:`LARGE_BLOCK` bytes or more its own mapping, which
     goes back to the system when it is freed (glibc ``mallopt(M_MMAP_THRESHOLD)``; elsewhere
@@ -231,8 +242,9 @@ def map_large_blocks() -> None:
     peak with metrics 316 -> 298 MB.  It costs a page fault per page of each such block, so a run
     whose arrays stay in memory (the budget not exceeded: the fastest case) leaves it alone.  It
     stays set for the process (glibc cannot go back to the adaptive threshold); values are
-    untouched."""
-    if _TRIM is None:
+    untouched.  Only in the ``navpp`` command (:func:`allow_large_block_mapping`): a library
+    user's process keeps its allocator as it was."""
+    if _TRIM is None or not _LARGE_BLOCKS_ALLOWED[0]:
         return
     name = ctypes.util.find_library("c")
     ctypes.CDLL(name).mallopt(ctypes.c_int(_M_MMAP_THRESHOLD), ctypes.c_int(LARGE_BLOCK))
@@ -249,5 +261,6 @@ def trim_heap() -> None:
         _TRIM(0)
 
 
-__all__ = ["LARGE_BLOCK", "WINDOW_ROWS", "Behind", "copy_rows", "empty_rows", "full_rows", "like", "map_large_blocks",
-           "release", "release_all", "release_before", "spilled", "trim_heap", "windows"]
+__all__ = ["LARGE_BLOCK", "WINDOW_ROWS", "Behind", "allow_large_block_mapping", "copy_rows", "empty_rows",
+           "full_rows", "like", "map_large_blocks", "release", "release_all", "release_before", "spilled",
+           "trim_heap", "windows"]

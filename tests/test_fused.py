@@ -167,3 +167,4 @@ def test_interpreted_kernels_take_the_generic_loop(monkeypatch: pytest.MonkeyPat
     interp, _, ran_interp = _both(rec, cfg, monkeypatch)
     assert ran_interp == 0
     _same(on, interp)
+

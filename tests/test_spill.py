@@ -379,3 +379,26 @@ def test_brackets_in_a_spilled_source_are_found_window_by_window(spill_dir, monk
             assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True)
         assert np.array_equal(windowed.linear(_spilled_copy(y)), whole.linear(y), equal_nan=True)
         assert np.array_equal(windowed.angle_deg(_spilled_copy(y[:, 2])), whole.angle_deg(y[:, 2]), equal_nan=True)
+
+
+def test_large_block_mapping_only_where_the_command_allows_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    """map_large_blocks leaves the C allocator alone in a program that imports navpp (glibc's
+    setting is process-wide and for good); once allowed (the navpp command), it sets glibc's
+    mmap threshold to LARGE_BLOCK."""
+    import ctypes
+
+    calls: list[tuple[int, int]] = []
+
+    class FakeLibc:
+        def mallopt(self, param: ctypes.c_int, value: ctypes.c_int) -> int:
+            calls.append((param.value, value.value))
+            return 1
+
+    monkeypatch.setattr(spill, "_TRIM", object())          # as on glibc, wherever the test runs
+    monkeypatch.setattr(ctypes, "CDLL", lambda name: FakeLibc())
+    monkeypatch.setattr(spill, "_LARGE_BLOCKS_ALLOWED", [False])
+    spill.map_large_blocks()
+    assert calls == []
+    spill.allow_large_block_mapping()
+    spill.map_large_blocks()
+    assert calls == [(-3, spill.LARGE_BLOCK)]

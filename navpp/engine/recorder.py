@@ -236,7 +236,8 @@ class RunRecorder:
             store.predicted(Prediction(prior, nodes_P[e, 2], x[0]))
             if not coast[e]:
                 store.updated(prior, GaussianState(tt, x[1], nodes_P[e, 1]), False)
-                self.epoch_node[fix[e]] = store.n - 1
+                if fix[e] >= 0:     # a still epoch's constraints alone have no fix (as epoch_done)
+                    self.epoch_node[fix[e]] = store.n - 1
 
     # results -------------------------------------------------------------------------------
     @property

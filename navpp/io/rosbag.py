@@ -145,15 +145,22 @@ def read_rosbag(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]
     files = _check_paths(paths)
     label = _label(files)
     notes: list[str] = []
+    fast_error: str | None = None
     if _ros1_fast(files):
         try:
             with _Ros1Bags.open(files) as bags:
-                return _read(label, _log_bytes(files), bags, topics, memory, notes)
-        except Ros1IndexError as exc:
+                return _read(label, _log_bytes(files), bags, topics, memory, [])
+        except Ros1IndexError as exc:     # its own notes are dropped: the fallback makes them again
+            fast_error = str(exc)
             notes.append(f"{exc}; the bag is read with rosbags' reader instead (slower, and its index of every "
                          "message makes memory grow with the bag)")
-    with _open(files) as reader:
-        return _read(label, _log_bytes(files), reader, topics, memory, notes)
+    try:
+        with _open(files) as reader:
+            return _read(label, _log_bytes(files), reader, topics, memory, notes)
+    except InputError as exc:
+        if fast_error is None:
+            raise
+        raise InputError(f"{exc} (navpp's own index reader: {fast_error})") from None
 
 
 def _read(label: str, size: int, reader: Any, topics: Iterable[str] | None, memory: int | None,
