@@ -643,3 +643,17 @@ def test_ros1_bags_read_without_rosbags_reader(logs, rec, monkeypatch):
     monkeypatch.setattr(Reader, "open", refused)
     assert_matches_recording(read_rosbag(logs["ros1-lz4"]), rec, ros1=True)
     assert [t.topic for t in list_topics(logs["ros1"])] == ["/gnss/fix", "/gnss/vel", "/imu/data", "/reference/fix"]
+
+
+def test_ros1_record_lengths_are_bounded(logs, monkeypatch):
+    """A record header or record data longer than such a record holds (a damaged length in a
+    large bag would otherwise be read whole, up to 4 GiB) is refused by the index reader with
+    its position, and the bag is read by rosbags' reader with that warning."""
+    from navpp.io import ros1index
+
+    monkeypatch.setattr(ros1index, "MAX_HEADER_BYTES", 16)
+    lc = read_rosbag(logs["ros1"])
+    (note,) = lc.warnings
+    assert "more than such a record holds (16 at most)" in note and "rosbags' reader instead" in note
+    monkeypatch.undo()
+    assert_same_contents(lc, read_rosbag(logs["ros1"]))

@@ -197,7 +197,16 @@ def _read_at(f: BinaryIO, pos: int, n: int, what: str) -> bytes:
     return raw
 
 
-def _u32(f: BinaryIO, size: int, what: str) -> int:
+#: The most bytes a record header may have, and the data of a record read whole (bag header,
+#: connection, chunk info: a message definition is the largest, some kB): a damaged length
+#: beyond these is an error, not a read of up to 4 GiB.
+MAX_HEADER_BYTES = 1 << 20
+MAX_RECORD_DATA_BYTES = 16 << 20
+
+
+def _u32(f: BinaryIO, size: int, what: str, limit: int | None = None) -> int:
+    """The little-endian length at the file position, checked against the file's ``size`` and
+    ``limit`` bytes."""
     pos = f.tell()
     raw = f.read(4)
     if len(raw) != 4:
@@ -205,6 +214,9 @@ def _u32(f: BinaryIO, size: int, what: str) -> int:
     n = int(struct.unpack("<I", raw)[0])
     if pos + 4 + n > size:
         raise Ros1IndexError(f"{what} at byte {pos}: a length of {n} bytes runs past the end of the file")
+    if limit is not None and n > limit:
+        raise Ros1IndexError(f"{what} at byte {pos}: a length of {n} bytes, more than such a record holds "
+                             f"({limit} at most)")
     return n
 
 
@@ -229,7 +241,7 @@ def _header(f: BinaryIO, size: int, op: int, what: str) -> dict[bytes, bytes]:
     """The header fields of the record at the file position, its op checked; the file is left at
     the record's ``data_len``."""
     pos = f.tell()
-    fields = _fields(f.read(_u32(f, size, what)), pos, what)
+    fields = _fields(f.read(_u32(f, size, what, MAX_HEADER_BYTES)), pos, what)
     have = fields.get(b"op")
     if have != bytes([op]):
         raise Ros1IndexError(f"{what} at byte {pos}: record op {have!r}, expected {op:#04x}")
@@ -239,7 +251,7 @@ def _header(f: BinaryIO, size: int, op: int, what: str) -> dict[bytes, bytes]:
 def _record(f: BinaryIO, size: int, op: int, what: str) -> tuple[dict[bytes, bytes], bytes]:
     """The header fields (op checked) and the data of the record at the file position."""
     fields = _header(f, size, op, what)
-    return fields, f.read(_u32(f, size, what))
+    return fields, f.read(_u32(f, size, what, MAX_RECORD_DATA_BYTES))
 
 
 def _uint(fields: dict[bytes, bytes], name: bytes, nbytes: int, pos: int, what: str) -> int:
