@@ -657,3 +657,20 @@ def test_ros1_record_lengths_are_bounded(logs, monkeypatch):
     assert "more than such a record holds (16 at most)" in note and "rosbags' reader instead" in note
     monkeypatch.undo()
     assert_same_contents(lc, read_rosbag(logs["ros1"]))
+
+
+def test_ros1_chunk_inflates_no_further_than_its_header_says(logs, tmp_path):
+    """A chunk whose header states fewer uncompressed bytes than its data hold is decompressed
+    only one byte past that size (damaged or crafted data cannot make it inflate further), and
+    refused with both figures; rosbags' reader then reports or reads the bag."""
+    from navpp.io import ros1index
+
+    data = bytearray(logs["ros1-lz4"].read_bytes())
+    at = data.index(b"size=") + 5                      # the first chunk's header
+    size = int.from_bytes(data[at:at + 4], "little")
+    data[at:at + 4] = (size - 1000).to_bytes(4, "little")
+    path = tmp_path / "small.bag"
+    path.write_bytes(bytes(data))
+    with ros1index.read_index(path) as index, pytest.raises(ros1index.Ros1IndexError) as err:
+        index.chunk_data(index.chunks[0])
+    assert f"{size - 999} bytes uncompressed, its header says {size - 1000}" in str(err.value)

@@ -130,12 +130,13 @@ class BagIndex:
         """The chunk's uncompressed bytes (``chunk.size`` of them, checked)."""
         raw = _read_at(self.file, chunk.data_pos, chunk.data_size, "chunk data")
         try:
+            # at most one byte more than the header's size: damaged or crafted data cannot inflate further
             if chunk.compression == "bz2":
-                raw = bz2.decompress(raw)
+                raw = bz2.BZ2Decompressor().decompress(raw, max_length=chunk.size + 1)
             elif chunk.compression == "lz4":
-                from lz4.frame import decompress  # type: ignore[import-untyped]  # rosbags' dependency
+                from lz4.frame import LZ4FrameDecompressor  # type: ignore[import-untyped]  # rosbags' dependency
 
-                raw = decompress(raw)
+                raw = LZ4FrameDecompressor().decompress(raw, max_length=chunk.size + 1)
         except Exception as exc:  # noqa: BLE001 - the decompressors raise several kinds for damaged data
             raise Ros1IndexError(f"chunk at byte {chunk.pos}: cannot decompress its {chunk.compression} data "
                                  f"({exc})") from None
