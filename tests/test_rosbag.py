@@ -674,3 +674,24 @@ def test_ros1_chunk_inflates_no_further_than_its_header_says(logs, tmp_path):
     with ros1index.read_index(path) as index, pytest.raises(ros1index.Ros1IndexError) as err:
         index.chunk_data(index.chunks[0])
     assert f"{size - 999} bytes uncompressed, its header says {size - 1000}" in str(err.value)
+
+
+def test_ros1_chunk_given_twice_is_refused(logs, monkeypatch):
+    """Two chunk infos naming the same chunk (its messages would be read twice) are refused by
+    the index reader with the index's position; rosbags' reader then reads the bag."""
+    from navpp.io import ros1index
+
+    real = ros1index._chunk_info
+    first: list = []
+
+    def repeated(f, size):
+        info = real(f, size)
+        first.append(first[0] if first else info)
+        return first[-1]
+
+    monkeypatch.setattr(ros1index, "_chunk_info", repeated)
+    lc = read_rosbag(logs["ros1"])
+    (note,) = lc.warnings
+    assert "gives a chunk position twice" in note and "rosbags' reader instead" in note
+    monkeypatch.undo()
+    assert_same_contents(lc, read_rosbag(logs["ros1"]))

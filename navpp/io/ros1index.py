@@ -180,6 +180,8 @@ def read_index(path: str | os.PathLike[str]) -> BagIndex:
         if len({c.conn for c in connections}) != len(connections):
             raise Ros1IndexError(f"the index at byte {index_pos} holds a connection id twice")
         infos = [_chunk_info(f, size) for _ in range(chunk_count)]
+        if len({info[0] for info in infos}) != len(infos):
+            raise Ros1IndexError(f"the index at byte {index_pos} gives a chunk position twice")
         chunks = tuple(_chunk(f, size, *info) for info in infos)
     except BaseException:
         f.close()
@@ -340,9 +342,10 @@ def _chunk(f: BinaryIO, size: int, chunk_pos: int, start_ns: int, end_ns: int, c
             raise Ros1IndexError(f"index-data record at byte {pos}: version is not 1")
         conn = _uint(idx, b"conn", 4, pos, "index-data record")
         count = _uint(idx, b"count", 4, pos, "index-data record")
-        if _u32(f, size, "index-data record") != count * ENTRY.itemsize or counts.get(conn) != count:
+        if (_u32(f, size, "index-data record") != count * ENTRY.itemsize or counts.get(conn) != count
+                or any(r.conn == conn for r in records)):
             raise Ros1IndexError(f"index-data record at byte {pos}: {count} entries of connection {conn} do not "
-                                 f"match its length or the chunk info")
+                                 f"match its length or the chunk info, or repeat its connection")
         entries_pos = f.tell()
         records.append(IndexRecord(conn, count, entries_pos))
         f.seek(entries_pos + count * ENTRY.itemsize)
