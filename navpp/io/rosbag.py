@@ -145,18 +145,19 @@ def read_rosbag(paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]
     files = _check_paths(paths)
     label = _label(files)
     notes: list[str] = []
+    size = _log_bytes(files)
     fast_error: str | None = None
     if _ros1_fast(files):
         try:
             with _Ros1Bags.open(files) as bags:
-                return _read(label, _log_bytes(files), bags, topics, memory, [])
+                return _read(label, size, bags, topics, memory, [])
         except Ros1IndexError as exc:     # its own notes are dropped: the fallback makes them again
             fast_error = str(exc)
             notes.append(f"{exc}; the bag is read with rosbags' reader instead (slower, and its index of every "
                          "message makes memory grow with the bag)")
     try:
         with _open(files) as reader:
-            return _read(label, _log_bytes(files), reader, topics, memory, notes)
+            return _read(label, size, reader, topics, memory, notes)
     except InputError as exc:
         if fast_error is None:
             raise
@@ -461,6 +462,18 @@ def _ros1_fast(files: Sequence[Path]) -> bool:
     return _FAST_ROS1 and all(f.suffix == ".bag" for f in files)
 
 
+@contextmanager
+def _naming(path: Path) -> Iterator[None]:
+    """A Ros1IndexError or OSError raised in the block, as a Ros1IndexError whose line starts with
+    ``path``."""
+    try:
+        yield
+    except Ros1IndexError as exc:
+        raise Ros1IndexError(f"{path}: {exc}") from None
+    except OSError as exc:
+        raise Ros1IndexError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
 class _Ros1Bags:
     """ROS 1 bag files read through navpp's own index (:mod:`navpp.io.ros1index`), with what
     :func:`_read` uses of an AnyReader: the topics, and the message definitions stored in the
@@ -486,12 +499,8 @@ class _Ros1Bags:
         bags: list[BagIndex] = []
         try:
             for path in files:
-                try:
+                with _naming(path):
                     bags.append(read_index(path))
-                except Ros1IndexError as exc:
-                    raise Ros1IndexError(f"{path}: {exc}") from None
-                except OSError as exc:
-                    raise Ros1IndexError(f"{path}: cannot read: {exc.strerror or exc}") from None
             yield cls(bags)
         finally:
             for bag in bags:
@@ -551,12 +560,8 @@ class _Ros1Bags:
     @staticmethod
     def _times(bag: BagIndex, record: IndexRecord, chunk: Any) -> np.ndarray:
         """The log times (ns) of an index-data record; Ros1IndexError naming the file."""
-        try:
+        with _naming(bag.path):
             return bag.entries(record, chunk)[0]
-        except Ros1IndexError as exc:
-            raise Ros1IndexError(f"{bag.path}: {exc}") from None
-        except OSError as exc:
-            raise Ros1IndexError(f"{bag.path}: cannot read: {exc.strerror or exc}") from None
 
 
 def _check_ros2_connections(files: Sequence[Path], reader: Any) -> None:
@@ -949,7 +954,7 @@ def _collect_ros1(bags: _Ros1Bags, wanted: Sequence[str], sinks: dict[str, _Sink
         if not here:
             continue
         bag = bags.bags[i]
-        try:
+        with _naming(bag.path):
             b = np.frombuffer(bag.chunk_data(chunk), dtype=np.uint8)
             for topic, records in here.items():
                 entries = [bag.entries(r, chunk) for _, r in records]
@@ -960,10 +965,6 @@ def _collect_ros1(bags: _Ros1Bags, wanted: Sequence[str], sinks: dict[str, _Sink
                 starts, lengths = _ros1_payloads(b, np.concatenate([e[1] for e in entries])[s], chunk.pos)
                 keys = (log_ns[s], conn[s], np.full(s.size, n, dtype=np.int64), entry[s])
                 order[topic].add(b, starts, lengths, keys, bounds[n][topic])
-        except Ros1IndexError as exc:
-            raise Ros1IndexError(f"{bag.path}: {exc}") from None
-        except OSError as exc:
-            raise Ros1IndexError(f"{bag.path}: cannot read: {exc.strerror or exc}") from None
         del b
     for topic in wanted:
         order[topic].flush()
