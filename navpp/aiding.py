@@ -459,8 +459,7 @@ class Aiding:
             return ok, z, var
         since = np.concatenate([[t[0] if t_prev is None else t_prev], t[:-1]])
         lo, hi = np.searchsorted(self.t, since, side="right"), np.searchsorted(self.t, t, side="right")
-        ok = hi - lo >= 2
-        ok[0] &= t_prev is not None
+        ok = hi - lo >= 2       # without t_prev the first epoch spans no samples
         for e in np.flatnonzero(ok):
             ok[e] = self.still[lo[e]:hi[e]].all()
         behind = Behind(self.t, self.gyro)
