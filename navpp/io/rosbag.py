@@ -531,10 +531,9 @@ class _Ros1Bags:
         last log time from the index entries (of the few chunks that can hold them)."""
         infos = []
         for name, conns in self.topics.items():
-            types = sorted({normalise_type(c.msgtype) for _, c in conns})
             count = sum(self.counts[i][c.conn] for i, c in conns)
-            infos.append(TopicInfo(name, types[0] if len(types) == 1 else ",".join(types), count,
-                                   *self._span(conns), "ros1"))
+            infos.append(TopicInfo(name, _joined_type(c.msgtype for _, c in conns), count, *self._span(conns),
+                                   "ros1"))
         return tuple(infos)
 
     def _span(self, conns: Sequence[tuple[int, Connection]]) -> tuple[int | None, int | None]:
@@ -614,14 +613,18 @@ def _connections(reader: Any, topic: str) -> list[Any]:
     return list(reader.topics[topic].connections)
 
 
+def _joined_type(msgtypes: Iterable[str]) -> str:
+    """A topic's message type as its connections give it, normalised; several joined by commas."""
+    return ",".join(sorted({normalise_type(m) for m in msgtypes}))
+
+
 def _topic_infos(reader: Any) -> tuple[TopicInfo, ...]:
     if isinstance(reader, _Ros1Bags):
         return reader.topic_infos()
     infos = []
     for name, info in reader.topics.items():
         conns = info.connections
-        types = sorted({normalise_type(c.msgtype) for c in conns})
-        msgtype = types[0] if len(types) == 1 else ",".join(types)
+        msgtype = _joined_type(c.msgtype for c in conns)
         if reader.is2:
             encs = sorted({getattr(c.ext, "serialization_format", "") or "" for c in conns})
             encoding = ",".join(encs)
