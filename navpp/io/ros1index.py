@@ -306,8 +306,8 @@ def _chunk_info(f: BinaryIO, size: int) -> tuple[int, int, int, dict[int, int]]:
     pos = f.tell()
     what = "chunk-info record"
     fields, data = _record(f, size, _OP_CHUNK_INFO, what)
-    if _uint(fields, b"ver", 4, pos, what) != 1:
-        raise Ros1IndexError(f"{what} at byte {pos}: version {_uint(fields, b'ver', 4, pos, what)} is not 1")
+    if (ver := _uint(fields, b"ver", 4, pos, what)) != 1:
+        raise Ros1IndexError(f"{what} at byte {pos}: version {ver} is not 1")
     count = _uint(fields, b"count", 4, pos, what)
     if len(data) != 8 * count:
         raise Ros1IndexError(f"{what} at byte {pos}: {len(data)} data bytes for {count} connections")
