@@ -395,11 +395,32 @@ def _row_sums(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(nb,) sum of squares and (nb,) count of the values kept per row of ``v`` (nb, k): those
     within ``OUTLIER_K`` times the row's median |v| (each row on its own: rows may come in parts)."""
     av = np.abs(v)
+    finite = np.isfinite(av)
+    every = bool(finite.all())
     with np.errstate(invalid="ignore", over="ignore"):
-        med = np.median(np.where(np.isfinite(av), av, np.inf), axis=1)
-        keep = np.isfinite(av) & (av <= OUTLIER_K * med[:, None])
-        sq = np.where(keep, av, 0.0) ** 2
-    return sq.sum(axis=1), keep.sum(axis=1).astype(float)
+        keep = av <= OUTLIER_K * _row_medians(av.copy() if every else np.where(finite, av, np.inf))[:, None]
+        if not every:
+            keep &= finite
+        sq = np.where(keep, av, 0.0)
+        np.square(sq, out=sq)
+    return sq.sum(axis=1), np.count_nonzero(keep, axis=1).astype(float)
+
+
+def _row_medians(work: np.ndarray) -> np.ndarray:
+    """``np.median(work, axis=1)`` of (nb, k) float ``work`` without NaN, to the bit, ``work``
+    partitioned in place: one partition at ``k // 2`` (np.median partitions at both middle
+    indices of an even row, on a copy), the lower middle value the largest of the row's lower part,
+    and the mean of the two middle values formed as np.median forms it, ``(a + b) / 2``."""
+    k = work.shape[1]
+    half = k // 2
+    work.partition(half, axis=1)
+    upper = work[:, half]
+    if k % 2:
+        return upper.copy()
+    lower = work[:, :half].max(axis=1)
+    lower += upper
+    lower /= 2.0
+    return lower
 
 
 def _pooled(ssq: np.ndarray, cnt: np.ndarray) -> np.ndarray:
