@@ -230,3 +230,13 @@ def test_row_sums_match_the_median_rule_to_the_bit(shape):
         got_ssq, got_cnt = _row_sums(x)
         assert np.array_equal(got_ssq, ssq, equal_nan=True)
         assert np.array_equal(got_cnt, keep.sum(axis=1).astype(float))
+
+
+@pytest.mark.parametrize("size", [1, 2, 7, 8, 12, 24, 60, 129])
+def test_group_means_are_numpys_to_the_bit(size):
+    """The noise profile's means of consecutive groups of rows add in numpy's order."""
+    from navpp.ins.calibrate import _group_means
+
+    rng = np.random.default_rng(size)
+    x = (rng.standard_normal((50 * size, 3)) * np.exp(5.0 * rng.standard_normal((50 * size, 3)))).reshape(50, size, 3)
+    assert np.array_equal(_group_means(x), x.mean(axis=1))
