@@ -417,7 +417,7 @@ def _row_medians(work: np.ndarray) -> np.ndarray:
     upper = work[:, half]
     if k % 2:
         return upper.copy()
-    lower = work[:, :half].max(axis=1)
+    lower: np.ndarray = work[:, :half].max(axis=1)
     lower += upper
     lower /= 2.0
     return lower
