@@ -17,8 +17,8 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Sequence
-from contextlib import nullcontext
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
@@ -448,10 +448,30 @@ def process(log: str | Path, *, filter_name: str = "ekf", config: str | Path | C
                  reference_anchor=_anchor_arg(reference_anchor))
     if plot:
         plan = replace(plan, plot=True)
-    with claimed_out_dir(plan.out, plan.out_label, OUTPUT_FILES) if write else nullcontext():
+    with claimed_out_dir(plan.out, plan.out_label, OUTPUT_FILES) if write else nullcontext(), cycles_after():
         res = _run(plan, progress)
     line = jitmode.note(choice)
     return replace(res, notes=(*res.notes, line)) if line else res
+
+
+@contextmanager
+def cycles_after() -> Iterator[None]:
+    """Python's cyclic garbage collector paused for a run, and left after it as it was.
+
+    A run makes few reference cycles, but its imports and the kernels' loading leave hundreds of
+    thousands of objects, which the collector walks again each time its counts trip: about 120
+    collections and 0.1 s of a one-hour log's 2 s (the peak memory of an eight-hour log 0.3 MB
+    higher).  Cycles made during the run are collected after it, as the collector's counts next
+    trip."""
+    import gc
+
+    paused = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if paused:
+            gc.enable()
 
 
 @dataclass(frozen=True)
