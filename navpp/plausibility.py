@@ -381,8 +381,8 @@ def solution_findings(name: str, vehicle_type: str, t: np.ndarray, alt: np.ndarr
     far_v = fast_v = -1.0
     for a, b in windows(t.shape[0], alt, vel_enu, std_enu):
         alt_w, std_w, vel_w = alt[a:b], std_enu[a:b], vel_enu[a:b]
-        bad = ~(np.isfinite(alt_w) & np.isfinite(std_w).all(axis=1))
-        if bad.any():
+        if not (np.isfinite(alt_w).all() and np.isfinite(std_w).all()):     # (the per-row test costs 20x)
+            bad = ~(np.isfinite(alt_w) & np.isfinite(std_w).all(axis=1))
             i = a + int(np.argmax(bad))
             return [Verdict(fatal, f"{name} diverged: its solution is not finite from t = {float(t[i]):.3f} s")]
         slack = k * std_w[:, 2]

@@ -206,3 +206,37 @@ def test_recovery_after_drift(drive):
     ha, hb = _metrics(a.solution, rec.reference), _metrics(b.solution, rec.reference)
     assert any("drifted from the GNSS" in w for w in a.warnings), a.warnings
     assert ha < 0.5 * hb, (ha, hb)
+
+
+@pytest.mark.parametrize("shape", [(40, 360), (40, 30), (40, 15), (7, 1), (7, 2), (3, 5)])
+def test_row_sums_match_the_median_rule_to_the_bit(shape):
+    """The noise profile's per-row sums (one in-place partition for the median) give what
+    ``np.median`` and the plain rule give, bit for bit, with glitches (NaN, inf, huge values)."""
+    from navpp.ins.calibrate import OUTLIER_K, _row_medians, _row_sums
+
+    rng = np.random.default_rng(sum(shape))
+    v = rng.standard_normal(shape) * np.exp(3.0 * rng.standard_normal(shape))
+    for bad, value in ((0.02, np.nan), (0.02, np.inf), (0.02, -np.inf), (0.01, 1e200)):
+        v[rng.random(shape) < bad] = value
+    v[0] = np.nan                                   # a row of nothing but glitches
+    for x in (v, np.nan_to_num(v, nan=1.0, posinf=2.0, neginf=-3.0)):
+        av = np.abs(x)
+        finite = np.isfinite(av)
+        with np.errstate(invalid="ignore", over="ignore"):
+            med = np.median(np.where(finite, av, np.inf), axis=1)
+            keep = finite & (av <= OUTLIER_K * med[:, None])
+            ssq = (np.where(keep, av, 0.0) ** 2).sum(axis=1)
+        assert np.array_equal(_row_medians(np.where(finite, av, np.inf)), med)
+        got_ssq, got_cnt = _row_sums(x)
+        assert np.array_equal(got_ssq, ssq, equal_nan=True)
+        assert np.array_equal(got_cnt, keep.sum(axis=1).astype(float))
+
+
+@pytest.mark.parametrize("size", [1, 2, 7, 8, 12, 24, 60, 129])
+def test_group_means_are_numpys_to_the_bit(size):
+    """The noise profile's means of consecutive groups of rows add in numpy's order."""
+    from navpp.ins.calibrate import _group_means
+
+    rng = np.random.default_rng(size)
+    x = (rng.standard_normal((50 * size, 3)) * np.exp(5.0 * rng.standard_normal((50 * size, 3)))).reshape(50, size, 3)
+    assert np.array_equal(_group_means(x), x.mean(axis=1))

@@ -170,6 +170,12 @@ def test_solution_bounds():
     (f,) = pl.solution_findings("ekf", "car", t, alt, fast, std, fix_alt, fix_su, 0.9999)
     assert "speed exceeds 150 m/s" in f.headline and "t = 7.0 s" in f.headline
     assert pl.solution_findings("ekf", "none", t, alt, vel * 10.0, std, fix_alt, fix_su, 0.9999) == []
+    for bad_alt, bad_std in ((np.nan, 1.0), (300.0, np.inf), (np.inf, np.nan)):   # the first row not finite
+        a, s = alt.copy(), std.copy()
+        a[612], s[612, 2] = bad_alt, bad_std
+        a[800] = np.nan
+        (f,) = pl.solution_findings("ekf", "car", t, a, vel, s.astype(np.float32), fix_alt, fix_su, 0.9999)
+        assert f.fatal and f.headline == "ekf diverged: its solution is not finite from t = 6.120 s"
 
 
 def test_fix_suspects(tmp_path):
