@@ -518,6 +518,7 @@ def compute_metrics(sol: Solution, ref: ReferenceData, *, filter_name: str, log:
     if att_err is not None and att_rows is not None and att_rows.any():
         att = att_err if att_rows.all() else att_err[att_rows]
         metrics["attitude_deg"] = {name: _abs_stats(att[:, j]) for j, name in enumerate(("roll", "pitch", "heading"))}
+        del att
     del att_err
     metrics["runtime_s"] = float(runtime_s)
     metrics["imu_samples"] = int(imu_samples)
