@@ -33,6 +33,10 @@ from .errors import NavppError
 
 #: rows per window of a sequential pass over a spilled array (64 Ki: 5 MB of the (N, 10) path)
 WINDOW_ROWS = 1 << 16
+#: bytes a spilled array written in order keeps in memory behind its writer before
+#: :func:`release_before` releases them (1 MiB: a window of the (N, 10) path is 5 MB, of the
+#: per-fix (M, 3, 3) records 4.7 MB, and an 8-hour run writes about ten such arrays at once)
+RELEASE_BYTES = 1 << 20
 #: bytes around a faulting page that Linux maps from the page cache with it (``fault_around_bytes``,
 #: 64 KiB by default): :func:`release` releases them before the rows too
 FAULT_AROUND = 1 << 16
@@ -130,13 +134,13 @@ def release_all(*arrays: np.ndarray | None) -> None:
 
 
 def release_before(a: np.ndarray, row: int) -> None:
-    """Release the rows of a spilled ``a`` before ``row`` once they make a window's worth of bytes
-    more than the last release (cheap to call per GNSS epoch from a loop writing ``a`` in order)."""
+    """Release the rows of a spilled ``a`` before ``row`` once they make :data:`RELEASE_BYTES` more
+    than the last release (cheap to call per GNSS epoch from a loop writing ``a`` in order)."""
     m = _mapping(a)
     if m is None:
         return
     offset = a.__array_interface__["data"][0] - m.address + row * a.strides[0]   # from the mapping's start
-    if offset - m.released < WINDOW_ROWS * a.strides[0]:
+    if offset - m.released < RELEASE_BYTES:
         return
     end = offset // mmap.PAGESIZE * mmap.PAGESIZE
     if end > m.released:
@@ -261,6 +265,6 @@ def trim_heap() -> None:
         _TRIM(0)
 
 
-__all__ = ["LARGE_BLOCK", "WINDOW_ROWS", "Behind", "allow_large_block_mapping", "copy_rows", "empty_rows",
-           "full_rows", "like", "map_large_blocks", "release", "release_all", "release_before", "spilled",
+__all__ = ["LARGE_BLOCK", "RELEASE_BYTES", "WINDOW_ROWS", "Behind", "allow_large_block_mapping", "copy_rows",
+           "empty_rows", "full_rows", "like", "map_large_blocks", "release", "release_all", "release_before", "spilled",
            "trim_heap", "windows"]

@@ -25,6 +25,7 @@ def spill_dir(tmp_path, monkeypatch):
     """The spill files' directory (``$TMPDIR``) for the test, and small windows (several per array)."""
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     monkeypatch.setattr(spill, "WINDOW_ROWS", 1000)
+    monkeypatch.setattr(spill, "RELEASE_BYTES", 80_000)
     return tmp_path
 
 
@@ -70,8 +71,22 @@ def test_release_before_follows_a_writer_by_windows(spill_dir):
     for i in range(a.shape[0]):
         a[i] = i
         spill.release_before(a, i)
-    assert _rss_kb(a) <= (spill.WINDOW_ROWS * 80) // 1024 + 8
+    assert _rss_kb(a) <= spill.RELEASE_BYTES // 1024 + 8
     assert np.array_equal(a[:, 0], np.arange(a.shape[0], dtype=float))
+
+
+def test_release_before_holds_bytes_not_rows(spill_dir, monkeypatch):
+    """Per-fix records (M, 3, 3) written in order keep at most RELEASE_BYTES behind the writer,
+    however many rows a window of a pass holds."""
+    monkeypatch.setattr(spill, "WINDOW_ROWS", 1 << 16)      # 4.7 MB of these rows
+    a = spill.full_rows(40_000, (3, 3), np.nan, spill=True)
+    spill.release([a], 0, a.shape[0])
+    for i in range(a.shape[0]):
+        a[i] = i
+        spill.release_before(a, i)
+        if i % 4000 == 0:
+            assert _rss_kb(a) <= spill.RELEASE_BYTES // 1024 + 8
+    assert np.array_equal(a[:, 1, 2], np.arange(a.shape[0], dtype=float))
 
 
 def test_new_path_spills_beyond_the_budget(spill_dir):
@@ -260,7 +275,7 @@ def test_release_before_counts_from_the_mapping_for_a_view(spill_dir):
         view[i] = i
         spill.release_before(view, i)
         if i % 5000 == 0:
-            assert _rss_kb(a) <= 2 * (spill.WINDOW_ROWS * 80) // 1024 + 8
+            assert _rss_kb(a) <= 2 * spill.RELEASE_BYTES // 1024 + 8
     assert np.array_equal(view[:, 0], np.arange(view.shape[0], dtype=float))
 
 

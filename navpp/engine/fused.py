@@ -63,7 +63,7 @@ _KNOT_N = KNOT.stop - KNOT.start
 KNOT_RECORD = 1 + 2 * _KNOT_N
 #: the longest stretch of epochs one kernel call runs (its knot buffer: 152 bytes per epoch), and
 #: when the smoother's store takes its states (its buffers: about 5 kB more per epoch)
-STRETCH = 4096
+STRETCH = 1024
 STORE_STRETCH = 512
 
 

@@ -22,12 +22,15 @@ from typing import Any
 
 import numpy as np
 
+from .. import spill
 from ..chi2 import chdtri
 from ..config import Config
 from ..findings import Finding
 from ..ins.gnss_error import Correlation, GnssErrorSettings
 from .schedule import GnssFixes
 
+#: fixes per block of :func:`innovation_score` (its (M, 3, 3) temporaries a block long)
+SCORE_ROWS = 1 << 14
 #: where the search starts when ``corr_time_s`` / ``correlated_share`` are "auto"
 PRIOR_TAU_S = 60.0
 PRIOR_SHARE = 0.8
@@ -166,10 +169,16 @@ def innovation_score(nis: np.ndarray, S: np.ndarray, gate_probability: float) ->
     (M, 3, 3); fixes without one skipped): how likely the fixes were under the filter's own
     predictions.  Two runs over the same fixes compare by it: the lower explains them better."""
     cap = gate_cap(gate_probability)
-    ok = np.isfinite(nis) & np.all(np.isfinite(S), axis=(1, 2))
-    sign, logdet = np.linalg.slogdet(S[ok])         # fix_score's, all fixes in one call
-    scores = np.minimum(nis[ok], cap) + np.where(sign > 0, logdet, math.inf)
-    return float(sum(scores.tolist()))              # in fix order, as fix_score's would add up
+    scores = np.empty(nis.shape[0])
+    n = 0
+    for a, b in spill.windows(nis.shape[0], S, rows=SCORE_ROWS):    # a spilled S released behind
+        Sb = S[a:b]
+        ok = np.isfinite(nis[a:b]) & np.all(np.isfinite(Sb), axis=(1, 2))
+        sign, logdet = np.linalg.slogdet(Sb[ok])    # fix_score's, each fix on its own
+        m = int(np.count_nonzero(ok))
+        scores[n:n + m] = np.minimum(nis[a:b][ok], cap) + np.where(sign > 0, logdet, math.inf)
+        n += m
+    return float(sum(scores[:n].tolist()))          # in fix order, as fix_score's would add up
 
 
 class LikelihoodRecorder:

@@ -1019,18 +1019,18 @@ def _jackknife_sigma(grid: np.ndarray, table: np.ndarray, r: np.ndarray, offset:
     k = int(min(max(n_blocks, 2), idx.shape[0] // 4))
     if k < 2:
         return float("nan")
-    near = np.abs(grid - offset) <= 0.5 * max_lag_s
-    lg, T = grid[near], table[near]
-    if lg.shape[0] < 3:
+    near = np.flatnonzero(np.abs(grid - offset) <= 0.5 * max_lag_s)    # one run of the increasing grid
+    if near.shape[0] < 3:
         return float("nan")
+    lg, T = grid[near[0]:near[-1] + 1], table[near[0]:near[-1] + 1]     # views: the table is not copied
     edges = np.linspace(0, idx.shape[0], k + 1).round().astype(int)
     step = float(lg[1] - lg[0])
     lags = np.empty(k)
     for i in range(k):
         sel = use.copy()
         sel[idx[edges[i]:edges[i + 1]]] = False
-        G, rr = T[:, sel], r[sel]
-        gs = G - G.mean(axis=1, keepdims=True)
+        gs, rr = T[:, sel], r[sel]
+        gs -= gs.mean(axis=1, keepdims=True)        # in place: one (L, n) copy per block, not two
         rs = rr - rr.mean()
         den = np.sqrt(np.einsum("ij,ij->i", gs, gs) * float(rs @ rs))
         corr = np.where(den > 0.0, (gs @ rs) / np.where(den > 0.0, den, 1.0), -np.inf)
