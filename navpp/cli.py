@@ -722,9 +722,14 @@ def filters_cmd() -> None:
 def compile_cmd(
     filters: Annotated[str, typer.Option(help="Comma-separated filter names whose kernels to compile.",
                                          autocompletion=_filter_names)] = "all",
+    native: Annotated[bool, typer.Option(
+        "--native/--no-native", help="Also build the native module from numba's cache (needs a C compiler): "
+        "runs then start without numba.")] = True,
 ) -> None:
     """Compile navpp's numba kernels once (every filter, the smoother, the MCAP/ROS readers) into the
-    cache, so that every later run loads them instead of compiling or running interpreted."""
+    cache, so that every later run loads them instead of compiling or running interpreted; then build
+    the native module (every kernel signature in the cache, compiled ahead of time for this CPU) that
+    later runs use without importing numba.  Run it again after upgrading navpp."""
     import time
 
     from rich.console import Console
@@ -739,7 +744,8 @@ def compile_cmd(
     try:
         from . import api
 
-        steps = api.compile_kernels(wanted, progress=lambda name: note(err, f"compiling: {name} ..."))
+        steps = api.compile_kernels(wanted, progress=lambda name: note(err, f"compiling: {name} ..."),
+                                    native=native)
     except NavppError as exc:
         _fail(str(exc), exc)
         return

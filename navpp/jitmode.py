@@ -121,8 +121,7 @@ def decided() -> bool | None:
     """The mode in force if a kernel module is already imported (True: compiled), else None."""
     if not any(m in sys.modules for m in KERNEL_MODULES):
         return None
-    config = sys.modules.get("numba.core.config")
-    return not bool(getattr(config, "DISABLE_JIT", 0))
+    return not interpreted()
 
 
 def apply(compiled: bool) -> None:
@@ -179,6 +178,10 @@ def kernel_cached(rel_path: str, name: str) -> bool:
     Uses numba's own cache locator and index reader on a stand-in function with the kernel's
     file, name and first line, so nothing of navpp's kernels is imported or decorated.
     """
+    from . import kernel
+
+    if kernel.covers("navpp." + rel_path.removesuffix(".py").replace("/", "."), name):
+        return True                             # compiled ahead of time: numba not even imported
     path = _ROOT / rel_path
     line = _first_line(path, name)
     if line is None:
