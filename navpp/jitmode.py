@@ -29,7 +29,9 @@ The choice comes from ``--jit`` (process, compare), else ``NAVPP_JIT``, else ``a
 command line and ``on`` in the Python API (``navpp.process(..., jit=...)``: a program may go on
 to larger jobs in the same process); it is passed to worker processes through
 ``NUMBA_DISABLE_JIT``.  ``navpp compile`` fills the cache
-for every filter and the smoother, after which ``auto`` always compiles (loads).
+for every filter and the smoother, after which ``auto`` always compiles (loads), and builds the
+native module (:mod:`navpp.kernel`): a kernel it holds counts as cached without numba being
+imported, and compiled runs use it; interpreted runs never do.
 
 The cost figures are CPU seconds measured on the development machine (see
 ``benchmarks/bench_startup.py``); both sides are Python-bound work (numba's compiler is mostly
