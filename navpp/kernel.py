@@ -14,8 +14,9 @@ machine's C compiler for this CPU.  When that module is present and matches the 
 match a compiled signature runs the native code without numba being imported at all.
 
 The module is looked for in :func:`native_dir` under a name carrying :func:`native_key`: a
-hash of every ``navpp/*.py`` source, the Python version and ABI, numpy's version and the CPU
-(model and instruction-set flags).  Editing any source, upgrading numpy or Python, or another
+hash of every ``navpp/*.py`` source's name, size and time stamp (what numba's own cache checks;
+reading them all would cost 14 ms a run), the Python version and ABI, numpy's version and the
+CPU (model and instruction-set flags).  Editing any source, upgrading numpy or Python, or another
 CPU reading a shared home directory simply finds no module: the kernels are numba's again.
 ``NAVPP_NATIVE=0`` turns the module off; it is never used when the kernels run interpreted
 (``--jit off``, ``NUMBA_DISABLE_JIT=1``).
@@ -130,9 +131,7 @@ def native_dir() -> str:
 def _cpu_id() -> str:
     """The CPU's model and instruction-set flags (Linux ``/proc/cpuinfo``), else the platform's
     words: a module compiled for one CPU is never loaded on another."""
-    import platform
-
-    words = [platform.machine(), platform.processor()]
+    words = [os.uname().machine if hasattr(os, "uname") else sys.platform]    # not platform.processor(): a subprocess
     try:
         with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
             for line in f:
@@ -157,9 +156,8 @@ def native_key() -> str:
         for name in sorted(files):
             if name.endswith(".py"):
                 path = os.path.join(d, name)
-                h.update(os.path.relpath(path, _ROOT).encode())
-                with open(path, "rb") as f:
-                    h.update(f.read())
+                st = os.stat(path)          # as numba's cache: a source's size and time stamp
+                h.update(f"{os.path.relpath(path, _ROOT)}\0{st.st_size}\0{st.st_mtime_ns}\0".encode())
     for word in (sys.version, importlib.machinery.EXTENSION_SUFFIXES[0], np.__version__, _cpu_id()):
         h.update(b"\0" + word.encode())
     key = h.hexdigest()[:24]
