@@ -76,18 +76,17 @@ def type_spec(ty: Any) -> str | None:
 
 
 def kernel_modules() -> list[str]:
-    """navpp's modules that declare kernels (their source uses :func:`navpp.kernel.njit`)."""
-    import navpp
-
+    """navpp's modules that declare kernels (their source uses :func:`navpp.kernel.njit`, or
+    :func:`navpp.filters.linalg.compiled`, which calls it)."""
     names = []
-    for info in pkgutil.walk_packages(navpp.__path__, "navpp."):
+    for info in pkgutil.walk_packages([os.path.dirname(os.path.abspath(kernel.__file__))], "navpp."):
         spec = importlib.util.find_spec(info.name)
         origin = getattr(spec, "origin", None)
         if not origin or not origin.endswith(".py"):
             continue
         with open(origin, encoding="utf-8") as f:
             text = f.read()
-        if "import njit" in text and info.name != "navpp.kernel":
+        if ("import njit" in text or "@compiled" in text) and info.name not in ("navpp.kernel", "navpp.native"):
             names.append(info.name)
     return names
 

@@ -208,3 +208,19 @@ def test_pipeline_on_the_native_module_is_numbas_byte_for_byte(tmp_path: Path) -
             assert untimed[0] == untimed[1]
         else:
             assert a == b, name
+
+
+def test_the_builder_finds_every_module_with_kernels() -> None:
+    """Every kernel made by importing all of navpp comes from a module the builder imports
+    (navpp.native.kernel_modules): none is left out of the native module."""
+    import importlib
+    import pkgutil
+
+    import navpp
+    from navpp.native import kernel_modules
+
+    for info in pkgutil.walk_packages(navpp.__path__, "navpp."):
+        if info.name != "navpp.__main__":
+            importlib.import_module(info.name)
+    declared = {getattr(k, "py_func", k).__module__ for k in kernel.CREATED}
+    assert declared and declared <= set(kernel_modules())
