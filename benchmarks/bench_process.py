@@ -43,6 +43,18 @@ import time
 from pathlib import Path
 
 
+def kernels_line() -> str:
+    """What navpp's kernels ran on in this process: the native module (numba never imported),
+    numba's dispatchers, or the native module with numba for the calls it did not fit."""
+    from navpp import kernel
+
+    if kernel.native() is None:
+        return "numba (no native module for these sources: navpp compile builds one)"
+    if "numba" in sys.modules:
+        return "native module, numba for calls it had no entry point for"
+    return "native module (numba not imported)"
+
+
 def machine_line() -> str:
     """``machine: CPU model, N cores, Python X.Y.Z`` (the model from /proc/cpuinfo where there is one)."""
     cpu = platform.processor() or platform.machine()
@@ -138,7 +150,7 @@ def measure(log: Path, filter_name: str, out: Path, smooth: bool = False, full: 
     stages = {"imu_samples": n, "gnss_epochs": gnss_epochs, "import_s": t_import, "read_s": t1 - t0,
               "process_s": t2 - t1, "write_s": t3 - t2, "us_per_sample": (t2 - t1) / n * 1e6,
               "read_cpu_s": c1 - c0, "process_cpu_s": c2 - c1, "write_cpu_s": c3 - c2,
-              "peak_read_process_write_mb": peak_rpw, "peak_source": source, **smoothing}
+              "peak_read_process_write_mb": peak_rpw, "peak_source": source, "kernels": kernels_line(), **smoothing}
     if not full:
         return stages
 
@@ -426,6 +438,7 @@ def sweep(hours: list[float], filter_name: str, workdir: Path, repeats: int) -> 
                "peak_max": max(r["peak_read_process_write_mb"] for r in rs), "store_mb": med(rs, "store_mb")}
         rows.append(row)
     rows.sort(key=lambda r: (r["smooth"], r["h"]))
+    print("kernels: " + "; ".join(sorted({r.get("kernels", "?") for rs in runs.values() for r in rs})))
     print(f"\nfilter {filter_name}, 125 Hz IMU + 5 Hz GNSS simulated CSV logs, median of {repeats} runs; "
           "seconds wall (us per IMU sample); peak = VmHWM of the measuring child (MB)")
     head = (f"{'run':<17}{'IMU samples':>12}{'read s (us)':>16}{'filter s (us)':>16}{'smooth s (us)':>16}"
@@ -501,6 +514,7 @@ def main() -> None:
     r = json.loads(proc.stdout)
     print(machine_line())
     print(f"log: {r['imu_samples']} IMU samples (125 Hz), {r['gnss_epochs']} GNSS epochs (5 Hz), filter {args.filter}")
+    print(f"kernels: {r['kernels']}")
     print(f"import navpp      {r['import_s']:7.3f} s")
     print(f"read + validate   {r['read_s']:7.3f} s")
     print(f"process           {r['process_s']:7.3f} s   ({r['us_per_sample']:.2f} us per IMU sample)")

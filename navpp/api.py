@@ -819,20 +819,25 @@ def simulate_log(out: str | Path, **spec: Any) -> Path:
 
 
 def compile_kernels(filters: Sequence[str] | None = None,
-                    progress: Callable[[str], None] | None = None) -> list[tuple[str, float]]:
+                    progress: Callable[[str], None] | None = None, native: bool = True) -> list[tuple[str, float]]:
     """``navpp compile``: compile (or load from the cache) every kernel group ``filters`` (None:
     all) need, the smoother's, the wheel-odometry aids' and the MCAP/ROS readers', by running
-    them on short simulated drives in a temporary directory (:mod:`navpp.jitmode`).
+    them on short simulated drives in a temporary directory (:mod:`navpp.jitmode`), once more
+    with every long store spilled to disk (its read-only arrays are kernel signatures of their
+    own); then, with ``native``, build the native module from numba's cache
+    (:mod:`navpp.native`: every signature compiled on this machine, the last step).
 
     Returns (step, CPU seconds) per step.  Raises :class:`~navpp.errors.ConfigError` when this
-    process already runs interpreted.
+    process already runs interpreted.  The native module's step names what was built, or why
+    nothing was (no C compiler, say): numba's cache serves the runs then.
     """
     import time
 
-    from . import jitmode
+    from . import jitmode, kernel
 
     if jitmode.decided() is False:
         raise jitmode.interpreted_error()
+    native_why = "" if not native or kernel.without_native() else "this process runs on one already"
     jitmode.apply(True)                 # before the filters' modules are imported
     jitmode.CHOSEN[:] = [jitmode.Choice(True, "navpp compile")]
     filters = tuple(filters) if filters is not None else jitmode.ALL_FILTERS
@@ -842,6 +847,7 @@ def compile_kernels(filters: Sequence[str] | None = None,
         get_filter(name)
 
     steps: list[tuple[str, float]] = []
+    built: list[Any] = []
     with tempfile.TemporaryDirectory(prefix="navpp-compile-") as tmp:
         root = Path(tmp)
         log = simulate_log(root / "drive", duration_s=90.0, still_s=30.0, seed=1)
@@ -865,4 +871,20 @@ def compile_kernels(filters: Sequence[str] | None = None,
                            odometry_yaw_rate=True)
         for name in filters:
             step(f"{name} with wheel odometry", lambda name=name: process(odo, filter_name=name, write=False))
+        step("ekf, smoother, stores spilled to disk", lambda: process(
+            log, filter_name="ekf", smooth=True, memory=1 << 12, out_dir=root / "spilled"))
+    if native and not native_why:
+        from .native import NativeBuildError, build
+
+        try:
+            step("native module", lambda: built.append(build(progress)))
+            r = built[0]
+            native_why = (f"{r.entries} entry points of {r.kernels} kernels"
+                          f"{' built' if r.built else ', up to date'}: {r.path}")
+        except NativeBuildError as exc:
+            steps.append(("native module", 0.0))
+            native_why = f"not built: {exc}"
+        steps[-1] = (f"native module ({native_why})", steps[-1][1])
+    elif native:
+        steps.append((f"native module (not built: {native_why})", 0.0))
     return steps

@@ -165,22 +165,22 @@ class CompileAnnouncer:
             self.kernels += 1
 
     def __enter__(self) -> CompileAnnouncer:
-        from numba.core import event as numba_event
+        from .kernel import CompileEvents
 
         outer = self
 
-        class _Listener(numba_event.Listener):
-            def on_start(self, event: Any) -> None:
-                outer._start(event)
+        def listener(numba_event: Any) -> Any:
+            class _Listener(numba_event.Listener):
+                def on_start(self, event: Any) -> None:
+                    outer._start(event)
 
-            def on_end(self, event: Any) -> None:
-                outer._end(event)
+                def on_end(self, event: Any) -> None:
+                    outer._end(event)
 
-        self._listener = _Listener()
-        numba_event.register("numba:compile", self._listener)
+            return _Listener()
+
+        self._listener = CompileEvents(listener).__enter__()    # registered when numba is imported
         return self
 
     def __exit__(self, *exc: object) -> None:
-        from numba.core import event as numba_event
-
-        numba_event.unregister("numba:compile", self._listener)
+        self._listener.__exit__(*exc)

@@ -29,7 +29,9 @@ The choice comes from ``--jit`` (process, compare), else ``NAVPP_JIT``, else ``a
 command line and ``on`` in the Python API (``navpp.process(..., jit=...)``: a program may go on
 to larger jobs in the same process); it is passed to worker processes through
 ``NUMBA_DISABLE_JIT``.  ``navpp compile`` fills the cache
-for every filter and the smoother, after which ``auto`` always compiles (loads).
+for every filter and the smoother, after which ``auto`` always compiles (loads), and builds the
+native module (:mod:`navpp.kernel`): a kernel it holds counts as cached without numba being
+imported, and compiled runs use it; interpreted runs never do.
 
 The cost figures are CPU seconds measured on the development machine (see
 ``benchmarks/bench_startup.py``); both sides are Python-bound work (numba's compiler is mostly
@@ -121,18 +123,19 @@ def decided() -> bool | None:
     """The mode in force if a kernel module is already imported (True: compiled), else None."""
     if not any(m in sys.modules for m in KERNEL_MODULES):
         return None
-    config = sys.modules.get("numba.core.config")
-    return not bool(getattr(config, "DISABLE_JIT", 0))
+    return not interpreted()
 
 
 def apply(compiled: bool) -> None:
     """Set the mode for kernels decorated from now on, here and in worker processes; compiled,
-    with scipy's BLAS module loaded on its own first (:func:`navpp.scipy_parts.preload_blas`)."""
+    with scipy's BLAS module loaded on its own before numba makes its first kernel
+    (:func:`navpp.scipy_parts.preload_blas`, :func:`navpp.kernel.on_numba`)."""
     os.environ["NUMBA_DISABLE_JIT"] = "0" if compiled else "1"
     if compiled:
+        from .kernel import on_numba
         from .scipy_parts import preload_blas
 
-        preload_blas()
+        on_numba(preload_blas)      # numba's first kernel: none on a run the native module serves
     config = sys.modules.get("numba.core.config")
     if config is not None:
         config.DISABLE_JIT = 0 if compiled else 1  # type: ignore[attr-defined]
@@ -179,6 +182,10 @@ def kernel_cached(rel_path: str, name: str) -> bool:
     Uses numba's own cache locator and index reader on a stand-in function with the kernel's
     file, name and first line, so nothing of navpp's kernels is imported or decorated.
     """
+    from . import kernel
+
+    if kernel.covers("navpp." + rel_path.removesuffix(".py").replace("/", "."), name):
+        return True                             # compiled ahead of time: numba not even imported
     path = _ROOT / rel_path
     line = _first_line(path, name)
     if line is None:

@@ -12,6 +12,10 @@ import pytest
 # command line's default (auto), a first short CLI run in this process would make every later
 # test run interpreted (navpp.jitmode).  Tests of the choice itself set the mode explicitly.
 os.environ["NAVPP_JIT"] = "on"
+# numba's dispatchers, not a native module (navpp.kernel): one built on this machine for these
+# sources would otherwise serve the tests (same results, but no numba compile events to test).
+# tests/test_native.py builds its own modules and turns them on in the processes it starts.
+os.environ["NAVPP_NATIVE"] = "0"
 
 #: The session log: 120 s at 125 Hz IMU / 5 Hz GNSS, 30 s still first, automotive IMU.
 SIM_DURATION_S = 120.0

@@ -13,7 +13,8 @@ import math
 import time
 
 import numpy as np
-from numba import njit
+
+from navpp.kernel import njit
 
 from .. import spill
 from ..filters.protocols import SmoothableModel

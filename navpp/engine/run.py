@@ -30,6 +30,7 @@ from ..ins.augmented import AugmentedInsModel, StateBlock
 from ..ins.gnss_error import Correlation, GnssErrorModel, GnssErrorSettings, innovation_correlation
 from ..ins.model import InsModel
 from ..ins.strapdown import NOMINAL_BG
+from ..kernel import CompileEvents
 from ..recording import ImuData, Recording
 from ..spill import map_large_blocks, release_all, spilled, trim_heap
 from .checks import alignment_findings, check_data, check_imu_plausible
@@ -83,14 +84,12 @@ def run(recording: Recording, config: Config, filt: Filter, *, progress: Progres
     ``runtime_s`` excludes the one-off compilation of navpp's kernels on a cold cache, which
     is reported as ``compile_s``.
     """
-    from numba.core import event as numba_event
-
     t_wall = time.perf_counter()
     config, vehicle_note = resolved_vehicle(recording, config)
     if spilled(recording.imu.t) or len(recording.imu) * OUTPUT_ROW_BYTES > config.output.memory:
         map_large_blocks()      # a long run: its large temporaries' memory back to the system when freed
         trim_heap()             # and the reader's, freed on the heap before
-    with numba_event.install_recorder("numba:compile") as rec:
+    with CompileEvents() as rec:
         segments = imu_segments(recording)
         if len(segments) > 1:
             result = run_segments(recording, segments, config, filt, progress, cov_step_s, smooth, run_one)
@@ -469,10 +468,8 @@ def smoothed_output(recorder: RunRecorder, model: Any, t_out: np.ndarray, path: 
                     tg: np.ndarray, t0_ns: int, gyro: np.ndarray | None = None) -> SmoothedRun:
     """The recorder's forward run smoothed (:func:`~navpp.engine.output.smoothed_run`), its
     runtime without the compilation of kernels on a cold cache; the recorder's store is emptied."""
-    from numba.core import event as numba_event
-
     assert recorder.store is not None
-    with numba_event.install_recorder("numba:compile") as compiling:
+    with CompileEvents() as compiling:
         smoothed = smoothed_run(recorder.store, model, t_out, path, recorder.epoch_node, tg, t0_ns, gyro)
     recorder.store = None
     return replace(smoothed, runtime_s=smoothed.runtime_s - compile_seconds(compiling.buffer))

@@ -8,17 +8,18 @@ loops compiled by numba beat LAPACK calls through numpy; they run without BLAS t
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, TypeVar, cast
+from typing import Any, TypeVar
 
 import numpy as np
-from numba import njit
+
+from navpp.kernel import njit
 
 F = TypeVar("F", bound=Callable[..., Any])
 
 
 def compiled(fn: F) -> F:
     """``numba.njit(cache=True)`` keeping the function's signature for type checkers."""
-    return cast(F, njit(cache=True)(fn))
+    return njit(cache=True)(fn)
 
 
 def symmetrise(P: np.ndarray) -> np.ndarray:

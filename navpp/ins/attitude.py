@@ -19,8 +19,9 @@ The scalar functions are numba-compiled (``njit``) and used inside the strapdown
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike
+
+from navpp.kernel import njit
 
 
 @njit(cache=True)

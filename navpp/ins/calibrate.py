@@ -48,7 +48,8 @@ from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
+
+from navpp.kernel import njit
 
 from .. import geodesy
 from ..intervals import interval_median, mean_interval, pairwise_sum

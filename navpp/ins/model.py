@@ -22,7 +22,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
-from numba import njit
+
+from navpp.kernel import njit
 
 from ..geodesy import GRAVITY_H1, GRAVITY_H1_LAT, GRAVITY_H2, OMEGA_E
 from ..intervals import interval_median, long_intervals

@@ -23,7 +23,8 @@ from collections.abc import Callable
 from typing import cast
 
 import numpy as np
-from numba import njit
+
+from navpp.kernel import njit
 
 from .. import geodesy
 from .state import (

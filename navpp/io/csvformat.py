@@ -22,7 +22,8 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from numba import njit
+
+from navpp.kernel import njit
 
 from ..jitmode import interpreted
 

@@ -21,12 +21,26 @@ import os
 import stat
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-from numba import njit
-from numba.cpython.unsafe.numbers import leading_zeros
 
+from navpp.kernel import njit, on_numba
 from navpp.spill import empty_rows, release, spilled, windows
+
+#: numba's count of leading zero bits (an intrinsic), set when numba is imported: a run on the
+#: native kernels (:mod:`navpp.kernel`) or interpreted (pandas parses then) never calls it.
+leading_zeros: Any = None
+
+
+def _numba_parts() -> None:
+    global leading_zeros
+    from numba.cpython.unsafe.numbers import leading_zeros as numba_leading_zeros
+
+    leading_zeros = numba_leading_zeros
+
+
+on_numba(_numba_parts)
 
 __all__ = ["parse_columns"]
 

@@ -32,7 +32,6 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from numba import njit
 
 from navpp import jitmode, spill
 from navpp.errors import InputError
@@ -53,6 +52,7 @@ from navpp.io.ros import (
     TopicInfo,
     normalise_type,
 )
+from navpp.kernel import njit
 
 __all__ = ["MCAP_MAGIC", "list_topics", "read_mcap"]
 

@@ -41,7 +41,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 from navpp import jitmode, spill
 from navpp.errors import InputError
@@ -57,6 +56,7 @@ from navpp.io.ros import (
     TwistMessages,
     normalise_type,
 )
+from navpp.kernel import njit
 
 __all__ = [
     "ENCODINGS",

@@ -40,7 +40,8 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
-from numba import njit
+
+from navpp.kernel import njit
 
 from ..engine.loop import EpochOutcome, run_epochs
 from ..engine.schedule import Epoch

@@ -10,16 +10,14 @@ from __future__ import annotations
 
 import types
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar, Protocol, cast
+from typing import ClassVar, Protocol, cast
 
 import numpy as np
-from numba import njit
+
+from navpp.kernel import njit
 
 from ...filters.protocols import MeasurementBase
 from ..model import plus
-
-if TYPE_CHECKING:
-    from numba.core.dispatcher import Dispatcher
 
 
 class ModelKernel(Protocol):
@@ -48,7 +46,7 @@ def _points_template(x: np.ndarray, dX: np.ndarray, p: np.ndarray) -> np.ndarray
     return Z
 
 
-def points_kernel(model: Dispatcher[ModelKernel]) -> Dispatcher[PointsKernel]:
+def points_kernel(model: ModelKernel) -> PointsKernel:
     """The compiled sigma-point images ``h(x ⊞ dX_i, p) - h(x, p)`` of the aid model ``model``
     (an ``njit`` kernel).
 
@@ -69,7 +67,7 @@ def points_kernel(model: Dispatcher[ModelKernel]) -> Dispatcher[PointsKernel]:
     fn.__qualname__ = name
     fn.__module__ = py_h.__module__
     fn.__doc__ = _points_template.__doc__
-    return cast("Dispatcher[PointsKernel]", njit(cache=True)(fn))
+    return cast(PointsKernel, njit(cache=True)(fn))
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,8 @@ from __future__ import annotations
 from typing import ClassVar
 
 import numpy as np
-from numba import njit
+
+from navpp.kernel import njit
 
 from ..attitude import quat_to_dcm, skew
 from ..state import ATT, BG, N_ERR, NOMINAL_BG, NOMINAL_Q, NOMINAL_VEL, VEL

@@ -20,7 +20,8 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 import numpy as np
-from numba import njit
+
+from navpp.kernel import njit
 
 from ..augmented import StateBlock, ins_part
 from ..state import N_ERR

@@ -13,7 +13,8 @@ from __future__ import annotations
 from typing import ClassVar
 
 import numpy as np
-from numba import njit
+
+from navpp.kernel import njit
 
 from ...geodesy import OMEGA_E
 from ..attitude import quat_to_dcm, skew

@@ -9,7 +9,8 @@ from __future__ import annotations
 from typing import ClassVar
 
 import numpy as np
-from numba import njit
+
+from navpp.kernel import njit
 
 from ..state import DX_VEL, N_ERR, NOMINAL_VEL
 from .base import Aid, points_kernel

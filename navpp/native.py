@@ -1,0 +1,228 @@
+"""Build navpp's native module: every kernel signature in numba's cache, compiled ahead of time.
+
+:mod:`navpp.kernel` explains what the module is for and how runs use it.  :func:`build` (run by
+``navpp compile`` after it has filled numba's cache) imports every navpp module that declares
+kernels, collects each kernel's signatures (those compiled in this process and those numba's
+on-disk cache holds for the current sources: every path run on this machine), and compiles
+them with ``numba.pycc`` into one extension module for this CPU, beside a manifest (JSON) that
+maps each kernel and argument-type key (:func:`navpp.kernel.call_spec`) to its entry point.
+Both are written under temporary names and renamed into place, the manifest last, so a run
+never sees half a module.  Older modules of other source versions in the same directory are
+removed.
+
+A signature whose types the native entry points cannot check (:func:`type_spec` gives None:
+records, strings, lists, functions, omitted defaults) is left to numba.  Building needs a C
+compiler (numba's ``pycc`` calls it through setuptools); without one :func:`build` raises
+:class:`NativeBuildError` and runs simply keep using numba's cache.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import glob
+import importlib
+import importlib.util
+import json
+import os
+import pkgutil
+import tempfile
+import time
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+from . import kernel
+
+
+class NativeBuildError(RuntimeError):
+    """The native module could not be built (no C compiler, a kernel numba's AOT compiler refused)."""
+
+
+@dataclass(frozen=True)
+class BuildResult:
+    """What :func:`build` made: the extension's path, kernels and entry points, CPU seconds,
+    the signatures left to numba (kernel, types, why)."""
+
+    path: str
+    kernels: int
+    entries: int
+    cpu_s: float
+    skipped: tuple[tuple[str, str, str], ...]
+    #: False when an up-to-date module with the same entry points was kept
+    built: bool = True
+
+
+def type_spec(ty: Any) -> str | None:
+    """A numba type as :func:`navpp.kernel.value_spec` writes the type of a value; None for a
+    type the native entry points do not take."""
+    from numba.core import types
+    from numba.np import numpy_support
+
+    if type(ty) is types.Array:
+        if not ty.aligned or not isinstance(ty.dtype, (types.Integer, types.Float, types.Boolean, types.Complex)):
+            return None
+        dt = numpy_support.as_dtype(ty.dtype)
+        return f"a{dt.str}{ty.ndim}{ty.layout}{'w' if ty.mutable else 'r'}"
+    if type(ty) in (types.Integer, types.Float, types.Boolean):
+        return str(ty)
+    if isinstance(ty, types.NoneType):
+        return "none"
+    if type(ty) in (types.UniTuple, types.Tuple):
+        parts = [type_spec(t) for t in ty.types]
+        if any(p is None for p in parts):
+            return None
+        return "(" + ",".join(parts) + ")"  # type: ignore[arg-type]
+    return None
+
+
+def kernel_modules() -> list[str]:
+    """navpp's modules that declare kernels (their source uses :func:`navpp.kernel.njit`, or
+    :func:`navpp.filters.linalg.compiled`, which calls it)."""
+    names = []
+    for info in pkgutil.walk_packages([os.path.dirname(os.path.abspath(kernel.__file__))], "navpp."):
+        spec = importlib.util.find_spec(info.name)
+        origin = getattr(spec, "origin", None)
+        if not origin or not origin.endswith(".py"):
+            continue
+        with open(origin, encoding="utf-8") as f:
+            text = f.read()
+        if ("import njit" in text or "@compiled" in text) and info.name not in ("navpp.kernel", "navpp.native"):
+            names.append(info.name)
+    return names
+
+
+def _cached_signatures(disp: Any) -> list[tuple]:
+    """The argument types numba's on-disk cache holds for dispatcher ``disp``, for its current
+    source and this machine (stale entries are not returned)."""
+    cache = getattr(disp, "_cache", None)
+    if cache is None or not hasattr(cache, "_cache_file"):
+        return []
+    try:
+        index = cache._cache_file._load_index()
+        codegen = disp.targetctx.codegen()
+        return [key[0] for key in index if key == cache._index_key(key[0], codegen)]
+    except Exception:  # noqa: BLE001 - numba's internals changed: only this process's signatures
+        return []
+
+
+def _entries(dispatchers: list[Any], progress: Any
+             ) -> tuple[list[tuple[str, str, str, Any, Any]], list[tuple[str, str, str]], list[str]]:
+    """(kernel key, argument-type key, symbol, signature, function) of every signature to build;
+    those left to numba; the kernels numba compiled only as parts of other kernels (a literal
+    argument), which the module holds inside its entry points."""
+    from numba.core import types
+    from numba.core.registry import CPUDispatcher
+
+    todo: list[tuple[str, str, str, Any, Any]] = []
+    skipped: list[tuple[str, str, str]] = []
+    seen: set[tuple[str, str]] = set()
+    inner: set[str] = set()
+    for disp in dispatchers:
+        if not isinstance(disp, CPUDispatcher):
+            continue
+        fn = disp.py_func
+        key = f"{fn.__module__}:{fn.__qualname__}"
+        sigs = list(disp.signatures)
+        sigs += [s for s in _cached_signatures(disp) if s not in sigs]
+        for sig in sigs:
+            if any(isinstance(t, types.Literal) for t in sig):
+                inner.add(key)              # compiled for a call from another kernel: inside that one
+                continue
+            specs = [type_spec(t) for t in sig]
+            if any(s is None for s in specs):
+                skipped.append((key, str(sig), "argument types the native module cannot check"))
+                continue
+            spec = ";".join(specs)  # type: ignore[arg-type]
+            if (key, spec) in seen:
+                continue
+            seen.add((key, spec))
+            try:
+                disp.compile(tuple(sig))           # loaded from the cache (or compiled)
+                cres = disp.overloads[tuple(sig)]
+            except Exception as exc:  # noqa: BLE001 - numba refused a cached signature: leave it to numba
+                skipped.append((key, str(sig), f"numba: {exc}".splitlines()[0]))
+                continue
+            todo.append((key, spec, f"k{len(todo)}", cres.signature, fn))
+    return todo, skipped, sorted(inner - {t[0] for t in todo})
+
+
+def build(progress: Any = None, dispatchers: list[Any] | None = None, force: bool = False) -> BuildResult:
+    """Compile the native module for the current sources (module docstring) into
+    :func:`navpp.kernel.native_dir`; returns what was built.  ``dispatchers``: the kernels to
+    compile (default: every kernel of navpp's kernel modules, imported here).  A module already
+    there with the same entry points is kept (``entries`` then counts them, ``cpu_s`` is the
+    check's), unless ``force``.  Raises :class:`NativeBuildError` when it cannot be built."""
+    from . import jitmode
+
+    if jitmode.interpreted():
+        raise NativeBuildError("the kernels run interpreted in this process (--jit off / NUMBA_DISABLE_JIT)")
+    if kernel.native() is not None:
+        raise NativeBuildError("this process runs on a native module already; build with NAVPP_NATIVE=0")
+    t0 = time.process_time()
+    if dispatchers is None:
+        for name in kernel_modules():
+            importlib.import_module(name)
+        dispatchers = kernel.CREATED
+    todo, skipped, inner = _entries(dispatchers, progress)
+    if not todo:
+        raise NativeBuildError("numba's cache holds no navpp kernel to compile (run navpp compile first)")
+    kernels: dict[str, list[list[str]]] = {}
+    for key, spec, symbol, _, _ in todo:
+        kernels.setdefault(key, []).append([spec, symbol])
+    name, ext_path, manifest_path = kernel.native_paths()
+    manifest = {"module": name, "kernels": kernels, "inner": inner, "skipped": [list(s) for s in skipped]}
+    if not force and os.path.isfile(ext_path) and _same_entries(manifest_path, manifest):
+        return BuildResult(ext_path, len(kernels), len(todo), time.process_time() - t0, tuple(skipped), False)
+    where = os.path.dirname(ext_path)
+    os.makedirs(where, mode=0o700, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="build-", dir=where) as tmp:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")             # pycc's pending-deprecation warning
+            try:
+                from numba.pycc import CC
+            except ImportError as exc:
+                raise NativeBuildError(f"numba's ahead-of-time compiler is unavailable: {exc}") from exc
+            cc = CC(name)
+            cc.output_dir = tmp
+            cc.target_cpu = "host"
+            cc.verbose = False
+            for _, _, symbol, sig, fn in todo:
+                cc.export(symbol, sig)(fn)
+            if progress:
+                progress(f"native module {name}: {len(todo)} signatures of {len(kernels)} kernels, through "
+                         "numba's AOT compiler and the C compiler")
+            try:
+                cc.compile()
+            except Exception as exc:  # compiler missing or a kernel refused
+                why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                raise NativeBuildError(f"building the native module failed: {why}") from exc
+        suffix = os.path.basename(ext_path)[len(name):]
+        built = [b for b in glob.glob(os.path.join(tmp, name + "*")) if os.path.isfile(b) and b.endswith(suffix)]
+        if not built:
+            raise NativeBuildError(f"the AOT compiler wrote no {os.path.basename(ext_path)}")
+        if os.path.exists(manifest_path):
+            os.remove(manifest_path)            # no run pairs the old manifest with the new module
+        os.replace(built[0], ext_path)
+    staged = manifest_path + ".tmp"
+    with open(staged, "w", encoding="utf-8") as f:
+        json.dump(manifest, f, indent=1, sort_keys=True)
+    os.replace(staged, manifest_path)
+    _remove_stale(where, name)
+    return BuildResult(ext_path, len(kernels), len(todo), time.process_time() - t0, tuple(skipped), True)
+
+
+def _same_entries(manifest_path: str, manifest: dict) -> bool:
+    try:
+        with open(manifest_path, encoding="utf-8") as f:
+            old = json.load(f)
+    except (OSError, ValueError):
+        return False
+    return bool(old.get("module") == manifest["module"] and old.get("kernels") == manifest["kernels"])
+
+
+def _remove_stale(where: str, keep: str) -> None:
+    """Native modules of other source versions in ``where`` (no run can use them again)."""
+    for path in glob.glob(os.path.join(where, kernel.PREFIX + "*")):
+        if not os.path.basename(path).startswith(keep):
+            with contextlib.suppress(OSError):
+                os.remove(path)
