@@ -291,6 +291,13 @@ def process(
         return
     print_process_summary(res, quiet, process_details(res, prog.marks, t_start, time.perf_counter()) if verbose else [],
                           compile_s=announcer.seconds)
+    from .kernel import native_hint
+
+    hint = "" if quiet else native_hint()
+    if hint:
+        from rich.console import Console
+
+        note(Console(stderr=True, highlight=False, soft_wrap=True), hint)
 
 
 DEFAULT_COMPARE = "ekf,aekf,ckf,vce-ckf,rwckf"

@@ -235,6 +235,17 @@ def covers(module: str, qualname: str) -> bool:
     return bool(table is not None and (table.get(key) or key in _state.get("inner", ())))
 
 
+def native_hint() -> str:
+    """A note for a compiled run that loaded its kernels through numba (no native module for
+    these sources, and none turned off): what ``navpp compile`` would save; else empty."""
+    if "numba" not in sys.modules or _jit_disabled() or os.environ.get(ENV_USE, "1").strip() == "0":
+        return ""
+    if native() is not None:
+        return ""
+    return ("navpp's kernels came from numba's cache: `navpp compile` also builds a native module for these "
+            "sources, with which runs start without numba (about 0.7 s of CPU and 120 MB less a run)")
+
+
 # --------------------------------------------------------------------------- numba, when needed
 
 

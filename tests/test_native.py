@@ -225,3 +225,19 @@ def test_the_builder_finds_every_module_with_kernels() -> None:
                           timeout=300).stdout for code in (only, every)]
     builder, everything = (set(json.loads(g)) for g in got)
     assert len(everything) > 50 and everything <= builder
+
+
+def test_a_run_on_numbas_cache_is_told_about_the_native_module(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The note of a compiled run that went through numba (no native module): once numba is
+    imported and none is loaded; never with NAVPP_NATIVE=0, interpreted, or on a native module."""
+    import numba  # noqa: F401 - a run through numba has it imported
+
+    monkeypatch.setattr(kernel, "_state", {"native": None})
+    monkeypatch.setenv("NAVPP_NATIVE", "1")
+    monkeypatch.setenv("NUMBA_DISABLE_JIT", "0")
+    assert "navpp compile" in kernel.native_hint()
+    monkeypatch.setenv("NAVPP_NATIVE", "0")
+    assert kernel.native_hint() == ""
+    monkeypatch.setenv("NAVPP_NATIVE", "1")
+    monkeypatch.setattr(kernel, "_state", {"native": {"navpp.x:y": {}}})
+    assert kernel.native_hint() == ""
