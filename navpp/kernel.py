@@ -293,7 +293,8 @@ class Kernel:
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         if not kwargs:
-            entry = self._entries.get(call_spec(args) or "")
+            spec = call_spec(args)
+            entry = self._entries.get(spec) if spec is not None else None
             if entry is not None:
                 return entry(*args)
         return self.dispatcher(*args, **kwargs)
