@@ -116,13 +116,48 @@ def _to_bits(w, q, negative, pow5):
     return sign | mantissa | (np.uint64(power2) << np.uint64(52)), True
 
 
+@njit(cache=True, inline="always")
+def _at(buf, i):
+    """``buf[i]`` for an index ``i`` >= 0, taken as unsigned: no test for a negative index (numba
+    wraps those around), so that loads of neighbouring bytes can fuse."""
+    return buf[np.uint64(i)]
+
+
+@njit(cache=True, inline="always")
+def _eight(buf, i):
+    """The 8 bytes ``buf[i:i + 8]`` as one little-endian uint64 (first byte lowest); ``i`` >= 0.
+    Unsigned indices: no wraparound of negative ones, so that the loads fuse into one."""
+    j = np.uint64(i)
+    v = np.uint64(0)
+    for k in range(8):
+        v |= np.uint64(buf[j + np.uint64(k)]) << np.uint64(8 * k)
+    return v
+
+
 @njit(cache=True)
 def _digits(buf, i, w):
     """``w`` with the decimal digits from ``buf[i]`` on appended (uint64, wraps beyond 19
-    digits), and the index of the first byte that is not a digit."""
+    digits), and the index of the first byte that is not a digit.
+
+    Eight digits at a time while eight bytes are digits (SWAR: Lemire's test and conversion of
+    eight ASCII digits in a 64-bit word), then one at a time."""
     ten = np.uint64(10)
+    high = np.uint64(0xF0F0F0F0F0F0F0F0)
+    while i + 8 <= buf.shape[0]:
+        v = _eight(buf, i)
+        # every byte 0x30..0x39: high nibble 3, and adding 6 leaves it 3
+        if ((v & high) | (((v + np.uint64(0x0606060606060606)) & high) >> np.uint64(4))) \
+                != np.uint64(0x3333333333333333):
+            break
+        v -= np.uint64(0x3030303030303030)
+        v = v * ten + (v >> np.uint64(8))                   # byte pairs: 2-digit values
+        mask = np.uint64(0x000000FF000000FF)
+        v = ((v & mask) * np.uint64(0x000F424000000064)
+             + ((v >> np.uint64(16)) & mask) * np.uint64(0x0000271000000001)) >> np.uint64(32)
+        w = w * np.uint64(100000000) + (v & np.uint64(0xFFFFFFFF))
+        i += 8
     while True:
-        d = np.uint64(buf[i]) - np.uint64(48)      # wraps to a huge value below '0'
+        d = np.uint64(_at(buf, i)) - np.uint64(48)      # wraps to a huge value below '0'
         if d > 9:
             return w, i
         w = w * ten + d
@@ -175,7 +210,7 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5):
     for the next line (consumed stops before it); ``_FALLBACK`` when a line is not in the plain
     form (see the module docstring)."""
     stop = buf.shape[0]
-    while stop > 0 and buf[stop - 1] != 10:
+    while stop > 0 and _at(buf, stop - 1) != 10:
         stop -= 1
     n_fields = target.shape[0]
     capacity = outs[0].shape[0]
@@ -190,19 +225,19 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5):
             col = target[field]
             if col < 0:                       # a field not wanted: skip it
                 while True:
-                    c = buf[i]
-                    if c == 44 or c == 10 or (c == 13 and buf[i + 1] == 10):
+                    c = _at(buf, i)
+                    if c == 44 or c == 10 or (c == 13 and _at(buf, i + 1) == 10):
                         break
                     if c == 34 or c >= 128:
                         return row - row0, pos, _FALLBACK
                     i += 1
             else:
-                c = buf[i]
+                c = _at(buf, i)
                 negative = c == 45
                 if c == 45 or c == 43:
                     i += 1
                 int_start = i
-                while buf[i] == 48:           # leading zeros
+                while _at(buf, i) == 48:           # leading zeros
                     i += 1
                 sig_start = i
                 w, i = _digits(buf, i, np.uint64(0))
@@ -210,11 +245,11 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5):
                 if i == int_start:
                     return row - row0, pos, _FALLBACK   # no digit before the point (or the cell)
                 exp10 = 0
-                if buf[i] == 46:
+                if _at(buf, i) == 46:
                     i += 1
                     frac_start = i
                     if n_sig == 0:
-                        while buf[i] == 48:   # zeros after "0.": not significant
+                        while _at(buf, i) == 48:   # zeros after "0.": not significant
                             i += 1
                     sig_start = i
                     w, i = _digits(buf, i, w)
@@ -224,15 +259,15 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5):
                         return row - row0, pos, _FALLBACK   # no digit after the point
                 if n_sig > 19:
                     return row - row0, pos, _FALLBACK       # more precision than 19 digits
-                c = buf[i]
+                c = _at(buf, i)
                 if c == 101 or c == 69:
                     i += 1
-                    c = buf[i]
+                    c = _at(buf, i)
                     e_negative = c == 45
                     if c == 45 or c == 43:
                         i += 1
                     e_start = i
-                    while buf[i] == 48:
+                    while _at(buf, i) == 48:
                         i += 1
                     digits_start = i
                     e, i = _digits(buf, i, np.uint64(0))
@@ -245,16 +280,16 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5):
                     bits, ok = _to_bits(w, exp10, negative, pow5)
                     if not ok:
                         return row - row0, pos, _FALLBACK
-                outs[col][row, component[field]] = bits
+                outs[col][np.uint64(row), np.uint64(component[field])] = bits
                 if field == stamp_field:
-                    outs[last][row, 0] = _exact_ns(w, exp10, negative)
+                    outs[last][np.uint64(row), 0] = _exact_ns(w, exp10, negative)
             if field < n_fields - 1:
-                if buf[i] != 44:
+                if _at(buf, i) != 44:
                     return row - row0, pos, _FALLBACK   # too few fields, or not a plain number
                 i += 1
-        if buf[i] == 13:
+        if _at(buf, i) == 13:
             i += 1
-        if buf[i] != 10:
+        if _at(buf, i) != 10:
             return row - row0, pos, _FALLBACK           # too many fields, or not a plain number
         row += 1
         pos = i + 1
