@@ -35,6 +35,8 @@ _BLOCK_BYTES = 1 << 22
 
 _OK, _FALLBACK, _FULL = 0, 1, 2     # kernel status: block done; not the plain form; output full
 
+_NONE = -(1 << 62)                  # in the decimals' stats: no row yet
+
 _SMALLEST_POWER = -342              # 10^q with q below this is 0, above _LARGEST_POWER infinite
 _LARGEST_POWER = 308
 
@@ -198,14 +200,18 @@ def _exact_ns(w, q, negative):
 
 
 @njit(cache=True)
-def _parse_block(buf, target, component, stamp_field, outs, row0, pow5):
+def _parse_block(buf, target, component, stamp_field, outs, row0, pow5, stats):
     """Parse the whole lines of ``buf`` (those up to its last ``\n``; the bytes after it are left)
     into ``outs[target[field]][row0 + row, component[field]]`` as IEEE bits (``outs`` a tuple of
     (capacity, width) uint64 arrays).
 
     ``target`` (n_fields,) int64: the output array of each field, -1 for a field not wanted;
     ``component`` (n_fields,) int64: its column there.  Field ``stamp_field`` (if >= 0) is also
-    written to ``outs[-1][:, 0]`` as the exact integer nanoseconds its text says (:func:`_exact_ns`).
+    written to ``outs[-1][:, 0]`` as the exact integer nanoseconds its text says (:func:`_exact_ns`),
+    and the decimals its text carries (digits after the point less the exponent) raise
+    ``stats[0]`` (over rows ``row < stats[3]``) and ``stats[1]`` (over all rows) to their most;
+    ``stats[2]`` becomes 1 when a field not wanted holds a CR not followed by LF (a line end
+    to a reader with universal newlines).
     Returns (rows parsed, bytes consumed, status): ``_OK``; ``_FULL`` when ``outs`` have no room
     for the next line (consumed stops before it); ``_FALLBACK`` when a line is not in the plain
     form (see the module docstring)."""
@@ -230,6 +236,8 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5):
                         break
                     if c == 34 or c >= 128:
                         return row - row0, pos, _FALLBACK
+                    if c == 13:
+                        stats[2] = 1
                     i += 1
             else:
                 c = _at(buf, i)
@@ -283,6 +291,11 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5):
                 outs[col][np.uint64(row), np.uint64(component[field])] = bits
                 if field == stamp_field:
                     outs[last][np.uint64(row), 0] = _exact_ns(w, exp10, negative)
+                    decimals = -exp10
+                    if decimals > stats[1]:
+                        stats[1] = decimals
+                    if decimals > stats[0] and row < stats[3]:
+                        stats[0] = decimals
             if field < n_fields - 1:
                 if _at(buf, i) != 44:
                     return row - row0, pos, _FALLBACK   # too few fields, or not a plain number
@@ -298,7 +311,8 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5):
 
 def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_position: int | None = None,
                   progress: Callable[[float], None] | None = None, widths: Sequence[int] | None = None,
-                  budget_bytes: int | None = None) -> tuple[list[np.ndarray], np.ndarray | None] | None:
+                  budget_bytes: int | None = None, decimals: list[int] | None = None,
+                  decimal_rows: int = 2000) -> tuple[list[np.ndarray], np.ndarray | None] | None:
     """The data rows of CSV file ``path`` (a header line, then rows of ``n_fields`` cells) as
     float64 arrays, the fields ``positions`` split in consecutive groups of ``widths`` (default
     one each): a group of one an (n_rows,) array, a wider one an (n_rows, width) C-contiguous
@@ -308,7 +322,11 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
     when the file is not in the plain form the kernel takes (then nothing is known about why).
     ``progress(fraction)`` follows the bytes read.  When the arrays would hold more than
     ``budget_bytes`` (None: never) they are made on a spill file (:mod:`navpp.spill`) and each
-    window's rows are released once parsed, so the file's values never stay in memory whole."""
+    window's rows are released once parsed, so the file's values never stay in memory whole.
+    When ``decimals`` (a list) is given, the most decimals a stamp cell carries (digits after
+    the point less the exponent; -2**62 for no row) over the first ``decimal_rows`` rows and
+    over all rows are appended to it, unless a cell not wanted holds a lone CR (a line break to
+    Python's universal newlines, not to this parse)."""
     widths = [1] * len(positions) if widths is None else list(widths)
     target = np.full(n_fields, -1, dtype=np.int64)
     component = np.zeros(n_fields, dtype=np.int64)
@@ -337,6 +355,7 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
         rows = 0
         start = len(header)                   # file offset of the first line not parsed yet
         buf = np.empty(_BLOCK_BYTES + 1, dtype=np.uint8)    # one byte more: the last line's missing end
+        stats = np.array([_NONE, _NONE, 0, decimal_rows], dtype=np.int64)
         while start < size:
             # read into one reused buffer, not mapped: a file cut short while it is read must
             # give an error line, not a SIGBUS
@@ -348,7 +367,8 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
             if last and buf[got - 1] != 10:
                 buf[got] = 10                 # the last line lacks its end: give it one
                 got += 1
-            done, outs, status = _parse_lines(buf[:got], target, component, stamp_field, outs, rows, budget_bytes)
+            done, outs, status = _parse_lines(buf[:got], target, component, stamp_field, outs, rows, stats,
+                                              budget_bytes)
             release(outs, rows, rows + done[0])
             rows += done[0]
             if status == _FALLBACK:
@@ -364,6 +384,8 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
             return None                       # no data line: the slow path says so
     values = [out[:rows, 0].view(np.float64) if width == 1 else out[:rows].view(np.float64)
               for out, width in zip(outs, widths)]
+    if decimals is not None and stamp_position is not None and stats[2] == 0:
+        decimals += [int(stats[0]), int(stats[1])]
     if stamp_position is None:
         return values, None
     stamps = outs[-1][:rows, 0]
@@ -372,15 +394,15 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
 
 
 def _parse_lines(buf: np.ndarray, target: np.ndarray, component: np.ndarray, stamp_field: int,
-                 outs: tuple[np.ndarray, ...], rows: int,
+                 outs: tuple[np.ndarray, ...], rows: int, stats: np.ndarray,
                  budget_bytes: int | None = None) -> tuple[tuple[int, int], tuple[np.ndarray, ...], int]:
     """The whole lines of ``buf`` (uint8) parsed into ``outs`` from row ``rows`` on by
-    :func:`_parse_block`, the outputs grown as often as they fill (onto the spill file once they
-    would hold more than ``budget_bytes``; None: never): ((rows parsed, bytes consumed), the
+    :func:`_parse_block` (``stats`` as there), the outputs grown as often as they fill (onto the
+    spill file once they would hold more than ``budget_bytes``; None: never): ((rows parsed, bytes consumed), the
     outputs, status ``_OK`` or ``_FALLBACK``)."""
     done = used = 0
     while True:
-        n, u, status = _parse_block(buf[used:], target, component, stamp_field, outs, rows + done, _POW5)
+        n, u, status = _parse_block(buf[used:], target, component, stamp_field, outs, rows + done, _POW5, stats)
         done += n
         used += u
         if status != _FULL:
