@@ -194,12 +194,12 @@ def _read_imu(imu_path: Path, gyro_scale: float, accel_scale: float, warnings: l
             raise _need_more(imu, "at least 2 IMU samples are needed")
         t_imu, rates = imu.col("t"), None
         imu_lines = imu.lines
-    _check_rate(imu, t_imu, "an IMU", 1.0, 100_000.0)
-    rate = 1.0 / float(np.median(np.diff(t_imu), overwrite_input=True))
+    nominal = _check_rate(imu, t_imu, "an IMU", 1.0, 100_000.0)     # the median interval, once
+    rate = 1.0 / nominal
     if rate < 50.0:
         warnings.append(f"{imu.path.name}: IMU rate {rate:.1f} Hz is low for strapdown navigation "
                         "(100-200 Hz expected); processed anyway")
-    _gap_warning(imu.path.name, t_imu, imu_lines, warnings)
+    _gap_warning(imu.path.name, t_imu, imu_lines, warnings, nominal)
     _released(imu)
     span = (float(t_imu[0]), float(t_imu[-1]))
     imu_ns = imu.data["t_ns"]
@@ -974,16 +974,17 @@ def _drop_invalid_fixes(table: _Table, warnings: list[str]) -> _Table:
     return kept
 
 
-def _check_rate(table: _Table, t: np.ndarray, what: str, low: float, high: float) -> None:
-    """A median sample interval far outside ``[1/high, 1/low]`` s means ``t`` is not in seconds."""
+def _check_rate(table: _Table, t: np.ndarray, what: str, low: float, high: float) -> float:
+    """A median sample interval far outside ``[1/high, 1/low]`` s means ``t`` is not in seconds.
+    Returns that median (s; NaN for fewer than 2 stamps)."""
     if t.shape[0] < 2:
-        return
+        return float("nan")
     dt = float(np.median(np.diff(t), overwrite_input=True))
     if dt <= 0:
-        return
+        return dt
     rate = 1.0 / dt
     if low <= rate <= high:
-        return
+        return dt
     hint = ""
     for factor, unit in ((1e3, "milliseconds"), (1e6, "microseconds"), (1e9, "nanoseconds")):
         if low <= rate * factor <= high:
@@ -1073,12 +1074,15 @@ def _check_time(table: _Table, warnings: list[str]) -> _Table:
     return table.take(keep)
 
 
-def _gap_warning(file_name: str, t: np.ndarray, lines: np.ndarray, warnings: list[str]) -> None:
-    """Warn about intervals longer than ``GAP_FACTOR`` times the median interval."""
+def _gap_warning(file_name: str, t: np.ndarray, lines: np.ndarray, warnings: list[str],
+                 nominal: float | None = None) -> None:
+    """Warn about intervals longer than ``GAP_FACTOR`` times the median interval (``nominal``
+    when the caller has it already: that of ``t``)."""
     if t.shape[0] < 3:
         return
     dt = np.diff(t)
-    nominal = float(np.median(dt))
+    if nominal is None:
+        nominal = float(np.median(dt))
     gaps = dt > GAP_FACTOR * nominal
     if not gaps.any():
         return
