@@ -223,8 +223,10 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5, stats):
     last = len(outs) - 1
     pos = 0
     row = row0
+    most_first, most, first_rows = stats[0], stats[1], stats[3]   # in registers, not in memory
     while pos < stop:
         if row == capacity:
+            stats[0], stats[1] = most_first, most
             return row - row0, pos, _FULL
         i = pos
         for field in range(n_fields):
@@ -291,11 +293,9 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5, stats):
                 outs[col][np.uint64(row), np.uint64(component[field])] = bits
                 if field == stamp_field:
                     outs[last][np.uint64(row), 0] = _exact_ns(w, exp10, negative)
-                    decimals = -exp10
-                    if decimals > stats[1]:
-                        stats[1] = decimals
-                    if decimals > stats[0] and row < stats[3]:
-                        stats[0] = decimals
+                    most = max(most, -exp10)
+                    if row < first_rows:
+                        most_first = max(most_first, -exp10)
             if field < n_fields - 1:
                 if _at(buf, i) != 44:
                     return row - row0, pos, _FALLBACK   # too few fields, or not a plain number
@@ -306,6 +306,7 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5, stats):
             return row - row0, pos, _FALLBACK           # too many fields, or not a plain number
         row += 1
         pos = i + 1
+    stats[0], stats[1] = most_first, most
     return row - row0, pos, _OK
 
 
