@@ -514,7 +514,9 @@ def _stamps_ns(table: _Table, header: list[str]) -> np.ndarray:
     decimals: then, as when ``|t| 10^d >= 2^51`` (e.g. unix stamps with 7+ decimals), the
     column is converted exactly from its text (half-even at 1 ns; by the fast parser when it
     read the file, ``table.stamps_ns``, else re-read).  A later row whose extra decimals lie
-    below float64's resolution of ``t`` is rounded to ``d`` decimals."""
+    below float64's resolution of ``t`` is rounded to ``d`` decimals.  When the fast parser read
+    the file it counted the decimals itself (``table.stamp_decimals``: no text scan), and when
+    no row carries more than ``d`` its exact ns are the fast path's result, taken as they are."""
     t = table.data["t"]
     if table.stamp_decimals is None:
         d = min(_stamp_decimals(table.path, header), 9)
