@@ -10,11 +10,11 @@ without fallback of Mushtak and Lemire, 2023, as in the ``fast_float`` library):
 rounded (half-even), so every value is the double Python's ``float`` and pandas give for the
 same text; the stamp column also becomes exact integer nanoseconds.  Digits are taken eight
 at a time where eight follow (SWAR), and the buffer is indexed unsigned (numba tests signed
-indices for wraparound on every byte).  Anything else (an empty
-or quoted cell, ``nan``, blanks, a blank line, a wrong number of cells, a byte outside ASCII,
-more than 19 significant digits, a value that would be subnormal or overflow) makes
-:func:`parse_columns` return None, and the caller reads the file with its exact, slower parser
-that also locates and names the fault.
+indices for wraparound on every byte).  Anything else (an empty or quoted cell, ``nan``,
+blanks, a blank line, a wrong number of cells, a byte outside ASCII, more than 19 significant
+digits, a value that would be subnormal or overflow) makes :func:`parse_columns` return None,
+and the caller reads the file with its exact, slower parser that also locates and names the
+fault.
 """
 
 from __future__ import annotations
