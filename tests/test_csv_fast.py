@@ -307,3 +307,17 @@ def test_a_lone_cr_in_an_ignored_cell_leaves_the_decimals_to_the_text(tmp_path: 
     table = csv_io._read_table(path, header, ["t", "x"], [])
     assert table.stamps_ns is not None and table.stamp_decimals is None
     assert csv_io._stamp_decimals(path, header) == 9
+
+
+def test_a_lone_cr_in_the_header_leaves_the_decimals_to_the_text(tmp_path: Path) -> None:
+    """A header ending in CR CR LF is one line to the parse, two to the text scan (which then
+    looks at one data line fewer): the kernel's counts are not used."""
+    path = tmp_path / "imu.csv"
+    rows = [f"{0.01 * k:.2f},1" for k in range(2000)] + ["20.001,1"]
+    rows[1999] = "19.99999,1"                 # the 2000th data line: beyond the text scan's window here
+    path.write_bytes(("t,x\r\r\n" + "\n".join(rows) + "\n").encode())
+    header = csv_io._read_header(path)
+    assert header == ["t", "x"]
+    table = csv_io._read_table(path, header, ["t", "x"], [])
+    assert table.stamps_ns is not None and table.stamp_decimals is None
+    assert csv_io._stamp_decimals(path, header) == 2

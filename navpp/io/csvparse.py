@@ -328,8 +328,8 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
     window's rows are released once parsed, so the file's values never stay in memory whole.
     When ``decimals`` (a list) is given, the most decimals a stamp cell carries (digits after
     the point less the exponent; -2**62 for no row) over the first ``decimal_rows`` rows and
-    over all rows are appended to it, unless a cell not wanted holds a lone CR (a line break to
-    Python's universal newlines, not to this parse)."""
+    over all rows are appended to it, unless the header or a cell not wanted holds a lone CR (a
+    line break to Python's universal newlines, not to this parse)."""
     widths = [1] * len(positions) if widths is None else list(widths)
     target = np.full(n_fields, -1, dtype=np.int64)
     component = np.zeros(n_fields, dtype=np.int64)
@@ -347,6 +347,7 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
         header = fh.readline(_BLOCK_BYTES)
         if not header.endswith(b"\n") or b'"' in header:
             return None
+        header_cr = b"\r" in header[:-2 if header.endswith(b"\r\n") else -1]   # a lone CR: a line end to text mode
         sample = fh.read(1 << 16)
         # room for the rows if they are as long as those of the first 64 KiB, and 5 % more;
         # grown if not (pages never written cost no memory)
@@ -387,7 +388,7 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
             return None                       # no data line: the slow path says so
     values = [out[:rows, 0].view(np.float64) if width == 1 else out[:rows].view(np.float64)
               for out, width in zip(outs, widths)]
-    if decimals is not None and stamp_position is not None and stats[2] == 0:
+    if decimals is not None and stamp_position is not None and stats[2] == 0 and not header_cr:
         decimals += [int(stats[0]), int(stats[1])]
     if stamp_position is None:
         return values, None
