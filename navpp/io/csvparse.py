@@ -120,24 +120,6 @@ def _to_bits(w, q, negative, pow5):
     return sign | mantissa | (np.uint64(power2) << np.uint64(52)), True
 
 
-@njit(cache=True, inline="always")
-def _at(buf, i):
-    """``buf[i]`` for an index ``i`` >= 0, taken as unsigned: no test for a negative index (numba
-    wraps those around), so that loads of neighbouring bytes can fuse."""
-    return buf[np.uint64(i)]
-
-
-@njit(cache=True, inline="always")
-def _eight(buf, i):
-    """The 8 bytes ``buf[i:i + 8]`` as one little-endian uint64 (first byte lowest); ``i`` >= 0.
-    Unsigned indices: no wraparound of negative ones, so that the loads fuse into one."""
-    j = np.uint64(i)
-    v = np.uint64(0)
-    for k in range(8):
-        v |= np.uint64(buf[j + np.uint64(k)]) << np.uint64(8 * k)
-    return v
-
-
 @njit(cache=True)
 def _digits(buf, i, w):
     """``w`` with the decimal digits from ``buf[i]`` on appended (uint64, wraps beyond 19
@@ -148,7 +130,10 @@ def _digits(buf, i, w):
     ten = np.uint64(10)
     high = np.uint64(0xF0F0F0F0F0F0F0F0)
     while i + 8 <= buf.shape[0]:
-        v = _eight(buf, i)
+        j = np.uint64(i)            # unsigned: no wraparound test, so that the 8 loads fuse into one
+        v = np.uint64(0)
+        for k in range(8):          # buf[i:i + 8] as one little-endian uint64 (first byte lowest)
+            v |= np.uint64(buf[j + np.uint64(k)]) << np.uint64(8 * k)
         # every byte 0x30..0x39: high nibble 3, and adding 6 leaves it 3
         if ((v & high) | (((v + np.uint64(0x0606060606060606)) & high) >> np.uint64(4))) \
                 != np.uint64(0x3333333333333333):
@@ -161,7 +146,7 @@ def _digits(buf, i, w):
         w = w * np.uint64(100000000) + (v & np.uint64(0xFFFFFFFF))
         i += 8
     while True:
-        d = np.uint64(_at(buf, i)) - np.uint64(48)      # wraps to a huge value below '0'
+        d = np.uint64(buf[np.uint64(i)]) - np.uint64(48)      # wraps to a huge value below '0'
         if d > 9:
             return w, i
         w = w * ten + d
@@ -217,8 +202,9 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5, stats):
     Returns (rows parsed, bytes consumed, status): ``_OK``; ``_FULL`` when ``outs`` have no room
     for the next line (consumed stops before it); ``_FALLBACK`` when a line is not in the plain
     form (see the module docstring)."""
+    # buf[np.uint64(i)]: every index is >= 0; as unsigned, numba adds no wraparound test per byte
     stop = buf.shape[0]
-    while stop > 0 and _at(buf, stop - 1) != 10:
+    while stop > 0 and buf[np.uint64(stop - 1)] != 10:
         stop -= 1
     n_fields = target.shape[0]
     capacity = outs[0].shape[0]
@@ -235,8 +221,8 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5, stats):
             col = target[field]
             if col < 0:                       # a field not wanted: skip it
                 while True:
-                    c = _at(buf, i)
-                    if c == 44 or c == 10 or (c == 13 and _at(buf, i + 1) == 10):
+                    c = buf[np.uint64(i)]
+                    if c == 44 or c == 10 or (c == 13 and buf[np.uint64(i + 1)] == 10):
                         break
                     if c == 34 or c >= 128:
                         return row - row0, pos, _FALLBACK
@@ -244,12 +230,12 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5, stats):
                         stats[2] = 1
                     i += 1
             else:
-                c = _at(buf, i)
+                c = buf[np.uint64(i)]
                 negative = c == 45
                 if c == 45 or c == 43:
                     i += 1
                 int_start = i
-                while _at(buf, i) == 48:           # leading zeros
+                while buf[np.uint64(i)] == 48:           # leading zeros
                     i += 1
                 sig_start = i
                 w, i = _digits(buf, i, np.uint64(0))
@@ -257,11 +243,11 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5, stats):
                 if i == int_start:
                     return row - row0, pos, _FALLBACK   # no digit before the point (or the cell)
                 exp10 = 0
-                if _at(buf, i) == 46:
+                if buf[np.uint64(i)] == 46:
                     i += 1
                     frac_start = i
                     if n_sig == 0:
-                        while _at(buf, i) == 48:   # zeros after "0.": not significant
+                        while buf[np.uint64(i)] == 48:   # zeros after "0.": not significant
                             i += 1
                     sig_start = i
                     w, i = _digits(buf, i, w)
@@ -271,15 +257,15 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5, stats):
                         return row - row0, pos, _FALLBACK   # no digit after the point
                 if n_sig > 19:
                     return row - row0, pos, _FALLBACK       # more precision than 19 digits
-                c = _at(buf, i)
+                c = buf[np.uint64(i)]
                 if c == 101 or c == 69:
                     i += 1
-                    c = _at(buf, i)
+                    c = buf[np.uint64(i)]
                     e_negative = c == 45
                     if c == 45 or c == 43:
                         i += 1
                     e_start = i
-                    while _at(buf, i) == 48:
+                    while buf[np.uint64(i)] == 48:
                         i += 1
                     digits_start = i
                     e, i = _digits(buf, i, np.uint64(0))
@@ -299,12 +285,12 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5, stats):
                     if row < first_rows:
                         most_first = max(most_first, -exp10)
             if field < n_fields - 1:
-                if _at(buf, i) != 44:
+                if buf[np.uint64(i)] != 44:
                     return row - row0, pos, _FALLBACK   # too few fields, or not a plain number
                 i += 1
-        if _at(buf, i) == 13:
+        if buf[np.uint64(i)] == 13:
             i += 1
-        if _at(buf, i) != 10:
+        if buf[np.uint64(i)] != 10:
             return row - row0, pos, _FALLBACK           # too many fields, or not a plain number
         row += 1
         pos = i + 1
