@@ -256,3 +256,68 @@ def test_reading_a_plain_log_imports_no_pandas(sim_log_dir: Path) -> None:
     out = subprocess.run([sys.executable, "-c", code, str(sim_log_dir)], capture_output=True, text=True,
                          env=env, cwd=REPO, check=True).stdout
     assert out.strip() == "False"
+
+
+def _stamp_cases() -> dict[str, list[str]]:
+    """Stamp columns whose decimals the parse counts: more decimals after the first 2000 lines
+    (below float64's resolution, then rounded to the first lines' decimals; above it, then
+    exact), e-notation, signs, fewer rows than 2000."""
+    unix = [f"{1_700_000_000 + 0.008 * k:.6f}" for k in range(3000)]
+    below = list(unix)
+    below[2500] = below[2500] + "001"              # 1 ns more: under float64's resolution at 1.7e9 s
+    above = [f"{0.008 * k:.6f}" for k in range(3000)]
+    above[2600] = above[2600] + "7"                # 0.1 us more at ~20 s: float64 resolves it
+    return {
+        "unix": unix, "below": below, "above": above,
+        "e-notation": [f"{1.7e9 + 0.01 * k:.12e}" for k in range(2500)],
+        "signs": [f"{-3.0 + 0.004 * k:+.4f}" for k in range(2100)],
+        "integers": [str(10 * k) for k in range(50)],
+        "short": [f"{0.5 * k:.3f}" for k in range(20)] + ["12.0001"],
+    }
+
+
+@pytest.mark.parametrize("case", list(_stamp_cases()))
+def test_the_decimals_the_parse_counts_give_the_same_stamps(tmp_path: Path, case: str) -> None:
+    """The stamps' decimals counted by the kernel (over the first 2000 lines and over all rows)
+    give the ns :func:`navpp.io.csv._stamps_ns` gives from the text (without the counts)."""
+    import dataclasses
+
+    stamps = _stamp_cases()[case]
+    path = tmp_path / "imu.csv"
+    path.write_text("t,note,x\n" + "".join(f"{s},n{k % 7},1\n" for k, s in enumerate(stamps)))
+    header = csv_io._read_header(path)
+    table = csv_io._read_table(path, header, ["t", "x"], [])
+    assert table.stamp_decimals is not None
+    first = max(csv_io._stamp_decimals(path, header), 0)
+    assert max(table.stamp_decimals[0], 0) == first
+    assert table.stamp_decimals[1] == max(csv_io._cell_decimals(s) for s in stamps)
+    got = csv_io._stamps_ns(table, header)
+    want = csv_io._stamps_ns(dataclasses.replace(table, stamp_decimals=None), header)
+    assert got.dtype == want.dtype and got.tolist() == want.tolist()
+
+
+def test_a_lone_cr_in_an_ignored_cell_leaves_the_decimals_to_the_text(tmp_path: Path) -> None:
+    """A CR without LF inside a cell the kernel skips is a line break to the text scan of the
+    stamps' decimals: then the kernel's counts are not used."""
+    path = tmp_path / "imu.csv"
+    rows = [f"{0.01 * k:.2f},n,1" for k in range(100)]
+    rows[10] = "0.10,a\r0.123456789,1"
+    path.write_bytes(("t,note,x\n" + "\n".join(rows) + "\n").encode())
+    header = csv_io._read_header(path)
+    table = csv_io._read_table(path, header, ["t", "x"], [])
+    assert table.stamps_ns is not None and table.stamp_decimals is None
+    assert csv_io._stamp_decimals(path, header) == 9
+
+
+def test_a_lone_cr_in_the_header_leaves_the_decimals_to_the_text(tmp_path: Path) -> None:
+    """A header ending in CR CR LF is one line to the parse, two to the text scan (which then
+    looks at one data line fewer): the kernel's counts are not used."""
+    path = tmp_path / "imu.csv"
+    rows = [f"{0.01 * k:.2f},1" for k in range(2000)] + ["20.001,1"]
+    rows[1999] = "19.99999,1"                 # the 2000th data line: beyond the text scan's window here
+    path.write_bytes(("t,x\r\r\n" + "\n".join(rows) + "\n").encode())
+    header = csv_io._read_header(path)
+    assert header == ["t", "x"]
+    table = csv_io._read_table(path, header, ["t", "x"], [])
+    assert table.stamps_ns is not None and table.stamp_decimals is None
+    assert csv_io._stamp_decimals(path, header) == 2

@@ -194,12 +194,12 @@ def _read_imu(imu_path: Path, gyro_scale: float, accel_scale: float, warnings: l
             raise _need_more(imu, "at least 2 IMU samples are needed")
         t_imu, rates = imu.col("t"), None
         imu_lines = imu.lines
-    _check_rate(imu, t_imu, "an IMU", 1.0, 100_000.0)
-    rate = 1.0 / float(np.median(np.diff(t_imu), overwrite_input=True))
+    nominal = _check_rate(imu, t_imu, "an IMU", 1.0, 100_000.0)     # the median interval, once
+    rate = 1.0 / nominal
     if rate < 50.0:
         warnings.append(f"{imu.path.name}: IMU rate {rate:.1f} Hz is low for strapdown navigation "
                         "(100-200 Hz expected); processed anyway")
-    _gap_warning(imu.path.name, t_imu, imu_lines, warnings)
+    _gap_warning(imu.path.name, t_imu, imu_lines, warnings, nominal)
     _released(imu)
     span = (float(t_imu[0]), float(t_imu[-1]))
     imu_ns = imu.data["t_ns"]
@@ -422,6 +422,9 @@ class _Table:
     # (n, k) C-contiguous arrays the fast parser wrote columns into, by their names (those
     # columns of ``data`` are views of them)
     groups: dict[tuple[str, ...], np.ndarray] = field(default_factory=dict)
+    # the most decimals a ``t`` cell's text carries over the file's first _STAMP_DECIMAL_LINES
+    # data lines and over all of its rows, when the fast parser read the file (see _stamps_ns)
+    stamp_decimals: tuple[int, int] | None = None
 
     @property
     def n(self) -> int:
@@ -454,7 +457,8 @@ class _Table:
         groups = {names: g[keep] for names, g in self.groups.items()}
         grouped = {name: g[:, j] for names, g in groups.items() for j, name in enumerate(names)}
         return _Table(self.path, {k: grouped[k] if k in grouped else v[keep] for k, v in self.data.items()},
-                      self.lines[keep], None if self.stamps_ns is None else self.stamps_ns[keep], groups)
+                      self.lines[keep], None if self.stamps_ns is None else self.stamps_ns[keep], groups,
+                      self.stamp_decimals)
 
 
 def _check_options(time_base: str, gyro_units: str, accel_units: str) -> tuple[float, float]:
@@ -482,7 +486,11 @@ def _cell_decimals(cell: str) -> int:
     return len(mantissa.partition(".")[2]) - shift
 
 
-def _stamp_decimals(path: Path, header: list[str], max_lines: int = 2000) -> int:
+_STAMP_DECIMAL_LINES = 2000
+"""Data lines over which :func:`_stamps_ns` takes the most decimals a stamp is written with."""
+
+
+def _stamp_decimals(path: Path, header: list[str], max_lines: int = _STAMP_DECIMAL_LINES) -> int:
     """Most decimals written in the ``t`` column over the first data lines (any float form)."""
     j = header.index("t")
     d = 0
@@ -506,13 +514,23 @@ def _stamps_ns(table: _Table, header: list[str]) -> np.ndarray:
     decimals: then, as when ``|t| 10^d >= 2^51`` (e.g. unix stamps with 7+ decimals), the
     column is converted exactly from its text (half-even at 1 ns; by the fast parser when it
     read the file, ``table.stamps_ns``, else re-read).  A later row whose extra decimals lie
-    below float64's resolution of ``t`` is rounded to ``d`` decimals."""
+    below float64's resolution of ``t`` is rounded to ``d`` decimals.  When the fast parser read
+    the file it counted the decimals itself (``table.stamp_decimals``: no text scan), and when
+    no row carries more than ``d`` its exact ns are the fast path's result, taken as they are."""
     t = table.data["t"]
-    d = min(_stamp_decimals(table.path, header), 9)
+    if table.stamp_decimals is None:
+        d = min(_stamp_decimals(table.path, header), 9)
+    else:       # the fast parser's count over the same lines
+        d = min(max(table.stamp_decimals[0], 0), 9)
     if t.size == 0:
         return np.zeros(0, dtype=np.int64)
     t_max = max(float(np.max(t)), -float(np.min(t)))
     scale = 10.0 ** d
+    if (table.stamps_ns is not None and table.stamp_decimals is not None and table.stamp_decimals[1] <= d
+            and t_max * scale < 2.0 ** 51):
+        # no row carries more than d decimals: each stamp is k / 10^d (|k| < 2^51) and round(t 10^d)
+        # is k (errors < 0.5), so the fast path below would give the parser's exact ns
+        return table.stamps_ns
     tolerance = 4.0 * np.finfo(np.float64).eps * t_max * scale
     # a block of rows at a time: the residuals first, then the ns (no full-length temporaries)
     if t_max * scale < 2.0 ** 51 and all(
@@ -731,8 +749,9 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
     if extra:
         warnings.append(f"{path.name}: ignoring extra column(s) {_names(extra)}")
     positions = [header.index(c) for c in wanted]
+    decimals: list[int] = []
     parsed = None if jitmode.interpreted() else _parse_plain(path, len(header), positions, header.index("t"),
-                                                             progress, widths, memory)
+                                                             progress, widths, memory, decimals)
     if parsed is not None:      # the kernel takes only finite numbers and no blank line: nothing to check
         values, stamps_ns = parsed
         names = iter(wanted)
@@ -749,7 +768,7 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
         lines = spill.like(values[0], n, (), np.int64)        # on the spill file with the values
         for a, b in spill.windows(n, lines):
             lines[a:b] = np.arange(a + 2, b + 2, dtype=np.int64)
-        return _Table(path, data, lines, stamps_ns, groups)
+        return _Table(path, data, lines, stamps_ns, groups, (decimals[0], decimals[1]) if decimals else None)
     block = _parse_with_pandas(path, header, wanted, positions, progress)
     finite = np.isfinite(block)
     n = block.shape[1]
@@ -776,14 +795,17 @@ def _read_table(path: Path, header: list[str], wanted: list[str], warnings: list
 
 def _parse_plain(path: Path, n_fields: int, positions: list[int], stamp_position: int,
                  progress: Callable[[float], None] | None, widths: Sequence[int] | None,
-                 memory: int | None = None) -> tuple[list[np.ndarray], np.ndarray | None] | None:
+                 memory: int | None = None,
+                 decimals: list[int] | None = None) -> tuple[list[np.ndarray], np.ndarray | None] | None:
     """The float64 columns in groups of ``widths`` and the exact ns of field ``stamp_position``
-    (or None) by :func:`navpp.io.csvparse.parse_columns` (spilled beyond ``memory`` bytes); None
-    when the file is not plain (then :func:`_parse_with_pandas` reads it and names the fault)."""
+    (or None) by :func:`navpp.io.csvparse.parse_columns` (spilled beyond ``memory`` bytes; the
+    stamps' decimals appended to ``decimals`` as there); None when the file is not plain (then
+    :func:`_parse_with_pandas` reads it and names the fault)."""
     from navpp.io.csvparse import parse_columns
 
     try:
-        return parse_columns(path, n_fields, positions, stamp_position, progress, widths, memory)
+        return parse_columns(path, n_fields, positions, stamp_position, progress, widths, memory, decimals,
+                             _STAMP_DECIMAL_LINES)
     except OSError as e:
         raise InputError(f"{path}: cannot read: {e}") from e
 
@@ -954,16 +976,17 @@ def _drop_invalid_fixes(table: _Table, warnings: list[str]) -> _Table:
     return kept
 
 
-def _check_rate(table: _Table, t: np.ndarray, what: str, low: float, high: float) -> None:
-    """A median sample interval far outside ``[1/high, 1/low]`` s means ``t`` is not in seconds."""
+def _check_rate(table: _Table, t: np.ndarray, what: str, low: float, high: float) -> float:
+    """A median sample interval far outside ``[1/high, 1/low]`` s means ``t`` is not in seconds.
+    Returns that median (s; NaN for fewer than 2 stamps)."""
     if t.shape[0] < 2:
-        return
+        return float("nan")
     dt = float(np.median(np.diff(t), overwrite_input=True))
     if dt <= 0:
-        return
+        return dt
     rate = 1.0 / dt
     if low <= rate <= high:
-        return
+        return dt
     hint = ""
     for factor, unit in ((1e3, "milliseconds"), (1e6, "microseconds"), (1e9, "nanoseconds")):
         if low <= rate * factor <= high:
@@ -1053,12 +1076,15 @@ def _check_time(table: _Table, warnings: list[str]) -> _Table:
     return table.take(keep)
 
 
-def _gap_warning(file_name: str, t: np.ndarray, lines: np.ndarray, warnings: list[str]) -> None:
-    """Warn about intervals longer than ``GAP_FACTOR`` times the median interval."""
+def _gap_warning(file_name: str, t: np.ndarray, lines: np.ndarray, warnings: list[str],
+                 nominal: float | None = None) -> None:
+    """Warn about intervals longer than ``GAP_FACTOR`` times the median interval (``nominal``
+    when the caller has it already: that of ``t``)."""
     if t.shape[0] < 3:
         return
     dt = np.diff(t)
-    nominal = float(np.median(dt))
+    if nominal is None:
+        nominal = float(np.median(dt))
     gaps = dt > GAP_FACTOR * nominal
     if not gaps.any():
         return

@@ -8,11 +8,13 @@ separated by ``,``, ended by ``\\n`` or ``\\r\\n`` (the last one may lack it); a
 Eisel-Lemire algorithm (Lemire, "Number parsing at a gigabyte per second", 2021; the form
 without fallback of Mushtak and Lemire, 2023, as in the ``fast_float`` library): correctly
 rounded (half-even), so every value is the double Python's ``float`` and pandas give for the
-same text; the stamp column also becomes exact integer nanoseconds.  Anything else (an empty
-or quoted cell, ``nan``, blanks, a blank line, a wrong number of cells, a byte outside ASCII,
-more than 19 significant digits, a value that would be subnormal or overflow) makes
-:func:`parse_columns` return None, and the caller reads the file with its exact, slower parser
-that also locates and names the fault.
+same text; the stamp column also becomes exact integer nanoseconds.  Digits are taken eight
+at a time where eight follow (SWAR), and the buffer is indexed unsigned (numba tests signed
+indices for wraparound on every byte).  Anything else (an empty or quoted cell, ``nan``,
+blanks, a blank line, a wrong number of cells, a byte outside ASCII, more than 19 significant
+digits, a value that would be subnormal or overflow) makes :func:`parse_columns` return None,
+and the caller reads the file with its exact, slower parser that also locates and names the
+fault.
 """
 
 from __future__ import annotations
@@ -48,6 +50,8 @@ _BLOCK_BYTES = 1 << 22
 """Bytes of the file mapped per call of the kernel (4 MiB): the file is never held whole."""
 
 _OK, _FALLBACK, _FULL = 0, 1, 2     # kernel status: block done; not the plain form; output full
+
+_NONE = -(1 << 62)                  # in the decimals' stats: no row yet
 
 _SMALLEST_POWER = -342              # 10^q with q below this is 0, above _LARGEST_POWER infinite
 _LARGEST_POWER = 308
@@ -133,10 +137,30 @@ def _to_bits(w, q, negative, pow5):
 @njit(cache=True)
 def _digits(buf, i, w):
     """``w`` with the decimal digits from ``buf[i]`` on appended (uint64, wraps beyond 19
-    digits), and the index of the first byte that is not a digit."""
+    digits), and the index of the first byte that is not a digit.
+
+    Eight digits at a time while eight bytes are digits (SWAR: Lemire's test and conversion of
+    eight ASCII digits in a 64-bit word), then one at a time."""
     ten = np.uint64(10)
+    high = np.uint64(0xF0F0F0F0F0F0F0F0)
+    while i + 8 <= buf.shape[0]:
+        j = np.uint64(i)            # unsigned: no wraparound test, so that the 8 loads fuse into one
+        v = np.uint64(0)
+        for k in range(8):          # buf[i:i + 8] as one little-endian uint64 (first byte lowest)
+            v |= np.uint64(buf[j + np.uint64(k)]) << np.uint64(8 * k)
+        # every byte 0x30..0x39: high nibble 3, and adding 6 leaves it 3
+        if ((v & high) | (((v + np.uint64(0x0606060606060606)) & high) >> np.uint64(4))) \
+                != np.uint64(0x3333333333333333):
+            break
+        v -= np.uint64(0x3030303030303030)
+        v = v * ten + (v >> np.uint64(8))                   # byte pairs: 2-digit values
+        mask = np.uint64(0x000000FF000000FF)
+        v = ((v & mask) * np.uint64(0x000F424000000064)
+             + ((v >> np.uint64(16)) & mask) * np.uint64(0x0000271000000001)) >> np.uint64(32)
+        w = w * np.uint64(100000000) + (v & np.uint64(0xFFFFFFFF))
+        i += 8
     while True:
-        d = np.uint64(buf[i]) - np.uint64(48)      # wraps to a huge value below '0'
+        d = np.uint64(buf[np.uint64(i)]) - np.uint64(48)      # wraps to a huge value below '0'
         if d > 9:
             return w, i
         w = w * ten + d
@@ -177,46 +201,55 @@ def _exact_ns(w, q, negative):
 
 
 @njit(cache=True)
-def _parse_block(buf, target, component, stamp_field, outs, row0, pow5):
+def _parse_block(buf, target, component, stamp_field, outs, row0, pow5, stats):
     """Parse the whole lines of ``buf`` (those up to its last ``\n``; the bytes after it are left)
     into ``outs[target[field]][row0 + row, component[field]]`` as IEEE bits (``outs`` a tuple of
     (capacity, width) uint64 arrays).
 
     ``target`` (n_fields,) int64: the output array of each field, -1 for a field not wanted;
     ``component`` (n_fields,) int64: its column there.  Field ``stamp_field`` (if >= 0) is also
-    written to ``outs[-1][:, 0]`` as the exact integer nanoseconds its text says (:func:`_exact_ns`).
+    written to ``outs[-1][:, 0]`` as the exact integer nanoseconds its text says (:func:`_exact_ns`),
+    and the decimals its text carries (digits after the point less the exponent) raise
+    ``stats[0]`` (over rows ``row < stats[3]``) and ``stats[1]`` (over all rows) to their most;
+    ``stats[2]`` becomes 1 when a field not wanted holds a CR not followed by LF (a line end
+    to a reader with universal newlines).
     Returns (rows parsed, bytes consumed, status): ``_OK``; ``_FULL`` when ``outs`` have no room
     for the next line (consumed stops before it); ``_FALLBACK`` when a line is not in the plain
     form (see the module docstring)."""
+    # buf[np.uint64(i)]: every index is >= 0; as unsigned, numba adds no wraparound test per byte
     stop = buf.shape[0]
-    while stop > 0 and buf[stop - 1] != 10:
+    while stop > 0 and buf[np.uint64(stop - 1)] != 10:
         stop -= 1
     n_fields = target.shape[0]
     capacity = outs[0].shape[0]
     last = len(outs) - 1
     pos = 0
     row = row0
+    most_first, most, first_rows = stats[0], stats[1], stats[3]   # in registers, not in memory
     while pos < stop:
         if row == capacity:
+            stats[0], stats[1] = most_first, most
             return row - row0, pos, _FULL
         i = pos
         for field in range(n_fields):
             col = target[field]
             if col < 0:                       # a field not wanted: skip it
                 while True:
-                    c = buf[i]
-                    if c == 44 or c == 10 or (c == 13 and buf[i + 1] == 10):
+                    c = buf[np.uint64(i)]
+                    if c == 44 or c == 10 or (c == 13 and buf[np.uint64(i + 1)] == 10):
                         break
                     if c == 34 or c >= 128:
                         return row - row0, pos, _FALLBACK
+                    if c == 13:
+                        stats[2] = 1
                     i += 1
             else:
-                c = buf[i]
+                c = buf[np.uint64(i)]
                 negative = c == 45
                 if c == 45 or c == 43:
                     i += 1
                 int_start = i
-                while buf[i] == 48:           # leading zeros
+                while buf[np.uint64(i)] == 48:           # leading zeros
                     i += 1
                 sig_start = i
                 w, i = _digits(buf, i, np.uint64(0))
@@ -224,11 +257,11 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5):
                 if i == int_start:
                     return row - row0, pos, _FALLBACK   # no digit before the point (or the cell)
                 exp10 = 0
-                if buf[i] == 46:
+                if buf[np.uint64(i)] == 46:
                     i += 1
                     frac_start = i
                     if n_sig == 0:
-                        while buf[i] == 48:   # zeros after "0.": not significant
+                        while buf[np.uint64(i)] == 48:   # zeros after "0.": not significant
                             i += 1
                     sig_start = i
                     w, i = _digits(buf, i, w)
@@ -238,15 +271,15 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5):
                         return row - row0, pos, _FALLBACK   # no digit after the point
                 if n_sig > 19:
                     return row - row0, pos, _FALLBACK       # more precision than 19 digits
-                c = buf[i]
+                c = buf[np.uint64(i)]
                 if c == 101 or c == 69:
                     i += 1
-                    c = buf[i]
+                    c = buf[np.uint64(i)]
                     e_negative = c == 45
                     if c == 45 or c == 43:
                         i += 1
                     e_start = i
-                    while buf[i] == 48:
+                    while buf[np.uint64(i)] == 48:
                         i += 1
                     digits_start = i
                     e, i = _digits(buf, i, np.uint64(0))
@@ -259,25 +292,30 @@ def _parse_block(buf, target, component, stamp_field, outs, row0, pow5):
                     bits, ok = _to_bits(w, exp10, negative, pow5)
                     if not ok:
                         return row - row0, pos, _FALLBACK
-                outs[col][row, component[field]] = bits
+                outs[col][np.uint64(row), np.uint64(component[field])] = bits
                 if field == stamp_field:
-                    outs[last][row, 0] = _exact_ns(w, exp10, negative)
+                    outs[last][np.uint64(row), 0] = _exact_ns(w, exp10, negative)
+                    most = max(most, -exp10)
+                    if row < first_rows:
+                        most_first = max(most_first, -exp10)
             if field < n_fields - 1:
-                if buf[i] != 44:
+                if buf[np.uint64(i)] != 44:
                     return row - row0, pos, _FALLBACK   # too few fields, or not a plain number
                 i += 1
-        if buf[i] == 13:
+        if buf[np.uint64(i)] == 13:
             i += 1
-        if buf[i] != 10:
+        if buf[np.uint64(i)] != 10:
             return row - row0, pos, _FALLBACK           # too many fields, or not a plain number
         row += 1
         pos = i + 1
+    stats[0], stats[1] = most_first, most
     return row - row0, pos, _OK
 
 
 def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_position: int | None = None,
                   progress: Callable[[float], None] | None = None, widths: Sequence[int] | None = None,
-                  budget_bytes: int | None = None) -> tuple[list[np.ndarray], np.ndarray | None] | None:
+                  budget_bytes: int | None = None, decimals: list[int] | None = None,
+                  decimal_rows: int = 2000) -> tuple[list[np.ndarray], np.ndarray | None] | None:
     """The data rows of CSV file ``path`` (a header line, then rows of ``n_fields`` cells) as
     float64 arrays, the fields ``positions`` split in consecutive groups of ``widths`` (default
     one each): a group of one an (n_rows,) array, a wider one an (n_rows, width) C-contiguous
@@ -287,7 +325,11 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
     when the file is not in the plain form the kernel takes (then nothing is known about why).
     ``progress(fraction)`` follows the bytes read.  When the arrays would hold more than
     ``budget_bytes`` (None: never) they are made on a spill file (:mod:`navpp.spill`) and each
-    window's rows are released once parsed, so the file's values never stay in memory whole."""
+    window's rows are released once parsed, so the file's values never stay in memory whole.
+    When ``decimals`` (a list) is given, the most decimals a stamp cell carries (digits after
+    the point less the exponent; -2**62 for no row) over the first ``decimal_rows`` rows and
+    over all rows are appended to it, unless the header or a cell not wanted holds a lone CR (a
+    line break to Python's universal newlines, not to this parse)."""
     widths = [1] * len(positions) if widths is None else list(widths)
     target = np.full(n_fields, -1, dtype=np.int64)
     component = np.zeros(n_fields, dtype=np.int64)
@@ -305,6 +347,7 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
         header = fh.readline(_BLOCK_BYTES)
         if not header.endswith(b"\n") or b'"' in header:
             return None
+        header_cr = b"\r" in header[:-2 if header.endswith(b"\r\n") else -1]   # a lone CR: a line end to text mode
         sample = fh.read(1 << 16)
         # room for the rows if they are as long as those of the first 64 KiB, and 5 % more;
         # grown if not (pages never written cost no memory)
@@ -316,6 +359,7 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
         rows = 0
         start = len(header)                   # file offset of the first line not parsed yet
         buf = np.empty(_BLOCK_BYTES + 1, dtype=np.uint8)    # one byte more: the last line's missing end
+        stats = np.array([_NONE, _NONE, 0, decimal_rows], dtype=np.int64)
         while start < size:
             # read into one reused buffer, not mapped: a file cut short while it is read must
             # give an error line, not a SIGBUS
@@ -327,7 +371,8 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
             if last and buf[got - 1] != 10:
                 buf[got] = 10                 # the last line lacks its end: give it one
                 got += 1
-            done, outs, status = _parse_lines(buf[:got], target, component, stamp_field, outs, rows, budget_bytes)
+            done, outs, status = _parse_lines(buf[:got], target, component, stamp_field, outs, rows, stats,
+                                              budget_bytes)
             release(outs, rows, rows + done[0])
             rows += done[0]
             if status == _FALLBACK:
@@ -343,6 +388,8 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
             return None                       # no data line: the slow path says so
     values = [out[:rows, 0].view(np.float64) if width == 1 else out[:rows].view(np.float64)
               for out, width in zip(outs, widths)]
+    if decimals is not None and stamp_position is not None and stats[2] == 0 and not header_cr:
+        decimals += [int(stats[0]), int(stats[1])]
     if stamp_position is None:
         return values, None
     stamps = outs[-1][:rows, 0]
@@ -351,15 +398,15 @@ def parse_columns(path: Path, n_fields: int, positions: list[int], stamp_positio
 
 
 def _parse_lines(buf: np.ndarray, target: np.ndarray, component: np.ndarray, stamp_field: int,
-                 outs: tuple[np.ndarray, ...], rows: int,
+                 outs: tuple[np.ndarray, ...], rows: int, stats: np.ndarray,
                  budget_bytes: int | None = None) -> tuple[tuple[int, int], tuple[np.ndarray, ...], int]:
     """The whole lines of ``buf`` (uint8) parsed into ``outs`` from row ``rows`` on by
-    :func:`_parse_block`, the outputs grown as often as they fill (onto the spill file once they
-    would hold more than ``budget_bytes``; None: never): ((rows parsed, bytes consumed), the
+    :func:`_parse_block` (``stats`` as there), the outputs grown as often as they fill (onto the
+    spill file once they would hold more than ``budget_bytes``; None: never): ((rows parsed, bytes consumed), the
     outputs, status ``_OK`` or ``_FALLBACK``)."""
     done = used = 0
     while True:
-        n, u, status = _parse_block(buf[used:], target, component, stamp_field, outs, rows + done, _POW5)
+        n, u, status = _parse_block(buf[used:], target, component, stamp_field, outs, rows + done, _POW5, stats)
         done += n
         used += u
         if status != _FULL:
