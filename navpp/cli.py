@@ -291,13 +291,21 @@ def process(
         return
     print_process_summary(res, quiet, process_details(res, prog.marks, t_start, time.perf_counter()) if verbose else [],
                           compile_s=announcer.seconds)
+    from rich.console import Console
+
     from .kernel import native_hint
+    from .native import build_due, build_in_child
 
-    hint = "" if quiet else native_hint()
-    if hint:
-        from rich.console import Console
-
-        note(Console(stderr=True, highlight=False, soft_wrap=True), hint)
+    err = Console(stderr=True, highlight=False, soft_wrap=True)
+    if announcer.kernels and build_due():       # this run compiled: the native module too, once
+        if not quiet:
+            note(err, "building navpp's native module from the kernels now in numba's cache (once, about a minute "
+                      "of CPU; later runs start without numba; NAVPP_NATIVE=0 skips this) ...")
+        line = build_in_child()
+        if not quiet:
+            note(err, line)
+    elif not quiet and (hint := native_hint()):
+        note(err, hint)
 
 
 DEFAULT_COMPARE = "ekf,aekf,ckf,vce-ckf,rwckf"

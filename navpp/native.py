@@ -10,6 +10,11 @@ Both are written under temporary names and renamed into place, the manifest last
 never sees half a module.  Older modules of other source versions in the same directory are
 removed.
 
+Besides ``navpp compile``, a ``navpp process`` run that had to compile kernels (a first run, a
+new path) builds the module at its end (:func:`build_due`, ``python -m navpp.native`` in a child
+process, announced), so the next run starts without numba; a build that fails leaves a marker
+beside the module's name so that later runs do not try again for these sources.
+
 A signature whose types the native entry points cannot check (:func:`type_spec` gives None:
 records, strings, lists, functions, omitted defaults) is left to numba.  Building needs a C
 compiler (numba's ``pycc`` calls it through setuptools); without one :func:`build` raises
@@ -25,6 +30,9 @@ import importlib.util
 import json
 import os
 import pkgutil
+import shutil
+import subprocess
+import sys
 import tempfile
 import time
 import warnings
@@ -208,6 +216,8 @@ def build(progress: Any = None, dispatchers: list[Any] | None = None, force: boo
         json.dump(manifest, f, indent=1, sort_keys=True)
     os.replace(staged, manifest_path)
     _remove_stale(where, name)
+    with contextlib.suppress(OSError):
+        os.remove(_failed_marker())
     return BuildResult(ext_path, len(kernels), len(todo), time.process_time() - t0, tuple(skipped), True)
 
 
@@ -226,3 +236,65 @@ def _remove_stale(where: str, keep: str) -> None:
         if not os.path.basename(path).startswith(keep):
             with contextlib.suppress(OSError):
                 os.remove(path)
+
+
+def _failed_marker() -> str:
+    name, _, _ = kernel.native_paths()
+    return os.path.join(kernel.native_dir(), name + ".failed")
+
+
+def c_compiler() -> str | None:
+    """The C compiler numba's AOT build would call (``$CC``, else ``cc`` or ``gcc`` on the PATH)."""
+    for cand in (os.environ.get("CC", "").split(" ")[0], "cc", "gcc"):
+        if cand and shutil.which(cand):
+            return cand
+    return None
+
+
+def build_due() -> bool:
+    """Whether a run that just compiled kernels should build the native module: compiled mode,
+    not turned off (``NAVPP_NATIVE=0``), none loaded for these sources, a C compiler there, and
+    no earlier failed build for these sources."""
+    from . import jitmode
+
+    if jitmode.interpreted() or os.environ.get(kernel.ENV_USE, "1").strip() == "0" or sys.platform == "win32":
+        return False
+    if kernel.native() is not None or c_compiler() is None:
+        return False
+    _, ext_path, manifest_path = kernel.native_paths()
+    if os.path.exists(manifest_path) and os.path.exists(ext_path):
+        return False                # built meanwhile (another run), not loaded by this one
+    return not os.path.exists(_failed_marker())
+
+
+def build_in_child() -> str:
+    """Build the native module in a child process (``python -m navpp.native``: this process's
+    memory stays as it is); returns the child's one-line report."""
+    env = {**os.environ, kernel.ENV_USE: "0"}
+    proc = subprocess.run([sys.executable, "-m", "navpp.native"], env=env, capture_output=True, text=True)
+    lines = (proc.stdout.strip() or proc.stderr.strip() or f"exit code {proc.returncode}").splitlines()
+    return lines[-1]
+
+
+def main() -> int:
+    """``python -m navpp.native``: build the module for the current sources; one line on stdout;
+    exit 1 (and a marker that stops later runs from retrying) when it cannot be built."""
+    from . import jitmode
+
+    jitmode.apply(True)
+    try:
+        r = build()
+    except NativeBuildError as exc:
+        os.makedirs(kernel.native_dir(), mode=0o700, exist_ok=True)
+        with open(_failed_marker(), "w", encoding="utf-8") as f:
+            f.write(f"{exc}\n")
+        print(f"the native module was not built: {exc} (navpp compile tries again)")
+        return 1
+    with contextlib.suppress(OSError):
+        os.remove(_failed_marker())
+    print(f"native module: {r.entries} entry points of {r.kernels} kernels in {r.path} ({r.cpu_s:.0f} s of CPU)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

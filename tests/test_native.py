@@ -187,11 +187,10 @@ def test_pipeline_on_the_native_module_is_numbas_byte_for_byte(tmp_path: Path) -
     first = subprocess.run(run + ["--out", str(tmp_path / "numba")], env={**env, "NAVPP_NATIVE": "0"},
                            capture_output=True, text=True, timeout=900)
     assert first.returncode == 0, first.stderr[-2000:]
-    build = "from navpp import jitmode, native; jitmode.apply(True); print(native.build().entries)"
-    built = subprocess.run([sys.executable, "-c", build], env={**env, "NAVPP_NATIVE": "0"}, capture_output=True,
-                           text=True, timeout=900)
+    built = subprocess.run([sys.executable, "-m", "navpp.native"], env={**env, "NAVPP_NATIVE": "0"},
+                           capture_output=True, text=True, timeout=900)
     assert built.returncode == 0, built.stderr[-2000:]
-    assert int(built.stdout.split()[-1]) > 10
+    assert built.stdout.startswith("native module: ") and int(built.stdout.split()[2]) > 10
     second = subprocess.run(run + ["--out", str(tmp_path / "native-out")], env={**env, "NAVPP_NATIVE": "1"},
                             capture_output=True, text=True, timeout=900)
     assert second.returncode == 0, second.stderr[-2000:]
@@ -241,3 +240,35 @@ def test_a_run_on_numbas_cache_is_told_about_the_native_module(monkeypatch: pyte
     monkeypatch.setenv("NAVPP_NATIVE", "1")
     monkeypatch.setattr(kernel, "_state", {"native": {"navpp.x:y": {}}})
     assert kernel.native_hint() == ""
+
+
+def test_a_build_is_due_once_and_not_after_a_failure(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """After a run that compiled: a build is due when there is no module for these sources and a
+    C compiler; not with NAVPP_NATIVE=0, not without a compiler, not once a module is there, and
+    not after a failed build for these sources (its marker), which ``python -m navpp.native``
+    writes with a one-line reason and exit code 1 (here: nothing in numba's cache to build)."""
+    from navpp import native
+
+    monkeypatch.setenv("NAVPP_NATIVE_DIR", str(tmp_path / "native"))
+    monkeypatch.setenv("NAVPP_NATIVE", "1")
+    monkeypatch.setattr(kernel, "_state", {"native": None})
+    monkeypatch.setattr(native, "c_compiler", lambda: "cc")
+    assert native.build_due()
+    monkeypatch.setenv("NAVPP_NATIVE", "0")
+    assert not native.build_due()
+    monkeypatch.setenv("NAVPP_NATIVE", "1")
+    monkeypatch.setattr(native, "c_compiler", lambda: None)
+    assert not native.build_due()
+    monkeypatch.setattr(native, "c_compiler", lambda: "cc")
+    empty = tmp_path / "empty-cache"
+    env = {**os.environ, "NAVPP_NATIVE_DIR": str(tmp_path / "native"), "PYTHONPATH": str(ROOT),
+           "NUMBA_CACHE_DIR": str(empty)}
+    proc = subprocess.run([sys.executable, "-m", "navpp.native"], env={**env, "NAVPP_NATIVE": "0"},
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 1 and proc.stdout.startswith("the native module was not built: ")
+    assert not native.build_due()                   # the marker: later runs do not try again
+    name, ext, manifest = kernel.native_paths()
+    Path(ext).write_bytes(b"")
+    Path(manifest).write_text("{}")
+    Path(tmp_path / "native" / (name + ".failed")).unlink()
+    assert not native.build_due()                   # a module is there (built by another run)
