@@ -388,10 +388,14 @@ def integrate_with_jacobian(x: np.ndarray, t: np.ndarray, gyro: np.ndarray, acce
     segments of about ``cov_step_s`` s (:func:`transition_from_segments`).
     """
     m = int((t_end - t_start) / cov_step_s) + 2
-    seg_x = np.empty((m, NOMINAL_SIZE))
-    seg_fn = np.empty((m, 3))
-    seg_T = np.empty(m)
-    x_start = x.copy()
+    # the segments' buffers and the start state: contiguous pieces of one allocation
+    buf = np.empty(m * (NOMINAL_SIZE + 4) + x.shape[0])
+    seg_x = buf[:m * NOMINAL_SIZE].reshape((m, NOMINAL_SIZE))
+    seg_fn = buf[m * NOMINAL_SIZE:m * (NOMINAL_SIZE + 3)].reshape((m, 3))
+    seg_T = buf[m * (NOMINAL_SIZE + 3):m * (NOMINAL_SIZE + 4)]
+    x_start = buf[m * (NOMINAL_SIZE + 4):]
+    for k in range(x.shape[0]):
+        x_start[k] = x[k]
     n_seg = integrate_nominal(x, t, gyro, accel, t_start, t_end, out, record, cov_step_s, seg_x, seg_fn, seg_T)
     return transition_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd, inv_tau_g, inv_tau_a)
 
