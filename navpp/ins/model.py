@@ -869,22 +869,34 @@ class GnssPosition:
 def gnss_innovation(x: np.ndarray, lat: float, lon: float, h: float, lever: np.ndarray) -> np.ndarray:
     """GNSS fix (``lat``, ``lon`` rad, ``h`` m) minus the antenna position predicted from the
     nominal ``x`` with the lever arm ``lever`` (body FLU, m): local ENU m about the nominal (3,)."""
+    return gnss_innovation_offset(x, lat, lon, h, antenna_offset_enu(x, lever))
+
+
+@njit(cache=True, inline="always")
+def gnss_innovation_offset(x: np.ndarray, lat: float, lon: float, h: float, offset: np.ndarray) -> np.ndarray:
+    """:func:`gnss_innovation` with the antenna's ENU ``offset`` (m) from the nominal position
+    given (:func:`antenna_offset_enu`: a caller that also needs the Jacobian computes it once)."""
     rm, rn = radii(x[X_LAT])
     hx = x[X_H]
     d = np.empty(3)
     d[0] = _wrap_pi(lon - x[X_LON]) * (rn + hx) * np.cos(x[X_LAT])
     d[1] = (lat - x[X_LAT]) * (rm + hx)
     d[2] = h - hx
-    nu: np.ndarray = d - antenna_offset_enu(x, lever)
+    nu: np.ndarray = d - offset
     return nu
 
 
 @njit(cache=True)
 def gnss_jacobian(x: np.ndarray, lever: np.ndarray) -> np.ndarray:
     """H (3, 15) of :func:`gnss_innovation`'s prediction: ``[-[(C l) x], 0, I, 0, 0]``."""
+    return gnss_jacobian_offset(antenna_offset_enu(x, lever))
+
+
+@njit(cache=True, inline="always")
+def gnss_jacobian_offset(offset: np.ndarray) -> np.ndarray:
+    """:func:`gnss_jacobian` with the antenna's ENU ``offset`` (m) given (:func:`gnss_innovation_offset`)."""
     H = np.zeros((3, N_ERR))
-    a = antenna_offset_enu(x, lever)
-    _set_neg_skew(H, 0, DX_ATT, a)
+    _set_neg_skew(H, 0, DX_ATT, offset)
     H[0, DP_E] = H[1, DP_N] = H[2, DP_U] = 1.0
     return H
 
