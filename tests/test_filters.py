@@ -119,3 +119,28 @@ def test_sigma_point_filter_repairs_a_slightly_indefinite_covariance():
     assert np.all(np.linalg.eigvalsh(state.P) > 0)
     with pytest.raises(FilterDivergedError, match=r"ckf: covariance is not finite at t=0\.000 s"):
         filt.predict(GaussianState(0.0, np.zeros(n), np.full((n, n), np.nan)), model, (0.0, 1.0))
+
+
+def test_gain_and_nis_same_bits_as_chol_solve():
+    """gain_and_nis solves row by row without transposed copies: the same bits as chol_solve on
+    Pxz^T and on nu (the form it had), and nis by the same dot product."""
+    from navpp.filters.linalg import chol_solve, cholesky, gain_and_nis
+    from navpp.kernel import njit
+
+    dot = njit()(lambda a, b: a @ b)    # the compiled dot product gain_and_nis uses
+    rng = np.random.default_rng(11)
+    for m in (1, 2, 3, 6):
+        for _ in range(10):
+            A = rng.normal(size=(m, m))
+            S = A @ A.T + m * np.eye(m)
+            Pxz = rng.normal(size=(15, m))
+            nu = rng.normal(size=m)
+            K, nis, ok = gain_and_nis(Pxz, S, nu)
+            L, ok_ref = cholesky(S)
+            assert ok and ok_ref
+            K_ref = chol_solve(L, np.ascontiguousarray(Pxz.T)).T.copy()
+            w = chol_solve(L, nu.reshape(-1, 1))[:, 0].copy()
+            assert K.tobytes() == K_ref.tobytes()
+            assert nis == dot(nu, w)
+    K, nis, ok = gain_and_nis(np.ones((15, 3)), -np.eye(3), np.ones(3))
+    assert not ok and nis == np.inf

@@ -194,3 +194,21 @@ def test_bias_process_keeps_turn_on_uncertainty():
     assert M.NoiseModel.bias_process(10.0, 0.0, 300.0) == (0.0, math.inf)        # a random constant
     q, tau = M.NoiseModel.bias_process(10.0, 1.0, math.inf)
     assert tau == math.inf and q * 3600.0 == pytest.approx(1.0)                 # random walk
+
+
+def test_gnss_offset_forms_are_the_same_bits():
+    """The fused fix update computes the antenna offset once (gnss_*_offset): the same bits as
+    gnss_innovation and gnss_jacobian, which compute it each."""
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        x = np.zeros(16)
+        q = rng.normal(size=4)
+        x[0:4] = q / np.linalg.norm(q)
+        x[4:7] = rng.normal(scale=10.0, size=3)
+        x[7], x[8], x[9] = rng.uniform(-1.2, 1.2), rng.uniform(-3.0, 3.0), rng.uniform(-50.0, 3000.0)
+        lever = rng.normal(size=3)
+        lat, lon, h = x[7] + rng.normal(scale=1e-6), x[8] + rng.normal(scale=1e-6), x[9] + rng.normal()
+        offset = M.antenna_offset_enu(x, lever)
+        assert M.gnss_innovation_offset(x, lat, lon, h, offset).tobytes() == \
+            M.gnss_innovation(x, lat, lon, h, lever).tobytes()
+        assert M.gnss_jacobian_offset(offset).tobytes() == M.gnss_jacobian(x, lever).tobytes()

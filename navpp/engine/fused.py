@@ -40,7 +40,15 @@ from ..filters.linalg import (
     propagated_covariance,
 )
 from ..ins.aids import zero_rate, zero_velocity
-from ..ins.model import GnssPosition, InsModel, gnss_innovation, gnss_jacobian, integrate_with_jacobian, plus
+from ..ins.model import (
+    GnssPosition,
+    InsModel,
+    antenna_offset_enu,
+    gnss_innovation_offset,
+    gnss_jacobian_offset,
+    integrate_with_jacobian,
+    plus,
+)
 from ..ins.state import DX_ATT, DX_BG, DX_VEL, NOMINAL_SIZE, X_BG, X_VE
 from ..jitmode import interpreted
 from .measurements import RunMeasurements
@@ -134,9 +142,10 @@ def _fix_update(x: np.ndarray, P: np.ndarray, lat: float, lon: float, alt: float
     ``(status, nu, S, R, nis, x+, P+)``, ``status`` :data:`FIX_ACCEPTED` when it passes the gate
     ``gate`` and leaves a sound state, :data:`FIX_REJECTED` (the prior returned) when it fails the
     gate, else :data:`FIX_GENERIC` (S not positive definite, an unsound posterior)."""
-    H = gnss_jacobian(x, lever)
+    offset = antenna_offset_enu(x, lever)       # once for both (gnss_jacobian, gnss_innovation)
+    H = gnss_jacobian_offset(offset)
     PHt, Pzz = linear_moments(P, H)
-    nu = gnss_innovation(x, lat, lon, alt, lever)
+    nu = gnss_innovation_offset(x, lat, lon, alt, offset)
     R = np.zeros((3, 3))
     for e in range(3):
         R[e, e] = var[e]

@@ -61,7 +61,12 @@ def finite_with_positive_variances(x: np.ndarray, P: np.ndarray) -> bool:
     """Whether :func:`all_finite` holds for the state ``x`` (n,) and its covariance ``P`` (m, m)
     and every variance on ``P``'s diagonal is positive: a state that needs no closer look
     (:func:`navpp.engine.verdict.state_fault`)."""
-    return all_finite(x, P) and np.diag(P).min() > 0.0
+    if not all_finite(x, P):
+        return False
+    for i in range(P.shape[0]):  # noqa: SIM110 (compiled: a loop, no copy of the diagonal; all finite, so min > 0 is every > 0)
+        if not P[i, i] > 0.0:
+            return False
+    return True
 
 
 @compiled
@@ -110,9 +115,35 @@ def gain_and_nis(Pxz: np.ndarray, S: np.ndarray, nu: np.ndarray) -> tuple[np.nda
     L, ok = cholesky(S)
     if not ok:
         return np.zeros_like(Pxz), np.inf, False
-    Kt = chol_solve(L, np.ascontiguousarray(Pxz.T))
-    w = chol_solve(L, nu.reshape(-1, 1))[:, 0].copy()
-    return Kt.T.copy(), float(nu @ w), True
+    # chol_solve's substitutions (the same operations in the same order) on each row of Pxz, the
+    # solution written straight into K's row, and on nu: no transposed copies
+    n, m = Pxz.shape
+    K = np.empty((n, m))
+    for c in range(n):
+        _chol_solve_row(L, Pxz, c, K)
+    nu2 = np.empty((1, m))
+    for i in range(m):
+        nu2[0, i] = nu[i]
+    _chol_solve_row(L, nu2, 0, nu2)
+    w = nu2[0]
+    return K, float(nu @ w), True
+
+
+@njit(cache=True, inline="always")
+def _chol_solve_row(L: np.ndarray, B: np.ndarray, c: int, out: np.ndarray) -> None:
+    """``out[c] = (L L^T)^-1 B[c]`` for lower-triangular ``L`` (m, m): :func:`chol_solve` of the
+    column ``B[c]`` (the same operations in the same order); ``out`` may be ``B``."""
+    m = L.shape[0]
+    for i in range(m):
+        s = B[c, i]
+        for j in range(i):
+            s -= L[i, j] * out[c, j]
+        out[c, i] = s / L[i, i]
+    for i in range(m - 1, -1, -1):
+        s = out[c, i]
+        for j in range(i + 1, m):
+            s -= L[j, i] * out[c, j]
+        out[c, i] = s / L[i, i]
 
 
 @compiled

@@ -388,10 +388,14 @@ def integrate_with_jacobian(x: np.ndarray, t: np.ndarray, gyro: np.ndarray, acce
     segments of about ``cov_step_s`` s (:func:`transition_from_segments`).
     """
     m = int((t_end - t_start) / cov_step_s) + 2
-    seg_x = np.empty((m, NOMINAL_SIZE))
-    seg_fn = np.empty((m, 3))
-    seg_T = np.empty(m)
-    x_start = x.copy()
+    # the segments' buffers and the start state: contiguous pieces of one allocation
+    buf = np.empty(m * (NOMINAL_SIZE + 4) + x.shape[0])
+    seg_x = buf[:m * NOMINAL_SIZE].reshape((m, NOMINAL_SIZE))
+    seg_fn = buf[m * NOMINAL_SIZE:m * (NOMINAL_SIZE + 3)].reshape((m, 3))
+    seg_T = buf[m * (NOMINAL_SIZE + 3):m * (NOMINAL_SIZE + 4)]
+    x_start = buf[m * (NOMINAL_SIZE + 4):]
+    for k in range(x.shape[0]):
+        x_start[k] = x[k]
     n_seg = integrate_nominal(x, t, gyro, accel, t_start, t_end, out, record, cov_step_s, seg_x, seg_fn, seg_T)
     return transition_from_segments(x_start, seg_x, seg_fn, seg_T, n_seg, psd, inv_tau_g, inv_tau_a)
 
@@ -865,22 +869,34 @@ class GnssPosition:
 def gnss_innovation(x: np.ndarray, lat: float, lon: float, h: float, lever: np.ndarray) -> np.ndarray:
     """GNSS fix (``lat``, ``lon`` rad, ``h`` m) minus the antenna position predicted from the
     nominal ``x`` with the lever arm ``lever`` (body FLU, m): local ENU m about the nominal (3,)."""
+    return gnss_innovation_offset(x, lat, lon, h, antenna_offset_enu(x, lever))
+
+
+@njit(cache=True, inline="always")
+def gnss_innovation_offset(x: np.ndarray, lat: float, lon: float, h: float, offset: np.ndarray) -> np.ndarray:
+    """:func:`gnss_innovation` with the antenna's ENU ``offset`` (m) from the nominal position
+    given (:func:`antenna_offset_enu`: a caller that also needs the Jacobian computes it once)."""
     rm, rn = radii(x[X_LAT])
     hx = x[X_H]
     d = np.empty(3)
     d[0] = _wrap_pi(lon - x[X_LON]) * (rn + hx) * np.cos(x[X_LAT])
     d[1] = (lat - x[X_LAT]) * (rm + hx)
     d[2] = h - hx
-    nu: np.ndarray = d - antenna_offset_enu(x, lever)
+    nu: np.ndarray = d - offset
     return nu
 
 
 @njit(cache=True)
 def gnss_jacobian(x: np.ndarray, lever: np.ndarray) -> np.ndarray:
     """H (3, 15) of :func:`gnss_innovation`'s prediction: ``[-[(C l) x], 0, I, 0, 0]``."""
+    return gnss_jacobian_offset(antenna_offset_enu(x, lever))
+
+
+@njit(cache=True, inline="always")
+def gnss_jacobian_offset(offset: np.ndarray) -> np.ndarray:
+    """:func:`gnss_jacobian` with the antenna's ENU ``offset`` (m) given (:func:`gnss_innovation_offset`)."""
     H = np.zeros((3, N_ERR))
-    a = antenna_offset_enu(x, lever)
-    _set_neg_skew(H, 0, DX_ATT, a)
+    _set_neg_skew(H, 0, DX_ATT, offset)
     H[0, DP_E] = H[1, DP_N] = H[2, DP_U] = 1.0
     return H
 

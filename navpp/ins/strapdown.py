@@ -35,6 +35,8 @@ from .state import (
     NOMINAL_SIZE,
     NOMINAL_VEL,
     PATH_SIZE,
+    X_BA,
+    X_BG,
     X_H,
     X_LAT,
     X_LON,
@@ -94,6 +96,14 @@ def _rv2q(x: float, y: float, z: float) -> tuple[float, float, float, float]:
 @njit(cache=True)
 def step(x: np.ndarray, w0: np.ndarray, w1: np.ndarray, f0: np.ndarray, f1: np.ndarray, dt: float,
          fn_out: np.ndarray) -> None:
+    """Advance the nominal state ``x`` (in place) over one interval of ``dt`` seconds
+    (:func:`_step`: its docstring)."""
+    _step(x, w0, w1, f0, f1, dt, fn_out)
+
+
+@njit(cache=True, inline="always")
+def _step(x: np.ndarray, w0: np.ndarray, w1: np.ndarray, f0: np.ndarray, f1: np.ndarray, dt: float,
+          fn_out: np.ndarray) -> None:
     """Advance the nominal state ``x`` (in place) over one interval of ``dt`` seconds.
 
     ``w0, w1`` (rad/s) and ``f0, f1`` (m/s^2) are the bias-corrected body rates and specific
@@ -219,14 +229,15 @@ def integrate(x: np.ndarray, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
     """
     n = t.shape[0]
     i = int(np.searchsorted(t, t_start, side="right"))
-    bg = x[NOMINAL_BG].copy()
-    ba = x[NOMINAL_BA].copy()
-    w0 = np.empty(3)
-    f0 = np.empty(3)
-    w1 = np.empty(3)
-    f1 = np.empty(3)
-    dv_n = np.empty(3)
-    acc = np.zeros(3)
+    # the biases (copied: x changes in place), the rates and forces at both ends of a step, its
+    # velocity increment and the segment's sum: rows of one scratch array, not eight arrays
+    scratch = np.empty((8, 3))
+    bg, ba, w0, f0, w1, f1, dv_n, acc = (scratch[0], scratch[1], scratch[2], scratch[3], scratch[4], scratch[5],
+                                         scratch[6], scratch[7])
+    for k in range(3):
+        bg[k] = x[X_BG + k]
+        ba[k] = x[X_BA + k]
+        acc[k] = 0.0
     t_acc = 0.0
     n_seg = 0
     _sample_at(t, gyro, i, t_start, bg, w0)
@@ -245,10 +256,11 @@ def integrate(x: np.ndarray, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
             _sample_at(t, accel, i, t_end, ba, f1)
             rec = i if (i < n and t[i] == t_end) else -1
         dt = tn - tc
-        step(x, w0, w1, f0, f1, dt, dv_n)
+        _step(x, w0, w1, f0, f1, dt, dv_n)
         # (element loops, not slice assignment from arrays: see navpp/jitcache.py)
         if seg_dt > 0.0:
-            acc += dv_n
+            for k in range(3):
+                acc[k] += dv_n[k]
             t_acc += dt
             if t_acc >= seg_dt or tn >= t_end:
                 for k in range(seg_x.shape[1]):
@@ -257,7 +269,8 @@ def integrate(x: np.ndarray, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
                     seg_fn[n_seg, k] = acc[k] / t_acc
                 seg_T[n_seg] = t_acc
                 n_seg += 1
-                acc[:] = 0.0
+                for k in range(3):
+                    acc[k] = 0.0
                 t_acc = 0.0
         if record and rec >= 0:
             for k in range(out.shape[1]):
