@@ -32,6 +32,8 @@ from typing import Any, Literal
 
 import numpy as np
 
+from navpp.kernel import njit
+
 from ..intervals import interval_median
 from ..spill import Behind, like, release, release_all
 from .calibrate import BLOCK_ROWS, trapezoid_integral, trapezoid_integral_at
@@ -182,19 +184,14 @@ def find_stale_rows(
     rep = repeats[1:]                                   # (N-1,) view
     starts = np.arange(0, n - 1, window_rows)
     sizes = np.diff(np.append(starts, n - 1))
-    n_fresh = np.empty(starts.shape[0], dtype=np.int64)
-    n_same = np.empty((starts.shape[0], 6), dtype=np.int64)
+    n_fresh = np.zeros(starts.shape[0], dtype=np.int64)
+    n_same = np.zeros((starts.shape[0], 6), dtype=np.int64)
     block = max(1, BLOCK_ROWS // window_rows) * window_rows
     for lo in range(0, n - 1, block):
         hi = min(lo + block, n - 1)
-        same_ch = np.concatenate([_bits(x[lo:hi + 1]) for x in (gyro, accel)], axis=1)     # (B+1, 6)
-        same_ch = same_ch[1:] == same_ch[:-1]                                               # (B, 6)
-        same_ch.all(axis=1, out=rep[lo:hi])
-        fresh = ~rep[lo:hi]
         win = slice(lo // window_rows, lo // window_rows + -(-(hi - lo) // window_rows))
-        local = starts[win] - lo
-        n_fresh[win] = np.add.reduceat(fresh.astype(np.int64), local)
-        n_same[win] = np.add.reduceat((same_ch & fresh[:, None]).astype(np.int64), local, axis=0)
+        _repeat_counts(_bits(gyro[lo:hi + 1]), _bits(accel[lo:hi + 1]), window_rows, rep[lo:hi], n_fresh[win],
+                       n_same[win])
         release((gyro, accel), lo, hi)                  # a spilled IMU's rows read: out of memory
     k_obs = int(np.count_nonzero(rep))
 
@@ -252,6 +249,29 @@ def find_stale_rows(
                      n_repeats=k_obs,
                      expected_by_chance=float(expected), dispersion=float(dispersion),
                      confident=bool(confident), reason=reason)
+
+
+@njit(cache=True)
+def _repeat_counts(gyro: np.ndarray, accel: np.ndarray, window_rows: int, rep: np.ndarray, n_fresh: np.ndarray,
+                   n_same: np.ndarray) -> None:
+    """For the rows ``gyro``, ``accel`` (B + 1, 3) int64 (the bits of the values, :func:`_bits`):
+    ``rep`` (B,) bool, row k + 1 repeats row k in all six channels; per window of
+    ``window_rows`` of those B rows, its rows that do not (``n_fresh`` (W,), added to) and among
+    them the ones repeating each channel (``n_same`` (W, 6), added to)."""
+    for k in range(rep.shape[0]):
+        w = k // window_rows
+        all6 = True
+        for c in range(3):
+            if gyro[k + 1, c] != gyro[k, c] or accel[k + 1, c] != accel[k, c]:
+                all6 = False
+        rep[k] = all6
+        if not all6:
+            n_fresh[w] += 1
+            for c in range(3):
+                if gyro[k + 1, c] == gyro[k, c]:
+                    n_same[w, c] += 1
+                if accel[k + 1, c] == accel[k, c]:
+                    n_same[w, 3 + c] += 1
 
 
 def _bits(x: np.ndarray) -> np.ndarray:
@@ -735,33 +755,76 @@ class Cubic:
         t = np.asarray(t, dtype=float)
         if t.ndim == 0:
             return self(t[None]).reshape(())
-        x, y, d = self.x, self.y, self.d
-        i = self.interval(t)
-        j = i + 1
-        s = t - x[i]
-        h = x[j] - x[i]
-        m = y[j] - y[i]
+        x = self.x
+        grid = isinstance(x, _Grid)
+        xs = np.empty(0) if grid else np.asarray(x, dtype=float)
+        start, step = (x.start, x.step) if isinstance(x, _Grid) else (0.0, 0.0)
+        out = np.empty(t.shape)
+        _cubic_values(xs, grid, start, step, x.shape[0], np.asarray(self.y, dtype=float),
+                      np.asarray(self.d, dtype=float), np.ascontiguousarray(t).reshape(-1), out.reshape(-1))
+        return out
+
+
+@njit(cache=True)
+def _grid_row(grid: bool, xs: np.ndarray, start: float, delta: float, step: float, k: int) -> float:
+    """Row ``k`` of the breakpoints: ``xs[k]``, or of ``np.arange(start, ..., step)`` (the bits of
+    :func:`_arange_rows`)."""
+    if not grid:
+        return float(xs[k])
+    if k == 0:
+        return start
+    if k == 1:
+        return start + step
+    return float(k) * delta + start
+
+
+@njit(cache=True)
+def _cubic_values(xs: np.ndarray, grid: bool, start: float, step: float, n: int, y: np.ndarray,
+                  d: np.ndarray, t: np.ndarray, out: np.ndarray) -> None:
+    """:meth:`Cubic.__call__` of the times ``t`` (K,) into ``out`` (K,), the same operations in the
+    same order, one time at a time: the breakpoints ``xs`` (N,), or (``grid``) the rows of
+    ``np.arange(start, ..., step)`` (:class:`_Grid`, ``n`` rows)."""
+    delta = (start + step) - start
+    last = n - 2
+    x0 = _grid_row(grid, xs, start, delta, step, 0)
+    xn = _grid_row(grid, xs, start, delta, step, n - 1)
+    scale = (last + 1) / (xn - x0)
+    for k in range(t.shape[0]):
+        tk = t[k]
+        if not (tk >= x0 and tk <= xn):
+            out[k] = np.nan
+            continue
+        g = (tk - x0) * scale
+        i = min(int(g), last) if g > 0.0 else 0
+        xi = _grid_row(grid, xs, start, delta, step, i)
+        xj = _grid_row(grid, xs, start, delta, step, i + 1)
+        while tk < xi and i > 0:                       # the interval with x[i] <= t < x[i + 1]
+            i -= 1
+            xj = xi
+            xi = _grid_row(grid, xs, start, delta, step, i)
+        while tk >= xj and i < last:
+            i += 1
+            xi = xj
+            xj = _grid_row(grid, xs, start, delta, step, i + 1)
+        s = tk - xi
+        h = xj - xi
+        m = y[i + 1] - y[i]
         m /= h
         d0 = d[i]
-        q = d0 + d[j]
+        q = d0 + d[i + 1]
         q -= 2 * m
         q /= h
         m -= d0
         m /= h
-        m -= q                                        # c1
-        q /= h                                        # c0
+        m -= q
+        q /= h
         z = s * s
-        out: np.ndarray = y[i]
-        out += 0.0                                    # scipy's sum starts at +0.0
-        d0 *= s
-        out += d0
-        m *= z
-        out += m
+        v = y[i] + 0.0
+        v += d0 * s
+        v += m * z
         z *= s
-        q *= z
-        out += q
-        out[~((t >= x[0]) & (t <= x[-1]))] = np.nan
-        return out
+        v += q * z
+        out[k] = v
 
 
 def _gyro_angle(t_imu: np.ndarray, rate: Callable[[int, int], np.ndarray],
