@@ -330,3 +330,59 @@ def test_clock_offset_simulated_sigma_is_honest(kw: dict) -> None:
     assert np.all(np.abs(z) < 4.0), z
     assert 0.3 < np.sqrt(np.mean(z**2)) < 1.6, z          # neither >3x conservative nor optimistic
     assert all(x < 4.0 for x in conf_err), conf_err
+
+
+# ---------------------------------------------------------------- the kernels against numpy
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_repeat_counts_are_numpys(seed):
+    """_repeat_counts: the all-six repeats and each window's fresh and per-channel counts, as the
+    numpy expressions (bitwise equality of each channel, np.add.reduceat per window) give them."""
+    from navpp.ins.timing_estimates import _bits, _repeat_counts
+
+    rng = np.random.default_rng(seed)
+    n, w = 2345, 100
+    gyro = np.round(rng.normal(size=(n, 3)), 1)
+    accel = np.round(rng.normal(size=(n, 3)), 1)
+    again = rng.random(n) < 0.3
+    for k in np.nonzero(again)[0][1:]:
+        gyro[k], accel[k] = gyro[k - 1], accel[k - 1]
+    gyro[5, 0], gyro[4, 0] = 0.0, -0.0              # equal values, different bits: not a repeat
+    bits = np.concatenate([_bits(gyro), _bits(accel)], axis=1)
+    same = bits[1:] == bits[:-1]
+    rep_ref = same.all(axis=1)
+    starts = np.arange(0, n - 1, w)
+    fresh_ref = np.add.reduceat((~rep_ref).astype(np.int64), starts)
+    same_ref = np.add.reduceat((same & ~rep_ref[:, None]).astype(np.int64), starts, axis=0)
+    rep = np.zeros(n - 1, dtype=bool)
+    n_fresh, n_same = np.zeros(starts.shape[0], np.int64), np.zeros((starts.shape[0], 6), np.int64)
+    _repeat_counts(_bits(gyro), _bits(accel), w, rep, n_fresh, n_same)
+    np.testing.assert_array_equal(rep, rep_ref)
+    np.testing.assert_array_equal(n_fresh, fresh_ref)
+    np.testing.assert_array_equal(n_same, same_ref)
+
+
+@pytest.mark.parametrize("order", ["increasing", "shuffled"])
+def test_window_counts_are_searchsorted_bincount(order):
+    """_window_counts: rows and fresh rows per window as np.searchsorted(edges, t, "right") - 1 and
+    np.bincount count them, stamps on an edge and a NaN stamp included."""
+    from navpp.ins.timing_estimates import _window_counts
+
+    rng = np.random.default_rng(7)
+    t = np.sort(rng.uniform(0.0, 50.0, 3000))
+    t[0] = 0.0
+    edges = np.arange(t[0], t[-1], 1.0)
+    t[10:13] = edges[3:6]                                   # on an edge: the window it opens
+    t = np.sort(t)
+    t = np.append(t, np.nan)
+    if order == "shuffled":
+        t = rng.permutation(t)
+    repeats = rng.random(t.shape[0]) < 0.4
+    idx = np.searchsorted(edges, t, side="right") - 1
+    rows_ref = np.bincount(idx, minlength=edges.shape[0])
+    fresh_ref = np.bincount(idx, weights=~repeats, minlength=edges.shape[0])
+    rows, fresh = np.zeros(edges.shape[0], np.int64), np.zeros(edges.shape[0])
+    _window_counts(edges, t, repeats, rows, fresh)
+    np.testing.assert_array_equal(rows, rows_ref)
+    np.testing.assert_array_equal(fresh, fresh_ref)

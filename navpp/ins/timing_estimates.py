@@ -302,9 +302,8 @@ def fresh_count_dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_
     rows = np.zeros(edges.shape[0], dtype=np.int64)
     fresh = np.zeros(edges.shape[0])
     for lo in range(0, t.shape[0], BLOCK_ROWS):
-        idx = np.searchsorted(edges, t[lo:lo + BLOCK_ROWS], side="right") - 1
-        rows += np.bincount(idx, minlength=edges.shape[0])
-        fresh += np.bincount(idx, weights=~repeats[lo:lo + BLOCK_ROWS], minlength=edges.shape[0])
+        _window_counts(edges, np.asarray(t[lo:lo + BLOCK_ROWS], dtype=float),
+                       np.asarray(repeats[lo:lo + BLOCK_ROWS], dtype=np.bool_), rows, fresh)
         release((t,), lo, lo + BLOCK_ROWS)
     rows, fresh = rows[1:-1], fresh[1:-1]       # drop the partial ends
     binom = float(np.mean(rows * f * (1.0 - f)))
@@ -315,6 +314,35 @@ def fresh_count_dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_
     # by at least the binomial variance; a fixed-rate sensor keeps the fresh count steady
     resid = fresh - rows * (1.0 - f)
     return float(min(np.var(fresh), np.var(resid)) / binom)
+
+
+@njit(cache=True)
+def _window_counts(edges: np.ndarray, t: np.ndarray, repeats: np.ndarray, rows: np.ndarray,
+                   fresh: np.ndarray) -> None:
+    """Add to ``rows`` (W,) int64 and ``fresh`` (W,) float the rows among the stamps ``t`` (K,) in
+    each window ``edges[w] <= t < edges[w + 1]`` (the last one unbounded) and those that are not
+    ``repeats`` (K,) bool: ``np.bincount`` of ``np.searchsorted(edges, t, "right") - 1`` (a NaN
+    stamp in the last window), the search started from the previous stamp's window."""
+    last = edges.shape[0] - 1
+    j = 0
+    for k in range(t.shape[0]):
+        tk = t[k]
+        if tk != tk:
+            j = last
+        elif not (edges[j] <= tk and (j == last or tk < edges[j + 1])):
+            lo, hi = 0, last + 1                    # the first edge > tk, binary search
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if tk < edges[mid]:
+                    hi = mid
+                else:
+                    lo = mid + 1
+            j = lo - 1
+            if j < 0:
+                raise ValueError("fresh_count_dispersion: a stamp before the first window")
+        rows[j] += 1
+        if not repeats[k]:
+            fresh[j] += 1.0
 
 
 # --------------------------------------------------------------------------------------------
