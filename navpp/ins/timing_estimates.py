@@ -783,13 +783,25 @@ class Cubic:
         t = np.asarray(t, dtype=float)
         if t.ndim == 0:
             return self(t[None]).reshape(())
-        x = self.x
-        grid = isinstance(x, _Grid)
-        xs = np.empty(0) if grid else np.asarray(x, dtype=float)
-        start, step = (x.start, x.step) if isinstance(x, _Grid) else (0.0, 0.0)
         out = np.empty(t.shape)
-        _cubic_values(xs, grid, start, step, x.shape[0], np.asarray(self.y, dtype=float),
-                      np.asarray(self.d, dtype=float), np.ascontiguousarray(t).reshape(-1), out.reshape(-1))
+        _cubic_values(*self._kernel_args(), np.ascontiguousarray(t).reshape(-1), out.reshape(-1))
+        return out
+
+    def _kernel_args(self) -> tuple[np.ndarray, bool, float, float, int, np.ndarray, np.ndarray]:
+        """The breakpoints, values and derivatives as the kernels (:func:`_cubic_at`) take them."""
+        x = self.x
+        xs = np.empty(0) if isinstance(x, _Grid) else np.asarray(x, dtype=float)
+        start, step = (x.start, x.step) if isinstance(x, _Grid) else (0.0, 0.0)
+        return (xs, isinstance(x, _Grid), float(start), float(step), int(x.shape[0]), np.asarray(self.y, dtype=float),
+                np.asarray(self.d, dtype=float))
+
+    def means(self, a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
+        """``(self(b + lags[:, None]) - self(a + lags[:, None])) / (b - a)``, (L, K) for the spans
+        ``a``, ``b`` (K,) s and the shifts ``lags`` (L,) s: the same bits, without the (L, K)
+        temporaries."""
+        out = np.empty((lags.shape[0], a.shape[0]))
+        _cubic_means(*self._kernel_args(), np.ascontiguousarray(a, dtype=float), np.ascontiguousarray(b, dtype=float),
+                     np.ascontiguousarray(lags, dtype=float), out)
         return out
 
 
@@ -807,52 +819,75 @@ def _grid_row(grid: bool, xs: np.ndarray, start: float, delta: float, step: floa
 
 
 @njit(cache=True)
+def _cubic_at(xs: np.ndarray, grid: bool, start: float, delta: float, step: float, last: int, x0: float,
+              xn: float, scale: float, y: np.ndarray, d: np.ndarray, tk: float) -> float:
+    """:meth:`Cubic.__call__` at one time ``tk``, the same operations in the same order: the
+    breakpoints ``xs`` (N,), or (``grid``) the rows of ``np.arange(start, ..., step)``
+    (:class:`_Grid`, ``delta`` its row spacing); ``last`` N - 2, ``x0`` and ``xn`` the first and
+    last breakpoints, ``scale`` (N - 1) / (xn - x0)."""
+    if not (tk >= x0 and tk <= xn):
+        return np.nan
+    g = (tk - x0) * scale
+    i = min(int(g), last) if g > 0.0 else 0
+    xi = _grid_row(grid, xs, start, delta, step, i)
+    xj = _grid_row(grid, xs, start, delta, step, i + 1)
+    while tk < xi and i > 0:                       # the interval with x[i] <= t < x[i + 1]
+        i -= 1
+        xj = xi
+        xi = _grid_row(grid, xs, start, delta, step, i)
+    while tk >= xj and i < last:
+        i += 1
+        xi = xj
+        xj = _grid_row(grid, xs, start, delta, step, i + 1)
+    s = tk - xi
+    h = xj - xi
+    m = y[i + 1] - y[i]
+    m /= h
+    d0 = d[i]
+    q = d0 + d[i + 1]
+    q -= 2 * m
+    q /= h
+    m -= d0
+    m /= h
+    m -= q
+    q /= h
+    z = s * s
+    v = y[i] + 0.0
+    v += d0 * s
+    v += m * z
+    z *= s
+    v += q * z
+    return v
+
+
+@njit(cache=True)
 def _cubic_values(xs: np.ndarray, grid: bool, start: float, step: float, n: int, y: np.ndarray,
                   d: np.ndarray, t: np.ndarray, out: np.ndarray) -> None:
-    """:meth:`Cubic.__call__` of the times ``t`` (K,) into ``out`` (K,), the same operations in the
-    same order, one time at a time: the breakpoints ``xs`` (N,), or (``grid``) the rows of
-    ``np.arange(start, ..., step)`` (:class:`_Grid`, ``n`` rows)."""
+    """:meth:`Cubic.__call__` of the times ``t`` (K,) into ``out`` (K,) (:func:`_cubic_at`, the
+    breakpoints ``xs`` or the ``n`` rows of a :class:`_Grid`)."""
     delta = (start + step) - start
-    last = n - 2
     x0 = _grid_row(grid, xs, start, delta, step, 0)
     xn = _grid_row(grid, xs, start, delta, step, n - 1)
-    scale = (last + 1) / (xn - x0)
+    scale = (n - 1) / (xn - x0)
     for k in range(t.shape[0]):
-        tk = t[k]
-        if not (tk >= x0 and tk <= xn):
-            out[k] = np.nan
-            continue
-        g = (tk - x0) * scale
-        i = min(int(g), last) if g > 0.0 else 0
-        xi = _grid_row(grid, xs, start, delta, step, i)
-        xj = _grid_row(grid, xs, start, delta, step, i + 1)
-        while tk < xi and i > 0:                       # the interval with x[i] <= t < x[i + 1]
-            i -= 1
-            xj = xi
-            xi = _grid_row(grid, xs, start, delta, step, i)
-        while tk >= xj and i < last:
-            i += 1
-            xi = xj
-            xj = _grid_row(grid, xs, start, delta, step, i + 1)
-        s = tk - xi
-        h = xj - xi
-        m = y[i + 1] - y[i]
-        m /= h
-        d0 = d[i]
-        q = d0 + d[i + 1]
-        q -= 2 * m
-        q /= h
-        m -= d0
-        m /= h
-        m -= q
-        q /= h
-        z = s * s
-        v = y[i] + 0.0
-        v += d0 * s
-        v += m * z
-        z *= s
-        v += q * z
-        out[k] = v
+        out[k] = _cubic_at(xs, grid, start, delta, step, n - 2, x0, xn, scale, y, d, t[k])
+
+
+@njit(cache=True)
+def _cubic_means(xs: np.ndarray, grid: bool, start: float, step: float, n: int, y: np.ndarray,
+                 d: np.ndarray, a: np.ndarray, b: np.ndarray, lags: np.ndarray, out: np.ndarray) -> None:
+    """:meth:`Cubic.means`: ``out[j, k] = (f(b[k] + lags[j]) - f(a[k] + lags[j])) / (b[k] - a[k])``,
+    ``f`` the spline (:func:`_cubic_values`' arguments)."""
+    delta = (start + step) - start
+    x0 = _grid_row(grid, xs, start, delta, step, 0)
+    xn = _grid_row(grid, xs, start, delta, step, n - 1)
+    scale = (n - 1) / (xn - x0)
+    for j in range(lags.shape[0]):
+        dt = lags[j]
+        for k in range(a.shape[0]):
+            fb = _cubic_at(xs, grid, start, delta, step, n - 2, x0, xn, scale, y, d, b[k] + dt)
+            fa = _cubic_at(xs, grid, start, delta, step, n - 2, x0, xn, scale, y, d, a[k] + dt)
+            out[j, k] = (fb - fa) / (b[k] - a[k])
 
 
 def _gyro_angle(t_imu: np.ndarray, rate: Callable[[int, int], np.ndarray],
@@ -1016,6 +1051,8 @@ class _LagFit:
     def gyro_mean(self, dt: float, sel: slice | np.ndarray = slice(None)) -> np.ndarray:
         """The gyro's mean rate over each baseline shifted by ``dt`` s, rad/s."""
         aa, bb = self.a[sel], self.b[sel]
+        if isinstance(self.theta_at, Cubic):
+            return self.theta_at.means(aa, bb, np.array([dt], dtype=float))[0]
         mean: np.ndarray = (self.theta_at(bb + dt) - self.theta_at(aa + dt)) / (bb - aa)
         return mean
 
@@ -1023,6 +1060,8 @@ class _LagFit:
         """:meth:`gyro_mean` of every baseline at each of ``lags`` (L,) s: (L, n) rad/s, the
         same bits, evaluated for as many lags at a time as a block holds."""
         n = self.r.shape[0]
+        if isinstance(self.theta_at, Cubic):
+            return self.theta_at.means(self.a, self.b, lags)
         out = np.empty((lags.shape[0], n))
         step = max(1, BLOCK_ROWS // max(n, 1))
         for lo in range(0, lags.shape[0], step):
