@@ -841,6 +841,60 @@ def _grid_row(grid: bool, xs: np.ndarray, start: float, delta: float, step: floa
 
 
 @njit(cache=True)
+def _cubic_interval(xs: np.ndarray, grid: bool, start: float, delta: float, step: float, last: int, x0: float,
+                    scale: float, tk: float) -> int:
+    """The interval ``i`` with ``x[i] <= tk < x[i + 1]`` (clipped to ``[0, last]``) of a time ``tk``
+    inside the breakpoints (:func:`_cubic_at`'s arguments): guessed from its offset, stepped."""
+    g = (tk - x0) * scale
+    i = min(int(g), last) if g > 0.0 else 0
+    xi = _grid_row(grid, xs, start, delta, step, i)
+    xj = _grid_row(grid, xs, start, delta, step, i + 1)
+    while tk < xi and i > 0:
+        i -= 1
+        xj = xi
+        xi = _grid_row(grid, xs, start, delta, step, i)
+    while tk >= xj and i < last:
+        i += 1
+        xi = xj
+        xj = _grid_row(grid, xs, start, delta, step, i + 1)
+    return i
+
+
+@njit(cache=True)
+def _cubic_coefficients(xs: np.ndarray, grid: bool, start: float, delta: float, step: float, y: np.ndarray,
+                        d: np.ndarray, i: int) -> tuple[float, float, float, float, float]:
+    """The breakpoint ``x[i]`` and CubicSpline's coefficients ``c3, c2, c1, c0`` of interval ``i``,
+    formed as :meth:`Cubic.__call__` forms them."""
+    xi = _grid_row(grid, xs, start, delta, step, i)
+    xj = _grid_row(grid, xs, start, delta, step, i + 1)
+    h = xj - xi
+    m = y[i + 1] - y[i]
+    m /= h
+    d0 = d[i]
+    q = d0 + d[i + 1]
+    q -= 2 * m
+    q /= h
+    m -= d0
+    m /= h
+    m -= q
+    q /= h
+    return xi, y[i], d0, m, q
+
+
+@njit(cache=True)
+def _cubic_sum(xi: float, c3: float, c2: float, c1: float, c0: float, tk: float) -> float:
+    """The interval's polynomial at ``tk``, summed as scipy's ``evaluate_poly1``."""
+    s = tk - xi
+    z = s * s
+    v = c3 + 0.0
+    v += c2 * s
+    v += c1 * z
+    z *= s
+    v += c0 * z
+    return v
+
+
+@njit(cache=True)
 def _cubic_at(xs: np.ndarray, grid: bool, start: float, delta: float, step: float, last: int, x0: float,
               xn: float, scale: float, y: np.ndarray, d: np.ndarray, tk: float) -> float:
     """:meth:`Cubic.__call__` at one time ``tk``, the same operations in the same order: the
@@ -904,12 +958,30 @@ def _cubic_means(xs: np.ndarray, grid: bool, start: float, step: float, n: int, 
     x0 = _grid_row(grid, xs, start, delta, step, 0)
     xn = _grid_row(grid, xs, start, delta, step, n - 1)
     scale = (n - 1) / (xn - x0)
-    for j in range(lags.shape[0]):
-        dt = lags[j]
-        for k in range(a.shape[0]):
-            fb = _cubic_at(xs, grid, start, delta, step, n - 2, x0, xn, scale, y, d, b[k] + dt)
-            fa = _cubic_at(xs, grid, start, delta, step, n - 2, x0, xn, scale, y, d, a[k] + dt)
-            out[j, k] = (fb - fa) / (b[k] - a[k])
+    last = n - 2
+    for k in range(a.shape[0]):
+        # sample by sample, the lags in turn: successive lags mostly fall in the interval of the
+        # previous one, whose coefficients are kept (one set per span end)
+        ia, ib = -1, -1
+        xa, a3, a2, a1, a0 = 0.0, 0.0, 0.0, 0.0, 0.0
+        xb, b3, b2, b1, b0 = 0.0, 0.0, 0.0, 0.0, 0.0
+        width = b[k] - a[k]
+        for j in range(lags.shape[0]):
+            ta, tb = a[k] + lags[j], b[k] + lags[j]
+            fa, fb = np.nan, np.nan
+            if ta >= x0 and ta <= xn:
+                i = _cubic_interval(xs, grid, start, delta, step, last, x0, scale, ta)
+                if i != ia:
+                    ia = i
+                    xa, a3, a2, a1, a0 = _cubic_coefficients(xs, grid, start, delta, step, y, d, i)
+                fa = _cubic_sum(xa, a3, a2, a1, a0, ta)
+            if tb >= x0 and tb <= xn:
+                i = _cubic_interval(xs, grid, start, delta, step, last, x0, scale, tb)
+                if i != ib:
+                    ib = i
+                    xb, b3, b2, b1, b0 = _cubic_coefficients(xs, grid, start, delta, step, y, d, i)
+                fb = _cubic_sum(xb, b3, b2, b1, b0, tb)
+            out[j, k] = (fb - fa) / width
 
 
 def _gyro_angle(t_imu: np.ndarray, rate: Callable[[int, int], np.ndarray],
