@@ -405,3 +405,16 @@ def test_cubic_means_are_the_numpy_expression(grid):
     lags = np.arange(-1.0, 1.0001, 0.05)
     ref = (spline(b + lags[:, None]) - spline(a + lags[:, None])) / (b - a)
     assert spline.means(a, b, lags).tobytes() == ref.tobytes()
+
+
+def test_chord_courses_are_the_scalar_ones():
+    """yaw_scale_from_track forms its chords' courses and lengths over arrays: numpy's arctan2 and
+    hypot give each element the bits they give it alone (as the chord-by-chord loop formed them)."""
+    rng = np.random.default_rng(9)
+    de = rng.standard_normal(2001) * rng.choice([1e-3, 1.0, 1e3], 2001)
+    dn = rng.standard_normal(2001) * rng.choice([1e-3, 1.0, 1e3], 2001)
+    de[:3], dn[:3] = [0.0, -0.0, np.nan], [-0.0, 0.0, 1.0]
+    courses, lengths = np.arctan2(dn, de), np.hypot(de, dn)
+    for k in range(de.shape[0]):
+        assert np.float64(courses[k]).tobytes() == np.float64(float(np.arctan2(dn[k], de[k]))).tobytes()
+        assert np.float64(lengths[k]).tobytes() == np.float64(float(np.hypot(de[k], dn[k]))).tobytes()

@@ -1337,18 +1337,14 @@ def yaw_scale_from_track(t_imu: np.ndarray, gyro_z_up: np.ndarray, t_gnss: np.nd
             break
         starts.append((i, j))
         i = j
-    mids, courses, ok = [], [], []
-    for i, j in starts:
-        de, dn = e[j] - e[i], nn[j] - nn[i]
-        length = float(np.hypot(de, dn))
-        need = max(min_chord_m, 20.0 * float(max(sig[i], sig[j])))
-        good = (gap[j] == gap[i]) and length >= need and (t_g[j] - t_g[i]) <= 1.5 * window_s
-        mids.append(0.5 * (t_g[i] + t_g[j]))
-        courses.append(float(np.arctan2(dn, de)))     # counter-clockwise from east
-        ok.append(good)
-    if len(mids) < 2:
+    if len(starts) < 2:
         return YawScale(nan, nan, 0.0, 0)
-    mids_a, courses_a, ok_a = np.array(mids), np.array(courses), np.array(ok)
+    ii, jj = np.array(starts, dtype=np.intp).T           # each chord's first and last epoch
+    de, dn = e[jj] - e[ii], nn[jj] - nn[ii]
+    need = np.maximum(min_chord_m, 20.0 * np.maximum(sig[ii], sig[jj]))
+    ok_a = (gap[jj] == gap[ii]) & (np.hypot(de, dn) >= need) & (t_g[jj] - t_g[ii] <= 1.5 * window_s)
+    mids_a = 0.5 * (t_g[ii] + t_g[jj])
+    courses_a = np.arctan2(dn, de)                       # counter-clockwise from east
     pair = ok_a[1:] & ok_a[:-1] & (mids_a[:-1] >= t_imu[0]) & (mids_a[1:] <= t_imu[-1])
     y = np.angle(np.exp(1j * np.diff(courses_a)))[pair]
     th = trapezoid_integral_at(t_imu, rate, t_imu.shape[0], mids_a)
