@@ -418,3 +418,19 @@ def test_chord_courses_are_the_scalar_ones():
     for k in range(de.shape[0]):
         assert np.float64(courses[k]).tobytes() == np.float64(float(np.arctan2(dn[k], de[k]))).tobytes()
         assert np.float64(lengths[k]).tobytes() == np.float64(float(np.hypot(de[k], dn[k]))).tobytes()
+
+
+def test_cubic_means_unshifted_are_the_value_difference():
+    """Cubic.means at a zero shift is (f(b) - f(a)) / (b - a) to the bit, spans ending at -0.0 and
+    +0.0 on a breakpoint at 0 included (as the gyro's moving average uses it)."""
+    from navpp.ins import timing_estimates as te
+
+    rng = np.random.default_rng(8)
+    for x in (te._Grid(0.0, 0.01, 500), np.r_[0.0, np.cumsum(rng.uniform(0.005, 0.015, 499))]):
+        y = np.cumsum(rng.standard_normal(500))
+        y[0] = 0.0
+        spline = te._spline(x, y)
+        a = np.r_[-0.0, 0.0, -0.0, rng.uniform(0.0, 4.0, 300)]
+        b = np.r_[0.5, 0.25, 1.0, a[3:] + rng.uniform(0.1, 0.6, 300)]
+        ref = (spline(b) - spline(a)) / (b - a)
+        assert spline.means(a, b, np.zeros(1))[0].tobytes() == ref.tobytes()

@@ -984,6 +984,10 @@ def _cubic_means(xs: np.ndarray, grid: bool, start: float, step: float, n: int, 
             out[j, k] = (fb - fa) / width
 
 
+#: One shift of nothing, s: :meth:`Cubic.means` of the spans themselves.
+_NO_SHIFT = np.zeros(1)
+
+
 def _gyro_angle(t_imu: np.ndarray, rate: Callable[[int, int], np.ndarray],
                 smooth_s: float) -> tuple[AngleAt, float, float]:
     """The integral of the vertical rate (rad/s at ``t_imu``, its rows ``lo:hi`` from ``rate(lo,
@@ -1012,7 +1016,9 @@ def _gyro_angle(t_imu: np.ndarray, rate: Callable[[int, int], np.ndarray],
             g = _arange_rows(start, step, lo, hi)
             a = np.clip(g - 0.5 * smooth_s, t_lo, t_hi)
             b = np.clip(g + 0.5 * smooth_s, t_lo, t_hi)
-            mean: np.ndarray = (raw(b) - raw(a)) / (b - a)
+            # the same bits as the expression below (a span end of -0.0 shifted by +0.0 gives its value)
+            mean: np.ndarray = (raw.means(a, b, _NO_SHIFT)[0] if isinstance(raw, Cubic)
+                                else (raw(b) - raw(a)) / (b - a))
             behind(float(a[0]) - smooth_s)
             return mean
 
