@@ -933,7 +933,7 @@ def _cubic_at(xs: np.ndarray, grid: bool, start: float, delta: float, step: floa
     v += m * z
     z *= s
     v += q * z
-    return v
+    return float(v)
 
 
 @njit(cache=True)
@@ -1152,7 +1152,8 @@ class _LagFit:
         """The gyro's mean rate over each baseline shifted by ``dt`` s, rad/s."""
         aa, bb = self.a[sel], self.b[sel]
         if isinstance(self.theta_at, Cubic):
-            return self.theta_at.means(aa, bb, np.array([dt], dtype=float))[0]
+            shifted: np.ndarray = self.theta_at.means(aa, bb, np.array([dt], dtype=float))[0]
+            return shifted
         mean: np.ndarray = (self.theta_at(bb + dt) - self.theta_at(aa + dt)) / (bb - aa)
         return mean
 
