@@ -709,10 +709,16 @@ def _spline_rows(x: np.ndarray | _Grid, y: np.ndarray, a: int, b: int) -> tuple[
     n = x.shape[0]
     lower, main, upper = np.empty(b - a - 1), np.empty(b - a), np.empty(b - a - 1)
     rhs = np.empty((b - a, 1))
-    grid = isinstance(x, _Grid)
-    start, step = (x.start, x.step) if isinstance(x, _Grid) else (0.0, 0.0)
-    _inner_rows(np.empty(0) if grid else np.asarray(x, dtype=float), grid, float(start), float(step),
-                np.asarray(y, dtype=float), a, b, lower, main, upper, rhs)
+    lo, hi = max(a, 1), min(b, n - 1)               # the inner rows
+    h = x[lo:hi + 1] - x[lo - 1:hi]                 # dx[lo - 1:hi]
+    m = y[lo:hi + 1] - y[lo - 1:hi]
+    m /= h                                          # slope[lo - 1:hi]
+    main[lo - a:hi - a] = 2 * (h[:-1] + h[1:])
+    rhs[lo - a:hi - a, 0] = 3 * (h[1:] * m[:-1] + h[:-1] * m[1:])
+    top = min(hi, b - 1)                            # inner rows with an upper coupling inside
+    upper[lo - a:top - a] = h[:top - lo]
+    first = max(lo, a + 1)                          # ... with a lower coupling inside
+    lower[first - a - 1:hi - a - 1] = h[first - lo + 1:]
     if a == 0:
         h0, h1 = x[1] - x[0], x[2] - x[1]
         main[0] = h1
@@ -724,34 +730,6 @@ def _spline_rows(x: np.ndarray | _Grid, y: np.ndarray, a: int, b: int) -> tuple[
         lower[-1] = w = x[-1] - x[-3]
         rhs[-1] = (g0 ** 2 * ((y[-2] - y[-3]) / g1) + (2 * w + g0) * g1 * ((y[-1] - y[-2]) / g0)) / w
     return lower, main, upper, rhs
-
-
-@njit(cache=True)
-def _inner_rows(xs: np.ndarray, grid: bool, start: float, step: float, y: np.ndarray, a: int, b: int,
-                lower: np.ndarray, main: np.ndarray, upper: np.ndarray, rhs: np.ndarray) -> None:
-    """The inner rows (0 < k < N - 1) among rows ``a .. b - 1`` of :func:`_spline_rows`' system, the
-    same operations as its numpy expressions: the breakpoints ``xs`` (N,), or (``grid``) the rows
-    of ``np.arange(start, ..., step)`` (:class:`_Grid`, ``y.shape[0]`` rows)."""
-    n = y.shape[0]
-    delta = (start + step) - start
-    lo, hi = max(a, 1), min(b, n - 1)
-    if hi <= lo:
-        return
-    x_prev = _grid_row(grid, xs, start, delta, step, lo - 1)
-    x_k = _grid_row(grid, xs, start, delta, step, lo)
-    for k in range(lo, hi):
-        x_next = _grid_row(grid, xs, start, delta, step, k + 1)
-        h_prev = x_k - x_prev                       # dx[k - 1]
-        h_next = x_next - x_k                       # dx[k]
-        m_prev = (y[k] - y[k - 1]) / h_prev
-        m_next = (y[k + 1] - y[k]) / h_next
-        main[k - a] = 2 * (h_prev + h_next)
-        rhs[k - a, 0] = 3 * (h_next * m_prev + h_prev * m_next)
-        if k < b - 1:
-            upper[k - a] = h_prev
-        if k > a:
-            lower[k - a - 1] = h_next
-        x_prev, x_k = x_k, x_next
 
 
 class Cubic:
