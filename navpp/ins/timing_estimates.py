@@ -732,6 +732,10 @@ def _spline_rows(x: np.ndarray | _Grid, y: np.ndarray, a: int, b: int) -> tuple[
     return lower, main, upper, rhs
 
 
+#: No shift at all: :func:`_cubic_means` evaluates the spline itself.
+_NO_LAGS = np.zeros(0)
+
+
 class Cubic:
     """The piecewise cubic Hermite interpolant over the breakpoints ``x`` (N,) s, strictly
     increasing, of the values ``y`` (N,) and first derivatives ``d`` (N,) at them (the last
@@ -783,9 +787,10 @@ class Cubic:
         t = np.asarray(t, dtype=float)
         if t.ndim == 0:
             return self(t[None]).reshape(())
-        out = np.empty(t.shape)
-        _cubic_values(*self._kernel_args(), np.ascontiguousarray(t).reshape(-1), out.reshape(-1))
-        return out
+        flat = np.ascontiguousarray(t).reshape(-1)
+        out = np.empty((1, flat.shape[0]))
+        _cubic_means(*self._kernel_args(), flat, flat, _NO_LAGS, out)
+        return out.reshape(t.shape)
 
     def _kernel_args(self) -> tuple[np.ndarray, bool, float, float, int, np.ndarray, np.ndarray]:
         """The breakpoints, values and derivatives as the kernels (:func:`_cubic_at`) take them."""
@@ -915,28 +920,21 @@ def _cubic_at(xs: np.ndarray, grid: bool, start: float, delta: float, step: floa
 
 
 @njit(cache=True)
-def _cubic_values(xs: np.ndarray, grid: bool, start: float, step: float, n: int, y: np.ndarray,
-                  d: np.ndarray, t: np.ndarray, out: np.ndarray) -> None:
-    """:meth:`Cubic.__call__` of the times ``t`` (K,) into ``out`` (K,) (:func:`_cubic_at`, the
-    breakpoints ``xs`` or the ``n`` rows of a :class:`_Grid`)."""
-    delta = (start + step) - start
-    x0 = _grid_row(grid, xs, start, delta, step, 0)
-    xn = _grid_row(grid, xs, start, delta, step, n - 1)
-    scale = (n - 1) / (xn - x0)
-    for k in range(t.shape[0]):
-        out[k] = _cubic_at(xs, grid, start, delta, step, n - 2, x0, xn, scale, y, d, t[k])
-
-
-@njit(cache=True)
 def _cubic_means(xs: np.ndarray, grid: bool, start: float, step: float, n: int, y: np.ndarray,
                  d: np.ndarray, a: np.ndarray, b: np.ndarray, lags: np.ndarray, out: np.ndarray) -> None:
     """:meth:`Cubic.means`: ``out[j, k] = (f(b[k] + lags[j]) - f(a[k] + lags[j])) / (b[k] - a[k])``,
-    ``f`` the spline (:func:`_cubic_values`' arguments)."""
+    ``f`` the spline over the breakpoints ``xs`` (N,) or (``grid``) the ``n`` rows of a :class:`_Grid`
+    (:func:`_cubic_at`); no ``lags`` at all: the values ``out[0, k] = f(a[k])`` (:meth:`Cubic.__call__`),
+    ``b`` unused (one kernel for both: each cached kernel costs a run some milliseconds to load)."""
     delta = (start + step) - start
     x0 = _grid_row(grid, xs, start, delta, step, 0)
     xn = _grid_row(grid, xs, start, delta, step, n - 1)
     scale = (n - 1) / (xn - x0)
     last = n - 2
+    if lags.shape[0] == 0:
+        for k in range(a.shape[0]):
+            out[0, k] = _cubic_at(xs, grid, start, delta, step, last, x0, xn, scale, y, d, a[k])
+        return
     for k in range(a.shape[0]):
         # sample by sample, the lags in turn: successive lags mostly fall in the interval of the
         # previous one, whose coefficients are kept (one set per span end)
