@@ -64,3 +64,20 @@ def test_clock_offset_from_the_gyro_and_up_is_that_of_the_vertical_rate():
     a = te.estimate_clock_offset(t, gyro @ up, tg, vel)
     b = te.estimate_clock_offset(t, gyro, tg, vel, up=up)
     assert a == b and np.isfinite(a.offset_s)
+
+
+@pytest.mark.parametrize("start", [0.0, 1.7e9 + 0.125, -321.5])
+def test_cubic_on_a_grid_is_scipys_on_its_rows(start):
+    """The spline over a _Grid (rows formed in the evaluation kernel) is CubicSpline's over the
+    np.arange rows to the bit: on and next to the breakpoints, inside, outside, NaN."""
+    from scipy import interpolate
+
+    rng = np.random.default_rng(11)
+    step = 0.008
+    rows = np.arange(start, start + 4000 * step, step)
+    y = np.cumsum(rng.standard_normal(rows.shape[0]))
+    got = te._spline(te._Grid(start, step, rows.shape[0]), y)
+    ref = interpolate.CubicSpline(rows, y, extrapolate=False)
+    q = np.concatenate([rows, np.nextafter(rows, np.inf), np.nextafter(rows, -np.inf),
+                        rng.uniform(rows[0] - 1.0, rows[-1] + 1.0, 5000), [np.nan]])
+    assert got(q).tobytes() == ref(q).tobytes()

@@ -330,3 +330,107 @@ def test_clock_offset_simulated_sigma_is_honest(kw: dict) -> None:
     assert np.all(np.abs(z) < 4.0), z
     assert 0.3 < np.sqrt(np.mean(z**2)) < 1.6, z          # neither >3x conservative nor optimistic
     assert all(x < 4.0 for x in conf_err), conf_err
+
+
+# ---------------------------------------------------------------- the kernels against numpy
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_repeat_counts_are_numpys(seed):
+    """_repeat_counts: the all-six repeats and each window's fresh and per-channel counts, as the
+    numpy expressions (bitwise equality of each channel, np.add.reduceat per window) give them."""
+    from navpp.ins.timing_estimates import _bits, _repeat_counts
+
+    rng = np.random.default_rng(seed)
+    n, w = 2345, 100
+    gyro = np.round(rng.normal(size=(n, 3)), 1)
+    accel = np.round(rng.normal(size=(n, 3)), 1)
+    again = rng.random(n) < 0.3
+    for k in np.nonzero(again)[0][1:]:
+        gyro[k], accel[k] = gyro[k - 1], accel[k - 1]
+    gyro[5, 0], gyro[4, 0] = 0.0, -0.0              # equal values, different bits: not a repeat
+    bits = np.concatenate([_bits(gyro), _bits(accel)], axis=1)
+    same = bits[1:] == bits[:-1]
+    rep_ref = same.all(axis=1)
+    starts = np.arange(0, n - 1, w)
+    fresh_ref = np.add.reduceat((~rep_ref).astype(np.int64), starts)
+    same_ref = np.add.reduceat((same & ~rep_ref[:, None]).astype(np.int64), starts, axis=0)
+    rep = np.zeros(n - 1, dtype=bool)
+    n_fresh, n_same = np.zeros(starts.shape[0], np.int64), np.zeros((starts.shape[0], 6), np.int64)
+    _repeat_counts(_bits(gyro), _bits(accel), w, rep, n_fresh, n_same)
+    np.testing.assert_array_equal(rep, rep_ref)
+    np.testing.assert_array_equal(n_fresh, fresh_ref)
+    np.testing.assert_array_equal(n_same, same_ref)
+
+
+@pytest.mark.parametrize("order", ["increasing", "shuffled"])
+def test_window_counts_are_searchsorted_bincount(order):
+    """_window_counts: rows and fresh rows per window as np.searchsorted(edges, t, "right") - 1 and
+    np.bincount count them, stamps on an edge and a NaN stamp included."""
+    from navpp.ins.timing_estimates import _window_counts
+
+    rng = np.random.default_rng(7)
+    t = np.sort(rng.uniform(0.0, 50.0, 3000))
+    t[0] = 0.0
+    edges = np.arange(t[0], t[-1], 1.0)
+    t[10:13] = edges[3:6]                                   # on an edge: the window it opens
+    t = np.sort(t)
+    t = np.append(t, np.nan)
+    if order == "shuffled":
+        t = rng.permutation(t)
+    repeats = rng.random(t.shape[0]) < 0.4
+    idx = np.searchsorted(edges, t, side="right") - 1
+    rows_ref = np.bincount(idx, minlength=edges.shape[0])
+    fresh_ref = np.bincount(idx, weights=~repeats, minlength=edges.shape[0])
+    rows, fresh = np.zeros(edges.shape[0], np.int64), np.zeros(edges.shape[0])
+    _window_counts(edges, t, repeats, rows, fresh)
+    np.testing.assert_array_equal(rows, rows_ref)
+    np.testing.assert_array_equal(fresh, fresh_ref)
+
+
+@pytest.mark.parametrize("grid", [False, True])
+def test_cubic_means_are_the_numpy_expression(grid):
+    """Cubic.means (one kernel) against the spline's values at the shifted span ends, differenced
+    and divided as numpy does it: the same bits, spans running off the ends (NaN) included."""
+    from navpp.ins import timing_estimates as te
+
+    rng = np.random.default_rng(4)
+    n = 3000
+    x = te._Grid(12.5, 0.01, n) if grid else 12.5 + np.cumsum(rng.uniform(0.008, 0.012, n))
+    y = np.cumsum(rng.standard_normal(n))
+    spline = te._spline(x, y)
+    xn = float(x[n - 1])
+    a = np.sort(rng.uniform(12.0, xn - 0.5, 400))
+    b = a + rng.uniform(0.2, 1.5, 400)
+    lags = np.arange(-1.0, 1.0001, 0.05)
+    ref = (spline(b + lags[:, None]) - spline(a + lags[:, None])) / (b - a)
+    assert spline.means(a, b, lags).tobytes() == ref.tobytes()
+
+
+def test_chord_courses_are_the_scalar_ones():
+    """yaw_scale_from_track forms its chords' courses and lengths over arrays: numpy's arctan2 and
+    hypot give each element the bits they give it alone (as the chord-by-chord loop formed them)."""
+    rng = np.random.default_rng(9)
+    de = rng.standard_normal(2001) * rng.choice([1e-3, 1.0, 1e3], 2001)
+    dn = rng.standard_normal(2001) * rng.choice([1e-3, 1.0, 1e3], 2001)
+    de[:3], dn[:3] = [0.0, -0.0, np.nan], [-0.0, 0.0, 1.0]
+    courses, lengths = np.arctan2(dn, de), np.hypot(de, dn)
+    for k in range(de.shape[0]):
+        assert np.float64(courses[k]).tobytes() == np.float64(float(np.arctan2(dn[k], de[k]))).tobytes()
+        assert np.float64(lengths[k]).tobytes() == np.float64(float(np.hypot(de[k], dn[k]))).tobytes()
+
+
+def test_cubic_means_unshifted_are_the_value_difference():
+    """Cubic.means at a zero shift is (f(b) - f(a)) / (b - a) to the bit, spans ending at -0.0 and
+    +0.0 on a breakpoint at 0 included (as the gyro's moving average uses it)."""
+    from navpp.ins import timing_estimates as te
+
+    rng = np.random.default_rng(8)
+    for x in (te._Grid(0.0, 0.01, 500), np.r_[0.0, np.cumsum(rng.uniform(0.005, 0.015, 499))]):
+        y = np.cumsum(rng.standard_normal(500))
+        y[0] = 0.0
+        spline = te._spline(x, y)
+        a = np.r_[-0.0, 0.0, -0.0, rng.uniform(0.0, 4.0, 300)]
+        b = np.r_[0.5, 0.25, 1.0, a[3:] + rng.uniform(0.1, 0.6, 300)]
+        ref = (spline(b) - spline(a)) / (b - a)
+        assert spline.means(a, b, np.zeros(1))[0].tobytes() == ref.tobytes()

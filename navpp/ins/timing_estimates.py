@@ -32,6 +32,8 @@ from typing import Any, Literal
 
 import numpy as np
 
+from navpp.kernel import njit
+
 from ..intervals import interval_median
 from ..spill import Behind, like, release, release_all
 from .calibrate import BLOCK_ROWS, trapezoid_integral, trapezoid_integral_at
@@ -182,19 +184,14 @@ def find_stale_rows(
     rep = repeats[1:]                                   # (N-1,) view
     starts = np.arange(0, n - 1, window_rows)
     sizes = np.diff(np.append(starts, n - 1))
-    n_fresh = np.empty(starts.shape[0], dtype=np.int64)
-    n_same = np.empty((starts.shape[0], 6), dtype=np.int64)
+    n_fresh = np.zeros(starts.shape[0], dtype=np.int64)
+    n_same = np.zeros((starts.shape[0], 6), dtype=np.int64)
     block = max(1, BLOCK_ROWS // window_rows) * window_rows
     for lo in range(0, n - 1, block):
         hi = min(lo + block, n - 1)
-        same_ch = np.concatenate([_bits(x[lo:hi + 1]) for x in (gyro, accel)], axis=1)     # (B+1, 6)
-        same_ch = same_ch[1:] == same_ch[:-1]                                               # (B, 6)
-        same_ch.all(axis=1, out=rep[lo:hi])
-        fresh = ~rep[lo:hi]
         win = slice(lo // window_rows, lo // window_rows + -(-(hi - lo) // window_rows))
-        local = starts[win] - lo
-        n_fresh[win] = np.add.reduceat(fresh.astype(np.int64), local)
-        n_same[win] = np.add.reduceat((same_ch & fresh[:, None]).astype(np.int64), local, axis=0)
+        _repeat_counts(_bits(gyro[lo:hi + 1]), _bits(accel[lo:hi + 1]), window_rows, rep[lo:hi], n_fresh[win],
+                       n_same[win])
         release((gyro, accel), lo, hi)                  # a spilled IMU's rows read: out of memory
     k_obs = int(np.count_nonzero(rep))
 
@@ -254,6 +251,29 @@ def find_stale_rows(
                      confident=bool(confident), reason=reason)
 
 
+@njit(cache=True)
+def _repeat_counts(gyro: np.ndarray, accel: np.ndarray, window_rows: int, rep: np.ndarray, n_fresh: np.ndarray,
+                   n_same: np.ndarray) -> None:
+    """For the rows ``gyro``, ``accel`` (B + 1, 3) int64 (the bits of the values, :func:`_bits`):
+    ``rep`` (B,) bool, row k + 1 repeats row k in all six channels; per window of
+    ``window_rows`` of those B rows, its rows that do not (``n_fresh`` (W,), added to) and among
+    them the ones repeating each channel (``n_same`` (W, 6), added to)."""
+    for k in range(rep.shape[0]):
+        w = k // window_rows
+        all6 = True
+        for c in range(3):
+            if gyro[k + 1, c] != gyro[k, c] or accel[k + 1, c] != accel[k, c]:
+                all6 = False
+        rep[k] = all6
+        if not all6:
+            n_fresh[w] += 1
+            for c in range(3):
+                if gyro[k + 1, c] == gyro[k, c]:
+                    n_same[w, c] += 1
+                if accel[k + 1, c] == accel[k, c]:
+                    n_same[w, 3 + c] += 1
+
+
 def _bits(x: np.ndarray) -> np.ndarray:
     """The rows ``x`` (R, 3) as float64, their bits as int64 (R, 3)."""
     bits: np.ndarray = np.ascontiguousarray(x, dtype=float).reshape(-1, 3).view(np.int64)
@@ -282,9 +302,8 @@ def fresh_count_dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_
     rows = np.zeros(edges.shape[0], dtype=np.int64)
     fresh = np.zeros(edges.shape[0])
     for lo in range(0, t.shape[0], BLOCK_ROWS):
-        idx = np.searchsorted(edges, t[lo:lo + BLOCK_ROWS], side="right") - 1
-        rows += np.bincount(idx, minlength=edges.shape[0])
-        fresh += np.bincount(idx, weights=~repeats[lo:lo + BLOCK_ROWS], minlength=edges.shape[0])
+        _window_counts(edges, np.asarray(t[lo:lo + BLOCK_ROWS], dtype=float),
+                       np.asarray(repeats[lo:lo + BLOCK_ROWS], dtype=np.bool_), rows, fresh)
         release((t,), lo, lo + BLOCK_ROWS)
     rows, fresh = rows[1:-1], fresh[1:-1]       # drop the partial ends
     binom = float(np.mean(rows * f * (1.0 - f)))
@@ -295,6 +314,35 @@ def fresh_count_dispersion(t: np.ndarray, repeats: np.ndarray, f: float, window_
     # by at least the binomial variance; a fixed-rate sensor keeps the fresh count steady
     resid = fresh - rows * (1.0 - f)
     return float(min(np.var(fresh), np.var(resid)) / binom)
+
+
+@njit(cache=True)
+def _window_counts(edges: np.ndarray, t: np.ndarray, repeats: np.ndarray, rows: np.ndarray,
+                   fresh: np.ndarray) -> None:
+    """Add to ``rows`` (W,) int64 and ``fresh`` (W,) float the rows among the stamps ``t`` (K,) in
+    each window ``edges[w] <= t < edges[w + 1]`` (the last one unbounded) and those that are not
+    ``repeats`` (K,) bool: ``np.bincount`` of ``np.searchsorted(edges, t, "right") - 1`` (a NaN
+    stamp in the last window), the search started from the previous stamp's window."""
+    last = edges.shape[0] - 1
+    j = 0
+    for k in range(t.shape[0]):
+        tk = t[k]
+        if tk != tk:
+            j = last
+        elif not (edges[j] <= tk and (j == last or tk < edges[j + 1])):
+            lo, hi = 0, last + 1                    # the first edge > tk, binary search
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if tk < edges[mid]:
+                    hi = mid
+                else:
+                    lo = mid + 1
+            j = lo - 1
+            if j < 0:
+                raise ValueError("fresh_count_dispersion: a stamp before the first window")
+        rows[j] += 1
+        if not repeats[k]:
+            fresh[j] += 1.0
 
 
 # --------------------------------------------------------------------------------------------
@@ -684,6 +732,10 @@ def _spline_rows(x: np.ndarray | _Grid, y: np.ndarray, a: int, b: int) -> tuple[
     return lower, main, upper, rhs
 
 
+#: No shift at all: :func:`_cubic_means` evaluates the spline itself.
+_NO_LAGS = np.zeros(0)
+
+
 class Cubic:
     """The piecewise cubic Hermite interpolant over the breakpoints ``x`` (N,) s, strictly
     increasing, of the values ``y`` (N,) and first derivatives ``d`` (N,) at them (the last
@@ -735,33 +787,181 @@ class Cubic:
         t = np.asarray(t, dtype=float)
         if t.ndim == 0:
             return self(t[None]).reshape(())
-        x, y, d = self.x, self.y, self.d
-        i = self.interval(t)
-        j = i + 1
-        s = t - x[i]
-        h = x[j] - x[i]
-        m = y[j] - y[i]
-        m /= h
-        d0 = d[i]
-        q = d0 + d[j]
-        q -= 2 * m
-        q /= h
-        m -= d0
-        m /= h
-        m -= q                                        # c1
-        q /= h                                        # c0
-        z = s * s
-        out: np.ndarray = y[i]
-        out += 0.0                                    # scipy's sum starts at +0.0
-        d0 *= s
-        out += d0
-        m *= z
-        out += m
-        z *= s
-        q *= z
-        out += q
-        out[~((t >= x[0]) & (t <= x[-1]))] = np.nan
+        flat = np.ascontiguousarray(t).reshape(-1)
+        out = np.empty((1, flat.shape[0]))
+        _cubic_means(*self._kernel_args(), flat, flat, _NO_LAGS, out)
+        return out.reshape(t.shape)
+
+    def _kernel_args(self) -> tuple[np.ndarray, bool, float, float, int, np.ndarray, np.ndarray]:
+        """The breakpoints, values and derivatives as the kernels (:func:`_cubic_at`) take them."""
+        x = self.x
+        xs = np.empty(0) if isinstance(x, _Grid) else np.asarray(x, dtype=float)
+        start, step = (x.start, x.step) if isinstance(x, _Grid) else (0.0, 0.0)
+        return (xs, isinstance(x, _Grid), float(start), float(step), int(x.shape[0]), np.asarray(self.y, dtype=float),
+                np.asarray(self.d, dtype=float))
+
+    def means(self, a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
+        """``(self(b + lags[:, None]) - self(a + lags[:, None])) / (b - a)``, (L, K) for the spans
+        ``a``, ``b`` (K,) s and the shifts ``lags`` (L,) s: the same bits, without the (L, K)
+        temporaries."""
+        out = np.empty((lags.shape[0], a.shape[0]))
+        _cubic_means(*self._kernel_args(), np.ascontiguousarray(a, dtype=float), np.ascontiguousarray(b, dtype=float),
+                     np.ascontiguousarray(lags, dtype=float), out)
         return out
+
+
+@njit(cache=True)
+def _grid_row(grid: bool, xs: np.ndarray, start: float, delta: float, step: float, k: int) -> float:
+    """Row ``k`` of the breakpoints: ``xs[k]``, or of ``np.arange(start, ..., step)`` (the bits of
+    :func:`_arange_rows`)."""
+    if not grid:
+        return float(xs[k])
+    if k == 0:
+        return start
+    if k == 1:
+        return start + step
+    return float(k) * delta + start
+
+
+@njit(cache=True)
+def _cubic_interval(xs: np.ndarray, grid: bool, start: float, delta: float, step: float, last: int, x0: float,
+                    scale: float, tk: float) -> int:
+    """The interval ``i`` with ``x[i] <= tk < x[i + 1]`` (clipped to ``[0, last]``) of a time ``tk``
+    inside the breakpoints (:func:`_cubic_at`'s arguments): guessed from its offset, stepped."""
+    g = (tk - x0) * scale
+    i = min(int(g), last) if g > 0.0 else 0
+    xi = _grid_row(grid, xs, start, delta, step, i)
+    xj = _grid_row(grid, xs, start, delta, step, i + 1)
+    while tk < xi and i > 0:
+        i -= 1
+        xj = xi
+        xi = _grid_row(grid, xs, start, delta, step, i)
+    while tk >= xj and i < last:
+        i += 1
+        xi = xj
+        xj = _grid_row(grid, xs, start, delta, step, i + 1)
+    return i
+
+
+@njit(cache=True)
+def _cubic_coefficients(xs: np.ndarray, grid: bool, start: float, delta: float, step: float, y: np.ndarray,
+                        d: np.ndarray, i: int) -> tuple[float, float, float, float, float]:
+    """The breakpoint ``x[i]`` and CubicSpline's coefficients ``c3, c2, c1, c0`` of interval ``i``,
+    formed as :meth:`Cubic.__call__` forms them."""
+    xi = _grid_row(grid, xs, start, delta, step, i)
+    xj = _grid_row(grid, xs, start, delta, step, i + 1)
+    h = xj - xi
+    m = y[i + 1] - y[i]
+    m /= h
+    d0 = d[i]
+    q = d0 + d[i + 1]
+    q -= 2 * m
+    q /= h
+    m -= d0
+    m /= h
+    m -= q
+    q /= h
+    return xi, y[i], d0, m, q
+
+
+@njit(cache=True)
+def _cubic_sum(xi: float, c3: float, c2: float, c1: float, c0: float, tk: float) -> float:
+    """The interval's polynomial at ``tk``, summed as scipy's ``evaluate_poly1``."""
+    s = tk - xi
+    z = s * s
+    v = c3 + 0.0
+    v += c2 * s
+    v += c1 * z
+    z *= s
+    v += c0 * z
+    return v
+
+
+@njit(cache=True)
+def _cubic_at(xs: np.ndarray, grid: bool, start: float, delta: float, step: float, last: int, x0: float,
+              xn: float, scale: float, y: np.ndarray, d: np.ndarray, tk: float) -> float:
+    """:meth:`Cubic.__call__` at one time ``tk``, the same operations in the same order: the
+    breakpoints ``xs`` (N,), or (``grid``) the rows of ``np.arange(start, ..., step)``
+    (:class:`_Grid`, ``delta`` its row spacing); ``last`` N - 2, ``x0`` and ``xn`` the first and
+    last breakpoints, ``scale`` (N - 1) / (xn - x0)."""
+    if not (tk >= x0 and tk <= xn):
+        return np.nan
+    g = (tk - x0) * scale
+    i = min(int(g), last) if g > 0.0 else 0
+    xi = _grid_row(grid, xs, start, delta, step, i)
+    xj = _grid_row(grid, xs, start, delta, step, i + 1)
+    while tk < xi and i > 0:                       # the interval with x[i] <= t < x[i + 1]
+        i -= 1
+        xj = xi
+        xi = _grid_row(grid, xs, start, delta, step, i)
+    while tk >= xj and i < last:
+        i += 1
+        xi = xj
+        xj = _grid_row(grid, xs, start, delta, step, i + 1)
+    s = tk - xi
+    h = xj - xi
+    m = y[i + 1] - y[i]
+    m /= h
+    d0 = d[i]
+    q = d0 + d[i + 1]
+    q -= 2 * m
+    q /= h
+    m -= d0
+    m /= h
+    m -= q
+    q /= h
+    z = s * s
+    v = y[i] + 0.0
+    v += d0 * s
+    v += m * z
+    z *= s
+    v += q * z
+    return float(v)
+
+
+@njit(cache=True)
+def _cubic_means(xs: np.ndarray, grid: bool, start: float, step: float, n: int, y: np.ndarray,
+                 d: np.ndarray, a: np.ndarray, b: np.ndarray, lags: np.ndarray, out: np.ndarray) -> None:
+    """:meth:`Cubic.means`: ``out[j, k] = (f(b[k] + lags[j]) - f(a[k] + lags[j])) / (b[k] - a[k])``,
+    ``f`` the spline over the breakpoints ``xs`` (N,) or (``grid``) the ``n`` rows of a :class:`_Grid`
+    (:func:`_cubic_at`); no ``lags`` at all: the values ``out[0, k] = f(a[k])`` (:meth:`Cubic.__call__`),
+    ``b`` unused (one kernel for both: each cached kernel costs a run some milliseconds to load)."""
+    delta = (start + step) - start
+    x0 = _grid_row(grid, xs, start, delta, step, 0)
+    xn = _grid_row(grid, xs, start, delta, step, n - 1)
+    scale = (n - 1) / (xn - x0)
+    last = n - 2
+    if lags.shape[0] == 0:
+        for k in range(a.shape[0]):
+            out[0, k] = _cubic_at(xs, grid, start, delta, step, last, x0, xn, scale, y, d, a[k])
+        return
+    for k in range(a.shape[0]):
+        # sample by sample, the lags in turn: successive lags mostly fall in the interval of the
+        # previous one, whose coefficients are kept (one set per span end)
+        ia, ib = -1, -1
+        xa, a3, a2, a1, a0 = 0.0, 0.0, 0.0, 0.0, 0.0
+        xb, b3, b2, b1, b0 = 0.0, 0.0, 0.0, 0.0, 0.0
+        width = b[k] - a[k]
+        for j in range(lags.shape[0]):
+            ta, tb = a[k] + lags[j], b[k] + lags[j]
+            fa, fb = np.nan, np.nan
+            if ta >= x0 and ta <= xn:
+                i = _cubic_interval(xs, grid, start, delta, step, last, x0, scale, ta)
+                if i != ia:
+                    ia = i
+                    xa, a3, a2, a1, a0 = _cubic_coefficients(xs, grid, start, delta, step, y, d, i)
+                fa = _cubic_sum(xa, a3, a2, a1, a0, ta)
+            if tb >= x0 and tb <= xn:
+                i = _cubic_interval(xs, grid, start, delta, step, last, x0, scale, tb)
+                if i != ib:
+                    ib = i
+                    xb, b3, b2, b1, b0 = _cubic_coefficients(xs, grid, start, delta, step, y, d, i)
+                fb = _cubic_sum(xb, b3, b2, b1, b0, tb)
+            out[j, k] = (fb - fa) / width
+
+
+#: One shift of nothing, s: :meth:`Cubic.means` of the spans themselves.
+_NO_SHIFT = np.zeros(1)
 
 
 def _gyro_angle(t_imu: np.ndarray, rate: Callable[[int, int], np.ndarray],
@@ -792,7 +992,9 @@ def _gyro_angle(t_imu: np.ndarray, rate: Callable[[int, int], np.ndarray],
             g = _arange_rows(start, step, lo, hi)
             a = np.clip(g - 0.5 * smooth_s, t_lo, t_hi)
             b = np.clip(g + 0.5 * smooth_s, t_lo, t_hi)
-            mean: np.ndarray = (raw(b) - raw(a)) / (b - a)
+            # the same bits as the expression below (a span end of -0.0 shifted by +0.0 gives its value)
+            mean: np.ndarray = (raw.means(a, b, _NO_SHIFT)[0] if isinstance(raw, Cubic)
+                                else (raw(b) - raw(a)) / (b - a))
             behind(float(a[0]) - smooth_s)
             return mean
 
@@ -925,6 +1127,9 @@ class _LagFit:
     def gyro_mean(self, dt: float, sel: slice | np.ndarray = slice(None)) -> np.ndarray:
         """The gyro's mean rate over each baseline shifted by ``dt`` s, rad/s."""
         aa, bb = self.a[sel], self.b[sel]
+        if isinstance(self.theta_at, Cubic):
+            shifted: np.ndarray = self.theta_at.means(aa, bb, np.array([dt], dtype=float))[0]
+            return shifted
         mean: np.ndarray = (self.theta_at(bb + dt) - self.theta_at(aa + dt)) / (bb - aa)
         return mean
 
@@ -932,6 +1137,8 @@ class _LagFit:
         """:meth:`gyro_mean` of every baseline at each of ``lags`` (L,) s: (L, n) rad/s, the
         same bits, evaluated for as many lags at a time as a block holds."""
         n = self.r.shape[0]
+        if isinstance(self.theta_at, Cubic):
+            return self.theta_at.means(self.a, self.b, lags)
         out = np.empty((lags.shape[0], n))
         step = max(1, BLOCK_ROWS // max(n, 1))
         for lo in range(0, lags.shape[0], step):
@@ -1113,18 +1320,14 @@ def yaw_scale_from_track(t_imu: np.ndarray, gyro_z_up: np.ndarray, t_gnss: np.nd
             break
         starts.append((i, j))
         i = j
-    mids, courses, ok = [], [], []
-    for i, j in starts:
-        de, dn = e[j] - e[i], nn[j] - nn[i]
-        length = float(np.hypot(de, dn))
-        need = max(min_chord_m, 20.0 * float(max(sig[i], sig[j])))
-        good = (gap[j] == gap[i]) and length >= need and (t_g[j] - t_g[i]) <= 1.5 * window_s
-        mids.append(0.5 * (t_g[i] + t_g[j]))
-        courses.append(float(np.arctan2(dn, de)))     # counter-clockwise from east
-        ok.append(good)
-    if len(mids) < 2:
+    if len(starts) < 2:
         return YawScale(nan, nan, 0.0, 0)
-    mids_a, courses_a, ok_a = np.array(mids), np.array(courses), np.array(ok)
+    ii, jj = np.array(starts, dtype=np.intp).T           # each chord's first and last epoch
+    de, dn = e[jj] - e[ii], nn[jj] - nn[ii]
+    need = np.maximum(min_chord_m, 20.0 * np.maximum(sig[ii], sig[jj]))
+    ok_a = (gap[jj] == gap[ii]) & (np.hypot(de, dn) >= need) & (t_g[jj] - t_g[ii] <= 1.5 * window_s)
+    mids_a = 0.5 * (t_g[ii] + t_g[jj])
+    courses_a = np.arctan2(dn, de)                       # counter-clockwise from east
     pair = ok_a[1:] & ok_a[:-1] & (mids_a[:-1] >= t_imu[0]) & (mids_a[1:] <= t_imu[-1])
     y = np.angle(np.exp(1j * np.diff(courses_a)))[pair]
     th = trapezoid_integral_at(t_imu, rate, t_imu.shape[0], mids_a)
