@@ -74,17 +74,9 @@ def chol_solve(L: np.ndarray, B: np.ndarray) -> np.ndarray:
     """Solve ``(L L^T) X = B`` for lower-triangular ``L`` (m, m), ``B`` (m, k)."""
     m, k = B.shape
     Y = np.empty((m, k))
+    Bt, Yt = B.T, Y.T              # column c of B and Y as row c: the substitutions of _chol_solve_row
     for c in range(k):
-        for i in range(m):
-            s = B[i, c]
-            for j in range(i):
-                s -= L[i, j] * Y[j, c]
-            Y[i, c] = s / L[i, i]
-        for i in range(m - 1, -1, -1):
-            s = Y[i, c]
-            for j in range(i + 1, m):
-                s -= L[j, i] * Y[j, c]
-            Y[i, c] = s / L[i, i]
+        _chol_solve_row(L, Bt, c, Yt)
     return Y
 
 
@@ -131,8 +123,8 @@ def gain_and_nis(Pxz: np.ndarray, S: np.ndarray, nu: np.ndarray) -> tuple[np.nda
 
 @njit(cache=True, inline="always")
 def _chol_solve_row(L: np.ndarray, B: np.ndarray, c: int, out: np.ndarray) -> None:
-    """``out[c] = (L L^T)^-1 B[c]`` for lower-triangular ``L`` (m, m): :func:`chol_solve` of the
-    column ``B[c]`` (the same operations in the same order); ``out`` may be ``B``."""
+    """``out[c] = (L L^T)^-1 B[c]`` for lower-triangular ``L`` (m, m): forward then backward
+    substitution on row ``c`` (:func:`chol_solve` runs it on each column); ``out`` may be ``B``."""
     m = L.shape[0]
     for i in range(m):
         s = B[c, i]

@@ -843,7 +843,7 @@ def _cubic_interval(xs: np.ndarray, grid: bool, start: float, delta: float, step
     return i
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _cubic_coefficients(xs: np.ndarray, grid: bool, start: float, delta: float, step: float, y: np.ndarray,
                         d: np.ndarray, i: int) -> tuple[float, float, float, float, float]:
     """The breakpoint ``x[i]`` and CubicSpline's coefficients ``c3, c2, c1, c0`` of interval ``i``,
@@ -864,7 +864,7 @@ def _cubic_coefficients(xs: np.ndarray, grid: bool, start: float, delta: float, 
     return xi, y[i], d0, m, q
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _cubic_sum(xi: float, c3: float, c2: float, c1: float, c0: float, tk: float) -> float:
     """The interval's polynomial at ``tk``, summed as scipy's ``evaluate_poly1``."""
     s = tk - xi
@@ -898,25 +898,8 @@ def _cubic_at(xs: np.ndarray, grid: bool, start: float, delta: float, step: floa
         i += 1
         xi = xj
         xj = _grid_row(grid, xs, start, delta, step, i + 1)
-    s = tk - xi
-    h = xj - xi
-    m = y[i + 1] - y[i]
-    m /= h
-    d0 = d[i]
-    q = d0 + d[i + 1]
-    q -= 2 * m
-    q /= h
-    m -= d0
-    m /= h
-    m -= q
-    q /= h
-    z = s * s
-    v = y[i] + 0.0
-    v += d0 * s
-    v += m * z
-    z *= s
-    v += q * z
-    return float(v)
+    xi, c3, c2, c1, c0 = _cubic_coefficients(xs, grid, start, delta, step, y, d, i)
+    return _cubic_sum(xi, c3, c2, c1, c0, tk)
 
 
 @njit(cache=True)
