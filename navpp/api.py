@@ -466,10 +466,13 @@ def cycles_after() -> Iterator[None]:
     trip."""
     import gc
 
+    from .kernel import CollectorOnCompile
+
     paused = gc.isenabled()
     gc.disable()
     try:
-        yield
+        with CollectorOnCompile():      # on again if numba compiles (its garbage is cyclic)
+            yield
     finally:
         if paused:
             gc.enable()

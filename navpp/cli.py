@@ -787,8 +787,9 @@ def main() -> None:
 
     A command is one job, so Python's cyclic garbage collector is off for it: its collections
     walked every object of the imports again and again (0.2-0.3 s of a 2 s run), while navpp's
-    own objects are freed by reference counting (the 1-hour log's peak: 1 MB more).  At the end
-    the objects left are frozen, so the interpreter's exit does not walk them either."""
+    own objects are freed by reference counting (the 1-hour log's peak: 1 MB more).  It comes
+    back on when numba compiles (:class:`navpp.kernel.CollectorOnCompile`).  At the end the
+    objects left are frozen, so the interpreter's exit does not walk them either."""
     import gc
 
     from . import interrupts
@@ -798,8 +799,11 @@ def main() -> None:
     interrupts.install()
     allow_large_block_mapping()     # the command's own process: large blocks back to the system when freed
     _numba_cache_note()
+    from .kernel import CollectorOnCompile
+
     try:
-        app(prog_name="navpp")
+        with CollectorOnCompile():      # on again if numba compiles (its garbage is cyclic)
+            app(prog_name="navpp")
     except BaseException as exc:
         signum = interrupts.received()
         if signum is None or (isinstance(exc, SystemExit) and interrupts.committed()):

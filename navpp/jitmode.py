@@ -128,14 +128,12 @@ def decided() -> bool | None:
 
 def apply(compiled: bool) -> None:
     """Set the mode for kernels decorated from now on, here and in worker processes; compiled,
-    with scipy's BLAS module loaded on its own before numba makes its first kernel
-    (:func:`navpp.scipy_parts.preload_blas`, :func:`navpp.kernel.on_numba`)."""
+    with scipy's BLAS module loaded on its own first (:func:`navpp.scipy_parts.preload_blas`)."""
     os.environ["NUMBA_DISABLE_JIT"] = "0" if compiled else "1"
     if compiled:
-        from .kernel import on_numba
         from .scipy_parts import preload_blas
 
-        on_numba(preload_blas)      # numba's first kernel: none on a run the native module serves
+        preload_blas()              # numba's BLAS helper (the native module's too) would import scipy.linalg
     config = sys.modules.get("numba.core.config")
     if config is not None:
         config.DISABLE_JIT = 0 if compiled else 1  # type: ignore[attr-defined]

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import glob
+import hashlib
 import importlib
 import importlib.util
 import json
@@ -36,6 +37,7 @@ import sys
 import tempfile
 import time
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -113,6 +115,13 @@ def _cached_signatures(disp: Any) -> list[tuple]:
         return []
 
 
+def _symbol(key: str, spec: str) -> str:
+    """An entry point's name from its kernel and argument types: a manifest paired with a module
+    of another build (a run reading one just as the other is replaced) can only miss names,
+    never call one kernel's code for another's."""
+    return "k_" + hashlib.sha256(f"{key}\0{spec}".encode()).hexdigest()[:24]
+
+
 def _entries(dispatchers: list[Any], progress: Any
              ) -> tuple[list[tuple[str, str, str, Any, Any]], list[tuple[str, str, str]], list[str]]:
     """(kernel key, argument-type key, symbol, signature, function) of every signature to build;
@@ -150,7 +159,7 @@ def _entries(dispatchers: list[Any], progress: Any
             except Exception as exc:  # noqa: BLE001 - numba refused a cached signature: leave it to numba
                 skipped.append((key, str(sig), f"numba: {exc}".splitlines()[0]))
                 continue
-            todo.append((key, spec, f"k{len(todo)}", cres.signature, fn))
+            todo.append((key, spec, _symbol(key, spec), cres.signature, fn))
     return todo, skipped, sorted(inner - {t[0] for t in todo})
 
 
@@ -159,17 +168,61 @@ def build(progress: Any = None, dispatchers: list[Any] | None = None, force: boo
     :func:`navpp.kernel.native_dir`; returns what was built.  ``dispatchers``: the kernels to
     compile (default: every kernel of navpp's kernel modules, imported here).  A module already
     there with the same entry points is kept (``entries`` then counts them, ``cpu_s`` is the
-    check's), unless ``force``.  Raises :class:`NativeBuildError` when it cannot be built."""
+    check's), unless ``force``.  Builds are serialised by a lock file beside the module.  Raises
+    :class:`NativeBuildError` when it cannot be built (a file system error included)."""
     from . import jitmode
 
     if jitmode.interpreted():
         raise NativeBuildError("the kernels run interpreted in this process (--jit off / NUMBA_DISABLE_JIT)")
     if kernel.native() is not None:
         raise NativeBuildError("this process runs on a native module already; build with NAVPP_NATIVE=0")
+    name, ext_path, manifest_path = kernel.native_paths()      # the sources as the build starts
+    where = os.path.dirname(ext_path)
+    try:
+        os.makedirs(where, mode=0o700, exist_ok=True)
+        with _locked(os.path.join(where, name + ".lock")):
+            return _build_locked(progress, dispatchers, force, name, ext_path, manifest_path)
+    except OSError as exc:
+        raise NativeBuildError(f"{where}: {exc.strerror or exc}") from exc
+
+
+@contextlib.contextmanager
+def _locked(path: str) -> Iterator[None]:
+    """An exclusive lock on ``path`` (``flock``; none where there is no ``fcntl``) while the block runs."""
+    try:
+        import fcntl
+    except ImportError:             # pragma: no cover - Windows: builds are not serialised
+        yield
+        return
+    with open(path, "a+") as f:
+        fcntl.flock(f.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f.fileno(), fcntl.LOCK_UN)
+
+
+@contextlib.contextmanager
+def _host_features() -> Iterator[None]:
+    """numba's AOT code generator for this CPU's actual features, as its JIT uses them (and
+    ``NUMBA_CPU_FEATURES`` when set), not every feature the CPU model's name implies: a virtual
+    machine that hides some (AVX-512, say) would otherwise get instructions it cannot run."""
+    from numba.core.codegen import AOTCPUCodegen
+
+    original = AOTCPUCodegen._customize_tm_features
+    AOTCPUCodegen._customize_tm_features = lambda self: self._get_host_cpu_features()  # type: ignore[method-assign]
+    try:
+        yield
+    finally:
+        AOTCPUCodegen._customize_tm_features = original  # type: ignore[method-assign]
+
+
+def _build_locked(progress: Any, dispatchers: list[Any] | None, force: bool, name: str, ext_path: str,
+                  manifest_path: str) -> BuildResult:
     t0 = time.process_time()
     if dispatchers is None:
-        for name in kernel_modules():
-            importlib.import_module(name)
+        for module in kernel_modules():
+            importlib.import_module(module)
         dispatchers = kernel.CREATED
     todo, skipped, inner = _entries(dispatchers, progress)
     if not todo:
@@ -177,12 +230,10 @@ def build(progress: Any = None, dispatchers: list[Any] | None = None, force: boo
     kernels: dict[str, list[list[str]]] = {}
     for key, spec, symbol, _, _ in todo:
         kernels.setdefault(key, []).append([spec, symbol])
-    name, ext_path, manifest_path = kernel.native_paths()
     manifest = {"module": name, "kernels": kernels, "inner": inner, "skipped": [list(s) for s in skipped]}
     if not force and os.path.isfile(ext_path) and _same_entries(manifest_path, manifest):
         return BuildResult(ext_path, len(kernels), len(todo), time.process_time() - t0, tuple(skipped), False)
     where = os.path.dirname(ext_path)
-    os.makedirs(where, mode=0o700, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="build-", dir=where) as tmp:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")             # pycc's pending-deprecation warning
@@ -200,7 +251,8 @@ def build(progress: Any = None, dispatchers: list[Any] | None = None, force: boo
                 progress(f"native module {name}: {len(todo)} signatures of {len(kernels)} kernels, through "
                          "numba's AOT compiler and the C compiler")
             try:
-                cc.compile()
+                with _host_features():
+                    cc.compile()
             except Exception as exc:  # compiler missing or a kernel refused
                 why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
                 raise NativeBuildError(f"building the native module failed: {why}") from exc
@@ -208,13 +260,14 @@ def build(progress: Any = None, dispatchers: list[Any] | None = None, force: boo
         built = [b for b in glob.glob(os.path.join(tmp, name + "*")) if os.path.isfile(b) and b.endswith(suffix)]
         if not built:
             raise NativeBuildError(f"the AOT compiler wrote no {os.path.basename(ext_path)}")
-        if os.path.exists(manifest_path):
-            os.remove(manifest_path)            # no run pairs the old manifest with the new module
+        staged = os.path.join(tmp, "manifest.json")
+        with open(staged, "w", encoding="utf-8") as f:
+            json.dump(manifest, f, indent=1, sort_keys=True)
+        kernel._state.pop("key", None)
+        if kernel.native_paths()[0] != name:
+            raise NativeBuildError("navpp's sources changed during the build; build again")
         os.replace(built[0], ext_path)
-    staged = manifest_path + ".tmp"
-    with open(staged, "w", encoding="utf-8") as f:
-        json.dump(manifest, f, indent=1, sort_keys=True)
-    os.replace(staged, manifest_path)
+        os.replace(staged, manifest_path)
     _remove_stale(where, name)
     with contextlib.suppress(OSError):
         os.remove(_failed_marker())
@@ -230,12 +283,19 @@ def _same_entries(manifest_path: str, manifest: dict) -> bool:
     return bool(old.get("module") == manifest["module"] and old.get("kernels") == manifest["kernels"])
 
 
+#: a module of other sources is removed when it has not been written for this long (s): another
+#: checkout or environment sharing the directory would otherwise rebuild its own again and again
+STALE_AFTER_S = 14 * 24 * 3600.0
+
+
 def _remove_stale(where: str, keep: str) -> None:
-    """Native modules of other source versions in ``where`` (no run can use them again)."""
+    """Native modules of other source versions in ``where`` not written for :data:`STALE_AFTER_S`."""
+    now = time.time()
     for path in glob.glob(os.path.join(where, kernel.PREFIX + "*")):
         if not os.path.basename(path).startswith(keep):
             with contextlib.suppress(OSError):
-                os.remove(path)
+                if now - os.path.getmtime(path) > STALE_AFTER_S:
+                    os.remove(path)
 
 
 def _failed_marker() -> str:
@@ -252,18 +312,16 @@ def c_compiler() -> str | None:
 
 
 def build_due() -> bool:
-    """Whether a run that just compiled kernels should build the native module: compiled mode,
-    not turned off (``NAVPP_NATIVE=0``), none loaded for these sources, a C compiler there, and
-    no earlier failed build for these sources."""
+    """Whether a run that just compiled kernels should build the native module (anew, with what
+    it compiled): compiled mode, not turned off (``NAVPP_NATIVE=0``), a C compiler there, and no
+    earlier failed build for these sources.  A build that finds the module up to date (another
+    run's, say) keeps it."""
     from . import jitmode
 
     if jitmode.interpreted() or os.environ.get(kernel.ENV_USE, "1").strip() == "0" or sys.platform == "win32":
         return False
-    if kernel.native() is not None or c_compiler() is None:
+    if c_compiler() is None:
         return False
-    _, ext_path, manifest_path = kernel.native_paths()
-    if os.path.exists(manifest_path) and os.path.exists(ext_path):
-        return False                # built meanwhile (another run), not loaded by this one
     return not os.path.exists(_failed_marker())
 
 
@@ -285,9 +343,10 @@ def main() -> int:
     try:
         r = build()
     except NativeBuildError as exc:
-        os.makedirs(kernel.native_dir(), mode=0o700, exist_ok=True)
-        with open(_failed_marker(), "w", encoding="utf-8") as f:
-            f.write(f"{exc}\n")
+        with contextlib.suppress(OSError):
+            os.makedirs(kernel.native_dir(), mode=0o700, exist_ok=True)
+            with open(_failed_marker(), "w", encoding="utf-8") as f:
+                f.write(f"{exc}\n")
         print(f"the native module was not built: {exc} (navpp compile tries again)")
         return 1
     with contextlib.suppress(OSError):

@@ -111,6 +111,8 @@ out["int"] = nk_mod.weighted(np.arange(6), w, 2.0).tolist()
 out["numba_after_int"] = "numba" in sys.modules
 out["strided"] = nk_mod.weighted(a[::2], w[::2], 2.0).tolist()
 out["keyword"] = nk_mod.weighted(a, w, scale=2.0).tolist()
+# numba compiles total for strided arrays: its callee weighted is a Kernel, typed as its dispatcher
+out["total_strided"] = nk_mod.total(a[::2], (w[::2], 3.0))
 print(json.dumps(out))
 '''
 
@@ -153,6 +155,19 @@ def test_native_module_runs_numba_results_and_declines_the_rest(tmp_path: Path,
     assert got["numba_after_int"] is True
     assert got["strided"] == (a[::2] ** 2 * w[::2] * 2.0).tolist()
     assert got["keyword"] == expected.tolist()
+    assert got["total_strided"] == pytest.approx(float((a[::2] ** 2 * w[::2] * 3.0).sum() + 3.0), rel=1e-15)
+    # entry points are named by kernel and argument types: another build's manifest can only miss
+    from navpp.native import _symbol
+
+    for key, entries in manifest["kernels"].items():
+        assert all(symbol == _symbol(key, spec) for spec, symbol in entries)
+    assert _symbol("nk_mod:weighted", "a<f81Cw") != _symbol("nk_mod:total", "a<f81Cw")
+    # a directory it cannot write: one NativeBuildError naming it, no traceback of OSError
+    from navpp.native import NativeBuildError
+
+    monkeypatch.setenv("NAVPP_NATIVE_DIR", "/proc/navpp-cannot-write")
+    with pytest.raises(NativeBuildError, match="/proc/navpp-cannot-write"):
+        build(dispatchers=[nk_mod.weighted], force=True)
 
 
 def test_no_module_for_other_sources(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -243,10 +258,10 @@ def test_a_run_on_numbas_cache_is_told_about_the_native_module(monkeypatch: pyte
 
 
 def test_a_build_is_due_once_and_not_after_a_failure(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """After a run that compiled: a build is due when there is no module for these sources and a
-    C compiler; not with NAVPP_NATIVE=0, not without a compiler, not once a module is there, and
-    not after a failed build for these sources (its marker), which ``python -m navpp.native``
-    writes with a one-line reason and exit code 1 (here: nothing in numba's cache to build)."""
+    """After a run that compiled: a build is due when there is a C compiler; not with
+    NAVPP_NATIVE=0, not without a compiler, and not after a failed build for these sources (its
+    marker), which ``python -m navpp.native`` writes with a one-line reason and exit code 1 (here:
+    nothing in numba's cache to build)."""
     from navpp import native
 
     monkeypatch.setenv("NAVPP_NATIVE_DIR", str(tmp_path / "native"))
@@ -267,8 +282,27 @@ def test_a_build_is_due_once_and_not_after_a_failure(tmp_path: Path, monkeypatch
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 1 and proc.stdout.startswith("the native module was not built: ")
     assert not native.build_due()                   # the marker: later runs do not try again
-    name, ext, manifest = kernel.native_paths()
-    Path(ext).write_bytes(b"")
-    Path(manifest).write_text("{}")
+    name, _, _ = kernel.native_paths()
     Path(tmp_path / "native" / (name + ".failed")).unlink()
-    assert not native.build_due()                   # a module is there (built by another run)
+    assert native.build_due()
+
+
+def test_the_collector_comes_back_when_numba_compiles() -> None:
+    """With the cyclic collector off (the command line, a run), numba's first compilation inside
+    CollectorOnCompile turns it on (its compiler's garbage is cyclic: the peak doubled); a block
+    that compiles nothing leaves it off."""
+    import gc
+
+    from numba import njit
+
+    was = gc.isenabled()
+    try:
+        gc.disable()
+        with kernel.CollectorOnCompile():
+            pass
+        assert not gc.isenabled()
+        with kernel.CollectorOnCompile():
+            njit(lambda x: x + 1)(1)
+        assert gc.isenabled()
+    finally:
+        (gc.enable if was else gc.disable)()
