@@ -840,7 +840,10 @@ def compile_kernels(filters: Sequence[str] | None = None,
 
     if jitmode.decided() is False:
         raise jitmode.interpreted_error()
-    native_why = "" if not native or kernel.without_native() else "this process runs on one already"
+    if os.environ.get(kernel.ENV_USE, "1").strip() == "0":
+        native_why = f"{kernel.ENV_USE}=0"
+    else:
+        native_why = "" if not native or kernel.without_native() else "this process runs on one already"
     jitmode.apply(True)                 # before the filters' modules are imported
     jitmode.CHOSEN[:] = [jitmode.Choice(True, "navpp compile")]
     filters = tuple(filters) if filters is not None else jitmode.ALL_FILTERS

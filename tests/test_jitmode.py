@@ -269,6 +269,7 @@ def test_navpp_compile_fills_the_cache(tmp_path: Path) -> None:
                           capture_output=True, text=True, check=False)
     assert done.returncode == 0, done.stderr
     assert "navpp's kernels are compiled" in done.stdout
+    assert "native module (not built: NAVPP_NATIVE=0)" in done.stdout      # the test session's setting
     probe = ("from navpp import jitmode; "
              "print(jitmode.missing_groups(('ins', 'ros', 'mcap', 'smooth')), jitmode.missing_groups(('sigma',)))")
     got = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, check=True)
