@@ -11,8 +11,9 @@ Oracle for every trial, whatever the moment:
 - no process of the run left alive (workers included): the run is started in its own
   process group and every member must be gone (or a zombie awaiting its reaper) within 10 s.
 
-The delays are random but seeded (reproducible); they start at 0.3 s, after Python itself
-has started (a signal before navpp's first line of code meets Python's defaults).  The three-trial
+The delays are random but seeded; they start at 0.3 s, after Python itself has started (a
+signal before navpp's first line of code meets Python's defaults), and end 10 % after an
+uninterrupted run of the same command would have (measured once per session).  The three-trial
 variant and the 36-trial soak are marked slow (CI runs them); the SIF-inside-numba test runs always.
 """
 
@@ -53,17 +54,36 @@ def _compare_argv(out: Path) -> tuple[str, ...]:
     return ("compare", str(DRIVE), "--filters", "ekf,ukf", "--jobs", "2", "--out", str(out), "-q")
 
 
+#: wall seconds of an uninterrupted run of each command (measured once per test session)
+_DURATION_S: dict[tuple[str, ...], float] = {}
+
+
+def _duration_s(argv: tuple[str, ...], out: Path) -> float:
+    """How long the run of ``argv`` takes here when left alone (wall s), measured once: the
+    trials' delays are drawn over it, so that most signals land inside a run on a fast machine
+    and a slow one alike (fixed ranges of 0.3-6 s let runs that got faster finish first)."""
+    key = tuple(a for a in argv if a != str(out))
+    if key not in _DURATION_S:
+        out.mkdir(parents=True, exist_ok=True)
+        t0 = time.monotonic()
+        subprocess.run([sys.executable, "-m", "navpp", *argv], cwd=ROOT, capture_output=True, check=True,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)})
+        _DURATION_S[key] = time.monotonic() - t0
+    return _DURATION_S[key]
+
+
 def _trials(seed: int, n_process: int, n_compare: int, out: Path) -> list[Trial]:
     rng = random.Random(seed)
     sigs = [(signal.SIGINT, False), (signal.SIGTERM, False), (signal.SIGINT, True)]
     trials = []
     for k in range(n_process):
         sig, group = sigs[k % 3]
-        trials.append(Trial(_process_argv(rng.choice(["ekf", "ukf", "sif", "rwckf"]), out),
-                            rng.uniform(0.3, 6.0), sig, group))
+        argv = _process_argv(rng.choice(["ekf", "ukf", "sif", "rwckf"]), out)
+        trials.append(Trial(argv, 0.3 + rng.random() * 1.1 * max(_duration_s(argv, out) - 0.3, 0.2), sig, group))
     for k in range(n_compare):
         sig, group = sigs[(k + 1) % 3]
-        trials.append(Trial(_compare_argv(out), rng.uniform(0.3, 8.0), sig, group))
+        argv = _compare_argv(out)
+        trials.append(Trial(argv, 0.3 + rng.random() * 1.1 * max(_duration_s(argv, out) - 0.3, 0.2), sig, group))
     return trials
 
 
