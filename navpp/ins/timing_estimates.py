@@ -886,18 +886,7 @@ def _cubic_at(xs: np.ndarray, grid: bool, start: float, delta: float, step: floa
     last breakpoints, ``scale`` (N - 1) / (xn - x0)."""
     if not (tk >= x0 and tk <= xn):
         return np.nan
-    g = (tk - x0) * scale
-    i = min(int(g), last) if g > 0.0 else 0
-    xi = _grid_row(grid, xs, start, delta, step, i)
-    xj = _grid_row(grid, xs, start, delta, step, i + 1)
-    while tk < xi and i > 0:                       # the interval with x[i] <= t < x[i + 1]
-        i -= 1
-        xj = xi
-        xi = _grid_row(grid, xs, start, delta, step, i)
-    while tk >= xj and i < last:
-        i += 1
-        xi = xj
-        xj = _grid_row(grid, xs, start, delta, step, i + 1)
+    i = _cubic_interval(xs, grid, start, delta, step, last, x0, scale, tk)
     xi, c3, c2, c1, c0 = _cubic_coefficients(xs, grid, start, delta, step, y, d, i)
     return _cubic_sum(xi, c3, c2, c1, c0, tk)
 
